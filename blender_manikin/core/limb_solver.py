@@ -1,0 +1,336 @@
+"""Analytic limb solver: swivel angles and exact two-bone IK with hinge limits.
+
+MANIKIN (Jiang et al., ECCV 2024), equations 2-14, batched over frames and
+vectorised over limbs.  A limb is (base, mid, end) = (shoulder, elbow, wrist)
+or (hip, knee, ankle); see :data:`skeleton.LIMBS`.  Arrays carry a leading
+``(T, L)`` shape: T frames, L limbs (``limb_ids`` picks which of the four).
+
+Swivel angle
+------------
+``n`` is the unit base→end axis.  The zero-swivel direction ``u`` is a
+body-fixed reference carried along with the limb by the *minimal swing* from
+a neutral axis ``n0`` to ``n`` (both in the frame of the limb's parent joint:
+collar for arms, pelvis for legs)::
+
+    u = R_par @ swing(n0 → R_parᵀ n) @ u0,      v = n × u
+    φ = atan2(v·(p_mid − p_base), u·(p_mid − p_base))          (eq. 5)
+    p_mid = p_base + l1 cos α n + l1 sin α (cos φ u + sin φ v)  (eqs. 3, 4, 7)
+
+``n0`` points lateral-forward-down for arms and down (11° forward) for legs,
+so the only direction where ``u`` is undefined (``n = -n0``: wrist behind the
+head on the other side, ankle above the hip behind the body) is outside the
+human range of motion and φ is continuous through ordinary motion.  ``u0`` is
+the natural mid-joint direction, so **φ = 0 means "elbow out, back and down"
+and "knee forward"**; positive φ turns the mid joint right-handedly about
+``n`` (for the left arm, from out-back-down towards up-back).  In the
+parent's rest frame (Blender axes, body facing -Y):
+
+=========  =====================  ==========================
+limb       n0                     u0
+=========  =====================  ==========================
+left arm   (1, -1, -1)/√3         (1, 2, -1)/√6
+right arm  (-1, -1, -1)/√3        (-1, 2, -1)/√6
+legs       (0, -0.2, -1)/|.|      (0, -1, -0.2)/|.|
+=========  =====================  ==========================
+
+Rotations
+---------
+Rest limbs are straight along ``a0`` (arms ±X, legs -Z).  The mid joint is a
+1-DoF hinge about ``h0`` in its local frame (elbows -Z / +Z for left / right,
+knees +X) with flexion θ = π - interior angle (eq. 9).  The bend plane's
+normal in the world is ``h = u_φ × n`` with ``u_φ = cos φ u + sin φ v``, which
+stays defined for a straight limb, so the base rotation (swing and twist,
+eqs. 10-12, built here in closed form as a change of frame) is::
+
+    R_base_world = [a, h, a×h] [a0, h0, a0×h0]ᵀ,   a = (p_mid − p_base)/l1
+    R_mid_local  = Rot(h0, θ) Rot(a0, τ)          (τ: elbow twist, arms only)
+    R_end_local  = (R_base_world Rot(h0, θ) Rot(a0, τ))ᵀ R_end_world
+
+τ is the twist of the wrist orientation about the forearm axis (eq. 13, the
+pronation part), clamped to the forearm's range; the wrist keeps the swing
+(eq. 14) and any excess twist, so the hand orientation is always exact.
+
+Limits (degrees)
+----------------
+Elbow flexion 0-150 (AAOS: Greene & Heckman 1994 give 0-150), knee 0-145
+(ibid.: 0-135 active, ~145 passive).  Forearm pronation 80 / supination 80
+from the T-pose neutral (palm down, elbow crease forward; AAOS).  Shoulder
+internal/external rotation 70/90 and hip 45/45 (AAOS) are measured as the
+twist of the base's local rotation about the bone axis relative to the
+zero-swivel configuration of the same swing and are reported by
+:func:`limit_report` (they constrain φ, which the network predicts from
+data that respect them).  Hinge limits are enforced by clamping the
+base-end distance to ``[d_min, l1 + l2]``: a target out of reach gets a
+fully extended limb pointing at it and its distance in ``reach_error``; a
+target too close gets the most-flexed elbow/knee.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from . import rotations as rot
+from .skeleton import LIMBS, PARENTS
+
+_S3 = np.sqrt(3.0)
+_S6 = np.sqrt(6.0)
+
+#: rest direction of the upper segment (= lower segment), per limb, unit
+A0 = np.array([[1.0, 0, 0], [-1.0, 0, 0], [0, 0, -1.0], [0, 0, -1.0]])
+#: hinge axis in the mid joint's local frame; +θ bends the limb
+H0 = np.array([[0, 0, -1.0], [0, 0, 1.0], [1.0, 0, 0], [1.0, 0, 0]])
+#: neutral base→end axis (parent frame) and its zero-swivel mid direction
+N0 = rot.normalize(np.array([[1.0, -1, -1], [-1.0, -1, -1], [0, -0.2, -1], [0, -0.2, -1]]))
+U0 = rot.normalize(np.array([[1.0, 2, -1], [-1.0, 2, -1], [0, -1, -0.2], [0, -1, -0.2]]))
+#: maximum flexion of the hinge (elbow 150°, knee 145°), radians
+FLEX_MAX = np.radians([150.0, 150.0, 145.0, 145.0])
+#: twist about the forearm: (min, max) radians, arms only (legs 0)
+#: pronation is +about +X for the left arm and -about -X for the right.
+TWIST_RANGE = np.radians([[-80.0, 80.0], [-80.0, 80.0], [0.0, 0.0], [0.0, 0.0]])
+#: sign that turns a twist about a0 into "pronation positive"
+PRONATION_SIGN = np.array([1.0, -1.0, 0.0, 0.0])
+#: base twist limits (internal, external rotation), radians: shoulders, hips
+BASE_TWIST_RANGE = np.radians([[70.0, 90.0], [70.0, 90.0], [45.0, 45.0], [45.0, 45.0]])
+#: sign taking a twist about a0 to "internal rotation positive"
+INTERNAL_SIGN = np.array([1.0, -1.0, -1.0, 1.0])
+
+LIMB_BASE = np.array([b for _, b, _, _ in LIMBS])
+LIMB_MID = np.array([m for _, _, m, _ in LIMBS])
+LIMB_END = np.array([e for _, _, _, e in LIMBS])
+LIMB_PARENT = PARENTS[LIMB_BASE]
+
+
+def _ids(limb_ids):
+    return np.arange(4) if limb_ids is None else np.asarray(limb_ids, dtype=int)
+
+
+def _dot(a, b):
+    return np.sum(a * b, axis=-1)
+
+
+def swivel_frame(base_pos, end_pos, parent_rot, limb_ids=None):
+    """Unit axis and zero-swivel basis of each limb.
+
+    base_pos, end_pos: ``(..., L, 3)`` metres; parent_rot: ``(..., L, 3, 3)``
+    world rotation of the limb's parent joint.  Returns ``(n, u, v, d)`` with
+    ``n, u, v`` ``(..., L, 3)`` orthonormal (``v = n × u``) and the base-end
+    distance ``d`` ``(..., L)``.  When base and end coincide ``n`` falls
+    back to the neutral axis ``R_par n0``.
+    """
+    ids = _ids(limb_ids)
+    base_pos = np.asarray(base_pos, np.float64)
+    end_pos = np.asarray(end_pos, np.float64)
+    parent_rot = np.asarray(parent_rot, np.float64)
+    diff = end_pos - base_pos
+    d = np.linalg.norm(diff, axis=-1)
+    n0 = N0[ids]
+    n_fallback = np.einsum("...ij,...j->...i", parent_rot, np.broadcast_to(n0, diff.shape))
+    n = np.where((d > 1e-9)[..., None], diff / np.maximum(d, 1e-12)[..., None], n_fallback)
+    n_par = np.einsum("...ji,...j->...i", parent_rot, n)
+    swing = rot.rotation_between(np.broadcast_to(n0, n_par.shape), n_par)
+    u_par = np.einsum("...ij,...j->...i", swing, np.broadcast_to(U0[ids], n_par.shape))
+    u = np.einsum("...ij,...j->...i", parent_rot, u_par)
+    u = rot.normalize(u - _dot(u, n)[..., None] * n)
+    v = np.cross(n, u)
+    return n, u, v, d
+
+
+def swivel_from_positions(base_pos, mid_pos, end_pos, parent_rot, limb_ids=None, base_rot=None,
+                          fill_straight=False, straight_tol=1e-3):
+    """Swivel angles φ ``(..., L)`` radians in (-π, π] from joint positions (eq. 5).
+
+    For a straight limb φ does not move any joint and is ill-defined from
+    positions.  ``base_rot`` (``(..., L, 3, 3)`` world rotation of the base
+    joint) resolves it from the hinge axis; its weight fades in only as the
+    limb straightens, so bent limbs are unaffected.  Without it,
+    ``fill_straight=True`` (arrays with time on axis 0) interpolates φ over
+    time across frames whose mid-joint offset from the axis is below
+    ``straight_tol`` × upper length.
+    """
+    ids = _ids(limb_ids)
+    n, u, v, d = swivel_frame(base_pos, end_pos, parent_rot, ids)
+    w = np.asarray(mid_pos, np.float64) - np.asarray(base_pos, np.float64)
+    l1 = np.linalg.norm(w, axis=-1)
+    perp = w - _dot(w, n)[..., None] * n
+    if base_rot is not None:
+        h = np.einsum("...ij,...j->...i", np.asarray(base_rot, np.float64),
+                      np.broadcast_to(H0[ids], n.shape))
+        # the mid joint bends towards u_phi = n x h (see module docstring)
+        perp = perp + 0.02 * l1[..., None] * rot.normalize(np.cross(n, h))
+    phi = np.arctan2(_dot(perp, v), _dot(perp, u))
+    if fill_straight and base_rot is None:
+        phi = _fill_straight(phi, np.linalg.norm(perp, axis=-1) < straight_tol * np.maximum(l1, 1e-9))
+    return phi
+
+
+def _fill_straight(phi, bad):
+    """Interpolate unwrapped φ over time (axis 0) across ``bad`` frames."""
+    phi = phi.copy()
+    T = phi.shape[0]
+    flat_phi = phi.reshape(T, -1)
+    flat_bad = bad.reshape(T, -1)
+    t = np.arange(T)
+    for k in range(flat_phi.shape[1]):
+        good = ~flat_bad[:, k]
+        if good.all():
+            continue
+        if not good.any():
+            flat_phi[:, k] = 0.0
+            continue
+        un = np.unwrap(flat_phi[good, k])
+        flat_phi[:, k] = np.angle(np.exp(1j * np.interp(t, t[good], un)))
+    return flat_phi.reshape(phi.shape)
+
+
+def mid_from_swivel(base_pos, end_pos, swivel, lengths, parent_rot, limb_ids=None):
+    """Mid-joint positions ``(..., L, 3)`` on the swivel circle (eq. 7).
+
+    lengths: ``(..., L, 2)`` or ``(L, 2)`` upper and lower segment lengths.
+    The base-end distance is clamped to the reachable range first (see
+    :func:`solve_limbs`).
+    """
+    ids = _ids(limb_ids)
+    n, u, v, d = swivel_frame(base_pos, end_pos, parent_rot, ids)
+    l1, l2 = _lengths(lengths, n.shape[:-1])
+    dc = _clamp_reach(d, l1, l2, FLEX_MAX[ids])
+    cos_a = np.clip((l1 ** 2 + dc ** 2 - l2 ** 2) / (2 * l1 * dc), -1.0, 1.0)
+    sin_a = np.sqrt(1.0 - cos_a ** 2)
+    swivel = np.asarray(swivel, np.float64)
+    u_phi = np.cos(swivel)[..., None] * u + np.sin(swivel)[..., None] * v
+    return np.asarray(base_pos) + (l1 * cos_a)[..., None] * n + (l1 * sin_a)[..., None] * u_phi
+
+
+def _lengths(lengths, shape):
+    lengths = np.asarray(lengths, np.float64)
+    lengths = np.broadcast_to(lengths, shape + (2,))
+    return lengths[..., 0], lengths[..., 1]
+
+
+def _clamp_reach(d, l1, l2, flex_max):
+    d_min = np.sqrt(np.maximum(l1 ** 2 + l2 ** 2 + 2 * l1 * l2 * np.cos(flex_max), 0.0))
+    d_min = np.maximum(d_min, 1e-6)
+    return np.clip(d, d_min, l1 + l2)
+
+
+@dataclass
+class LimbSolution:
+    """Result of :func:`solve_limbs`; every array has leading shape ``(T, L)``.
+
+    base_local, mid_local, end_local: ``(T, L, 3, 3)`` local rotations of the
+    base, mid and end joints (parent frame).  base_world, mid_world:
+    world rotations.  mid_pos, end_pos: ``(T, L, 3)`` reached positions
+    (metres).  flexion: hinge angle θ (radians, ``[0, FLEX_MAX]``).
+    elbow_twist: τ (radians, 0 for legs).  reach_error: distance from the
+    requested to the reached end position (metres; 0 when reachable).
+    """
+    base_local: np.ndarray
+    mid_local: np.ndarray
+    end_local: np.ndarray | None
+    base_world: np.ndarray
+    mid_world: np.ndarray
+    mid_pos: np.ndarray
+    end_pos: np.ndarray
+    flexion: np.ndarray
+    elbow_twist: np.ndarray
+    reach_error: np.ndarray
+    swivel: np.ndarray
+
+
+def solve_limbs(base_pos, end_pos, swivel, lengths, parent_rot, end_rot=None, limb_ids=None,
+                clamp_twist=True):
+    """Exact analytic IK of two-bone limbs (eqs. 7, 9-14).
+
+    base_pos: ``(T, L, 3)`` base joint world positions (from torso FK), metres.
+    end_pos: ``(T, L, 3)`` end-effector targets (wrist / ankle joint), metres.
+    swivel: ``(T, L)`` radians.
+    lengths: ``(L, 2)`` or ``(T, L, 2)`` upper/lower lengths, metres.
+    parent_rot: ``(T, L, 3, 3)`` world rotation of the base's parent joint.
+    end_rot: optional ``(T, L, 3, 3)`` world orientation wanted for the end
+    joint; without it the elbow twist is 0 and ``end_local`` is None.
+    Returns a :class:`LimbSolution`.  Finite for any finite input.
+    """
+    ids = _ids(limb_ids)
+    base_pos = np.asarray(base_pos, np.float64)
+    end_pos = np.asarray(end_pos, np.float64)
+    parent_rot = np.asarray(parent_rot, np.float64)
+    swivel = np.asarray(swivel, np.float64)
+    n, u, v, d = swivel_frame(base_pos, end_pos, parent_rot, ids)
+    l1, l2 = _lengths(lengths, d.shape)
+    flex_max = FLEX_MAX[ids]
+    dc = _clamp_reach(d, l1, l2, flex_max)
+    end_reached = base_pos + dc[..., None] * n
+    reach_error = np.abs(d - dc)
+
+    cos_a = np.clip((l1 ** 2 + dc ** 2 - l2 ** 2) / (2 * l1 * dc), -1.0, 1.0)
+    sin_a = np.sqrt(1.0 - cos_a ** 2)
+    u_phi = np.cos(swivel)[..., None] * u + np.sin(swivel)[..., None] * v
+    a = cos_a[..., None] * n + sin_a[..., None] * u_phi          # unit upper-segment direction
+    mid_pos = base_pos + l1[..., None] * a
+    cos_g = np.clip((l1 ** 2 + l2 ** 2 - dc ** 2) / (2 * l1 * l2), -1.0, 1.0)
+    flexion = np.clip(np.pi - np.arccos(cos_g), 0.0, flex_max)   # eq. 9
+
+    h = np.cross(u_phi, n)                                        # hinge axis, world
+    a0 = np.broadcast_to(A0[ids], a.shape)
+    h0 = np.broadcast_to(H0[ids], a.shape)
+    world_frame = np.stack([a, h, np.cross(a, h)], axis=-1)
+    rest_frame = np.stack([a0, h0, np.cross(a0, h0)], axis=-1)
+    base_world = world_frame @ np.swapaxes(rest_frame, -1, -2)
+    base_local = np.swapaxes(parent_rot, -1, -2) @ base_world
+    hinge = rot.axis_angle_rotation(h0, flexion)
+    bent_world = base_world @ hinge
+
+    twist = np.zeros(d.shape)
+    end_local = None
+    if end_rot is not None:
+        end_rot = np.asarray(end_rot, np.float64)
+        rel = np.swapaxes(bent_world, -1, -2) @ end_rot
+        twist_full = rot.twist_angle(rel, a0)
+        is_arm = (ids < 2)
+        twist = np.where(is_arm, twist_full, 0.0)
+        if clamp_twist:
+            lo, hi = TWIST_RANGE[ids, 0], TWIST_RANGE[ids, 1]
+            twist = np.where(is_arm, np.clip(twist, lo, hi), 0.0)
+        tw = rot.axis_angle_rotation(a0, twist)
+        mid_local = hinge @ tw
+        end_local = np.swapaxes(tw, -1, -2) @ rel
+    else:
+        mid_local = hinge
+    mid_world = base_world @ mid_local
+    return LimbSolution(base_local=base_local, mid_local=mid_local, end_local=end_local,
+                        base_world=base_world, mid_world=mid_world, mid_pos=mid_pos,
+                        end_pos=end_reached, flexion=flexion, elbow_twist=twist,
+                        reach_error=reach_error, swivel=swivel)
+
+
+def base_twist(base_local, limb_ids=None):
+    """Axial rotation of the base joint (radians, internal rotation positive).
+
+    Measured as the twist about the rest bone axis of ``R_zero^T R`` where
+    ``R_zero`` is the minimal swing from the rest bone direction to the
+    current one, i.e. the bone's roll away from swinging straight out of the
+    T-pose.  ``base_local``: ``(..., L, 3, 3)``.
+    """
+    ids = _ids(limb_ids)
+    a0 = np.broadcast_to(A0[ids], base_local.shape[:-1])
+    return INTERNAL_SIGN[ids] * rot.twist_angle(base_local, a0)
+
+
+def limit_report(solution: LimbSolution, limb_ids=None):
+    """Per-frame booleans ``(T, L)`` of which biomechanical limits are touched.
+
+    Keys: ``reach`` (target out of reach or too close), ``pronation``
+    (forearm twist clamped), ``base_twist`` (shoulder/hip axial rotation
+    beyond the AAOS range).
+    """
+    ids = _ids(limb_ids)
+    bt = base_twist(solution.base_local, ids)
+    lo = -BASE_TWIST_RANGE[ids, 1]
+    hi = BASE_TWIST_RANGE[ids, 0]
+    tol = 1e-9
+    tw = solution.elbow_twist
+    return {
+        "reach": solution.reach_error > 1e-6,
+        "pronation": (ids < 2) & ((tw <= TWIST_RANGE[ids, 0] + tol) | (tw >= TWIST_RANGE[ids, 1] - tol)),
+        "base_twist": (bt < lo) | (bt > hi),
+    }
