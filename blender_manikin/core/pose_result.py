@@ -1,0 +1,79 @@
+"""Data passed between the solver and the Blender/JSON writers.  Never imports bpy."""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .skeleton import Body, LIMB_NAMES, forward_kinematics
+
+#: device names, in this order wherever devices are listed
+DEVICES = ("head", "left_hand", "right_hand", "pelvis", "left_foot", "right_foot")
+
+
+@dataclass
+class TrackerTargets:
+    """Per-frame joint targets derived from devices (after device offsets).
+
+    pos: device -> ``(T, 3)`` float64 metres, Blender world axes (Z-up, floor z=0).
+    rot: device -> ``(T, 3, 3)`` world orientation of the *joint* the device
+    drives (head, wrist, pelvis, ankle), in the body-model convention
+    (identity = T-pose rest orientation, body facing -Y).
+    valid: device -> ``(T,)`` bool, False where the sample was bridged over a gap.
+    """
+    fps: float
+    pos: dict
+    rot: dict
+    valid: dict = field(default_factory=dict)
+
+    @property
+    def num_frames(self) -> int:
+        return int(next(iter(self.pos.values())).shape[0])
+
+    @property
+    def devices(self):
+        return tuple(d for d in DEVICES if d in self.pos)
+
+
+@dataclass
+class PoseResult:
+    """A solved full-body animation.
+
+    local_rot: ``(T, 22, 3, 3)`` local joint rotations (body-model convention).
+    root_pos: ``(T, 3)`` pelvis world position, metres, Blender axes.
+    swivel: ``(T, 4)`` radians, limbs in ``LIMB_NAMES`` order.
+    contacts: ``(T, 2)`` bool, left/right foot planted.
+    reach_error: ``(T, 4)`` metres the limb end missed its target (0 = exact).
+    Frame k is at time ``t0 + k / fps`` seconds of the recording clock.
+    """
+    fps: float
+    body: Body
+    local_rot: np.ndarray
+    root_pos: np.ndarray
+    swivel: np.ndarray
+    contacts: np.ndarray | None = None
+    reach_error: np.ndarray | None = None
+    targets: TrackerTargets | None = None
+    t0: float = 0.0
+    _fk: tuple | None = field(default=None, repr=False)
+
+    @property
+    def num_frames(self) -> int:
+        return int(self.local_rot.shape[0])
+
+    def fk(self):
+        """``(positions (T,22,3), world_rot (T,22,3,3))``, cached."""
+        if self._fk is None:
+            self._fk = forward_kinematics(self.local_rot, self.root_pos, self.body)
+        return self._fk
+
+    @property
+    def positions(self):
+        return self.fk()[0]
+
+    @property
+    def world_rot(self):
+        return self.fk()[1]
+
+    def swivel_dict(self):
+        return {name: self.swivel[:, i] for i, name in enumerate(LIMB_NAMES)}
