@@ -128,8 +128,7 @@ def ik_from_positions(positions, body: Body, end_rot=None, twists=None, adaptive
             base_p = src(b)
             phi = ls.swivel_from_positions(base_p[:, None], P[:, m][:, None], P[:, e][:, None],
                                            Rp[:, None], [li],
-                                           base_rot=None if b not in base_rot else base_rot[b][:, None],
-                                           fill_straight=b not in base_rot)[:, 0]
+                                           base_rot=None if b not in base_rot else base_rot[b][:, None])[:, 0]
             if swivel is not None:
                 phi = np.asarray(swivel, np.float64)[:, li]
             er = end_rot.get(e)

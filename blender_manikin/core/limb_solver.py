@@ -136,17 +136,17 @@ def swivel_frame(base_pos, end_pos, parent_rot, limb_ids=None):
     return n, u, v, d
 
 
-def swivel_from_positions(base_pos, mid_pos, end_pos, parent_rot, limb_ids=None, base_rot=None,
-                          fill_straight=False, straight_tol=1e-3):
+def swivel_from_positions(base_pos, mid_pos, end_pos, parent_rot, limb_ids=None, base_rot=None):
     """Swivel angles φ ``(..., L)`` radians in (-π, π] from joint positions (eq. 5).
 
     For a straight limb φ does not move any joint and is ill-defined from
-    positions.  ``base_rot`` (``(..., L, 3, 3)`` world rotation of the base
-    joint) resolves it from the hinge axis; its weight fades in only as the
-    limb straightens, so bent limbs are unaffected.  Without it,
-    ``fill_straight=True`` (arrays with time on axis 0) interpolates φ over
-    time across frames whose mid-joint offset from the axis is below
-    ``straight_tol`` × upper length.
+    positions; a reference hinge axis resolves it, with a weight that fades
+    in only as the limb straightens (bent limbs are unaffected to ~1e-3 rad
+    (angle change below 1e-9 / sin(flexion) rad).  The reference is
+    the hinge of ``base_rot`` (``(..., L, 3, 3)`` world rotation of the base
+    joint, e.g. from mocap) when given, else the hinge of the zero-twist
+    swing of the base out of the rest pose, so a straight T-pose limb gets
+    the rest-pose swivel and identity rotations.
     """
     ids = _ids(limb_ids)
     n, u, v, d = swivel_frame(base_pos, end_pos, parent_rot, ids)
@@ -156,31 +156,15 @@ def swivel_from_positions(base_pos, mid_pos, end_pos, parent_rot, limb_ids=None,
     if base_rot is not None:
         h = np.einsum("...ij,...j->...i", np.asarray(base_rot, np.float64),
                       np.broadcast_to(H0[ids], n.shape))
-        # the mid joint bends towards u_phi = n x h (see module docstring)
-        perp = perp + 0.02 * l1[..., None] * rot.normalize(np.cross(n, h))
-    phi = np.arctan2(_dot(perp, v), _dot(perp, u))
-    if fill_straight and base_rot is None:
-        phi = _fill_straight(phi, np.linalg.norm(perp, axis=-1) < straight_tol * np.maximum(l1, 1e-9))
-    return phi
-
-
-def _fill_straight(phi, bad):
-    """Interpolate unwrapped φ over time (axis 0) across ``bad`` frames."""
-    phi = phi.copy()
-    T = phi.shape[0]
-    flat_phi = phi.reshape(T, -1)
-    flat_bad = bad.reshape(T, -1)
-    t = np.arange(T)
-    for k in range(flat_phi.shape[1]):
-        good = ~flat_bad[:, k]
-        if good.all():
-            continue
-        if not good.any():
-            flat_phi[:, k] = 0.0
-            continue
-        un = np.unwrap(flat_phi[good, k])
-        flat_phi[:, k] = np.angle(np.exp(1j * np.interp(t, t[good], un)))
-    return flat_phi.reshape(phi.shape)
+    else:
+        parent_rot = np.asarray(parent_rot, np.float64)
+        n_par = np.einsum("...ji,...j->...i", parent_rot, n)
+        swing = rot.rotation_between(np.broadcast_to(A0[ids], n_par.shape), n_par)
+        h = np.einsum("...ij,...j->...i", parent_rot @ swing, np.broadcast_to(H0[ids], n.shape))
+    # the mid joint bends towards u_phi = n x h (see module docstring)
+    ref = rot.normalize(np.cross(n, h))
+    perp = perp + 1e-9 * l1[..., None] * ref
+    return np.arctan2(_dot(perp, v), _dot(perp, u))
 
 
 def mid_from_swivel(base_pos, end_pos, swivel, lengths, parent_rot, limb_ids=None):
@@ -211,6 +195,17 @@ def _clamp_reach(d, l1, l2, flex_max):
     d_min = np.sqrt(np.maximum(l1 ** 2 + l2 ** 2 + 2 * l1 * l2 * np.cos(flex_max), 0.0))
     d_min = np.maximum(d_min, 1e-6)
     return np.clip(d, d_min, l1 + l2)
+
+
+def _check_finite(**arrays):
+    for name, a in arrays.items():
+        if a is None:
+            continue
+        a = np.asarray(a)
+        if not np.isfinite(a).all():
+            frames = np.unique(np.nonzero(~np.isfinite(a))[0])
+            raise ValueError(f"limb solver input '{name}' contains NaN/inf at frame(s) "
+                             f"{frames[:10].tolist()}; bridge tracking gaps before solving")
 
 
 @dataclass
@@ -255,6 +250,8 @@ def solve_limbs(base_pos, end_pos, swivel, lengths, parent_rot, end_rot=None, li
     end_pos = np.asarray(end_pos, np.float64)
     parent_rot = np.asarray(parent_rot, np.float64)
     swivel = np.asarray(swivel, np.float64)
+    _check_finite(base_pos=base_pos, end_pos=end_pos, swivel=swivel, parent_rot=parent_rot,
+                  end_rot=end_rot)
     n, u, v, d = swivel_frame(base_pos, end_pos, parent_rot, ids)
     l1, l2 = _lengths(lengths, d.shape)
     flex_max = FLEX_MAX[ids]

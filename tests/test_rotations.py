@@ -1,0 +1,108 @@
+import numpy as np
+from hypothesis import given, settings, strategies as st
+from hypothesis.extra.numpy import arrays
+
+from blender_manikin.core import rotations as rot
+
+finite = st.floats(-3.0, 3.0, allow_nan=False)
+
+
+def rand_R(rng, n):
+    return rot.quat_to_matrix(rng.normal(size=(n, 4)))
+
+
+def test_quat_matrix_round_trip():
+    rng = np.random.default_rng(0)
+    q = rot.normalize(rng.normal(size=(1000, 4)))
+    q2 = rot.matrix_to_quat(rot.quat_to_matrix(q))
+    assert np.allclose(np.abs(np.sum(q * q2, -1)), 1.0, atol=1e-12)
+    assert np.all(q2[:, 0] >= 0)
+    R = rot.quat_to_matrix(q)
+    assert np.allclose(R @ np.swapaxes(R, -1, -2), np.eye(3), atol=1e-12)
+    assert np.allclose(np.linalg.det(R), 1.0)
+
+
+def test_quat_convention_is_wxyz_right_handed():
+    q = np.array([np.cos(np.pi / 4), 0, 0, np.sin(np.pi / 4)])  # +90 deg about Z
+    assert np.allclose(rot.quat_to_matrix(q) @ [1, 0, 0], [0, 1, 0])
+    assert np.allclose(rot.quat_rotate(q, [1, 0, 0]), [0, 1, 0])
+
+
+def test_quat_mul_matches_matrix_product():
+    rng = np.random.default_rng(1)
+    a, b = rng.normal(size=(2, 50, 4))
+    assert np.allclose(rot.quat_to_matrix(rot.quat_mul(a, b)), rot.quat_to_matrix(a) @ rot.quat_to_matrix(b))
+
+
+@settings(max_examples=200, deadline=None)
+@given(arrays(np.float64, 3, elements=finite))
+def test_axis_angle_round_trip(aa):
+    R = rot.axis_angle_to_matrix(aa)
+    R2 = rot.axis_angle_to_matrix(rot.matrix_to_axis_angle(R))
+    assert np.allclose(R, R2, atol=1e-9)
+    assert np.allclose(rot.quat_to_matrix(rot.axis_angle_to_quat(aa)), R, atol=1e-12)
+
+
+def test_6d_round_trip_and_gram_schmidt():
+    rng = np.random.default_rng(2)
+    R = rand_R(rng, 500)
+    assert np.allclose(rot.sixd_to_matrix(rot.matrix_to_6d(R)), R, atol=1e-12)
+    noisy = rot.matrix_to_6d(R) + rng.normal(size=(500, 6)) * 0.01
+    R2 = rot.sixd_to_matrix(noisy)
+    assert np.allclose(R2 @ np.swapaxes(R2, -1, -2), np.eye(3), atol=1e-12)
+
+
+def test_slerp_endpoints_midpoint_and_short_arc():
+    q0 = np.array([1.0, 0, 0, 0])
+    q1 = rot.axis_angle_to_quat(np.array([0, 0, 1.0]))
+    assert np.allclose(rot.quat_slerp(q0, q1, 0.0), q0)
+    assert np.allclose(rot.quat_slerp(q0, q1, 1.0), q1)
+    mid = rot.quat_slerp(q0, q1, 0.5)
+    assert np.allclose(rot.quat_to_axis_angle(mid), [0, 0, 0.5])
+    # -q1 is the same rotation: slerp must still take the short arc
+    mid2 = rot.quat_slerp(q0, -q1, 0.5)
+    assert np.allclose(rot.quat_to_matrix(mid2), rot.quat_to_matrix(mid))
+
+
+def test_quat_continuous_removes_sign_flips():
+    t = np.linspace(0, 3, 100)
+    q = rot.axis_angle_to_quat(np.stack([0 * t, t, 0 * t], -1))
+    flipped = q.copy()
+    flipped[::3] *= -1
+    c = rot.quat_continuous(flipped)
+    assert np.all(np.sum(c[1:] * c[:-1], -1) > 0)
+    assert np.allclose(rot.quat_to_matrix(c), rot.quat_to_matrix(q))
+
+
+def test_swing_twist_decomposition():
+    rng = np.random.default_rng(3)
+    q = rot.normalize(rng.normal(size=(500, 4)))
+    axis = rot.normalize(rng.normal(size=(500, 3)))
+    sw, tw, ang = rot.swing_twist(q, axis)
+    assert np.allclose(rot.quat_to_matrix(rot.quat_mul(sw, tw)), rot.quat_to_matrix(q), atol=1e-10)
+    # twist rotates about the axis, swing axis is perpendicular to it
+    assert np.allclose(np.cross(tw[:, 1:], axis), 0, atol=1e-10)
+    assert np.allclose(np.sum(sw[:, 1:] * axis, -1), 0, atol=1e-10)
+    assert np.all((ang > -np.pi - 1e-12) & (ang <= np.pi + 1e-12))
+    # a pure twist of known angle
+    a = np.array([0.0, 0.0, 1.0])
+    q = rot.axis_angle_to_quat(a * 0.7)
+    assert np.isclose(rot.swing_twist(q, a)[2], 0.7)
+    assert np.isclose(rot.twist_angle(rot.quat_to_matrix(q), -a), -0.7)
+
+
+def test_rotation_between_including_antiparallel():
+    rng = np.random.default_rng(4)
+    a = rng.normal(size=(200, 3))
+    b = rng.normal(size=(200, 3))
+    b[:5] = -a[:5]
+    b[5:10] = a[5:10] * 3
+    R = rot.rotation_between(a, b)
+    assert np.all(np.isfinite(R))
+    assert np.allclose(np.einsum("nij,nj->ni", R, rot.normalize(a)), rot.normalize(b), atol=1e-9)
+    assert np.allclose(R[5:10], np.eye(3), atol=1e-9)
+
+
+def test_geodesic_angle():
+    R = rot.axis_angle_to_matrix(np.array([[0, 0.3, 0.0]]))
+    assert np.isclose(rot.geodesic_angle(np.eye(3)[None], R)[0], 0.3)
