@@ -1,0 +1,171 @@
+"""Network inputs and outputs: canonical frame, feature and target layouts.
+
+Shared by training (numpy batches fed to torch) and inference (onnxruntime),
+so both see exactly the same numbers.  Never imports bpy or torch.
+
+Canonical frame of a window
+---------------------------
+A window of W frames is expressed in the frame of its centre frame ``c``:
+origin at the head joint's floor projection ``o = (hx, hy, 0)``, rotated
+about +Z so the head's heading (its local -Y axis projected on the floor)
+points along -Y, and every length divided by the performer's stature ``s``::
+
+    C = Rz(yaw_c)                      world-from-canonical rotation (3, 3)
+    p_can = Cᵀ (p - o) / s             positions
+    R_can = Cᵀ R                       world orientations
+
+So a performer anywhere in the room, facing anywhere, of any height gives the
+same features (tested).  Heights stay measured from the floor (z = 0).
+
+Inputs ``x`` : ``(B, W, F_in)`` float32, per frame, for each input device
+in ``INPUT_DEVICES`` order: canonical position (3), canonical orientation
+6D (6), velocity (3, canonical, in statures per second / 10).
+
+Outputs (MANIKIN) ``y`` : ``(B, W, F_out)`` float32 with the blocks of
+:data:`OUTPUT_BLOCKS`: root (pelvis) world orientation 6D in the canonical
+frame; torso local rotations 6D (spine1, spine2, spine3, neck, left_collar,
+right_collar); ankle positions relative to the head (canonical, / s); ankle
+world orientations 6D (canonical); swivel (cos, sin) for the four limbs;
+foot-contact logits (left, right).
+
+The network-only baseline (``kind="fk"``) predicts the root orientation and
+all 21 other local rotations (6D) instead, posed by FK.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from . import rotations as rot
+from .skeleton import J, NUM_JOINTS
+
+INPUT_DEVICES = ("head", "left_hand", "right_hand")
+DEVICE_JOINT = {"head": J["head"], "left_hand": J["left_wrist"], "right_hand": J["right_wrist"],
+                "pelvis": J["pelvis"], "left_foot": J["left_ankle"], "right_foot": J["right_ankle"]}
+PER_DEVICE = 12
+VEL_SCALE = 0.1
+
+TORSO_LOCAL = ("spine1", "spine2", "spine3", "neck", "left_collar", "right_collar")
+TORSO_LOCAL_IDX = tuple(J[n] for n in TORSO_LOCAL)
+ANKLES = (J["left_ankle"], J["right_ankle"])
+
+OUTPUT_BLOCKS = {
+    "manikin": (("root_rot", 6), ("torso_rot", 6 * len(TORSO_LOCAL)), ("ankle_pos", 6),
+                ("ankle_rot", 12), ("swivel", 8), ("contact", 2)),
+    "fk": (("root_rot", 6), ("local_rot", 6 * (NUM_JOINTS - 1)), ("contact", 2)),
+}
+
+
+def output_slices(kind="manikin"):
+    """``{block name: slice}`` into the last axis of ``y``."""
+    out, k = {}, 0
+    for name, size in OUTPUT_BLOCKS[kind]:
+        out[name] = slice(k, k + size)
+        k += size
+    return out
+
+
+def output_dim(kind="manikin"):
+    return sum(size for _, size in OUTPUT_BLOCKS[kind])
+
+
+def input_dim(devices=INPUT_DEVICES):
+    return PER_DEVICE * len(devices)
+
+
+def heading_yaw(R):
+    """Yaw (radians about +Z) of orientations ``(..., 3, 3)``: the angle of
+    the local -Y axis projected on the floor, 0 when it points along -Y."""
+    f = -R[..., :, 1]
+    return np.arctan2(f[..., 0], -f[..., 1])
+
+
+def rot_z(yaw):
+    c, s = np.cos(yaw), np.sin(yaw)
+    z, o = np.zeros_like(c), np.ones_like(c)
+    return np.stack([np.stack([c, -s, z], -1), np.stack([s, c, z], -1), np.stack([z, z, o], -1)], -2)
+
+
+def canonical_frames(head_pos, head_rot, centre=None):
+    """Canonical frame of each window.
+
+    head_pos ``(B, W, 3)``, head_rot ``(B, W, 3, 3)`` (head *joint* targets).
+    Returns ``(C (B, 3, 3), origin (B, 3))``; ``centre`` defaults to W // 2.
+    """
+    c = head_pos.shape[1] // 2 if centre is None else centre
+    C = rot_z(heading_yaw(head_rot[:, c]))
+    o = head_pos[:, c].copy()
+    o[:, 2] = 0.0
+    return C, o
+
+
+def make_inputs(pos, rot_m, stature, fps, devices=INPUT_DEVICES, frames=None):
+    """Network input ``(B, W, 12·D)`` float32.
+
+    pos: dict device → ``(B, W, 3)`` joint target positions (metres, world);
+    rot_m: dict device → ``(B, W, 3, 3)`` joint target orientations;
+    stature: ``(B,)`` metres; fps: frames per second of the window.
+    frames: optional precomputed ``(C, o)``.  Returns ``(x, C, o)``.
+    """
+    C, o = canonical_frames(pos["head"], rot_m["head"]) if frames is None else frames
+    s = np.asarray(stature, np.float64).reshape(-1, 1, 1)
+    Ct = np.swapaxes(C, -1, -2)[:, None]
+    feats = []
+    for d in devices:
+        p = np.einsum("bwij,bwj->bwi", Ct, pos[d] - o[:, None]) / s
+        r6 = rot.matrix_to_6d(Ct @ rot_m[d])
+        vel = np.zeros_like(p)
+        vel[:, 1:] = (p[:, 1:] - p[:, :-1]) * (fps * VEL_SCALE)
+        vel[:, 0] = vel[:, 1] if p.shape[1] > 1 else 0.0
+        feats += [p, r6, vel]
+    return np.concatenate(feats, -1).astype(np.float32), C, o
+
+
+def encode_targets(world_rot, local_rot, positions, swivel, contacts, C, o, stature, kind="manikin"):
+    """Training targets ``(B, W, F_out)`` float32 from ground truth.
+
+    world_rot/local_rot: ``(B, W, 22, 3, 3)``; positions ``(B, W, 22, 3)``;
+    swivel ``(B, W, 4)`` radians; contacts ``(B, W, 2)`` in {0, 1}.
+    """
+    Ct = np.swapaxes(C, -1, -2)[:, None]
+    s = np.asarray(stature, np.float64).reshape(-1, 1, 1)
+    blocks = [rot.matrix_to_6d(Ct @ world_rot[:, :, 0])]
+    if kind == "manikin":
+        B, W = swivel.shape[:2]
+        blocks.append(rot.matrix_to_6d(local_rot[:, :, list(TORSO_LOCAL_IDX)]).reshape(B, W, -1))
+        rel = positions[:, :, list(ANKLES)] - positions[:, :, J["head"]][:, :, None]
+        blocks.append((np.einsum("bwij,bwkj->bwki", Ct, rel) / s[..., None]).reshape(B, W, 6))
+        blocks.append(rot.matrix_to_6d(Ct[:, :, None] @ world_rot[:, :, list(ANKLES)]).reshape(B, W, 12))
+        blocks.append(np.stack([np.cos(swivel), np.sin(swivel)], -1).reshape(B, W, 8))
+    else:
+        B, W = local_rot.shape[:2]
+        blocks.append(rot.matrix_to_6d(local_rot[:, :, 1:]).reshape(B, W, -1))
+    blocks.append(np.asarray(contacts, np.float64))
+    return np.concatenate(blocks, -1).astype(np.float32)
+
+
+def decode_outputs(y, C, o, stature, head_pos, kind="manikin"):
+    """Network output ``(B, W, F_out)`` → world-space quantities (dict).
+
+    head_pos ``(B, W, 3)`` anchors the ankle positions.  Keys (manikin):
+    ``root_rot (B, W, 3, 3)`` world, ``torso_rot (B, W, 6, 3, 3)`` local,
+    ``ankle_pos (B, W, 2, 3)`` world metres, ``ankle_rot (B, W, 2, 3, 3)``
+    world, ``swivel_cs (B, W, 4, 2)`` unnormalised (cos, sin),
+    ``contact (B, W, 2)`` probabilities.  (fk): ``root_rot``,
+    ``local_rot (B, W, 21, 3, 3)``, ``contact``.
+    """
+    y = np.asarray(y, np.float64)
+    sl = output_slices(kind)
+    B, W = y.shape[:2]
+    Cb = C[:, None]
+    s = np.asarray(stature, np.float64).reshape(-1, 1, 1)
+    out = {"root_rot": Cb @ rot.sixd_to_matrix(y[..., sl["root_rot"]]),
+           "contact": 1.0 / (1.0 + np.exp(-y[..., sl["contact"]]))}
+    if kind == "manikin":
+        out["torso_rot"] = rot.sixd_to_matrix(y[..., sl["torso_rot"]].reshape(B, W, -1, 6))
+        rel = y[..., sl["ankle_pos"]].reshape(B, W, 2, 3) * s[..., None]
+        out["ankle_pos"] = head_pos[:, :, None] + np.einsum("bij,bwkj->bwki", C, rel)
+        out["ankle_rot"] = Cb[:, :, None] @ rot.sixd_to_matrix(y[..., sl["ankle_rot"]].reshape(B, W, 2, 6))
+        out["swivel_cs"] = y[..., sl["swivel"]].reshape(B, W, 4, 2)
+    else:
+        out["local_rot"] = rot.sixd_to_matrix(y[..., sl["local_rot"]].reshape(B, W, -1, 6))
+    return out
