@@ -1,0 +1,140 @@
+"""Load the shipped ONNX pose network and read its contract.  No bpy, no torch.
+
+The contract is JSON stored in the ONNX file's ``metadata_props`` under
+``manikin_contract`` (written by ``blender_manikin.training.export``): input
+and output names and shapes, fps, window, input devices, joint names, output
+blocks and normalisation constants.  The add-on reads these instead of
+hard-coding them and refuses a model whose contract does not match the code.
+"""
+from __future__ import annotations
+
+import json
+import os
+from dataclasses import dataclass
+
+import numpy as np
+
+from . import features
+from .skeleton import JOINT_NAMES
+
+MODELS_DIR = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "models")
+DEFAULT_MODEL = os.path.join(MODELS_DIR, "manikin_s.onnx")
+CONTRACT_KEY = "manikin_contract"
+
+
+class ModelError(RuntimeError):
+    """The model file is missing, unreadable or does not match this code."""
+
+
+def _import_onnxruntime():
+    try:
+        from .. import onnx_runtime_loader  # clear, platform-specific message inside Blender
+        return onnx_runtime_loader.import_onnxruntime()
+    except ImportError as exc:  # loader absent (core used stand-alone)
+        if "onnx_runtime_loader" not in str(exc):
+            raise
+    import onnxruntime
+    return onnxruntime
+
+
+@dataclass
+class Contract:
+    kind: str
+    fps: float
+    window: int
+    devices: tuple
+    input_name: str
+    output_name: str
+    input_dim: int
+    output_dim: int
+    raw: dict
+
+    @classmethod
+    def from_json(cls, text, path="<model>"):
+        try:
+            d = json.loads(text)
+        except json.JSONDecodeError as exc:
+            raise ModelError(f"{path}: the '{CONTRACT_KEY}' metadata is not valid JSON ({exc})") from exc
+        try:
+            c = cls(kind=d["kind"], fps=float(d["fps"]), window=int(d["window"]),
+                    devices=tuple(d["input_devices"]), input_name=d["input_name"],
+                    output_name=d["output_name"], input_dim=int(d["input_shape"][-1]),
+                    output_dim=int(d["output_shape"][-1]), raw=d)
+        except KeyError as exc:
+            raise ModelError(f"{path}: model contract lacks the field {exc}") from exc
+        c.check(path)
+        return c
+
+    def check(self, path):
+        """Raise :class:`ModelError` when the contract disagrees with this code."""
+        problems = []
+        if self.kind not in features.OUTPUT_BLOCKS:
+            problems.append(f"unknown model kind {self.kind!r}")
+        else:
+            blocks = [tuple(b) for b in self.raw.get("output_blocks", [])]
+            if blocks and blocks != [tuple(b) for b in features.OUTPUT_BLOCKS[self.kind]]:
+                problems.append(f"output blocks {blocks} differ from the code's")
+            if self.output_dim != features.output_dim(self.kind):
+                problems.append(f"output size {self.output_dim} != {features.output_dim(self.kind)}")
+        if self.input_dim != features.input_dim(self.devices):
+            problems.append(f"input size {self.input_dim} != {features.input_dim(self.devices)}")
+        if tuple(self.raw.get("joint_names", JOINT_NAMES)) != tuple(JOINT_NAMES):
+            problems.append("joint names differ from the 22-joint body")
+        vs = self.raw.get("normalisation", {}).get("vel_scale", features.VEL_SCALE)
+        if abs(float(vs) - features.VEL_SCALE) > 1e-12:
+            problems.append(f"velocity scale {vs} != {features.VEL_SCALE}")
+        if problems:
+            raise ModelError(f"{path}: model contract does not match this add-on: " + "; ".join(problems))
+
+
+class ModelRunner:
+    """An onnxruntime session plus its contract.
+
+    ``predict(x)`` takes ``(B, W, F_in)`` float32 and returns
+    ``(B, W, F_out)`` float32, in batches of ``batch`` windows.
+    """
+
+    def __init__(self, path=None, threads=None, batch=256):
+        path = path or DEFAULT_MODEL
+        if not os.path.isfile(path):
+            raise ModelError(f"pose model not found: {path} (reinstall the add-on, or train one with "
+                             "'python -m blender_manikin.training.train')")
+        ort = _import_onnxruntime()
+        opts = ort.SessionOptions()
+        opts.intra_op_num_threads = int(threads or min(4, os.cpu_count() or 1))
+        opts.inter_op_num_threads = 1
+        try:
+            self.session = ort.InferenceSession(path, sess_options=opts, providers=["CPUExecutionProvider"])
+        except Exception as exc:  # onnxruntime raises its own exception types
+            raise ModelError(f"{path}: onnxruntime could not load the model ({exc})") from exc
+        meta = self.session.get_modelmeta().custom_metadata_map
+        if CONTRACT_KEY not in meta:
+            raise ModelError(f"{path}: no '{CONTRACT_KEY}' metadata; not a blender_manikin model")
+        self.contract = Contract.from_json(meta[CONTRACT_KEY], path)
+        self.path = path
+        self.batch = int(batch)
+
+    @property
+    def num_parameters(self):
+        return int(self.contract.raw.get("num_parameters", 0))
+
+    def predict(self, x):
+        x = np.ascontiguousarray(x, dtype=np.float32)
+        out = []
+        for i in range(0, x.shape[0], self.batch):
+            out.append(self.session.run([self.contract.output_name],
+                                        {self.contract.input_name: x[i:i + self.batch]})[0])
+        if not out:
+            return np.zeros((0, x.shape[1], self.contract.output_dim), np.float32)
+        return np.concatenate(out, 0)
+
+
+_CACHE = {}
+
+
+def load_model(path=None) -> ModelRunner:
+    """Cached :class:`ModelRunner` for ``path`` (default: the shipped model)."""
+    key = os.path.abspath(path or DEFAULT_MODEL)
+    if key not in _CACHE:
+        _CACHE[key] = ModelRunner(key)
+    return _CACHE[key]

@@ -1,0 +1,343 @@
+"""Inference: tracker targets + body → full-body pose (MANIKIN).  No bpy, no torch.
+
+:func:`solve` runs, for T frames at any fps:
+
+1. resample the head and hand targets to the network's fps (contract) and
+   cut them into centred windows (stride W/2), batched through onnxruntime;
+2. decode every window from its canonical frame and blend overlapping
+   windows (triangular weights; 6D rotations and (cos, sin) averaged, then
+   re-normalised); resample back to the scene frames;
+3. torso FK from the predicted root orientation and torso rotations, placed
+   so the head joint lands exactly on its target;
+4. feet: predicted ankle poses lifted so no joint goes below the floor,
+   planted while the predicted contact probability is above 0.5 (position
+   locked over the contact, blended in and out), or taken from foot trackers
+   when the recording has them;
+5. the analytic limb solver for the four limbs with the predicted swivel
+   angles: hands land exactly on their targets (when an arm cannot reach,
+   the collar is swung towards the target first) and legs on the feet.
+
+Shapes: targets ``(T, 3)`` positions (metres, Blender axes, floor z = 0) and
+``(T, 3, 3)`` orientations per device; results in :class:`PoseResult`.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from . import features
+from . import limb_solver as ls
+from . import rotations as rot
+from .pose_result import PoseResult, TrackerTargets
+from .skeleton import Body, J, NUM_JOINTS, PARENTS, forward_kinematics
+
+CONTACT_THRESHOLD = 0.5
+CONTACT_BLEND_FRAMES = 4
+COLLAR_MAX_SWING = np.radians(25.0)
+
+
+class SolveCancelled(Exception):
+    """Raised through :func:`solve` when the progress callback asks to stop."""
+
+
+@dataclass
+class NetworkOutput:
+    """Per-frame network predictions at the scene rate (world space).
+
+    root_rot (T,3,3); torso_rot (T,6,3,3) local; ankle_pos (T,2,3);
+    ankle_rot (T,2,3,3); swivel (T,4) radians; contact (T,2) probability.
+    For kind "fk": local_rot (T,21,3,3) instead of torso/ankles/swivel.
+    """
+    root_rot: np.ndarray
+    contact: np.ndarray
+    torso_rot: np.ndarray | None = None
+    ankle_pos: np.ndarray | None = None
+    ankle_rot: np.ndarray | None = None
+    swivel: np.ndarray | None = None
+    local_rot: np.ndarray | None = None
+
+
+def _interp_rows(t_new, t_old, values):
+    """Linear interpolation along axis 0 of ``values`` ``(N, ...)`` (vectorised)."""
+    values = np.asarray(values, np.float64)
+    if len(t_old) == 1:
+        return np.repeat(values, len(t_new), 0)
+    idx = np.clip(np.searchsorted(t_old, t_new, side="right") - 1, 0, len(t_old) - 2)
+    w = np.clip((t_new - t_old[idx]) / (t_old[idx + 1] - t_old[idx]), 0.0, 1.0)
+    w = w.reshape((-1,) + (1,) * (values.ndim - 1))
+    return values[idx] * (1 - w) + values[idx + 1] * w
+
+
+def resample_pose_targets(pos, rotm, fps_in, fps_out):
+    """Resample ``(T, 3)`` positions and ``(T, 3, 3)`` orientations to ``fps_out``
+    over the same time span (linear / slerp).  Returns ``(pos, rot, times_in, times_out)``."""
+    T = pos.shape[0]
+    t_in = np.arange(T) / fps_in
+    n_out = int(np.floor(t_in[-1] * fps_out + 1e-9)) + 1
+    t_out = np.arange(n_out) / fps_out
+    p = _interp_rows(t_out, t_in, pos)
+    q = rot.quat_continuous(rot.matrix_to_quat(rotm))
+    idx = np.clip(np.searchsorted(t_in, t_out, side="right") - 1, 0, max(T - 2, 0))
+    if T == 1:
+        qo = np.repeat(q, n_out, 0)
+    else:
+        w = np.clip((t_out - t_in[idx]) * fps_in, 0.0, 1.0)
+        qo = rot.quat_slerp(q[idx], q[idx + 1], w)
+    return p, rot.quat_to_matrix(qo), t_in, t_out
+
+
+def run_network(targets: TrackerTargets, body: Body, runner, progress=None):
+    """Windows → onnxruntime → blended per-frame :class:`NetworkOutput` at the scene fps."""
+    c = runner.contract
+    W = c.window
+    fps = float(targets.fps)
+    pos_m, rot_m = {}, {}
+    for d in c.devices:
+        if d not in targets.pos:
+            raise ValueError(f"the pose model needs a '{d}' tracker; the recording has {list(targets.pos)}")
+        pos_m[d], rot_m[d], t_in, t_out = resample_pose_targets(targets.pos[d], targets.rot[d], fps, c.fps)
+    N = t_out.shape[0]
+    stride = max(W // 2, 1)
+    pad = W // 2
+    starts = np.arange(-pad, max(N - pad, 1), stride)
+    idx = np.clip(starts[:, None] + np.arange(W)[None], 0, N - 1)          # (B, W) edge padding
+    wpos = {d: pos_m[d][idx] for d in c.devices}
+    wrot = {d: rot_m[d][idx] for d in c.devices}
+    stature = np.full(len(starts), body.stature)
+    x, C, o = features.make_inputs(wpos, wrot, stature, c.fps, devices=c.devices)
+    if progress is not None:
+        progress(0.1)
+    y = runner.predict(x)
+    if progress is not None:
+        progress(0.5)
+    dec = features.decode_outputs(y, C, o, stature, wpos["head"], kind=c.kind)
+
+    # blend overlapping windows with triangular weights
+    tri = 1.0 - np.abs((np.arange(W) + 0.5) / W * 2.0 - 1.0) + 1e-3
+    flat_idx = idx.reshape(-1)
+    valid = ((starts[:, None] + np.arange(W)[None]) >= 0) & ((starts[:, None] + np.arange(W)[None]) < N)
+    wts = (tri[None] * valid).reshape(-1)
+    wsum = np.bincount(flat_idx, wts, minlength=N)
+
+    def blend(a):
+        a = a.reshape((flat_idx.shape[0], -1))
+        out = np.zeros((N, a.shape[1]))
+        np.add.at(out, flat_idx, a * wts[:, None])
+        return out / wsum[:, None]
+
+    def blend_rot(R):
+        sixd = rot.matrix_to_6d(R)
+        shape = R.shape[2:-2]
+        b = blend(sixd).reshape((N,) + shape + (6,))
+        return b
+
+    six = {"root_rot": blend_rot(dec["root_rot"])}
+    contact = blend(dec["contact"])
+    if c.kind == "manikin":
+        six["torso_rot"] = blend_rot(dec["torso_rot"])
+        six["ankle_rot"] = blend_rot(dec["ankle_rot"])
+        ankle_pos = blend(dec["ankle_pos"]).reshape(N, 2, 3)
+        swivel_cs = blend(dec["swivel_cs"]).reshape(N, 4, 2)
+    else:
+        six["local_rot"] = blend_rot(dec["local_rot"])
+
+    # back to the scene frame rate
+    t_scene = t_in
+    up = {k: rot.sixd_to_matrix(_interp_rows(t_scene, t_out, v)) for k, v in six.items()}
+    out = NetworkOutput(root_rot=up["root_rot"],
+                        contact=np.clip(_interp_rows(t_scene, t_out, contact), 0.0, 1.0))
+    if c.kind == "manikin":
+        out.torso_rot = up["torso_rot"]
+        out.ankle_rot = up["ankle_rot"]
+        out.ankle_pos = _interp_rows(t_scene, t_out, ankle_pos)
+        cs = _interp_rows(t_scene, t_out, swivel_cs)
+        out.swivel = np.arctan2(cs[..., 1], cs[..., 0])
+    else:
+        out.local_rot = up["local_rot"]
+    return out
+
+
+def _segments(mask):
+    """``[(start, stop), ...]`` of runs of True in a 1-D bool array."""
+    m = np.concatenate([[False], mask, [False]]).astype(np.int8)
+    d = np.diff(m)
+    return list(zip(np.nonzero(d == 1)[0], np.nonzero(d == -1)[0]))
+
+
+def lock_planted_feet(ankle_pos, contact, threshold=CONTACT_THRESHOLD, blend=CONTACT_BLEND_FRAMES):
+    """Hold each ankle still while its foot is planted.
+
+    ankle_pos ``(T, 2, 3)``; contact ``(T, 2)`` probabilities.  Over each
+    contact run the ankle keeps the (x, y, z) it has at the run's median
+    frame; ``blend`` frames on either side ease in and out linearly.
+    Returns a new array.
+    """
+    out = np.array(ankle_pos, np.float64, copy=True)
+    T = out.shape[0]
+    for k in range(2):
+        for a, b in _segments(contact[:, k] > threshold):
+            if b - a < 2:
+                continue
+            anchor = np.median(out[a:b, k], axis=0)
+            lo, hi = max(a - blend, 0), min(b + blend, T)
+            w = np.zeros(hi - lo)
+            w[a - lo:b - lo] = 1.0
+            for i in range(lo, a):
+                w[i - lo] = (i - (a - blend - 1)) / (blend + 1)
+            for i in range(b, hi):
+                w[i - lo] = ((b + blend) - i) / (blend + 1)
+            w = np.clip(w, 0.0, 1.0)[:, None]
+            out[lo:hi, k] = out[lo:hi, k] * (1 - w) + anchor * w
+    return out
+
+
+def keep_feet_above_floor(ankle_pos, ankle_rot, body: Body, floor=0.0):
+    """Lift ankle targets so the ankle and the foot (ball) joint stay above ``floor``.
+
+    ankle_pos ``(T, 2, 3)``, ankle_rot ``(T, 2, 3, 3)`` world.  The ankle keeps
+    at least half its rest height; the ball of the foot at least ``floor``.
+    """
+    out = np.array(ankle_pos, np.float64, copy=True)
+    foot_off = body.offsets[[J["left_foot"], J["right_foot"]]]                 # (2, 3)
+    ball_dz = np.einsum("tkij,kj->tki", ankle_rot, foot_off)[..., 2]
+    min_ankle = 0.5 * body.rest_positions()[[J["left_ankle"], J["right_ankle"]], 2]
+    need = np.maximum(floor - ball_dz, floor + min_ankle[None])
+    out[..., 2] = np.maximum(out[..., 2], need)
+    return out
+
+
+def _torso_fk(root_rot, torso_rot, head_rot, head_pos, body: Body):
+    """World rotations/positions of pelvis, torso, head, collars, shoulders, hips.
+
+    The root is placed so the head joint lands on ``head_pos``.  Returns
+    ``(local (T,22,3,3) with torso+head filled, root_pos (T,3))``.
+    """
+    T = root_rot.shape[0]
+    local = np.broadcast_to(np.eye(3), (T, NUM_JOINTS, 3, 3)).copy()
+    local[:, 0] = root_rot
+    local[:, list(features.TORSO_LOCAL_IDX)] = torso_rot
+    pos0, world0 = forward_kinematics(local, np.zeros((T, 3)), body)
+    neck = J["neck"]
+    local[:, J["head"]] = np.swapaxes(world0[:, neck], -1, -2) @ head_rot
+    root_pos = head_pos - pos0[:, J["head"]]
+    return local, root_pos
+
+
+def _reach_collars(local, root_pos, targets_pos, body: Body, max_swing=COLLAR_MAX_SWING):
+    """Swing the collars (≤ ``max_swing``) on frames where a hand is out of reach."""
+    pos, world = forward_kinematics(local, root_pos, body)
+    L = body.limb_lengths()
+    for li, side in ((0, "left"), (1, "right")):
+        col, sh = J[f"{side}_collar"], J[f"{side}_shoulder"]
+        wrist = targets_pos[li]
+        reach = L[li].sum() * (1 - 1e-9)
+        far = np.linalg.norm(wrist - pos[:, sh], axis=-1) > reach
+        if not far.any():
+            continue
+        f = np.nonzero(far)[0]
+        c = pos[f, col]
+        cur = rot.normalize(pos[f, sh] - c)
+        goal = rot.normalize(wrist[f] - c)
+        r = np.linalg.norm(body.offsets[sh])
+        full = rot.rotation_between(cur, goal)
+        ang_full = rot.geodesic_angle(np.eye(3)[None], full)
+        axis = rot.normalize(rot.matrix_to_axis_angle(full))
+        lo, hi = np.zeros(len(f)), np.minimum(ang_full, max_swing)
+        # smallest swing bringing the wrist within reach (bisection), capped
+        for _ in range(30):
+            mid = 0.5 * (lo + hi)
+            Rm = rot.axis_angle_rotation(axis, mid)
+            s_new = c + r * np.einsum("nij,nj->ni", Rm, cur)
+            ok = np.linalg.norm(wrist[f] - s_new, axis=-1) <= reach
+            hi = np.where(ok, mid, hi)
+            lo = np.where(ok, lo, mid)
+        Rm = rot.axis_angle_rotation(axis, hi)
+        new_world = Rm @ world[f, col]
+        local[f, col] = np.swapaxes(world[f, PARENTS[col]], -1, -2) @ new_world
+    return local
+
+
+def solve(targets: TrackerTargets, body: Body, runner=None, progress=None, lock_feet=True,
+          fk_runner=None, lower_body="ik"):
+    """Full-body pose for every frame of ``targets``.
+
+    runner: a :class:`~.model_runner.ModelRunner` (default: the shipped model).
+    progress: optional ``callable(fraction)``; raise :class:`SolveCancelled`
+    (or anything) from it to stop.  lower_body: ``"ik"`` (MANIKIN) or
+    ``"fk"`` (ablation: legs from ``fk_runner``'s predicted rotations).
+    """
+    if runner is None:
+        from .model_runner import load_model
+        runner = load_model()
+    for d in ("head", "left_hand", "right_hand"):
+        if d not in targets.pos:
+            raise ValueError(f"a '{d}' tracker is required; the recording has {list(targets.pos)}")
+    T = targets.num_frames
+    if T < 1:
+        raise ValueError("the recording has no frames to solve")
+    for d in targets.pos:
+        for name, a in (("position", targets.pos[d]), ("orientation", targets.rot[d])):
+            if not np.isfinite(a).all():
+                bad = np.unique(np.nonzero(~np.isfinite(a))[0])
+                raise ValueError(f"{d} {name} has NaN at frames {bad[:10].tolist()}: bridge gaps first")
+
+    def report(x):
+        if progress is not None:
+            progress(x)
+
+    net = run_network(targets, body, runner, progress=lambda x: report(0.6 * x))
+    if runner.contract.kind != "manikin":
+        raise ValueError(f"{runner.path}: solve() needs a MANIKIN model, got kind {runner.contract.kind!r}")
+    head_pos, head_rot = targets.pos["head"], targets.rot["head"]
+    local, root_pos = _torso_fk(net.root_rot, net.torso_rot, head_rot, head_pos, body)
+    if "pelvis" in targets.pos:   # six-tracker setting: the pelvis tracker wins
+        local[:, 0] = targets.rot["pelvis"]
+        local, root_pos = _torso_fk(targets.rot["pelvis"], local[:, list(features.TORSO_LOCAL_IDX)],
+                                    head_rot, head_pos, body)
+        root_pos = targets.pos["pelvis"]
+    report(0.65)
+
+    wrist_pos = np.stack([targets.pos["left_hand"], targets.pos["right_hand"]], 0)
+    local = _reach_collars(local, root_pos, wrist_pos, body)
+
+    # feet
+    ankle_pos, ankle_rot = net.ankle_pos.copy(), net.ankle_rot.copy()
+    foot_tracked = [d in targets.pos for d in ("left_foot", "right_foot")]
+    for k, d in enumerate(("left_foot", "right_foot")):
+        if foot_tracked[k]:
+            ankle_pos[:, k] = targets.pos[d]
+            ankle_rot[:, k] = targets.rot[d]
+    contact = net.contact.copy()
+    if lock_feet:
+        locked = lock_planted_feet(ankle_pos, contact)
+        for k in range(2):
+            if not foot_tracked[k]:
+                ankle_pos[:, k] = locked[:, k]
+    ankle_pos = keep_feet_above_floor(ankle_pos, ankle_rot, body)
+    report(0.75)
+
+    # limbs
+    pos, world = forward_kinematics(local, root_pos, body)
+    base = pos[:, ls.LIMB_BASE]
+    par = world[:, ls.LIMB_PARENT]
+    ends = np.stack([targets.pos["left_hand"], targets.pos["right_hand"], ankle_pos[:, 0], ankle_pos[:, 1]], 1)
+    end_rot = np.stack([targets.rot["left_hand"], targets.rot["right_hand"], ankle_rot[:, 0], ankle_rot[:, 1]], 1)
+    sol = ls.solve_limbs(base, ends, net.swivel, body.limb_lengths(), par, end_rot=end_rot)
+    local[:, ls.LIMB_BASE] = sol.base_local
+    local[:, ls.LIMB_MID] = sol.mid_local
+    local[:, ls.LIMB_END] = sol.end_local
+    swivel = net.swivel.copy()
+    if lower_body == "fk":
+        if fk_runner is None:
+            raise ValueError("lower_body='fk' needs fk_runner (the network-only model)")
+        fk_net = run_network(targets, body, fk_runner)
+        legs = [J[n] for n in ("left_hip", "right_hip", "left_knee", "right_knee",
+                               "left_ankle", "right_ankle")]
+        local[:, legs] = fk_net.local_rot[:, [j - 1 for j in legs]]
+    report(0.95)
+    result = PoseResult(fps=float(targets.fps), body=body, local_rot=local, root_pos=root_pos,
+                        swivel=swivel, contacts=contact > CONTACT_THRESHOLD,
+                        reach_error=sol.reach_error, targets=targets)
+    report(1.0)
+    return result
