@@ -232,7 +232,7 @@ def _reach_collars(local, root_pos, targets_pos, body: Body, max_swing=COLLAR_MA
         col, sh = J[f"{side}_collar"], J[f"{side}_shoulder"]
         wrist = targets_pos[li]
         reach = L[li].sum() * (1 - 1e-9)
-        far = np.linalg.norm(wrist - pos[:, sh], axis=-1) > reach
+        far = np.linalg.norm(wrist - pos[:, sh], axis=-1) > L[li].sum() + 1e-9
         if not far.any():
             continue
         f = np.nonzero(far)[0]

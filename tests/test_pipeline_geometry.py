@@ -1,0 +1,61 @@
+"""Pipeline building blocks that do not need the network."""
+import numpy as np
+
+from blender_manikin.core import pipeline as pl
+from blender_manikin.core import rotations as rot
+from blender_manikin.core import skeleton as sk
+
+
+def test_resample_pose_targets_linear_and_slerp():
+    T = 31
+    t = np.arange(T) / 30.0
+    pos = np.stack([t, 2 * t, 0 * t], -1)
+    R = rot.axis_angle_to_matrix(np.stack([0 * t, 0 * t, t], -1))
+    p, r, t_in, t_out = pl.resample_pose_targets(pos, R, 30.0, 90.0)
+    assert np.isclose(t_out[-1], 1.0) and len(t_out) == 91
+    assert np.allclose(p[:, 0], t_out) and np.allclose(p[:, 1], 2 * t_out)
+    assert np.allclose(rot.matrix_to_axis_angle(r)[:, 2], t_out, atol=1e-9)
+
+
+def test_lock_planted_feet_holds_position_during_contact():
+    T = 60
+    ankle = np.zeros((T, 2, 3))
+    ankle[:, 0, 0] = np.linspace(0, 0.3, T)          # left foot slides 30 cm
+    ankle[:, 1, 1] = np.linspace(0, 0.1, T)
+    contact = np.zeros((T, 2))
+    contact[20:40, 0] = 0.9
+    out = pl.lock_planted_feet(ankle, contact)
+    assert np.ptp(out[20:40, 0, 0]) == 0.0               # no slide while planted
+    assert np.allclose(out[:15, 0], ankle[:15, 0])        # untouched away from the contact
+    assert np.allclose(out[:, 1], ankle[:, 1])            # other foot never planted
+    step = np.abs(np.diff(out[:, 0, 0]))
+    assert step.max() < 0.05                             # eased in and out, no pop
+
+
+def test_keep_feet_above_floor():
+    body = sk.make_body(1.75)
+    T = 5
+    ankle = np.zeros((T, 2, 3))
+    ankle[:, :, 2] = np.array([-0.1, 0.0, 0.02, 0.05, 0.3])[:, None]
+    # toes pointing down 60 degrees
+    R = np.broadcast_to(rot.axis_angle_to_matrix(np.array([-1.0, 0, 0])), (T, 2, 3, 3))
+    out = pl.keep_feet_above_floor(ankle, R, body)
+    ball = out + np.einsum("tkij,kj->tki", R, body.offsets[[sk.J["left_foot"], sk.J["right_foot"]]])
+    assert ball[..., 2].min() >= -1e-12 and out[..., 2].min() > 0
+    assert np.allclose(out[-1], ankle[-1])
+
+
+def test_reach_collars_brings_far_hand_within_reach():
+    body = sk.make_body(1.75)
+    T = 3
+    local = np.broadcast_to(np.eye(3), (T, 22, 3, 3)).copy()
+    root = np.tile(body.root_rest, (T, 1))
+    pos, _ = sk.forward_kinematics(local, root, body)
+    L = body.limb_lengths()[0].sum()
+    sh = pos[:, sk.J["left_shoulder"]]
+    wrists = np.stack([sh + [0.0, -(L + 0.02), 0.0], pos[:, sk.J["right_wrist"]]], 0)
+    new = pl._reach_collars(local.copy(), root, wrists, body)
+    pos2, _ = sk.forward_kinematics(new, root, body)
+    d = np.linalg.norm(wrists[0] - pos2[:, sk.J["left_shoulder"]], axis=-1)
+    assert np.all(d <= L + 1e-9)
+    assert np.allclose(new[:, sk.J["right_collar"]], np.eye(3))
