@@ -1,0 +1,230 @@
+"""Reader for BeatLeader Beat Saber replays (``.bsor``).  Never imports bpy.
+
+Only the header and the motion frames are read.  The schema relied on (all
+little-endian; checked against a real replay, version 1, game 1.29.1)::
+
+    offset 0   int32   magic 0x442d3d69
+               uint8   format version (1; others are read with a warning)
+               uint8   block id 0 (info)
+    info block, strings are int32 byte length + UTF-8 bytes:
+               str version, gameVersion, timestamp, playerID, playerName,
+                   platform, trackingSystem, hmd, controller, hash, songName,
+                   mapper, difficulty
+               int32 score
+               str mode, environment, modifiers   (modifiers: comma separated)
+               float32 jumpDistance
+               uint8 leftHanded (bool)
+               float32 height (player height setting, metres)
+               float32 startTime, failTime, speed (practice speed, 0 = normal)
+    frames block:
+               uint8   block id 1
+               int32   frame count N
+               N × 92 bytes: float32 time (song time, s), int32 fps,
+                   then head, left hand, right hand, each 7 × float32
+                   px, py, pz, qx, qy, qz, qw
+    (notes, walls, heights, pauses ... blocks follow; not read)
+
+Poses are in Unity axes (left-handed, +Y up, +Z forward), metres; the hand
+poses are the game's *saber* poses (see the ``beat_saber`` device-offset
+preset), the head pose is the HMD (eye centre).
+
+Repairs (each reported in :attr:`Recording.warnings`):
+
+* a device sample is invalid when its numbers are not finite, its
+  quaternion is not (close to) unit length - e.g. frame 0, a placeholder with
+  zero position and a quaternion of -1s - or it is exactly zero; frames with no
+  valid device are dropped, other invalid samples are kept with
+  ``valid=False``;
+* song time must increase strictly: a frame is kept only when its time is
+  greater than that of every earlier kept frame (the first of several frames
+  sharing a time is kept; after a pause/rewind jump back, frames are dropped
+  until the song passes the earlier time);
+* with a song-speed modifier (SS 0.85, FS 1.2, SF 1.5) or a practice speed,
+  song time runs faster/slower than real time; times are divided by the
+  speed factor (assumption: the replay's frame time is song time).
+
+The player ID and name are not copied into the metadata.
+"""
+from __future__ import annotations
+
+import os
+import struct
+
+import numpy as np
+
+from .recording import (
+    Recording, RecordingError, TrackerStream, UNITS, canonical_axes, canonical_units,
+    increasing_mask, to_blender,
+)
+from .rotations import normalize
+
+MAGIC = 0x442D3D69
+FRAME_BYTES = 92
+_INFO_STRINGS_1 = ("version", "gameVersion", "timestamp", "playerID", "playerName", "platform",
+                   "trackingSystem", "hmd", "controller", "hash", "songName", "mapper", "difficulty")
+_INFO_STRINGS_2 = ("mode", "environment", "modifiers")
+_PRIVATE = ("playerID", "playerName")
+_SPEED_MODIFIERS = {"SS": 0.85, "FS": 1.2, "SF": 1.5}
+_MAX_STRING = 1 << 20
+
+FRAME_DTYPE = np.dtype([("time", "<f4"), ("fps", "<i4"), ("pose", "<f4", (3, 7))])
+
+
+class _Reader:
+    def __init__(self, data, path):
+        self.b = data
+        self.o = 0
+        self.path = path
+
+    def need(self, n, what):
+        if self.o + n > len(self.b):
+            raise RecordingError(f"file is truncated: {what} needs {n} bytes but only "
+                                 f"{len(self.b) - self.o} remain", path=self.path, offset=self.o)
+
+    def unpack(self, fmt, what):
+        n = struct.calcsize(fmt)
+        self.need(n, what)
+        v = struct.unpack_from(fmt, self.b, self.o)
+        self.o += n
+        return v if len(v) > 1 else v[0]
+
+    def string(self, what):
+        start = self.o
+        n = self.unpack("<i", f"length of {what}")
+        if n < 0 or n > _MAX_STRING:
+            raise RecordingError(f"invalid length {n} of string {what}: not a BSOR file or corrupted",
+                                 path=self.path, offset=start)
+        self.need(n, f"string {what}")
+        raw = self.b[self.o:self.o + n]
+        self.o += n
+        return bytes(raw).decode("utf-8", errors="replace")
+
+
+def _parse_header(r):
+    magic = r.unpack("<i", "magic number")
+    if (magic & 0xFFFFFFFF) != MAGIC:
+        raise RecordingError(f"not a BSOR replay: magic number 0x{magic & 0xFFFFFFFF:08x}, expected "
+                             f"0x{MAGIC:08x}", path=r.path, offset=0)
+    version = r.unpack("<B", "format version")
+    at = r.o
+    block = r.unpack("<B", "info block id")
+    if block != 0:
+        raise RecordingError(f"expected the info block (id 0), found id {block}", path=r.path, offset=at)
+    info = {}
+    for k in _INFO_STRINGS_1:
+        info[k] = r.string(k)
+    info["score"] = r.unpack("<i", "score")
+    for k in _INFO_STRINGS_2:
+        info[k] = r.string(k)
+    info["jumpDistance"] = float(r.unpack("<f", "jumpDistance"))
+    info["leftHanded"] = bool(r.unpack("<B", "leftHanded"))
+    info["height"] = float(r.unpack("<f", "height"))
+    info["startTime"], info["failTime"], info["speed"] = (float(x) for x in r.unpack("<3f", "start/fail time, speed"))
+    return version, info
+
+
+def read_bsor(path, axes=None, units=None) -> Recording:
+    """Read the head and hand motion of a BeatLeader replay.
+
+    path: ``.bsor`` file.  axes/units: override the format's Unity axes and
+    metres (only useful for odd files).  Returns a :class:`Recording` (Blender
+    axes, metres) with devices ``head``, ``left_hand``, ``right_hand`` and
+    header fields in ``metadata`` (``hmd``, ``controller``, ``trackingSystem``,
+    ``height``, ``leftHanded``, ``gameVersion``, ``modifiers`` ...).
+    Raises :class:`RecordingError` naming the byte offset for wrong magic,
+    truncated or corrupted files.
+    """
+    path = os.fspath(path)
+    try:
+        with open(path, "rb") as fh:
+            data = fh.read()
+    except OSError as exc:
+        raise RecordingError(f"cannot read file ({exc.strerror or exc})", path=path) from None
+    if not data:
+        raise RecordingError("file is empty", path=path, offset=0)
+    return parse_bsor(data, path=path, axes=axes, units=units)
+
+
+def parse_bsor(data: bytes, path="<bytes>", axes=None, units=None) -> Recording:
+    """:func:`read_bsor` on bytes already in memory."""
+    axes = canonical_axes(axes or "unity")
+    units = canonical_units(units or "m")
+    r = _Reader(memoryview(bytes(data)), path)
+    version, info = _parse_header(r)
+    warnings = []
+    if version != 1:
+        warnings.append(f"BSOR format version {version} (reader written for version 1)")
+
+    at = r.o
+    block = r.unpack("<B", "frames block id")
+    if block != 1:
+        raise RecordingError(f"expected the frames block (id 1), found id {block}", path=path, offset=at)
+    at = r.o
+    n = r.unpack("<i", "frame count")
+    if n <= 0:
+        raise RecordingError(f"frame count {n}: the replay has no motion frames", path=path, offset=at)
+    avail = len(r.b) - r.o
+    if n * FRAME_BYTES > avail:
+        raise RecordingError(
+            f"file is truncated: the frames block declares {n} frames ({n * FRAME_BYTES} bytes from byte "
+            f"offset {r.o}) but only {avail} bytes remain ({avail // FRAME_BYTES} whole frames)",
+            path=path, offset=r.o + (avail // FRAME_BYTES) * FRAME_BYTES)
+    frames = np.frombuffer(r.b, dtype=FRAME_DTYPE, count=n, offset=r.o)
+    t = frames["time"].astype(np.float64)
+    fps = frames["fps"].astype(np.int64)
+    pose = frames["pose"].astype(np.float64)              # (N, 3 devices, 7)
+    upos = pose[..., 0:3]
+    uquat = np.concatenate([pose[..., 6:7], pose[..., 3:6]], -1)   # xyzw → wxyz
+
+    finite = np.all(np.isfinite(pose), -1)
+    qn = np.linalg.norm(uquat, axis=-1)
+    unit = np.abs(qn - 1.0) < 0.05
+    zero = np.all(pose == 0.0, -1)
+    ok = finite & unit & ~zero                           # (N, 3)
+
+    any_ok = ok.any(-1)
+    keep = any_ok & increasing_mask(np.where(any_ok, t, np.nan))
+    n_placeholder = int((~any_ok).sum())
+    if n_placeholder:
+        first = np.nonzero(~any_ok)[0][:3]
+        warnings.append(f"dropped {n_placeholder} frame(s) with no valid pose (placeholder/lost; "
+                        f"frame index {', '.join(str(int(i)) for i in first)}{' ...' if n_placeholder > 3 else ''})")
+    dropped = any_ok & ~keep
+    if dropped.any():
+        idx = np.nonzero(dropped)[0]
+        times = ", ".join(f"{t[i]:.3f}" for i in idx[:5])
+        warnings.append(f"dropped {idx.size} frame(s) whose song time did not increase "
+                        f"(pause, rewind or repeated time; at t = {times}{' ...' if idx.size > 5 else ''} s)")
+    lost = ok[keep] == False  # noqa: E712
+    if lost.any():
+        for j, dev in enumerate(("head", "left_hand", "right_hand")):
+            c = int(lost[:, j].sum())
+            if c:
+                warnings.append(f"{dev}: {c} sample(s) with an invalid pose marked invalid")
+
+    speed = 1.0
+    mods = [m.strip().upper() for m in info.get("modifiers", "").split(",") if m.strip()]
+    for m in mods:
+        if m in _SPEED_MODIFIERS:
+            speed *= _SPEED_MODIFIERS[m]
+    practice = info.get("speed", 0.0)
+    if np.isfinite(practice) and practice > 0 and abs(practice - 1.0) > 1e-6:
+        speed *= practice
+    if abs(speed - 1.0) > 1e-9:
+        warnings.append(f"song speed x{speed:g} (modifiers {info.get('modifiers')!r}, practice speed "
+                        f"{practice:g}): frame times divided by {speed:g} to get real time")
+
+    tk = t[keep] / speed
+    scale = UNITS[units]
+    pos_b, quat_b = to_blender(upos[keep] * scale, normalize(uquat[keep]), axes)
+    streams = {}
+    for j, dev in enumerate(("head", "left_hand", "right_hand")):
+        streams[dev] = TrackerStream(dev, tk.copy(), pos_b[:, j], quat_b[:, j], ok[keep][:, j])
+
+    meta = {k: v for k, v in info.items() if k not in _PRIVATE}
+    meta.update(format="bsor", bsor_version=int(version), axes=axes, units=units,
+                frames_in_file=int(n), frames_kept=int(keep.sum()), time_scale=float(speed),
+                game_fps_median=float(np.median(fps[keep])) if keep.any() else float("nan"))
+    if info.get("leftHanded"):
+        warnings.append("the replay was played in left-handed mode: check that left and right are not swapped")
+    return Recording(streams=streams, source=path, metadata=meta, warnings=warnings)

@@ -1,0 +1,294 @@
+"""Tracker recordings: data classes, axis/unit conversion, and file loading.
+
+Never imports bpy.
+
+A :class:`Recording` holds one :class:`TrackerStream` per device (``head``,
+``left_hand``, ``right_hand`` and optionally ``pelvis``, ``left_foot``,
+``right_foot``; see :data:`~blender_manikin.core.pose_result.DEVICES`).  Every
+stream has its own timestamps: devices are sampled at their own rates (72,
+90, 120 Hz ...) with jitter, and :func:`~blender_manikin.core.resample.resample`
+brings them onto a common frame grid.
+
+Conventions of the data *after loading* (whatever the file used):
+
+* time: seconds, float64, strictly increasing within a stream;
+* positions: metres, Blender world axes (right-handed, +Z up, the performer
+  faces -Y at rest, so the performer's right is -X);
+* orientations: unit quaternions ``(w, x, y, z)`` of the *device* frame in
+  Blender axes, acting on column vectors (see :mod:`.rotations`).  The device
+  frame's own axes are converted like the world axes, so an HMD (OpenXR view
+  space: -Z forward, +Y up) that looks straight ahead has identity
+  orientation: local -Y forward, +Z up.
+
+Axis conventions of source files (:data:`AXES`):
+
+==========  ==============================================  =====================
+name        convention                                      to Blender ``M``
+==========  ==============================================  =====================
+openxr      right-handed, +Y up, -Z forward, +X right        (x, y, z) → (-x, z, y)
+            (also OpenVR/SteamVR, WebXR, OpenGL)
+unity       left-handed, +Y up, +Z forward, +X right         (x, y, z) → (-x, -z, y)
+blender     right-handed, +Z up, -Y forward, -X right        identity
+==========  ==============================================  =====================
+
+Both maps keep "forward" forward, "up" up and "right" right.  Positions convert
+as ``p_b = M p``; rotation matrices as ``R_b = M R Mᵀ`` (a proper rotation even
+for Unity's improper ``M``, det -1).  On quaternions this is
+``(w, v) → (w, det(M) · M v)``, which keeps the sign of ``w`` (so sign
+continuity and deliberate sign flips survive the conversion).
+"""
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .pose_result import DEVICES
+
+#: axis conventions understood by the readers and writers
+AXES = ("openxr", "unity", "blender")
+
+_AXES_ALIASES = {
+    "openxr": "openxr", "openvr": "openxr", "steamvr": "openxr", "webxr": "openxr",
+    "opengl": "openxr", "unity": "unity", "blender": "blender",
+}
+
+_M = {
+    "openxr": np.array([[-1.0, 0, 0], [0, 0, 1.0], [0, 1.0, 0]]),
+    "unity": np.array([[-1.0, 0, 0], [0, 0, -1.0], [0, 1.0, 0]]),
+    "blender": np.eye(3),
+}
+
+#: length units: metres per unit
+UNITS = {"m": 1.0, "cm": 0.01, "mm": 0.001}
+
+_UNITS_ALIASES = {
+    "m": "m", "metre": "m", "metres": "m", "meter": "m", "meters": "m",
+    "cm": "cm", "centimetre": "cm", "centimetres": "cm", "centimeter": "cm", "centimeters": "cm",
+    "mm": "mm", "millimetre": "mm", "millimetres": "mm", "millimeter": "mm", "millimeters": "mm",
+}
+
+#: alternative device names accepted by the readers (lower case)
+DEVICE_ALIASES = {
+    "hmd": "head", "headset": "head",
+    "left": "left_hand", "lefthand": "left_hand", "left_controller": "left_hand",
+    "right": "right_hand", "righthand": "right_hand", "right_controller": "right_hand",
+    "waist": "pelvis", "hips": "pelvis", "hip": "pelvis",
+    "leftfoot": "left_foot", "rightfoot": "right_foot",
+}
+
+
+class RecordingError(ValueError):
+    """A recording could not be read or used.
+
+    The message names the file, the line (text formats) or byte offset
+    (binary formats) where there is one, and the problem, e.g.
+    ``"take1.csv, line 12: unknown device 'hand_l' (expected one of head, ...)"``.
+    The parts are also available as attributes.
+    """
+
+    def __init__(self, problem, path=None, line=None, offset=None):
+        self.problem = str(problem)
+        self.path = None if path is None else str(path)
+        self.line = line
+        self.offset = offset
+        where = []
+        if self.path:
+            where.append(os.path.basename(self.path) or self.path)
+        if line is not None:
+            where.append(f"line {line}")
+        if offset is not None:
+            where.append(f"byte offset {offset}")
+        msg = (", ".join(where) + ": " + self.problem) if where else self.problem
+        super().__init__(msg)
+
+
+def canonical_axes(axes) -> str:
+    """Canonical axes name (see :data:`AXES`) for ``axes`` (case-insensitive, aliases allowed)."""
+    key = str(axes).strip().lower()
+    if key not in _AXES_ALIASES:
+        raise ValueError(f"unknown axes {axes!r}: expected one of {', '.join(AXES)}")
+    return _AXES_ALIASES[key]
+
+
+def canonical_units(units) -> str:
+    """Canonical unit name (``m``, ``cm`` or ``mm``) for ``units``."""
+    key = str(units).strip().lower()
+    if key not in _UNITS_ALIASES:
+        raise ValueError(f"unknown units {units!r}: expected one of {', '.join(UNITS)}")
+    return _UNITS_ALIASES[key]
+
+
+def canonical_device(name):
+    """Canonical device name for ``name`` (case/space-insensitive, aliases), or None."""
+    key = str(name).strip().lower().replace(" ", "_").replace("-", "_")
+    if key in DEVICES:
+        return key
+    return DEVICE_ALIASES.get(key)
+
+
+def axes_matrix(axes) -> np.ndarray:
+    """``(3, 3)`` matrix ``M`` taking source-axes vectors to Blender axes (``p_b = M p``)."""
+    return _M[canonical_axes(axes)].copy()
+
+
+def _convert_quat(quat, M):
+    q = np.asarray(quat, dtype=np.float64)
+    det = float(np.round(np.linalg.det(M)))
+    v = np.einsum("ij,...j->...i", M, q[..., 1:]) * det
+    return np.concatenate([q[..., :1], v], axis=-1)
+
+
+def to_blender(pos, quat, axes):
+    """Convert positions ``(..., 3)`` and wxyz quaternions ``(..., 4)`` from ``axes`` to Blender axes.
+
+    Units are unchanged.  Either argument may be None.  Returns ``(pos, quat)``.
+    """
+    M = axes_matrix(axes)
+    p = None if pos is None else np.einsum("ij,...j->...i", M, np.asarray(pos, dtype=np.float64))
+    q = None if quat is None else _convert_quat(quat, M)
+    return p, q
+
+
+def from_blender(pos, quat, axes):
+    """Inverse of :func:`to_blender`: Blender axes → ``axes``."""
+    Mt = axes_matrix(axes).T
+    p = None if pos is None else np.einsum("ij,...j->...i", Mt, np.asarray(pos, dtype=np.float64))
+    q = None if quat is None else _convert_quat(quat, Mt)
+    return p, q
+
+
+def increasing_mask(time) -> np.ndarray:
+    """``(N,)`` bool: True for samples whose time is greater than every earlier sample's.
+
+    Keeping these yields a strictly increasing series (the first of several
+    samples sharing a time is kept; samples after a backwards jump are dropped
+    until time passes the previous maximum).  NaN times are never kept.
+    """
+    t = np.asarray(time, dtype=np.float64)
+    if t.size == 0:
+        return np.zeros(0, dtype=bool)
+    tt = np.where(np.isfinite(t), t, -np.inf)
+    prev_max = np.concatenate([[-np.inf], np.maximum.accumulate(tt)[:-1]])
+    return np.isfinite(t) & (t > prev_max)
+
+
+@dataclass
+class TrackerStream:
+    """The samples of one device.
+
+    device: one of :data:`~blender_manikin.core.pose_result.DEVICES`.
+    time: ``(N,)`` float64 seconds (recording clock), strictly increasing.
+    pos: ``(N, 3)`` float64 metres, Blender world axes (may contain NaN = lost).
+    quat: ``(N, 4)`` float64 unit wxyz quaternions, device orientation in
+    Blender axes (may contain NaN = lost).
+    valid: ``(N,)`` bool, False where the source flagged tracking as lost.
+    """
+    device: str
+    time: np.ndarray
+    pos: np.ndarray
+    quat: np.ndarray
+    valid: np.ndarray = None
+
+    def __post_init__(self):
+        dev = canonical_device(self.device)
+        if dev is None:
+            raise ValueError(f"unknown device {self.device!r}: expected one of {', '.join(DEVICES)}")
+        self.device = dev
+        self.time = np.asarray(self.time, dtype=np.float64).reshape(-1)
+        n = self.time.shape[0]
+        self.pos = np.asarray(self.pos, dtype=np.float64).reshape(n, 3)
+        self.quat = np.asarray(self.quat, dtype=np.float64).reshape(n, 4)
+        if self.valid is None:
+            self.valid = np.ones(n, dtype=bool)
+        self.valid = np.asarray(self.valid, dtype=bool).reshape(n)
+
+    def __len__(self):
+        return int(self.time.shape[0])
+
+    @property
+    def usable(self) -> np.ndarray:
+        """``(N,)`` bool: valid and with finite position and non-degenerate finite quaternion."""
+        qn = np.linalg.norm(self.quat, axis=-1)
+        return (self.valid & np.all(np.isfinite(self.pos), -1) & np.all(np.isfinite(self.quat), -1)
+                & (qn > 1e-6))
+
+    @property
+    def rate(self) -> float:
+        """Nominal sample rate, Hz (1 / median sample interval); NaN with < 2 samples."""
+        if len(self) < 2:
+            return float("nan")
+        return float(1.0 / np.median(np.diff(self.time)))
+
+    def select(self, mask) -> "TrackerStream":
+        """A new stream with only the samples where ``mask`` is True."""
+        m = np.asarray(mask, dtype=bool)
+        return TrackerStream(self.device, self.time[m], self.pos[m], self.quat[m], self.valid[m])
+
+    def copy(self) -> "TrackerStream":
+        return TrackerStream(self.device, self.time.copy(), self.pos.copy(), self.quat.copy(),
+                             self.valid.copy())
+
+
+@dataclass
+class Recording:
+    """A tracker recording in Blender axes and metres.
+
+    streams: device name → :class:`TrackerStream`.
+    source: where it came from (the file path for loaded recordings).
+    metadata: free-form information from the file (``axes``/``units`` as read,
+    ``source`` text, BSOR header fields ...).
+    warnings: human-readable notes about repairs made while reading.
+    """
+    streams: dict
+    source: str = ""
+    metadata: dict = field(default_factory=dict)
+    warnings: list = field(default_factory=list)
+
+    @property
+    def devices(self):
+        """Devices present, in :data:`DEVICES` order."""
+        return tuple(d for d in DEVICES if d in self.streams)
+
+    def time_range(self):
+        """``(first, last)`` sample time over all streams, seconds."""
+        firsts = [s.time[0] for s in self.streams.values() if len(s)]
+        lasts = [s.time[-1] for s in self.streams.values() if len(s)]
+        if not firsts:
+            return (float("nan"), float("nan"))
+        return (float(min(firsts)), float(max(lasts)))
+
+    @property
+    def duration(self) -> float:
+        a, b = self.time_range()
+        return b - a
+
+    def __getitem__(self, device):
+        return self.streams[device]
+
+
+def load_recording(path, axes=None, units=None) -> Recording:
+    """Read a tracker recording, dispatching on the file extension.
+
+    * ``.csv``: the native CSV format (:mod:`.io_csv`); ``axes``/``units``
+      override the file's ``# axes:``/``# units:`` metadata (default
+      ``openxr``, metres).
+    * ``.bsor``: a BeatLeader Beat Saber replay (:mod:`.io_bsor`); Unity axes
+      and metres unless overridden.
+
+    Returns a :class:`Recording` in Blender axes and metres.  Raises
+    :class:`RecordingError` naming the file, line/byte offset and problem.
+    """
+    path = os.fspath(path)
+    ext = os.path.splitext(path)[1].lower()
+    if not os.path.isfile(path):
+        raise RecordingError("no such file", path=path)
+    if ext == ".csv":
+        from .io_csv import read_csv
+        return read_csv(path, axes=axes, units=units)
+    if ext == ".bsor":
+        from .io_bsor import read_bsor
+        return read_bsor(path, axes=axes, units=units)
+    raise RecordingError(f"unsupported file type {ext or '(none)'!r}: expected .csv or .bsor", path=path)
+

@@ -1,0 +1,299 @@
+"""Resample tracker streams onto a common frame grid, bridging gaps.  Never imports bpy.
+
+Each device of a :class:`~.recording.Recording` has its own timestamps.
+:func:`resample` puts all devices on one grid (frame ``k`` at
+``t0 + k / fps`` seconds of the recording clock): positions are interpolated
+linearly, rotations by slerp after making the quaternion series
+sign-continuous.  Everything is vectorised (``np.searchsorted``/``np.interp``);
+there is no Python loop over samples or frames.
+
+A sample is *usable* when its ``valid`` flag is set, its position and
+quaternion are finite and the quaternion is not zero, and it is not a
+*frozen* repeat: when a device repeats exactly the same pose for longer
+than ``freeze_s`` while another device moves, the repeats after the first
+are stale (tracking froze) and are not used.
+
+A *gap* is an interval between two consecutive usable samples of a device
+that either had unusable samples in it or is longer than ``gap_factor``
+nominal sample intervals (missing rows).  Gaps are bridged by the same
+interpolation (hold at the ends of the data) and reported in a
+:class:`GapReport`: ``start``/``end`` are the times of the usable samples
+around the gap, ``duration = end - start`` is the bridged time.  Frames
+strictly inside a gap, or before a device's first / after its last usable
+sample (held), get ``valid = False``.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .pose_result import DEVICES
+from .recording import Recording, RecordingError, increasing_mask
+from .rotations import normalize, quat_continuous, quat_slerp
+
+REQUIRED_DEVICES = ("head", "left_hand", "right_hand")
+
+#: head-joint/HMD height range (metres above the floor) accepted by the units check
+HEAD_HEIGHT_RANGE = (0.5, 3.0)
+
+
+@dataclass
+class Gap:
+    """One bridged interval of one device.
+
+    start/end: seconds (recording clock) of the usable samples around the gap
+    (for ``reason='start'``: the grid start and the first usable sample; for
+    ``'end'``: the last usable sample and the grid end).
+    reason: ``'missing'`` (no rows), ``'invalid'`` (valid=0), ``'nan'``
+    (non-finite values), ``'frozen'`` (repeated pose), ``'start'``/``'end'``
+    (device not tracked at the start/end of the grid).
+    samples: number of unusable samples inside the gap.
+    """
+    device: str
+    start: float
+    end: float
+    reason: str
+    samples: int = 0
+
+    @property
+    def duration(self) -> float:
+        return float(self.end - self.start)
+
+    def __str__(self):
+        return (f"{self.device}: {self.reason} {self.start:.3f}-{self.end:.3f} s "
+                f"({self.duration:.3f} s{', %d samples' % self.samples if self.samples else ''})")
+
+
+@dataclass
+class GapReport:
+    """What :func:`resample` found and repaired.
+
+    fps, t0, t_end (seconds), num_frames: the grid.  gaps: list of
+    :class:`Gap`.  sign_flips: device → number of quaternion sign flips
+    removed.  warnings: the recording's warnings plus resampling notes.
+    """
+    fps: float
+    t0: float
+    t_end: float
+    num_frames: int
+    devices: tuple = ()
+    gaps: list = field(default_factory=list)
+    sign_flips: dict = field(default_factory=dict)
+    warnings: list = field(default_factory=list)
+
+    def for_device(self, device):
+        return [g for g in self.gaps if g.device == device]
+
+    def total_gap_time(self, device) -> float:
+        return float(sum(g.duration for g in self.for_device(device)))
+
+    def summary(self) -> str:
+        lines = [f"{self.num_frames} frames at {self.fps:g} fps, {self.t0:.3f}-{self.t_end:.3f} s, "
+                 f"devices {', '.join(self.devices)}"]
+        lines += [str(g) for g in self.gaps]
+        lines += self.warnings
+        return "\n".join(lines)
+
+    def __str__(self):
+        return self.summary()
+
+
+def check_head_height(height, path=None, units=None):
+    """Raise :class:`RecordingError` when a median head height (metres) is implausible.
+
+    Suggests the unit that would make it plausible.
+    """
+    lo, hi = HEAD_HEIGHT_RANGE
+    h = float(height)
+    if lo <= h <= hi:
+        return
+    loaded = f" (read as units={units})" if units else ""
+    if h > hi:
+        hint = None
+        for name, factor in (("centimetres", 100.0), ("millimetres", 1000.0)):
+            if lo <= h / factor <= hi:
+                hint = (name, "cm" if factor == 100 else "mm")
+                break
+        if hint:
+            msg = (f"head is {h:.0f} m above the floor{loaded}: positions look like {hint[0]}; "
+                   f"pass units={hint[1]}")
+        else:
+            msg = (f"head is {h:.1f} m above the floor{loaded}: the units or axes are wrong "
+                   f"(positions should be metres with the floor at height 0)")
+    else:
+        hint = None
+        for name, factor in (("were scaled down 100x", 100.0), ("were scaled down 1000x", 1000.0)):
+            if lo <= h * factor <= hi:
+                hint = name
+                break
+        if hint and units and units != "m":
+            msg = (f"head is {h:.3f} m above the floor{loaded}: positions {hint}; they look like metres "
+                   f"already, pass units=m")
+        else:
+            msg = (f"head is only {h:.2f} m above the floor{loaded}: check the axes (height is the file's "
+                   f"up axis) and that the floor is at 0 (e.g. an OpenXR LOCAL space puts the origin at "
+                   f"the starting head pose, not on the floor)")
+    raise RecordingError(msg, path=path)
+
+
+def _frozen(t, pos, quat, others, freeze_s, move_tol):
+    """Indices (into the usable-sample arrays) of stale repeats."""
+    n = t.shape[0]
+    if n < 3:
+        return np.zeros(0, dtype=np.int64)
+    same = (np.all(np.abs(pos[1:] - pos[:-1]) <= 1e-9, -1)
+            & np.all(np.abs(quat[1:] - quat[:-1]) <= 1e-9, -1))
+    if not same.any():
+        return np.zeros(0, dtype=np.int64)
+    edges = np.diff(np.concatenate([[0], same.astype(np.int8), [0]]))
+    starts = np.nonzero(edges == 1)[0]          # same[i] True from starts ...
+    ends = np.nonzero(edges == -1)[0]           # ... to ends-1: samples starts..ends identical
+    dur = t[ends] - t[starts]
+    long_ = np.nonzero(dur > freeze_s)[0]
+    out = []
+    for k in long_:                              # loop over long runs only (few)
+        a, b = t[starts[k]], t[ends[k]]
+        moved = False
+        for (to, po) in others:
+            i0, i1 = np.searchsorted(to, [a, b], side="left")
+            i1 = min(i1 + 1, to.shape[0])
+            if i1 - i0 >= 2 and np.max(np.ptp(po[i0:i1], axis=0)) > move_tol:
+                moved = True
+                break
+        if moved:
+            out.append(np.arange(starts[k] + 1, ends[k] + 1))
+    return np.concatenate(out) if out else np.zeros(0, dtype=np.int64)
+
+
+def resample(recording: Recording, fps, t_start=None, t_end=None, required=REQUIRED_DEVICES,
+             gap_factor=3.0, freeze_s=0.1, move_tol=0.002, check_units=True):
+    """Resample every device of ``recording`` onto one frame grid.
+
+    recording: a :class:`Recording` (Blender axes, metres).
+    fps: frames per second of the grid.
+    t_start, t_end: grid limits in seconds of the recording clock; default:
+    the first usable sample of any device, and the last time covered by all
+    ``required`` devices (the earliest of their last usable samples).
+    required: devices that must be present (default head and both hands).
+    gap_factor: a step between usable samples longer than this many nominal
+    intervals (median step of the device) is a gap.
+    freeze_s, move_tol: a pose repeated exactly for more than ``freeze_s``
+    seconds while another device moves more than ``move_tol`` metres is frozen.
+    check_units: raise when the median head height is outside 0.5-3 m (see
+    :func:`check_head_height`).
+
+    Returns ``(times, pos, quat, valid, report)``: ``times`` ``(T,)`` seconds;
+    ``pos`` device → ``(T, 3)`` metres; ``quat`` device → ``(T, 4)`` wxyz,
+    sign-continuous; ``valid`` device → ``(T,)`` bool (False on bridged/held
+    frames); ``report`` a :class:`GapReport`.
+    """
+    path = recording.source or None
+    fps = float(fps)
+    if not np.isfinite(fps) or fps <= 0:
+        raise ValueError(f"fps must be positive, got {fps!r}")
+    missing = [d for d in required if d not in recording.streams]
+    if missing:
+        raise RecordingError(f"the recording has no {', '.join(missing)} samples "
+                             f"(devices present: {', '.join(recording.devices) or 'none'})", path=path)
+    warnings = list(recording.warnings)
+
+    # --- usable samples per device
+    prep = {}
+    for d in recording.devices:
+        s = recording.streams[d]
+        inc = increasing_mask(s.time)
+        if not inc.all():
+            warnings.append(f"{d}: {int((~inc).sum())} sample(s) with non-increasing time ignored")
+            s = s.select(inc)
+        finite = np.all(np.isfinite(s.pos), -1) & np.all(np.isfinite(s.quat), -1)
+        nonzero = np.linalg.norm(np.where(np.isfinite(s.quat), s.quat, 0.0), axis=-1) > 1e-6
+        reason = np.full(len(s), "", dtype=object)
+        reason[~s.valid] = "invalid"
+        reason[s.valid & ~(finite & nonzero)] = "nan"
+        ok = s.valid & finite & nonzero
+        if ok.sum() == 0:
+            if d in required:
+                raise RecordingError(f"{d} has no usable samples (all invalid or NaN)", path=path)
+            warnings.append(f"{d}: no usable samples; device dropped")
+            continue
+        prep[d] = dict(t=s.time, ok=ok, reason=reason, pos=s.pos, quat=s.quat)
+
+    # --- frozen repeats (needs all devices' usable samples)
+    for d, P in prep.items():
+        idx = np.nonzero(P["ok"])[0]
+        others = [(Q["t"][Q["ok"]], Q["pos"][Q["ok"]]) for e, Q in prep.items() if e != d]
+        fr = _frozen(P["t"][idx], P["pos"][idx], P["quat"][idx], others, freeze_s, move_tol)
+        if fr.size:
+            P["ok"][idx[fr]] = False
+            P["reason"][idx[fr]] = "frozen"
+
+    # --- units sanity check
+    if check_units and "head" in prep:
+        P = prep["head"]
+        check_head_height(np.median(P["pos"][P["ok"], 2]), path=path,
+                          units=recording.metadata.get("units"))
+
+    # --- grid
+    firsts = {d: P["t"][P["ok"]][0] for d, P in prep.items()}
+    lasts = {d: P["t"][P["ok"]][-1] for d, P in prep.items()}
+    t0 = float(min(firsts.values())) if t_start is None else float(t_start)
+    if t_end is None:
+        t1 = float(min(lasts[d] for d in required)) if required else float(max(lasts.values()))
+    else:
+        t1 = float(t_end)
+    if not (t1 >= t0):
+        raise RecordingError(f"no time covered by all of {', '.join(required)}: grid would end at "
+                             f"{t1:.3f} s before it starts at {t0:.3f} s", path=path)
+    T = int(np.floor((t1 - t0) * fps + 1e-6)) + 1
+    times = t0 + np.arange(T) / fps
+    report = GapReport(fps=fps, t0=t0, t_end=float(times[-1]), num_frames=T,
+                       devices=tuple(d for d in DEVICES if d in prep), warnings=warnings)
+
+    out_pos, out_quat, out_valid = {}, {}, {}
+    for d in report.devices:
+        P = prep[d]
+        ok = P["ok"]
+        idx = np.nonzero(ok)[0]
+        tg = P["t"][idx]
+        pg = P["pos"][idx]
+        qg = normalize(P["quat"][idx])
+        flips = int(np.sum(np.sum(qg[1:] * qg[:-1], -1) < 0)) if len(idx) > 1 else 0
+        qg = quat_continuous(qg)
+        report.sign_flips[d] = flips
+        n = tg.shape[0]
+
+        # gaps between consecutive usable samples
+        traw = P["t"]
+        nominal = float(np.median(np.diff(traw))) if traw.shape[0] > 1 else 1.0 / fps
+        if n > 1:
+            bad_between = np.diff(idx) - 1
+            step = np.diff(tg)
+            is_gap = (bad_between > 0) | (step > gap_factor * nominal)
+            for k in np.nonzero(is_gap)[0]:          # loop over gaps only
+                reasons = list(P["reason"][idx[k] + 1:idx[k + 1]])
+                reason = max(set(reasons), key=reasons.count) if reasons else "missing"
+                report.gaps.append(Gap(d, float(tg[k]), float(tg[k + 1]), reason, int(len(reasons))))
+        else:
+            is_gap = np.zeros(0, dtype=bool)
+        if tg[0] - t0 > gap_factor * nominal:
+            report.gaps.append(Gap(d, t0, float(tg[0]), "start", int(np.sum(P["t"][~ok] < tg[0]))))
+        if report.t_end - tg[-1] > gap_factor * nominal:
+            report.gaps.append(Gap(d, float(tg[-1]), report.t_end, "end", int(np.sum(P["t"][~ok] > tg[-1]))))
+
+        # interpolate
+        out_pos[d] = np.stack([np.interp(times, tg, pg[:, c]) for c in range(3)], -1)
+        if n == 1:
+            q = np.repeat(qg, T, axis=0)
+            valid = np.isclose(times, tg[0])
+        else:
+            i = np.clip(np.searchsorted(tg, times, side="right") - 1, 0, n - 2)
+            a = np.clip((times - tg[i]) / (tg[i + 1] - tg[i]), 0.0, 1.0)
+            q = quat_slerp(qg[i], qg[i + 1], a)
+            inside = (times > tg[i]) & (times < tg[i + 1])
+            valid = (times >= tg[0]) & (times <= tg[-1]) & ~(is_gap[i] & inside)
+        out_quat[d] = quat_continuous(q)
+        out_valid[d] = valid
+
+    report.gaps.sort(key=lambda g: (g.start, DEVICES.index(g.device)))
+    return times, out_pos, out_quat, out_valid, report

@@ -1,0 +1,210 @@
+"""Resampling onto a common grid, gap bridging and reporting, units sanity check."""
+import re
+import time
+
+import numpy as np
+import pytest
+
+from blender_manikin.core.recording import Recording, RecordingError, TrackerStream, load_recording
+from blender_manikin.core.resample import check_head_height, resample
+from blender_manikin.core.rotations import axis_angle_to_quat, geodesic_angle, quat_to_matrix
+
+from fixtures_recordings import make_recording, make_streams, truth, write_recording_csv
+
+
+def rot_err_deg(qa, qb):
+    return np.degrees(geodesic_angle(quat_to_matrix(qa), quat_to_matrix(qb)))
+
+
+def test_grid_and_accuracy_with_mixed_jittered_rates():
+    rec = make_recording(duration=3.0)                     # head 90, left 72, right 120 Hz, jittered
+    times, pos, quat, valid, report = resample(rec, 60)
+    assert times[0] == pytest.approx(0.0)
+    np.testing.assert_allclose(np.diff(times), 1 / 60, atol=1e-12)
+    last = min(rec.streams[d].time[-1] for d in rec.devices)
+    assert times[-1] <= last + 1e-9 and times[-1] > last - 1 / 60
+    assert report.num_frames == len(times) and report.gaps == []
+    for d in rec.devices:
+        p, q = truth(d, times)
+        assert np.abs(pos[d] - p).max() < 1e-4
+        assert rot_err_deg(quat[d], q).max() < 0.05
+        assert valid[d].all()
+        assert pos[d].shape == (len(times), 3) and quat[d].shape == (len(times), 4)
+
+
+def test_t_start_t_end_define_the_grid():
+    rec = make_recording(duration=3.0)
+    times, pos, *_ = resample(rec, 30, t_start=0.5, t_end=1.5)
+    np.testing.assert_allclose(times, 0.5 + np.arange(31) / 30)
+
+
+def test_slerp_midpoint_between_two_samples():
+    s = lambda d: TrackerStream(d, [0.0, 1.0], [[0, 0, 1.6], [0.2, 0, 1.8]],
+                                axis_angle_to_quat(np.array([[0, 0, 0], [0, 0, np.pi / 2]])))
+    rec = Recording({d: s(d) for d in ("head", "left_hand", "right_hand")})
+    times, pos, quat, valid, report = resample(rec, 2)
+    np.testing.assert_allclose(times, [0, 0.5, 1.0])
+    np.testing.assert_allclose(pos["head"][1], [0.1, 0, 1.7])
+    expect = axis_angle_to_quat(np.array([0, 0, np.pi / 4]))
+    assert rot_err_deg(quat["head"][1], expect) < 1e-9
+    # slerp, not normalised lerp: a quarter of the way is 22.5 deg
+    times, pos, quat, valid, report = resample(rec, 4)
+    assert rot_err_deg(quat["head"][1], axis_angle_to_quat(np.array([0, 0, np.pi / 8]))) < 1e-9
+
+
+def test_quaternion_sign_flips_are_handled():
+    rec = make_recording(duration=2.0, flip=("left_hand", 0.5, 1.2))
+    times, pos, quat, valid, report = resample(rec, 60)
+    q = quat["left_hand"]
+    assert np.all(np.sum(q[1:] * q[:-1], -1) > 0)                    # sign-continuous output
+    assert rot_err_deg(q, truth("left_hand", times)[1]).max() < 0.05  # no spurious spin at the flips
+    assert report.sign_flips["left_hand"] == 2
+    assert report.gaps == []
+
+
+def test_missing_rows_gap_reported_with_duration_and_bridged():
+    rec = make_recording(duration=3.0, gap=("left_hand", 1.0, 1.5))
+    lh = rec.streams["left_hand"]
+    before = lh.time[lh.time < 1.0][-1]
+    after = lh.time[lh.time >= 1.5][0]
+    times, pos, quat, valid, report = resample(rec, 60)
+    gaps = report.for_device("left_hand")
+    assert len(gaps) == 1 and report.gaps == gaps
+    g = gaps[0]
+    assert g.reason == "missing" and g.samples == 0
+    assert g.start == pytest.approx(before) and g.end == pytest.approx(after)
+    assert g.duration == pytest.approx(after - before)
+    assert 0.5 <= g.duration <= 0.5 + 2.5 / 72                       # the removed half second
+    inside = (times > before) & (times < after)
+    assert inside.sum() >= 29 and not valid["left_hand"][inside].any()
+    assert valid["left_hand"][~inside].all()
+    # bridged linearly between the samples around the gap
+    k = np.nonzero(inside)[0][len(np.nonzero(inside)[0]) // 2]
+    a = (times[k] - before) / (after - before)
+    i0 = np.searchsorted(lh.time, before)
+    np.testing.assert_allclose(pos["left_hand"][k], (1 - a) * lh.pos[i0] + a * lh.pos[i0 + 1], atol=1e-12)
+    assert "left_hand: missing" in report.summary()
+
+
+@pytest.mark.parametrize("kind,reason", [("invalid", "invalid"), ("nan", "nan"), ("frozen", "frozen")])
+def test_tracking_loss_kinds_are_bridged_and_reported(kind, reason):
+    rec = make_recording(duration=3.0, **{kind: ("right_hand", 1.0, 1.3)})
+    rh = rec.streams["right_hand"]
+    times, pos, quat, valid, report = resample(rec, 60)
+    gaps = report.for_device("right_hand")
+    assert [g.reason for g in gaps] == [reason]
+    g = gaps[0]
+    in_defect = (rh.time >= 1.0) & (rh.time < 1.3)
+    n_bad = in_defect.sum() - (1 if kind == "frozen" else 0)         # frozen: first sample is real
+    assert g.samples == n_bad
+    assert g.duration == pytest.approx(0.3, abs=2.5 / 120)
+    assert not valid["right_hand"][(times > g.start) & (times < g.end)].any()
+    assert np.all(np.isfinite(pos["right_hand"])) and np.all(np.isfinite(quat["right_hand"]))
+    # the other devices are untouched
+    assert valid["head"].all() and valid["left_hand"].all()
+    # outside the gap the values are still the truth
+    ok = (times < g.start - 0.02) | (times > g.end + 0.02)
+    assert np.abs(pos["right_hand"][ok] - truth("right_hand", times[ok])[0]).max() < 1e-4
+
+
+def test_short_frozen_or_all_still_is_not_a_gap():
+    # repeated pose for 50 ms only: below the 0.1 s threshold
+    rec = make_recording(duration=2.0, frozen=("right_hand", 1.0, 1.05))
+    assert resample(rec, 60)[4].gaps == []
+    # every device perfectly still: nothing moves, so nothing is "frozen"
+    streams = {}
+    for d in ("head", "left_hand", "right_hand"):
+        t = np.arange(100) / 90
+        p, q = truth(d, np.zeros(100))
+        streams[d] = TrackerStream(d, t, p, q)
+    assert resample(Recording(streams), 60)[4].gaps == []
+
+
+def test_hold_at_ends_for_a_late_optional_device():
+    rates = {"head": 90.0, "left_hand": 72.0, "right_hand": 72.0, "pelvis": 60.0}
+    rec = make_recording(duration=2.0, rates=rates, starts={"pelvis": 0.5})
+    times, pos, quat, valid, report = resample(rec, 30)
+    g = report.for_device("pelvis")
+    assert [x.reason for x in g] == ["start"]
+    assert g[0].start == pytest.approx(0.0) and g[0].end == pytest.approx(0.5)
+    first = rec.streams["pelvis"].pos[0]
+    early = times < 0.5
+    np.testing.assert_allclose(pos["pelvis"][early], np.repeat(first[None], early.sum(), 0))
+    assert not valid["pelvis"][early].any() and valid["pelvis"][~early].all()
+
+
+def test_required_devices():
+    rec = make_recording(duration=1.0, rates={"head": 90.0, "left_hand": 72.0})
+    with pytest.raises(RecordingError, match="has no right_hand samples"):
+        resample(rec, 30)
+    times, pos, *_ = resample(rec, 30, required=("head",))
+    assert set(pos) == {"head", "left_hand"}
+    rec = make_recording(duration=1.0, nan=("head", 0.0, 2.0))
+    with pytest.raises(RecordingError, match="head has no usable samples"):
+        resample(rec, 30)
+
+
+def test_units_check_message_for_millimetres(tmp_path):
+    path, rec = write_recording_csv(tmp_path, name="take_mm.csv", units="mm", duration=1.0)
+    # strip the units line: the file now looks like metres but holds millimetres
+    text = open(path).read().replace("# units: mm\n", "")
+    open(path, "w").write(text)
+    bad = load_recording(path)
+    with pytest.raises(RecordingError) as ei:
+        resample(bad, 30)
+    msg = str(ei.value)
+    assert msg.startswith("take_mm.csv: ")
+    assert re.search(r"head is 16\d\d m above the floor \(read as units=m\)", msg)
+    assert "positions look like millimetres; pass units=mm" in msg
+    good = load_recording(path, units="mm")
+    times, pos, *_ = resample(good, 30)
+    assert 1.55 < np.median(pos["head"][:, 2]) < 1.7
+    times, *_ = resample(bad, 30, check_units=False)                 # opt-out
+
+
+def test_units_check_other_cases():
+    with pytest.raises(RecordingError, match="positions look like centimetres; pass units=cm"):
+        check_head_height(165.0)
+    with pytest.raises(RecordingError, match="they look like metres already, pass units=m"):
+        check_head_height(0.0165, units="cm")
+    with pytest.raises(RecordingError, match="check the axes"):
+        check_head_height(0.05)
+    with pytest.raises(RecordingError, match="units or axes are wrong"):
+        check_head_height(12.0)
+    check_head_height(1.7)
+
+
+def test_non_increasing_times_in_a_stream_are_ignored_with_warning():
+    rec = make_recording(duration=1.0)
+    s = rec.streams["head"]
+    t = s.time.copy()
+    t[40] = t[38]                                                    # a stale timestamp
+    rec.streams["head"] = TrackerStream("head", t, s.pos, s.quat)
+    times, pos, quat, valid, report = resample(rec, 30)
+    assert any("non-increasing" in w for w in report.warnings)
+    assert np.all(np.isfinite(pos["head"]))
+
+
+def test_end_to_end_csv_unity_with_defects(tmp_path):
+    path, rec = write_recording_csv(tmp_path, axes="unity", duration=3.0, gap=("head", 2.0, 2.4),
+                                    flip=("right_hand", 0.3, 0.6), invalid=("left_hand", 0.5, 0.7))
+    loaded = load_recording(path)
+    times, pos, quat, valid, report = resample(loaded, 60)
+    assert {(g.device, g.reason) for g in report.gaps} == {("head", "missing"), ("left_hand", "invalid")}
+    for d in loaded.devices:
+        ok = valid[d]
+        assert np.abs(pos[d][ok] - truth(d, times[ok])[0]).max() < 1e-4
+        assert rot_err_deg(quat[d][ok], truth(d, times[ok])[1]).max() < 0.05
+
+
+def test_resample_is_fast_for_ten_minutes():
+    rates = {"head": 90.0, "left_hand": 90.0, "right_hand": 90.0}
+    streams = make_streams(duration=600.0, rates=rates, jitter=0.1)
+    assert len(streams["head"]) >= 54_000
+    rec = Recording(streams)
+    resample(rec, 60)                                                # warm-up
+    t0 = time.perf_counter()
+    times, pos, quat, valid, report = resample(rec, 60)
+    elapsed = time.perf_counter() - t0
+    assert len(times) >= 35_900
+    assert elapsed < 1.0, f"resampling took {elapsed:.2f} s"
