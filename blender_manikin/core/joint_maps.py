@@ -1,0 +1,844 @@
+"""Maps from source BVH skeletons onto the 22-joint body model.
+
+Never imports bpy.  Input is a :class:`~blender_manikin.core.bvh.BvhClip`
+(source units and axes); output is a :class:`MotionClip` in the body model's
+conventions (see :mod:`blender_manikin.core.skeleton`): **metres, Blender
+axes (+Z up, the body faces -Y, its left is +X), floor at z = 0**.
+
+Axis and unit conversion
+------------------------
+
+A :class:`JointMap` names the source's up axis and the direction a performer
+faces in the source's rest convention.  The rotation ``M`` (3x3, det +1)
+takes source left/forward/up to Blender ``+X / -Y / +Z``; positions become
+``p_blender = unit_scale * M @ p_source``.  For both built-in maps (source
++Y up, facing +Z, left +X) this is ``(x, y, z) -> (x, -z, y) * unit_scale``.
+
+Checked on the Bandai Namco files: with the pelvis forward axis
+``left x up`` (left = right hip -> left hip), walks, runs and dashes move
+along that axis (+Z in the file), ``walk-back`` moves against it, and at the
+first frame it is within 45 degrees of +Z in 80 % of the takes (a quarter
+sample of all 3,076; ``walk-left``/``walk-right`` start already turned
+towards +-X, about 11 % of the Set-2 takes face -Z).  So the files are
+right-handed, +Y up, the ``_L`` joints are the performer's left (+X when
+facing +Z), and the rest convention faces +Z; after conversion the
+performer faces -Y as the body model does.  Units are centimetres (Hips
+about 0.9 m up, Head about 1.35-1.40 m).
+
+``unit_scale`` (metres per source unit) is the map's default or, with
+``"auto"``, the candidate among m, cm, mm, inch, foot and the CMU unit
+(1/0.45 inch = 0.056444 m, used by the cgspeed conversion whose Hips stand
+about 17 units high) that makes the skeleton's leg (hip-knee-ankle) closest
+to the body model's leg of a 1.70 m person (0.491 of stature).
+
+Positions (table)
+-----------------
+
+Targets with no exact source joint are placed on the source skeleton:
+``chain(a, b, c, d; f)`` is the point at fraction ``f`` of the arc length of
+the polyline ``a-b-c-d`` (bone lengths from the clip, so it is a fixed blend
+of two neighbouring joints); ``lerp(a, b; t) = (1 - t) a + t b``.
+The body model spaces pelvis, spine1, spine2, spine3 and neck evenly, hence
+the quarters.
+
+==============  ===============================  =================================
+body joint      Bandai Namco                     CMU (cgspeed BVH)
+==============  ===============================  =================================
+pelvis          Hips                             Hips
+left_hip        UpperLeg_L                       LeftUpLeg
+right_hip       UpperLeg_R                       RightUpLeg
+spine1          chain(Hips,Spine,Chest,Neck;1/4) chain(Hips,Spine,Spine1; 1/4)
+spine2          chain(...; 1/2)                  chain(...; 1/2)
+spine3          chain(...; 3/4)                  chain(...; 3/4)
+left_knee       LowerLeg_L                       LeftLeg
+left_ankle      Foot_L                           LeftFoot
+left_foot       Toes_L (ball of the foot)        LeftToeBase (ball of the foot)
+neck            Neck                             Neck (= Spine1 point, neck base)
+head            Head (top of the neck)           Head (top of the neck)
+left_collar     Shoulder_L (clavicle root)       lerp(LeftShoulder, LeftArm; 0.4)
+left_shoulder   UpperArm_L                       LeftArm
+left_elbow      LowerArm_L                       LeftForeArm
+left_wrist      Hand_L                           LeftHand
+==============  ===============================  =================================
+
+Right side likewise (``_R`` / ``Right...``).  Bandai's ``joint_Root`` (a
+ground projection of the hips carrying the root motion of cyclic takes) is
+not mapped; it moves everything through FK.  CMU's ``LeftShoulder`` joint
+sits at the neck base, so the SMPL-like collar is put 0.4 of the way along
+the clavicle (the body model puts its collar 0.04 H out of 0.105 H).
+
+Orientations
+------------
+
+``MotionClip.rotations`` holds world rotations ``(T, 3, 3)`` for
+``pelvis, head, left_wrist, right_wrist, left_ankle, right_ankle`` in the
+body-model convention: **identity = that joint's frame in the T-pose rest**,
+i.e. pelvis and head upright facing -Y; left wrist with the hand along +X,
+palm down (back of the hand +Z, thumb -Y); right wrist along -X, palm down;
+ankle with the foot standing flat, pointing -Y, lateral axis +X.  "Flat"
+needs the source's own foot geometry: the ankle->ball line of a flat foot
+dips by the *foot pitch* below the floor plane, so the identity ankle frame
+maps ``foot_direction(pitch) = (0, -cos p, -sin p)`` to the ankle->ball
+direction.  The pitch is a per-map constant (Bandai: 39.6 degrees, the
+median over stance frames, identical in most takes because the files share
+one skeleton), measured per clip (``"auto"``, CMU's default: median dip
+while both the ankle and the ball are within 2 cm of their lowest), or the
+body model's own 20.3 degrees (``skeleton.make_body``'s ankle->ball
+offset).  A rotation maps body-local vectors (T-pose frame) to Blender world
+vectors, like ``skeleton.forward_kinematics``'s world rotations.
+
+Derivation.  Each oriented joint names two anatomical directions in the
+source joint's *local* frame: a primary ``a`` (hand/bone direction, up for
+pelvis and head, ankle-to-ball for the foot) and a secondary ``b`` (back of
+the hand, face forward, body left, foot lateral), and the same directions
+``A, B`` in the body's T-pose frame.  Gram-Schmidt gives orthonormal frames
+``F_src = [a, b', a x b']`` and ``F_body = [A, B', A x B']``; then
+
+    R_body(t) = M @ R_src(t) @ F_src @ F_body^T
+
+(``M`` the axis conversion).  When the source joint points its ``a`` and
+``b`` where the T-pose would, ``R_body = I``.  Source directions come from
+the clip itself where the skeleton determines them, else from the rig's
+axis convention:
+
+* ``bone(j, k)``: the rest-pose (zero-channel) direction from joint ``j``
+  to joint ``k``.  Exact in the local frame of ``j`` when ``k`` is a child
+  of ``j`` (pelvis up = Hips->Spine, pelvis left = right hip -> left hip,
+  ankle primary = ankle -> toes).
+* ``rest``: the T-pose direction itself (``M^T A``).  Valid when the
+  source's zero pose is a T-pose facing the map's forward axis with
+  world-aligned joint frames, as in the CMU skeleton (its reference pose
+  has arms along +-X with palms down: the thumb End Site points +Z, i.e.
+  forward; legs splay 20 degrees outward, which does not affect the
+  oriented joints' frames).
+* ``local(v)``: a fixed axis of the rig's joint frame.
+
+The Bandai zero pose is *not* a T-pose: every bone lies along its parent's
+local +-X axis (the spine, the left leg and the left arm all point +X, the
+right leg and arm -X), joint frames differ by arbitrary 90/180 degree turns
+and the rotation channels carry them.  Its axis conventions were read off the
+data (223 takes; means of world directions expressed in the joint frame):
+Hips: +X up (Spine child), -Y left (leg children), +Z forward.  Head: +X up
+along the neck, +Y face forward (mean 0.86 while walking), so +Z is left.
+Hand_L: +X along the hand (mean forearm direction 0.91), -Y palm (faces the
+thigh with the arm hanging, faces forward when waving: 0.8-0.98), +Z thumb
+side (forward when hanging).  Hand_R: -X along the hand, +Y palm, -Z thumb.
+Foot_L/Foot_R: +-X towards Toes, +Y to the performer's left (0.95).
+The Bandai ``Head`` joint sits at the top of the neck about 0.8 of stature
+high; with ``+X`` up the neutral head is pitched forward by the neck's lean.
+
+Floor
+-----
+
+``floor="auto"`` estimates the floor from the ankle and ball-of-foot
+joints: for every frame the lowest of ``z_j(t) - rest_z_j`` over those four
+joints, where ``rest_z_j`` is the joint's height in the clip's own rest body
+(ball of the foot at 0.012 of stature as in ``make_body``, ankle above it
+along the flat foot), and the floor is the 5th percentile of that over the
+clip (robust to jumps, a few bad frames and the swing foot).  On the Bandai
+files this puts the floor 1.4-2.8 cm above the files' own ground (their
+ball joints rest 4 cm up), so the balls rest at 1.8 cm and the ankles at
+9.3 cm.  A number instead gives the floor height in
+metres in the converted axes (``0.0`` keeps the source's own ground).
+
+Body
+----
+
+``MotionClip.body`` is a :class:`~blender_manikin.core.skeleton.Body` with
+the clip's own bone lengths (mean over frames of the mapped joint
+distances) laid out in the standard rest directions: spine, neck and head
+straight up, arms along +-X, legs along -Z, the foot flat along
+``foot_direction(pitch)``; the hip offsets (in the pelvis frame), collar
+offsets (in a chest frame built from spine3->neck and the collar line) and
+shoulder directions are the clip's mean vectors, mirrored and averaged so the
+body is left-right symmetric.  The pelvis height puts the rest balls of the
+feet at 0.012 of stature with stature = head height / 0.910, the rules of
+``skeleton.make_body`` and ``Body.from_offsets``.  For a body made by
+``make_body`` and posed by FK this reproduces its offsets exactly.  (The
+Bandai ``Head`` joint is at the top of the neck, about 0.83 of stature, so
+the head-based stature of the Bandai skeleton, 1.53 m, is low; its leg
+length suggests about 1.63 m.)
+"""
+from __future__ import annotations
+
+import os
+import re
+import warnings
+from dataclasses import dataclass
+from typing import Dict, Mapping, Optional, Sequence, Tuple, Union
+
+import numpy as np
+
+from . import skeleton
+from .bvh import BvhClip
+from .rotations import normalize
+
+__all__ = [
+    "Point", "joint", "lerp", "chain", "Axis", "local", "bone", "rest", "OrientationSpec",
+    "JointMap", "BANDAI", "CMU", "JOINT_MAPS", "ORIENTED_JOINTS", "MotionClip",
+    "detect_joint_map", "get_joint_map", "axis_conversion", "detect_unit_scale",
+    "estimate_floor", "clip_to_body_motion", "take_id_from_name", "rest_pose_report",
+    "UNIT_CANDIDATES", "REST_FOOT_DIRECTION", "REST_FOOT_PITCH", "BANDAI_FOOT_PITCH",
+    "foot_direction", "estimate_foot_pitch", "orientation_corrections",
+]
+
+JN = skeleton.JOINT_NAMES
+NJ = skeleton.NUM_JOINTS
+_J = skeleton.J
+
+#: Joints whose orientation MotionClip carries (body-model names).
+ORIENTED_JOINTS = ("pelvis", "head", "left_wrist", "right_wrist", "left_ankle", "right_ankle")
+
+_P = skeleton.PROPORTIONS
+#: Rest direction ankle -> ball of the foot in the body model (unit, Blender axes).
+REST_FOOT_DIRECTION = normalize(np.array(
+    [0.0, -_P["foot_forward"], _P["foot_height"] - _P["ankle_height"]]))
+#: Its dip below the floor plane, degrees (20.3).
+REST_FOOT_PITCH = float(np.degrees(np.arcsin(-REST_FOOT_DIRECTION[2])))
+#: Ankle->ball dip of a flat-standing foot in the Bandai Namco files, degrees
+#: (median over stance frames per take: median 39.6, 10th-90th percentile
+#: 39.6-40.8, range 34-47 over 75 takes checked).
+BANDAI_FOOT_PITCH = 39.6
+
+
+def foot_direction(pitch_deg: float) -> np.ndarray:
+    """Unit ankle->ball direction of a flat foot pointing -Y that dips ``pitch_deg``."""
+    t = np.radians(float(pitch_deg))
+    return np.array([0.0, -np.cos(t), -np.sin(t)])
+
+#: Metres per unit for ``unit_scale="auto"``.
+UNIT_CANDIDATES = {
+    "m": 1.0, "cm": 0.01, "mm": 0.001, "inch": 0.0254, "foot": 0.3048,
+    "cmu": 0.0254 / 0.45,
+}
+_TYPICAL_LEG = (_P["thigh"] + _P["shank"]) * 1.70   # metres, hip-knee-ankle
+
+
+# --------------------------------------------------------------------------
+# specification objects
+@dataclass(frozen=True)
+class Point:
+    """Where a body joint sits on the source skeleton (see module table)."""
+    kind: str                       # "joint" | "lerp" | "chain"
+    joints: Tuple[str, ...]
+    t: float = 0.0
+
+    def describe(self) -> str:
+        if self.kind == "joint":
+            return self.joints[0]
+        if self.kind == "lerp":
+            return f"lerp({self.joints[0]}, {self.joints[1]}; {self.t:g})"
+        return f"chain({', '.join(self.joints)}; {self.t:g})"
+
+
+def joint(name: str) -> Point:
+    return Point("joint", (name,))
+
+
+def lerp(a: str, b: str, t: float) -> Point:
+    return Point("lerp", (a, b), float(t))
+
+
+def chain(names: Sequence[str], fraction: float) -> Point:
+    return Point("chain", tuple(names), float(fraction))
+
+
+@dataclass(frozen=True)
+class Axis:
+    """An anatomical direction in a source joint's local frame."""
+    kind: str                            # "local" | "bone" | "rest"
+    vector: Tuple[float, float, float] = (0.0, 0.0, 0.0)
+    joints: Tuple[str, ...] = ()
+
+
+def local(x, y, z) -> Axis:
+    return Axis("local", (float(x), float(y), float(z)))
+
+
+def bone(a: str, b: str) -> Axis:
+    return Axis("bone", joints=(a, b))
+
+
+def rest() -> Axis:
+    return Axis("rest")
+
+
+@dataclass(frozen=True)
+class OrientationSpec:
+    """Source joint and its primary/secondary anatomical axes (see module docstring)."""
+    source: str
+    primary: Axis
+    secondary: Axis
+
+
+# body-frame anatomical directions (T-pose, Blender axes) per oriented joint
+_BODY_AXES = {
+    "pelvis": ((0, 0, 1), (1, 0, 0)),                 # up, left
+    "head": ((0, 0, 1), (0, -1, 0)),                  # up, face forward
+    "left_wrist": ((1, 0, 0), (0, 0, 1)),             # along the hand, back of the hand
+    "right_wrist": ((-1, 0, 0), (0, 0, 1)),
+    "left_ankle": (None, (1, 0, 0)),       # ankle->ball (foot_direction), lateral (+X)
+    "right_ankle": (None, (1, 0, 0)),
+}
+
+_AXES = {"x": 0, "y": 1, "z": 2}
+
+
+def _axis_vec(s: str) -> np.ndarray:
+    s = s.strip().lower()
+    sign = -1.0 if s.startswith("-") else 1.0
+    v = np.zeros(3)
+    v[_AXES[s.lstrip("+-")]] = sign
+    return v
+
+
+def axis_conversion(up: str = "y", forward: str = "z") -> np.ndarray:
+    """Rotation ``M`` (3x3) from source axes to Blender axes.
+
+    ``up`` and ``forward`` are the source's up axis and the direction its
+    performer faces (``"y"``, ``"-z"``, ...).  ``M`` sends ``left = up x
+    forward`` to +X, ``forward`` to -Y and ``up`` to +Z.  ``axis_conversion("y",
+    "z")`` is ``(x, y, z) -> (x, -z, y)``.
+    """
+    u, f = _axis_vec(up), _axis_vec(forward)
+    if abs(np.dot(u, f)) > 0.5:
+        raise ValueError(f"up {up!r} and forward {forward!r} must be different axes")
+    left = np.cross(u, f)
+    src = np.stack([left, f, u], axis=1)                 # columns: source left, fwd, up
+    dst = np.array([[1.0, 0, 0], [0, -1.0, 0], [0, 0, 1.0]]).T
+    return dst @ src.T
+
+
+@dataclass(frozen=True)
+class JointMap:
+    """How a source skeleton maps onto the 22 body joints.
+
+    ``positions``: one :class:`Point` per body joint name (the floor uses
+    the ankles and feet, unit detection the hips, knees and ankles).
+    ``orientations``: one :class:`OrientationSpec` per name in
+    :data:`ORIENTED_JOINTS`.  ``unit_scale``: metres per source unit or
+    ``"auto"``.  ``up`` / ``forward``: source axes (see
+    :func:`axis_conversion`).  ``rest_is_tpose``: whether the zero-channel
+    pose is a T-pose with world-aligned frames (required by ``rest()`` axes).
+    ``foot_pitch``: degrees the ankle->ball line dips below the floor plane
+    when the foot stands flat, ``"auto"`` (measure it on each clip) or
+    ``None`` (the body model's 20.3 degrees).
+    """
+    name: str
+    positions: Mapping[str, Point]
+    orientations: Mapping[str, OrientationSpec]
+    unit_scale: Union[float, str] = "auto"
+    up: str = "y"
+    forward: str = "z"
+    rest_is_tpose: bool = False
+    foot_pitch: Union[float, str, None] = "auto"
+    description: str = ""
+
+    def source_joints(self) -> Tuple[str, ...]:
+        names = []
+        for p in self.positions.values():
+            names.extend(p.joints)
+        for o in self.orientations.values():
+            names.append(o.source)
+            for ax in (o.primary, o.secondary):
+                names.extend(ax.joints)
+        return tuple(dict.fromkeys(names))
+
+    def missing(self, joint_names: Sequence[str]) -> Tuple[str, ...]:
+        res = _Resolver(joint_names)
+        return tuple(n for n in self.source_joints() if res.find(n) is None)
+
+    def table(self) -> str:
+        """The position map as text (one ``body: source`` line per joint)."""
+        return "\n".join(f"{n:15s} {self.positions[n].describe()}" for n in JN)
+
+
+def _bandai() -> JointMap:
+    spine = ("Hips", "Spine", "Chest", "Neck")
+    pos = {
+        "pelvis": joint("Hips"),
+        "spine1": chain(spine, 0.25), "spine2": chain(spine, 0.5), "spine3": chain(spine, 0.75),
+        "neck": joint("Neck"), "head": joint("Head"),
+    }
+    for side, s in (("left", "L"), ("right", "R")):
+        pos[f"{side}_hip"] = joint(f"UpperLeg_{s}")
+        pos[f"{side}_knee"] = joint(f"LowerLeg_{s}")
+        pos[f"{side}_ankle"] = joint(f"Foot_{s}")
+        pos[f"{side}_foot"] = joint(f"Toes_{s}")
+        pos[f"{side}_collar"] = joint(f"Shoulder_{s}")
+        pos[f"{side}_shoulder"] = joint(f"UpperArm_{s}")
+        pos[f"{side}_elbow"] = joint(f"LowerArm_{s}")
+        pos[f"{side}_wrist"] = joint(f"Hand_{s}")
+    ori = {
+        "pelvis": OrientationSpec("Hips", bone("Hips", "Spine"), bone("UpperLeg_R", "UpperLeg_L")),
+        "head": OrientationSpec("Head", local(1, 0, 0), local(0, 1, 0)),
+        "left_wrist": OrientationSpec("Hand_L", local(1, 0, 0), local(0, 1, 0)),
+        "right_wrist": OrientationSpec("Hand_R", local(-1, 0, 0), local(0, -1, 0)),
+        "left_ankle": OrientationSpec("Foot_L", bone("Foot_L", "Toes_L"), local(0, 1, 0)),
+        "right_ankle": OrientationSpec("Foot_R", bone("Foot_R", "Toes_R"), local(0, 1, 0)),
+    }
+    return JointMap("bandai", pos, ori, unit_scale=0.01, up="y", forward="z", rest_is_tpose=False,
+                    foot_pitch=BANDAI_FOOT_PITCH,
+                    description="Bandai Namco Research Motiondataset 1/2 (cm, Y-up, faces +Z)")
+
+
+def _cmu() -> JointMap:
+    spine = ("Hips", "Spine", "Spine1")
+    pos = {
+        "pelvis": joint("Hips"),
+        "spine1": chain(spine, 0.25), "spine2": chain(spine, 0.5), "spine3": chain(spine, 0.75),
+        "neck": joint("Neck"), "head": joint("Head"),
+    }
+    for side, S in (("left", "Left"), ("right", "Right")):
+        pos[f"{side}_hip"] = joint(f"{S}UpLeg")
+        pos[f"{side}_knee"] = joint(f"{S}Leg")
+        pos[f"{side}_ankle"] = joint(f"{S}Foot")
+        pos[f"{side}_foot"] = joint(f"{S}ToeBase")
+        pos[f"{side}_collar"] = lerp(f"{S}Shoulder", f"{S}Arm", 0.4)
+        pos[f"{side}_shoulder"] = joint(f"{S}Arm")
+        pos[f"{side}_elbow"] = joint(f"{S}ForeArm")
+        pos[f"{side}_wrist"] = joint(f"{S}Hand")
+    ori = {
+        "pelvis": OrientationSpec("Hips", rest(), rest()),
+        "head": OrientationSpec("Head", rest(), rest()),
+        "left_wrist": OrientationSpec("LeftHand", rest(), rest()),
+        "right_wrist": OrientationSpec("RightHand", rest(), rest()),
+        "left_ankle": OrientationSpec("LeftFoot", bone("LeftFoot", "LeftToeBase"), rest()),
+        "right_ankle": OrientationSpec("RightFoot", bone("RightFoot", "RightToeBase"), rest()),
+    }
+    return JointMap("cmu", pos, ori, unit_scale="auto", up="y", forward="z", rest_is_tpose=True,
+                    foot_pitch="auto",
+                    description="CMU mocap, cgspeed BVH conversion (1/0.45 inch units, Y-up, faces +Z)")
+
+
+BANDAI = _bandai()
+CMU = _cmu()
+JOINT_MAPS: Dict[str, JointMap] = {"bandai": BANDAI, "cmu": CMU}
+
+
+# --------------------------------------------------------------------------
+# name resolution and detection
+def _norm_name(n: str) -> str:
+    n = n.split(":")[-1].split("|")[-1]
+    return n.strip().lower()
+
+
+class _Resolver:
+    """Find source joints by exact name, else case-insensitively without a namespace."""
+
+    def __init__(self, names: Sequence[str]):
+        self.exact = {n: i for i, n in enumerate(names)}
+        self.loose = {}
+        for i, n in enumerate(names):
+            self.loose.setdefault(_norm_name(n), i)
+
+    def find(self, name: str) -> Optional[int]:
+        i = self.exact.get(name)
+        return i if i is not None else self.loose.get(_norm_name(name))
+
+    def __call__(self, name: str, clip_name: str = "") -> int:
+        i = self.find(name)
+        if i is None:
+            raise KeyError(f"{clip_name}: source joint {name!r} not found")
+        return i
+
+
+def detect_joint_map(joint_names: Sequence[str]) -> JointMap:
+    """The registered map whose source joints are all present (best coverage wins).
+
+    Raises ``ValueError`` listing what each map misses when none fits.
+    """
+    best, report = None, []
+    for jm in JOINT_MAPS.values():
+        miss = jm.missing(joint_names)
+        need = len(jm.source_joints())
+        report.append(f"{jm.name}: missing {', '.join(miss) if miss else 'nothing'}")
+        if not miss and (best is None or need > len(best.source_joints())):
+            best = jm
+    if best is None:
+        raise ValueError("no joint map fits this skeleton (" + "; ".join(report) + ")")
+    return best
+
+
+def get_joint_map(joint_map: Union[None, str, JointMap], clip: Optional[BvhClip] = None) -> JointMap:
+    if isinstance(joint_map, JointMap):
+        return joint_map
+    if joint_map is None or joint_map == "auto":
+        if clip is None:
+            raise ValueError("auto-detecting a joint map needs a clip")
+        return detect_joint_map(clip.joint_names)
+    try:
+        return JOINT_MAPS[str(joint_map).lower()]
+    except KeyError:
+        raise ValueError(f"unknown joint map {joint_map!r}; known: {', '.join(JOINT_MAPS)}") from None
+
+
+# --------------------------------------------------------------------------
+def take_id_from_name(name: str) -> str:
+    """Stable take id for train/validation splits: the file stem, lower case.
+
+    ``"Bandai/data/dataset-1_walk_normal_001.bvh.gz"`` -> ``"dataset-1_walk_normal_001"``.
+    """
+    base = os.path.basename(str(name).replace("\\", "/"))
+    base = re.sub(r"(\.bvh)?(\.gz)?$", "", base, flags=re.IGNORECASE)
+    return base.lower()
+
+
+@dataclass
+class MotionClip:
+    """A source clip in body-model conventions.
+
+    * ``positions``: ``(T, 22, 3)`` float64 metres, Blender axes, floor z = 0,
+      joint order ``skeleton.JOINT_NAMES``.
+    * ``rotations``: ``{name: (T, 3, 3)}`` world rotations for
+      :data:`ORIENTED_JOINTS` (identity = T-pose rest frame of that joint).
+    * ``body``: the clip's own :class:`skeleton.Body`.
+    * ``fps``: frames per second (1 / Frame Time, rounded when within 1e-4
+      of an integer); ``name``: take name; ``take_id``: split key.
+    * ``unit_scale`` (metres per source unit), ``floor_height`` (metres,
+      converted axes, already subtracted), ``foot_pitch`` (degrees, see
+      :func:`clip_to_body_motion`), ``joint_map`` (map name), ``source``
+      (file name).
+    """
+    name: str
+    take_id: str
+    fps: float
+    positions: np.ndarray
+    rotations: Dict[str, np.ndarray]
+    body: skeleton.Body
+    joint_map: str = ""
+    unit_scale: float = 1.0
+    floor_height: float = 0.0
+    foot_pitch: float = REST_FOOT_PITCH
+    source: str = ""
+
+    @property
+    def num_frames(self) -> int:
+        return int(self.positions.shape[0])
+
+    def rotation_array(self, names: Sequence[str] = ORIENTED_JOINTS) -> np.ndarray:
+        """``(T, len(names), 3, 3)`` stacked rotations."""
+        return np.stack([self.rotations[n] for n in names], axis=1)
+
+
+# --------------------------------------------------------------------------
+# helpers
+def _resolve_weights(jm: JointMap, res: _Resolver, rest_len_fn, clip_name: str) -> np.ndarray:
+    """``(22, J)`` matrix W with body positions = W @ source positions."""
+    W = np.zeros((NJ, len(res.exact)))
+    for n in JN:
+        p = jm.positions[n]
+        idx = [res(j, clip_name) for j in p.joints]
+        if p.kind == "joint":
+            W[_J[n], idx[0]] = 1.0
+        elif p.kind == "lerp":
+            W[_J[n], idx[0]] += 1.0 - p.t
+            W[_J[n], idx[1]] += p.t
+        elif p.kind == "chain":
+            seg = np.array([rest_len_fn(a, b) for a, b in zip(idx[:-1], idx[1:])])
+            total = seg.sum()
+            if total <= 0:
+                raise ValueError(f"{clip_name}: chain {p.describe()} has zero length")
+            target = p.t * total
+            cum = np.concatenate([[0.0], np.cumsum(seg)])
+            k = int(np.clip(np.searchsorted(cum, target, side="right") - 1, 0, len(seg) - 1))
+            while seg[k] <= 0 and k < len(seg) - 1:
+                k += 1
+            u = (target - cum[k]) / seg[k] if seg[k] > 0 else 0.0
+            u = float(np.clip(u, 0.0, 1.0))
+            W[_J[n], idx[k]] += 1.0 - u
+            W[_J[n], idx[k + 1]] += u
+        else:  # pragma: no cover
+            raise ValueError(f"unknown point kind {p.kind!r}")
+    return W
+
+
+def _frame(a, b):
+    """Orthonormal frame(s) ``[a, b', a x b']`` as columns; ``(..., 3, 3)``."""
+    a = normalize(a)
+    b = np.asarray(b, dtype=np.float64)
+    b = b - np.sum(a * b, -1, keepdims=True) * a
+    nb = np.linalg.norm(b, axis=-1)
+    if np.any(nb < 1e-6):
+        raise ValueError("primary and secondary axes are parallel")
+    b = b / nb[..., None]
+    return np.stack([a, b, np.cross(a, b)], axis=-1)
+
+
+def _source_axis(ax: Axis, body_vec, M, res: _Resolver, rest_pos, clip_name) -> np.ndarray:
+    if ax.kind == "local":
+        return np.asarray(ax.vector, dtype=np.float64)
+    if ax.kind == "rest":
+        return M.T @ np.asarray(body_vec, dtype=np.float64)
+    if ax.kind == "bone":
+        a, b = (res(j, clip_name) for j in ax.joints)
+        v = rest_pos[b] - rest_pos[a]
+        if np.linalg.norm(v) < 1e-9:
+            raise ValueError(f"{clip_name}: bone {ax.joints} has zero rest length")
+        return v
+    raise ValueError(f"unknown axis kind {ax.kind!r}")  # pragma: no cover
+
+
+def orientation_corrections(clip: BvhClip, jm: JointMap, M: np.ndarray,
+                            foot_pitch: float = REST_FOOT_PITCH) -> Dict[str, Tuple[int, np.ndarray]]:
+    """``{body name: (source joint index, C)}`` with ``R_body = M @ R_src @ C``.
+
+    ``foot_pitch`` (degrees) sets the ankles' body-frame primary direction
+    :func:`foot_direction`.
+    """
+    res = _Resolver(clip.joint_names)
+    rest_pos = clip.rest_positions()
+    out = {}
+    for name in ORIENTED_JOINTS:
+        spec = jm.orientations[name]
+        A, B = _BODY_AXES[name]
+        if A is None:
+            A = tuple(foot_direction(foot_pitch))
+        a = _source_axis(spec.primary, A, M, res, rest_pos, clip.name)
+        b = _source_axis(spec.secondary, B, M, res, rest_pos, clip.name)
+        C = _frame(a, b) @ _frame(np.asarray(A, float), np.asarray(B, float)).T
+        out[name] = (res(spec.source, clip.name), C)
+    return out
+
+
+def rest_pose_report(clip: BvhClip, joint_map: Union[None, str, JointMap] = None) -> Dict[str, float]:
+    """Angles (degrees) between the zero-channel pose's limbs and a T-pose.
+
+    Keys ``left_arm``, ``right_arm`` (shoulder->wrist vs. +-left),
+    ``left_leg``, ``right_leg`` (hip->ankle vs. down), ``spine`` (pelvis->neck
+    vs. up), measured in the map's source axes.  All near 0 (legs may splay
+    ~20 degrees in CMU) means the rest pose is a T-pose.
+    """
+    jm = get_joint_map(joint_map, clip)
+    M = axis_conversion(jm.up, jm.forward)
+    res = _Resolver(clip.joint_names)
+    rp = clip.rest_positions()
+    W = _resolve_weights(jm, res, lambda a, b: float(np.linalg.norm(rp[b] - rp[a])), clip.name)
+    p = (W @ rp) @ M.T          # Blender axes, source units
+
+    def ang(v, d):
+        v = normalize(v)
+        return float(np.degrees(np.arccos(np.clip(np.dot(v, d), -1, 1))))
+
+    return {
+        "left_arm": ang(p[_J["left_wrist"]] - p[_J["left_shoulder"]], np.array([1.0, 0, 0])),
+        "right_arm": ang(p[_J["right_wrist"]] - p[_J["right_shoulder"]], np.array([-1.0, 0, 0])),
+        "left_leg": ang(p[_J["left_ankle"]] - p[_J["left_hip"]], np.array([0, 0, -1.0])),
+        "right_leg": ang(p[_J["right_ankle"]] - p[_J["right_hip"]], np.array([0, 0, -1.0])),
+        "spine": ang(p[_J["neck"]] - p[_J["pelvis"]], np.array([0, 0, 1.0])),
+    }
+
+
+def detect_unit_scale(leg_length_source_units: float) -> float:
+    """Metres per unit among :data:`UNIT_CANDIDATES` for a hip-knee-ankle length."""
+    L = float(leg_length_source_units)
+    if not np.isfinite(L) or L <= 0:
+        raise ValueError(f"cannot detect units from a leg length of {L!r}")
+    names = list(UNIT_CANDIDATES)
+    err = [abs(np.log(L * UNIT_CANDIDATES[n] / _TYPICAL_LEG)) for n in names]
+    return UNIT_CANDIDATES[names[int(np.argmin(err))]]
+
+
+def estimate_floor(positions: np.ndarray, rest_heights: Mapping[int, float], percentile: float = 5.0) -> float:
+    """Floor height (same units as ``positions[..., 2]``) from foot joints.
+
+    ``positions``: ``(T, J, 3)`` with +Z up.  ``rest_heights``: ``{joint index:
+    height of that joint above the floor when standing}``.  Returns the
+    ``percentile`` over frames of ``min_j (z_j(t) - rest_heights[j])``.
+    """
+    idx = list(rest_heights)
+    z = positions[:, idx, 2] - np.array([rest_heights[i] for i in idx])
+    low = np.min(z, axis=1)
+    if low.size == 0:
+        return 0.0
+    return float(np.percentile(low, percentile))
+
+
+def estimate_foot_pitch(positions: np.ndarray, tol: float = 0.02, percentile: float = 5.0) -> Optional[float]:
+    """Dip (degrees) of the ankle->ball line while the foot stands flat.
+
+    ``positions``: ``(T, 22, 3)`` metres, +Z up (floor not needed).  Stance
+    frames of a foot are those where both its ankle and its ball are within
+    ``tol`` metres of their own ``percentile`` heights; returns the median dip
+    over the stance frames of both feet, or ``None`` when there are fewer
+    than 3 or the result is outside 0-70 degrees.
+    """
+    vals = []
+    for side in ("left", "right"):
+        a = positions[:, _J[f"{side}_ankle"]]
+        b = positions[:, _J[f"{side}_foot"]]
+        L = np.linalg.norm(b - a, axis=-1)
+        ok = L > 1e-6
+        dip = np.degrees(np.arcsin(np.clip((a[:, 2] - b[:, 2]) / np.maximum(L, 1e-9), -1, 1)))
+        st = ok & (a[:, 2] <= np.percentile(a[:, 2], percentile) + tol) \
+            & (b[:, 2] <= np.percentile(b[:, 2], percentile) + tol)
+        vals.append(dip[st])
+    vals = np.concatenate(vals)
+    if vals.size < 3:
+        return None
+    med = float(np.median(vals))
+    return med if 0.0 <= med <= 70.0 else None
+
+
+def _snap_fps(frame_time: float) -> float:
+    fps = 1.0 / frame_time
+    r = round(fps)
+    return float(r) if r > 0 and abs(fps - r) < 1e-4 * fps else fps
+
+
+def _mirror(v):
+    return v * np.array([-1.0, 1.0, 1.0])
+
+
+def _body_from_motion(pos: np.ndarray, R_pelvis: np.ndarray, foot_pitch: float = REST_FOOT_PITCH) -> skeleton.Body:
+    """Body with the clip's mean bone lengths in the standard rest layout.
+
+    ``pos``: ``(T, 22, 3)`` metres, Blender axes; ``R_pelvis``: ``(T, 3, 3)``
+    pelvis orientation (body convention); ``foot_pitch``: degrees.
+    """
+    par = skeleton.PARENTS
+    L = np.linalg.norm(pos[:, 1:] - pos[:, par[1:]], axis=-1).mean(axis=0)
+    length = np.concatenate([[0.0], L])
+    off = np.zeros((NJ, 3))
+    up = np.array([0, 0, 1.0])
+    for n in ("spine1", "spine2", "spine3", "neck", "head"):
+        off[_J[n]] = up * length[_J[n]]
+
+    # hips in the pelvis frame
+    def mean_local(R, child, parent):
+        v = np.einsum("tji,tj->ti", R, pos[:, child] - pos[:, parent])
+        return v.mean(axis=0)
+
+    hl = mean_local(R_pelvis, _J["left_hip"], _J["pelvis"])
+    hr = mean_local(R_pelvis, _J["right_hip"], _J["pelvis"])
+    h = 0.5 * (hl + _mirror(hr))
+    off[_J["left_hip"]], off[_J["right_hip"]] = h, _mirror(h)
+
+    # chest frame: up = spine3->neck, left = right collar -> left collar
+    a = pos[:, _J["neck"]] - pos[:, _J["spine3"]]
+    b = pos[:, _J["left_collar"]] - pos[:, _J["right_collar"]]
+    upv = normalize(a)
+    leftv = normalize(b - np.sum(b * upv, -1, keepdims=True) * upv)
+    yv = np.cross(upv, leftv)                  # up x left = +Y (backward) in body frame
+    Rc = np.stack([leftv, yv, upv], axis=-1)
+    cl = mean_local(Rc, _J["left_collar"], _J["spine3"])
+    cr = mean_local(Rc, _J["right_collar"], _J["spine3"])
+    c = 0.5 * (cl + _mirror(cr))
+    off[_J["left_collar"]], off[_J["right_collar"]] = c, _mirror(c)
+    sl = normalize(mean_local(Rc, _J["left_shoulder"], _J["left_collar"]))
+    sr = normalize(mean_local(Rc, _J["right_shoulder"], _J["right_collar"]))
+    s = normalize(0.5 * (sl + _mirror(sr)))
+    ls = 0.5 * (length[_J["left_shoulder"]] + length[_J["right_shoulder"]])
+    off[_J["left_shoulder"]], off[_J["right_shoulder"]] = s * ls, _mirror(s * ls)
+
+    def sym(n):
+        return 0.5 * (length[_J["left_" + n]] + length[_J["right_" + n]])
+
+    for n in ("elbow", "wrist"):
+        off[_J["left_" + n]] = [sym(n), 0, 0]
+        off[_J["right_" + n]] = [-sym(n), 0, 0]
+    for n in ("knee", "ankle"):
+        off[_J["left_" + n]] = [0, 0, -sym(n)]
+        off[_J["right_" + n]] = [0, 0, -sym(n)]
+    off[_J["left_foot"]] = off[_J["right_foot"]] = foot_direction(foot_pitch) * sym("foot")
+
+    # pelvis height: the rest ball of the foot at foot_height * stature (as in
+    # make_body), stature = head z / head_height (as in Body.from_offsets)
+    rel = np.zeros((NJ, 3))
+    for j in range(1, NJ):
+        rel[j] = rel[par[j]] + off[j]
+    c_ = _P["foot_height"] / _P["head_height"]
+    head_rel, ball_rel = rel[_J["head"], 2], rel[_J["left_foot"], 2]
+    z0 = (c_ * head_rel - ball_rel) / (1.0 - c_)
+    return skeleton.Body.from_offsets(off, np.array([0.0, 0.0, z0]))
+
+
+# --------------------------------------------------------------------------
+def clip_to_body_motion(clip: BvhClip, joint_map: Union[None, str, JointMap] = None, *,
+                        unit_scale: Union[None, float, str] = None, floor: Union[str, float] = "auto",
+                        up: Optional[str] = None, forward: Optional[str] = None,
+                        foot_pitch: Union[None, float, str] = "map",
+                        name: Optional[str] = None) -> MotionClip:
+    """Map a BVH clip onto the 22-joint body (metres, Blender axes, floor z = 0).
+
+    ``joint_map``: a :class:`JointMap`, a registered name (``"bandai"``,
+    ``"cmu"``) or ``None``/``"auto"`` to detect it from the joint names.
+    ``unit_scale``: metres per source unit, ``"auto"``, or ``None`` for the
+    map's default.  ``floor``: ``"auto"`` or the floor height in metres in
+    converted axes.  ``up``/``forward`` override the map's source axes.
+    ``foot_pitch``: dip (degrees) of the ankle->ball line of a flat foot,
+    which defines the ankles' identity orientation and the body's rest foot;
+    ``"map"`` uses the map's value, ``"auto"`` measures it on the clip
+    (:func:`estimate_foot_pitch`, falling back to the body model's 20.3),
+    ``None`` is the body model's 20.3.
+    """
+    jm = get_joint_map(joint_map, clip)
+    M = axis_conversion(up or jm.up, forward or jm.forward)
+    res = _Resolver(clip.joint_names)
+    pos_src, rot_src = clip.global_transforms()
+    T = clip.num_frames
+    if T == 0:
+        raise ValueError(f"{clip.name}: clip has no frames")
+
+    # chain weights from the clip's mean joint distances (constant for rigid bones)
+    sample = pos_src[:: max(1, T // 64)]
+
+    def seg_len(a, b):
+        return float(np.linalg.norm(sample[:, b] - sample[:, a], axis=-1).mean())
+
+    W = _resolve_weights(jm, res, seg_len, clip.name)
+
+    scale = jm.unit_scale if unit_scale is None else unit_scale
+    if isinstance(scale, str):
+        if scale != "auto":
+            scale = UNIT_CANDIDATES[scale]
+        else:
+            body_src = np.einsum("kj,tjc->tkc", W, sample)
+            leg = 0.0
+            for side in ("left", "right"):
+                h, k, a = (_J[f"{side}_{n}"] for n in ("hip", "knee", "ankle"))
+                leg += np.median(np.linalg.norm(body_src[:, k] - body_src[:, h], axis=-1)
+                                 + np.linalg.norm(body_src[:, a] - body_src[:, k], axis=-1)) / 2
+            scale = detect_unit_scale(leg)
+    scale = float(scale)
+
+    if any(ax.kind == "rest" for o in jm.orientations.values() for ax in (o.primary, o.secondary)):
+        rep = rest_pose_report(clip, jm)
+        if not jm.rest_is_tpose or max(rep["left_arm"], rep["right_arm"], rep["spine"]) > 30.0:
+            warnings.warn(f"{clip.name}: joint map {jm.name!r} takes orientations from the rest pose, "
+                          f"but the rest pose is not a T-pose ({rep})")
+
+    # positions: W combines source joints, then axes and units
+    P = np.einsum("kj,tjc->tkc", W, pos_src)
+    P = np.einsum("ij,tkj->tki", M * scale, P)
+
+    # foot pitch, orientations, body
+    fp = jm.foot_pitch if isinstance(foot_pitch, str) and foot_pitch == "map" else foot_pitch
+    if fp is None:
+        fp = REST_FOOT_PITCH
+    elif isinstance(fp, str):
+        if fp != "auto":
+            raise ValueError(f"foot_pitch must be 'map', 'auto', None or degrees, got {fp!r}")
+        est = estimate_foot_pitch(P)
+        fp = REST_FOOT_PITCH if est is None else est
+    fp = float(fp)
+    corr = orientation_corrections(clip, jm, M, fp)
+    rotations = {n: M @ rot_src[:, j] @ C for n, (j, C) in corr.items()}
+
+    body = _body_from_motion(P, rotations["pelvis"], fp)
+    if isinstance(floor, str):
+        if floor != "auto":
+            raise ValueError(f"floor must be 'auto' or a height in metres, got {floor!r}")
+        rest_p = body.rest_positions()
+        heights = {_J[n]: rest_p[_J[n], 2] for n in ("left_ankle", "right_ankle", "left_foot", "right_foot")}
+        floor_h = estimate_floor(P, heights)
+    else:
+        floor_h = float(floor)
+    P[..., 2] -= floor_h
+
+    nm = name or clip.name
+    return MotionClip(
+        name=nm, take_id=take_id_from_name(nm), fps=_snap_fps(clip.frame_time), positions=P,
+        rotations=rotations, body=body, joint_map=jm.name, unit_scale=scale, floor_height=floor_h,
+        foot_pitch=fp, source=clip.source,
+    )
