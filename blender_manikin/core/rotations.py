@@ -29,6 +29,17 @@ def _f64(x):
 def normalize(v, axis=-1, eps=_EPS):
     """Unit vectors along ``axis``; zero vectors stay zero (no NaN)."""
     v = _f64(v)
+    if v.ndim and axis in (-1, v.ndim - 1) and v.shape[-1] in (3, 4):
+        # same sum order as np.linalg.norm, without its temporaries
+        n = np.empty(v.shape[:-1])
+        np.multiply(v[..., 0], v[..., 0], out=n)
+        n += v[..., 1] * v[..., 1]
+        n += v[..., 2] * v[..., 2]
+        if v.shape[-1] == 4:
+            n += v[..., 3] * v[..., 3]
+        np.sqrt(n, out=n)
+        np.maximum(n, eps, out=n)
+        return v / n[..., None]
     n = np.linalg.norm(v, axis=axis, keepdims=True)
     return v / np.maximum(n, eps)
 
@@ -67,52 +78,73 @@ def quat_rotate(q, v):
 def quat_to_matrix(q):
     """``(..., 4)`` wxyz → ``(..., 3, 3)``.  Input need not be normalised."""
     q = normalize(q)
-    w, x, y, z = np.moveaxis(q, -1, 0)
+    w, x, y, z = q[..., 0], q[..., 1], q[..., 2], q[..., 3]
     xx, yy, zz = x * x, y * y, z * z
     xy, xz, yz = x * y, x * z, y * z
     wx, wy, wz = w * x, w * y, w * z
-    m = np.stack([
-        1 - 2 * (yy + zz), 2 * (xy - wz), 2 * (xz + wy),
-        2 * (xy + wz), 1 - 2 * (xx + zz), 2 * (yz - wx),
-        2 * (xz - wy), 2 * (yz + wx), 1 - 2 * (xx + yy),
-    ], axis=-1)
-    return m.reshape(q.shape[:-1] + (3, 3))
+    m = np.empty(q.shape[:-1] + (3, 3))
+    m[..., 0, 0] = 1 - 2 * (yy + zz)
+    m[..., 0, 1] = 2 * (xy - wz)
+    m[..., 0, 2] = 2 * (xz + wy)
+    m[..., 1, 0] = 2 * (xy + wz)
+    m[..., 1, 1] = 1 - 2 * (xx + zz)
+    m[..., 1, 2] = 2 * (yz - wx)
+    m[..., 2, 0] = 2 * (xz - wy)
+    m[..., 2, 1] = 2 * (yz + wx)
+    m[..., 2, 2] = 1 - 2 * (xx + yy)
+    return m
 
 
 def matrix_to_quat(m):
     """``(..., 3, 3)`` → ``(..., 4)`` wxyz with ``w >= 0`` (Shepperd's method)."""
     m = _f64(m)
     shape = m.shape[:-2]
-    m = m.reshape(-1, 3, 3)
-    tr = m[:, 0, 0] + m[:, 1, 1] + m[:, 2, 2]
-    cand = np.stack([tr, m[:, 0, 0], m[:, 1, 1], m[:, 2, 2]], axis=-1)
-    k = np.argmax(cand, axis=-1)
-    q = np.empty((m.shape[0], 4))
-    # case w largest
-    s = np.sqrt(np.maximum(1.0 + tr, 0.0)) * 2.0
-    i = k == 0
-    q[i, 0] = 0.25 * s[i]
-    q[i, 1] = (m[i, 2, 1] - m[i, 1, 2]) / s[i]
-    q[i, 2] = (m[i, 0, 2] - m[i, 2, 0]) / s[i]
-    q[i, 3] = (m[i, 1, 0] - m[i, 0, 1]) / s[i]
-    i = k == 1
-    s = np.sqrt(np.maximum(1.0 + m[:, 0, 0] - m[:, 1, 1] - m[:, 2, 2], 0.0)) * 2.0
-    q[i, 0] = (m[i, 2, 1] - m[i, 1, 2]) / s[i]
-    q[i, 1] = 0.25 * s[i]
-    q[i, 2] = (m[i, 0, 1] + m[i, 1, 0]) / s[i]
-    q[i, 3] = (m[i, 0, 2] + m[i, 2, 0]) / s[i]
-    i = k == 2
-    s = np.sqrt(np.maximum(1.0 + m[:, 1, 1] - m[:, 0, 0] - m[:, 2, 2], 0.0)) * 2.0
-    q[i, 0] = (m[i, 0, 2] - m[i, 2, 0]) / s[i]
-    q[i, 1] = (m[i, 0, 1] + m[i, 1, 0]) / s[i]
-    q[i, 2] = 0.25 * s[i]
-    q[i, 3] = (m[i, 1, 2] + m[i, 2, 1]) / s[i]
-    i = k == 3
-    s = np.sqrt(np.maximum(1.0 + m[:, 2, 2] - m[:, 0, 0] - m[:, 1, 1], 0.0)) * 2.0
-    q[i, 0] = (m[i, 1, 0] - m[i, 0, 1]) / s[i]
-    q[i, 1] = (m[i, 0, 2] + m[i, 2, 0]) / s[i]
-    q[i, 2] = (m[i, 1, 2] + m[i, 2, 1]) / s[i]
-    q[i, 3] = 0.25 * s[i]
+    f = m.reshape(-1, 9)
+    N = f.shape[0]
+    d0, d1, d2 = f[:, 0], f[:, 4], f[:, 8]
+    tr = d0 + d1 + d2
+    # argmax of (tr, m00, m11, m22), first maximum on ties
+    k = np.zeros(N, dtype=np.int8)
+    best = tr.copy()
+    for c, dc in ((1, d0), (2, d1), (3, d2)):
+        better = dc > best
+        k[better] = c
+        np.maximum(best, dc, out=best)
+    q = np.empty((N, 4))
+    if N:
+        if not k.any():              # the common case: every row is case 0
+            groups = ((0, slice(None)),)
+        else:
+            groups = tuple((c, np.flatnonzero(k == c)) for c in range(4))
+        for c, i in groups:
+            g = f[i]
+            if g.shape[0] == 0:
+                continue
+            m00, m01, m02, m10, m11, m12, m20, m21, m22 = g.T
+            if c == 0:
+                s = np.sqrt(np.maximum(1.0 + (m00 + m11 + m22), 0.0)) * 2.0
+                q[i, 0] = 0.25 * s
+                q[i, 1] = (m21 - m12) / s
+                q[i, 2] = (m02 - m20) / s
+                q[i, 3] = (m10 - m01) / s
+            elif c == 1:
+                s = np.sqrt(np.maximum(1.0 + m00 - m11 - m22, 0.0)) * 2.0
+                q[i, 0] = (m21 - m12) / s
+                q[i, 1] = 0.25 * s
+                q[i, 2] = (m01 + m10) / s
+                q[i, 3] = (m02 + m20) / s
+            elif c == 2:
+                s = np.sqrt(np.maximum(1.0 + m11 - m00 - m22, 0.0)) * 2.0
+                q[i, 0] = (m02 - m20) / s
+                q[i, 1] = (m01 + m10) / s
+                q[i, 2] = 0.25 * s
+                q[i, 3] = (m12 + m21) / s
+            else:
+                s = np.sqrt(np.maximum(1.0 + m22 - m00 - m11, 0.0)) * 2.0
+                q[i, 0] = (m10 - m01) / s
+                q[i, 1] = (m02 + m20) / s
+                q[i, 2] = (m12 + m21) / s
+                q[i, 3] = 0.25 * s
     q = normalize(q)
     q *= np.where(q[:, :1] < 0, -1.0, 1.0)
     return q.reshape(shape + (4,))
@@ -125,10 +157,25 @@ def axis_angle_to_matrix(aa):
     aa = _f64(aa)
     theta = np.linalg.norm(aa, axis=-1, keepdims=True)
     k = aa / np.maximum(theta, _EPS)
-    theta = theta[..., None]
-    K = skew(k)
-    eye = np.broadcast_to(np.eye(3), K.shape)
-    return eye + np.sin(theta) * K + (1 - np.cos(theta)) * (K @ K)
+    theta = theta[..., 0]
+    s = np.sin(theta)
+    c = 1 - np.cos(theta)
+    x, y, z = k[..., 0], k[..., 1], k[..., 2]
+    xx, yy, zz = x * x, y * y, z * z
+    cxy, cxz, cyz = c * (x * y), c * (x * z), c * (y * z)
+    sx, sy, sz = s * x, s * y, s * z
+    R = np.empty(aa.shape[:-1] + (3, 3))
+    # (K K)_ii = -(k_j^2 + k_l^2), (K K)_ij = k_i k_j
+    R[..., 0, 0] = 1 + c * -(yy + zz)
+    R[..., 0, 1] = -sz + cxy
+    R[..., 0, 2] = sy + cxz
+    R[..., 1, 0] = sz + cxy
+    R[..., 1, 1] = 1 + c * -(xx + zz)
+    R[..., 1, 2] = -sx + cyz
+    R[..., 2, 0] = -sy + cxz
+    R[..., 2, 1] = sx + cyz
+    R[..., 2, 2] = 1 + c * -(xx + yy)
+    return R
 
 
 def matrix_to_axis_angle(m):
@@ -162,13 +209,15 @@ def axis_angle_rotation(axis, angle):
 def skew(v):
     """``(..., 3)`` → cross-product matrices ``(..., 3, 3)``."""
     v = _f64(v)
-    z = np.zeros(v.shape[:-1])
     x, y, w = v[..., 0], v[..., 1], v[..., 2]
-    return np.stack([
-        np.stack([z, -w, y], -1),
-        np.stack([w, z, -x], -1),
-        np.stack([-y, x, z], -1),
-    ], -2)
+    K = np.zeros(v.shape[:-1] + (3, 3))
+    K[..., 0, 1] = -w
+    K[..., 0, 2] = y
+    K[..., 1, 0] = w
+    K[..., 1, 2] = -x
+    K[..., 2, 0] = -y
+    K[..., 2, 1] = x
+    return K
 
 
 # --------------------------------------------------------------------------
@@ -237,24 +286,39 @@ def swing_twist(q, axis):
     rotation is a half-turn about an axis perpendicular to ``axis`` the twist
     is undefined and returned as identity.
     """
-    q = normalize(q)
-    axis = normalize(axis)
-    proj = np.sum(q[..., 1:] * axis, -1, keepdims=True)
-    tw = np.concatenate([q[..., :1], proj * axis], -1)
-    n = np.linalg.norm(tw, axis=-1, keepdims=True)
-    ident = np.zeros_like(tw)
-    ident[..., 0] = 1.0
-    tw = np.where(n < 1e-9, ident, tw / np.maximum(n, _EPS))
-    angle = 2.0 * np.arctan2(np.sum(tw[..., 1:] * axis, -1), tw[..., 0])
-    angle = np.where(angle > np.pi, angle - 2 * np.pi, angle)
-    angle = np.where(angle <= -np.pi, angle + 2 * np.pi, angle)
+    q, tw, angle = _twist(q, axis)
     sw = quat_mul(q, quat_conj(tw))
     return sw, tw, angle
 
 
+def _dot3(a, b):
+    """``sum(a * b, -1)`` for ``(..., 3)`` arrays, same summation order."""
+    return (a[..., 0] * b[..., 0] + a[..., 1] * b[..., 1]) + a[..., 2] * b[..., 2]
+
+
+def _twist(q, axis):
+    """``(normalised q, twist quaternion, twist angle)`` of :func:`swing_twist`."""
+    q = normalize(q)
+    axis = normalize(axis)
+    proj = _dot3(q[..., 1:], axis)[..., None]
+    shape = np.broadcast_shapes(q.shape, axis.shape[:-1] + (4,))
+    tw = np.empty(shape)
+    tw[..., :1] = q[..., :1]
+    tw[..., 1:] = proj * axis
+    n = np.linalg.norm(tw, axis=-1, keepdims=True)
+    tw /= np.maximum(n, _EPS)
+    small = n[..., 0] < 1e-9
+    if small.any():
+        tw[small] = (1.0, 0.0, 0.0, 0.0)
+    angle = 2.0 * np.arctan2(_dot3(tw[..., 1:], axis), tw[..., 0])
+    angle = np.where(angle > np.pi, angle - 2 * np.pi, angle)
+    angle = np.where(angle <= -np.pi, angle + 2 * np.pi, angle)
+    return q, tw, angle
+
+
 def twist_angle(R, axis):
     """Twist angle (radians, (-pi, pi]) of rotation matrices ``R`` about ``axis``."""
-    return swing_twist(matrix_to_quat(R), axis)[2]
+    return _twist(matrix_to_quat(R), axis)[2]
 
 
 def rotation_between(a, b):
@@ -266,11 +330,15 @@ def rotation_between(a, b):
     a = normalize(a)
     b = normalize(b)
     a, b = np.broadcast_arrays(a, b)
-    c = np.cross(a, b)
-    d = np.sum(a * b, -1)
-    # quaternion (1 + d, c) normalised is the half-way rotation
-    q = np.concatenate([(1.0 + d)[..., None], c], -1)
-    bad = (1.0 + d) < 1e-10
+    a0, a1, a2 = a[..., 0], a[..., 1], a[..., 2]
+    b0, b1, b2 = b[..., 0], b[..., 1], b[..., 2]
+    # quaternion (1 + a.b, a x b) normalised is the half-way rotation
+    q = np.empty(a.shape[:-1] + (4,))
+    q[..., 0] = 1.0 + ((a0 * b0 + a1 * b1) + a2 * b2)
+    q[..., 1] = a1 * b2 - a2 * b1
+    q[..., 2] = a2 * b0 - a0 * b2
+    q[..., 3] = a0 * b1 - a1 * b0
+    bad = q[..., 0] < 1e-10
     if np.any(bad):
         ab = a[bad]
         helper = np.where(np.abs(ab[:, :1]) < 0.9, np.array([[1.0, 0, 0]]), np.array([[0, 1.0, 0]]))
