@@ -219,21 +219,27 @@ def forward_kinematics(local_rot, root_pos, body: Body, offsets=None):
     root_pos: ``(T, 3)`` pelvis world position, metres.
     offsets: optional ``(22, 3)`` or ``(T, 22, 3)`` overriding ``body.offsets``.
     Returns ``(positions (T, 22, 3), world_rot (T, 22, 3, 3))`` float64.
-    Loops over the 22 joints, vectorised over frames.
+    Loops over the 22 joints, vectorised over frames (joint-major contiguous
+    buffers, so each step is one batched matmul).
     """
     local_rot = np.asarray(local_rot, dtype=np.float64)
     T = local_rot.shape[0]
     off = np.asarray(body.offsets if offsets is None else offsets, dtype=np.float64)
-    off = np.broadcast_to(off, (T, NUM_JOINTS, 3))
-    pos = np.empty((T, NUM_JOINTS, 3))
-    rot = np.empty((T, NUM_JOINTS, 3, 3))
-    pos[:, 0] = np.asarray(root_pos, dtype=np.float64).reshape(T, 3)
-    rot[:, 0] = local_rot[:, 0]
+    per_frame = off.ndim == 3
+    loc = np.ascontiguousarray(np.moveaxis(local_rot, 1, 0))             # (22, T, 3, 3)
+    offj = np.ascontiguousarray(np.moveaxis(off, 1, 0))[..., None] if per_frame else off
+    pos = np.empty((NUM_JOINTS, T, 3))
+    rot = np.empty((NUM_JOINTS, T, 3, 3))
+    pos[0] = np.asarray(root_pos, dtype=np.float64).reshape(T, 3)
+    rot[0] = loc[0]
     for j in range(1, NUM_JOINTS):
         p = PARENTS[j]
-        rot[:, j] = rot[:, p] @ local_rot[:, j]
-        pos[:, j] = pos[:, p] + np.einsum("tij,tj->ti", rot[:, p], off[:, j])
-    return pos, rot
+        np.matmul(rot[p], loc[j], out=rot[j])
+        if per_frame:
+            pos[j] = pos[p] + np.matmul(rot[p], offj[j])[..., 0]
+        else:
+            pos[j] = pos[p] + np.matmul(rot[p], offj[j])
+    return np.moveaxis(pos, 0, 1), np.moveaxis(rot, 0, 1)
 
 
 def local_from_world(world_rot):
