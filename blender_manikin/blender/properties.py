@@ -1,0 +1,172 @@
+"""Scene settings of the add-on (``scene.manikin``) and their conversion to a :class:`SolveConfig`."""
+
+import json
+
+import bpy
+from bpy.props import (BoolProperty, EnumProperty, FloatProperty, IntProperty, PointerProperty,
+                       StringProperty)
+from bpy.types import PropertyGroup
+
+from ..core.pose_result import DEVICES
+
+DEVICE_LABELS = {
+    "head": "Head", "left_hand": "Left Hand", "right_hand": "Right Hand",
+    "pelvis": "Pelvis", "left_foot": "Left Foot", "right_foot": "Right Foot",
+}
+
+_AXES_ITEMS = [
+    ('AUTO', "From File", "Axes from the file's metadata, else the format's default "
+     "(CSV: OpenXR, BSOR: Unity)"),
+    ('OPENXR', "OpenXR / SteamVR", "Right-handed, +Y up, -Z forward"),
+    ('UNITY', "Unity", "Left-handed, +Y up, +Z forward"),
+    ('BLENDER', "Blender", "Right-handed, +Z up, -Y forward"),
+]
+_UNITS_ITEMS = [
+    ('AUTO', "From File", "Units from the file's metadata, else metres"),
+    ('M', "Metres", ""), ('CM', "Centimetres", ""), ('MM', "Millimetres", ""),
+]
+
+_preset_items_cache = []
+
+
+def _preset_items(self, context):
+    """Enum items of the device offsets presets (kept referenced: Blender requires it)."""
+    global _preset_items_cache
+    if not _preset_items_cache:
+        try:
+            from ..core import device_offsets
+            names = device_offsets.PRESET_NAMES
+            desc = {n: device_offsets.get_preset(n).get("description", "") for n in names}
+        except Exception:          # pragma: no cover - module missing
+            names, desc = ("none",), {"none": "Device poses are the joint poses"}
+        _preset_items_cache = [(n, n.replace("_", " ").title() if n != "none" else "None", desc[n])
+                               for n in names]
+    return _preset_items_cache
+
+
+def _armature_poll(self, obj):
+    return obj.type == 'ARMATURE'
+
+
+class MANIKIN_DeviceSource(PropertyGroup):
+    """A scene object (optionally one of its bones) standing in for a tracker device."""
+    object: PointerProperty(name="Object", type=bpy.types.Object,
+                            description="Animated object whose world transform is this device's pose")
+    bone: StringProperty(name="Bone", default="",
+                         description="Bone of an armature object to use instead of the object itself")
+
+
+class MANIKIN_Settings(PropertyGroup):
+    """Settings of the "Solve full body" panel (``scene.manikin``)."""
+    source: EnumProperty(
+        name="Source", default='FILE',
+        items=[('FILE', "Recording File", "A tracker recording (.csv native format, .bsor Beat Saber replay)"),
+               ('SCENE', "Scene Objects", "Animated objects or bones in this scene, mapped to devices")])
+    filepath: StringProperty(name="Recording", subtype='FILE_PATH', default="",
+                             description="Tracker recording (.csv or .bsor)")
+    axes: EnumProperty(name="Axes", items=_AXES_ITEMS, default='AUTO')
+    units: EnumProperty(name="Units", items=_UNITS_ITEMS, default='AUTO')
+    use_scene_fps: BoolProperty(name="Scene Frame Rate", default=True,
+                                description="Solve at the scene's frame rate (else at FPS)")
+    fps: FloatProperty(name="FPS", default=60.0, min=1.0, max=1000.0,
+                       description="Frames per second of the solve")
+
+    head: PointerProperty(type=MANIKIN_DeviceSource, name="Head")
+    left_hand: PointerProperty(type=MANIKIN_DeviceSource, name="Left Hand")
+    right_hand: PointerProperty(type=MANIKIN_DeviceSource, name="Right Hand")
+    pelvis: PointerProperty(type=MANIKIN_DeviceSource, name="Pelvis")
+    left_foot: PointerProperty(type=MANIKIN_DeviceSource, name="Left Foot")
+    right_foot: PointerProperty(type=MANIKIN_DeviceSource, name="Right Foot")
+
+    calibration: EnumProperty(
+        name="Calibration", default='AUTO',
+        items=[('AUTO', "Automatic", "Calibrate on the most T-pose-like moment; if there is none, "
+                "stature from the standing head height"),
+               ('TPOSE', "T-Pose Time", "Calibrate body size and device rotations on the T-pose "
+                "at the given time"),
+               ('MEASURE', "Measurements", "Use the typed height and arm span")])
+    tpose_time: FloatProperty(name="T-Pose Time", default=0.0, min=0.0, unit='TIME_ABSOLUTE',
+                              description="Seconds after the first tracker sample")
+    height: FloatProperty(name="Height", default=1.75, min=0.5, max=2.8, unit='LENGTH',
+                          description="Performer's stature (metres)")
+    use_height: BoolProperty(name="Override Height", default=False,
+                             description="Use the typed height instead of the measured stature")
+    arm_span: FloatProperty(name="Arm Span", default=0.0, min=0.0, max=3.0, unit='LENGTH',
+                            description="Wrist-to-wrist distance in a T-pose (0 = from proportions)")
+
+    offsets_preset: EnumProperty(name="Offsets", items=_preset_items,
+                                 description="Device-to-joint offsets preset")
+    offsets_text: PointerProperty(
+        name="Edited Offsets", type=bpy.types.Text,
+        description="Text block with offsets JSON (made by Load Preset) used instead of the preset")
+
+    use_scene_range: BoolProperty(name="Scene Frame Range", default=True,
+                                  description="Scene objects: sample the scene's frame range")
+    frame_start: IntProperty(name="Start", default=1, description="First frame of the solve")
+    frame_end: IntProperty(name="End", default=250,
+                           description="Last frame (scene objects; recordings when Limit is on)")
+    limit_frames: BoolProperty(name="Limit", default=False,
+                               description="Recordings: stop at the End frame")
+
+    create_trackers: BoolProperty(name="Tracker Empties", default=True,
+                                  description="Also create keyed empties at the device targets")
+    set_scene_range: BoolProperty(name="Set Scene Range", default=True,
+                                  description="Set the scene frame range to the solved animation")
+    reuse_armature: BoolProperty(name="Reuse Armature", default=True,
+                                 description="Write the new action to the armature of the last solve "
+                                 "when its body matches (else a new armature is created)")
+    armature: PointerProperty(name="Armature", type=bpy.types.Object, poll=_armature_poll,
+                              description="Armature of the last solve")
+    last_report: StringProperty(name="Last Solve", default="")
+
+
+def device_source(settings, device):
+    return getattr(settings, device)
+
+
+def config_from_settings(context):
+    """A :class:`~.solve_job.SolveConfig` from ``context.scene.manikin``."""
+    from .solve_job import SolveConfig, SolveError
+    from .writer import scene_fps
+    scene = context.scene
+    s = scene.manikin
+    cfg = SolveConfig()
+    cfg.source = s.source
+    cfg.filepath = bpy.path.abspath(s.filepath) if s.filepath else ""
+    cfg.axes = None if s.axes == 'AUTO' else s.axes.lower()
+    cfg.units = None if s.units == 'AUTO' else s.units.lower()
+    cfg.fps = scene_fps(scene) if s.use_scene_fps else float(s.fps)
+    cfg.calibration = s.calibration
+    cfg.tpose_time = float(s.tpose_time)
+    if s.calibration == 'MEASURE' or s.use_height:
+        cfg.height = float(s.height)
+    cfg.arm_span = float(s.arm_span) if s.arm_span > 0 else None
+    if s.offsets_text is not None:
+        try:
+            cfg.offsets = json.loads(s.offsets_text.as_string())
+        except json.JSONDecodeError as exc:
+            raise SolveError(f"offsets text {s.offsets_text.name!r}, line {exc.lineno}: "
+                             f"not valid JSON ({exc.msg})") from None
+    else:
+        cfg.offsets = s.offsets_preset or "none"
+    cfg.create_trackers = s.create_trackers
+    cfg.set_scene_range = s.set_scene_range
+    cfg.reuse_armature = s.armature if (s.reuse_armature and s.armature is not None
+                                        and s.armature.name in scene.objects) else None
+    if s.source == 'SCENE':
+        cfg.scene_sources = {}
+        for d in DEVICES:
+            src = device_source(s, d)
+            if src.object is not None:
+                cfg.scene_sources[d] = (src.object.name, src.bone)
+        cfg.scene_frames = ((scene.frame_start, scene.frame_end) if s.use_scene_range
+                            else (s.frame_start, s.frame_end))
+        cfg.fps = scene_fps(scene)      # scene sources are sampled on scene frames
+    else:
+        cfg.frame_start = s.frame_start if not s.use_scene_range else scene.frame_start
+        if s.limit_frames:
+            cfg.max_frames = max(1, s.frame_end - cfg.frame_start + 1)
+    return cfg
+
+
+CLASSES = (MANIKIN_DeviceSource, MANIKIN_Settings)

@@ -1,0 +1,240 @@
+"""Put a solved :class:`~blender_manikin.core.pose_result.PoseResult` into the scene.
+
+Everything is written in one step at the end of a solve and is
+all-or-nothing: if anything fails, every ID created so far is removed again
+and the exception propagates (no half-written data).  Nothing that existed
+before is modified except, optionally, the scene frame range and -- when an
+existing MANIKIN armature of the same body is reused -- that armature's
+assigned action (the previous action is kept, with a fake user).
+
+Timing: result frame ``k`` is keyed at scene frame
+``frame_start + k * frame_step``; by default ``frame_step`` is
+``scene_fps / result.fps`` so the animation plays back in real time.
+
+Data written (armature object ``obj``, new action ``MANIKIN_solve[.NNN]``):
+
+* ``pose.bones["<joint>"].rotation_quaternion`` (w, x, y, z), every bone,
+  see :mod:`.armature` for the mapping and the bone axes;
+* ``pose.bones["pelvis"].location`` (metres, pelvis bone's rest frame);
+* ``["swivel_left_arm"]`` ... ``["swivel_right_leg"]``: object custom
+  properties, radians, unwrapped over time (so curves are continuous; the
+  value modulo 2π is the solver's swivel angle), subtype ANGLE.
+* optional tracker empties ``MANIKIN_<device>`` in a new collection
+  ``MANIKIN trackers``, each with its own new action keying ``location``
+  (metres, world) and ``rotation_quaternion`` (the targeted joint's world
+  orientation, body-model convention) of the device targets after offsets.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+import bpy
+
+from ..core import rotations as rot
+from ..core import skeleton as sk
+from . import armature as arm_mod
+from . import keying
+
+#: limb name -> custom property name on the armature object
+SWIVEL_PROPS = {limb: f"swivel_{limb}" for limb in sk.LIMB_NAMES}
+SWIVEL_GROUP = "Swivel"
+#: hard limits of the swivel properties (radians); the soft (UI slider) range is [-pi, pi]
+SWIVEL_HARD_LIMIT = 32.0 * math.pi
+TRACKER_COLLECTION = "MANIKIN trackers"
+
+
+@dataclass
+class WriteOptions:
+    """How :func:`write_result` writes.  Frames are scene frames."""
+    frame_start: float = 1.0
+    frame_step: float | None = None          # None: scene fps / result fps
+    armature: object = None                  # reuse this MANIKIN armature if it fits the body
+    armature_name: str = "MANIKIN_body"
+    action_name: str = "MANIKIN_solve"
+    create_trackers: bool = False
+    tracker_collection: str = TRACKER_COLLECTION
+    set_scene_range: bool = False
+    interpolation: str = 'LINEAR'
+
+
+@dataclass
+class WriteOutput:
+    """What :func:`write_result` created."""
+    armature: object
+    action: object
+    created_armature: bool
+    frames: np.ndarray
+    trackers: dict = field(default_factory=dict)          # device -> empty object
+    tracker_actions: dict = field(default_factory=dict)   # device -> action
+    tracker_collection: object = None
+
+
+def scene_fps(scene) -> float:
+    """Effective frames per second of ``scene`` (``fps / fps_base``)."""
+    return float(scene.render.fps) / float(scene.render.fps_base)
+
+
+def ensure_swivel_properties(obj):
+    """Create (if missing) the four swivel custom properties on ``obj`` with their UI data.
+
+    Float, radians, subtype ANGLE, soft range [-π, π], hard range
+    ±``SWIVEL_HARD_LIMIT``.  Existing values are kept.
+    """
+    for limb, name in SWIVEL_PROPS.items():
+        if name not in obj.keys():
+            obj[name] = 0.0
+        desc = (f"MANIKIN swivel angle of the {limb.replace('_', ' ')} (radians): rotation of the "
+                f"{'elbow' if 'arm' in limb else 'knee'} about the "
+                f"{'shoulder-wrist' if 'arm' in limb else 'hip-ankle'} axis; 0 = "
+                f"{'elbow out, back and down' if 'arm' in limb else 'knee forward'}")
+        try:
+            ui = obj.id_properties_ui(name)
+            ui.update(subtype='ANGLE', min=-SWIVEL_HARD_LIMIT, max=SWIVEL_HARD_LIMIT,
+                      soft_min=-math.pi, soft_max=math.pi, default=0.0, precision=3,
+                      description=desc)
+        except (AttributeError, TypeError):      # very old API: rna_idprop_ui
+            from rna_prop_ui import rna_idprop_ui_create
+            rna_idprop_ui_create(obj, name, default=0.0, min=-SWIVEL_HARD_LIMIT,
+                                 max=SWIVEL_HARD_LIMIT, soft_min=-math.pi, soft_max=math.pi,
+                                 description=desc, subtype='ANGLE')
+
+
+def unwrap_swivel(swivel):
+    """``(T, 4)`` swivel angles unwrapped over time, each limb shifted by a multiple of 2π
+    so that its median lies in [-π, π] (continuous curves, values near the solver's)."""
+    s = np.unwrap(np.asarray(swivel, dtype=np.float64).reshape(len(swivel), -1), axis=0)
+    if s.shape[0]:
+        s -= 2.0 * np.pi * np.round(np.median(s, axis=0) / (2.0 * np.pi))
+    return s
+
+
+def _pose_channels(obj, result):
+    heads, rest_mats = arm_mod.rest_matrices(obj)
+    quats = arm_mod.pose_bone_quaternions(result.local_rot, rest_mats)      # (T, 22, 4)
+    loc = arm_mod.root_locations(result.root_pos, heads[0], rest_mats[0])  # (T, 3)
+    ch = []
+    for j, name in enumerate(sk.JOINT_NAMES):
+        path = f'pose.bones["{name}"].rotation_quaternion'
+        for i in range(4):
+            ch.append((path, i, name, quats[:, j, i]))
+    root = sk.JOINT_NAMES[0]
+    for i in range(3):
+        ch.append((f'pose.bones["{root}"].location', i, root, loc[:, i]))
+    swivel = unwrap_swivel(result.swivel)
+    for li, limb in enumerate(sk.LIMB_NAMES):
+        ch.append((f'["{SWIVEL_PROPS[limb]}"]', 0, SWIVEL_GROUP, swivel[:, li]))
+    return ch
+
+
+def _remove_ids(ids):
+    for idb in reversed(ids):
+        try:
+            if isinstance(idb, bpy.types.Object):
+                bpy.data.objects.remove(idb)
+            elif isinstance(idb, bpy.types.Armature):
+                bpy.data.armatures.remove(idb)
+            elif isinstance(idb, bpy.types.Action):
+                bpy.data.actions.remove(idb)
+            elif isinstance(idb, bpy.types.Collection):
+                bpy.data.collections.remove(idb)
+        except ReferenceError:
+            pass
+
+
+def write_result(result, options: WriteOptions | None = None, context=None) -> WriteOutput:
+    """Write ``result`` into the scene of ``context`` (default ``bpy.context``).
+
+    Creates a new armature (or reuses ``options.armature`` when it is a
+    MANIKIN armature of the same body), a NEW action assigned to it, the
+    swivel custom properties, and optionally tracker empties.  All or nothing.
+    """
+    options = options or WriteOptions()
+    context = context or bpy.context
+    scene = context.scene
+    T = result.num_frames
+    if T < 1:
+        raise ValueError("the solve produced no frames")
+    step = options.frame_step if options.frame_step else scene_fps(scene) / float(result.fps)
+    frames = options.frame_start + np.arange(T, dtype=np.float64) * step
+    created = []
+    prev_action = None
+    obj = options.armature
+    try:
+        try:
+            reuse = obj is not None and arm_mod.armature_matches_body(obj, result.body) \
+                and obj.name in scene.objects
+        except ReferenceError:                  # deleted while the solve ran
+            reuse, obj = False, None
+        if not reuse:
+            obj = arm_mod.create_armature(result.body, options.armature_name, context=context)
+            created += [obj.data, obj]
+        else:
+            prev_action = obj.animation_data.action if obj.animation_data else None
+        ensure_swivel_properties(obj)
+        action = keying.new_action(options.action_name)
+        created.append(action)
+        keying.assign_action(obj, action)
+        keying.key_channels(action, obj, frames, _pose_channels(obj, result), options.interpolation)
+        out = WriteOutput(obj, action, not reuse, frames)
+
+        if options.create_trackers and result.targets is not None:
+            _write_trackers(result.targets, frames, scene, options, out, created)
+
+        if options.set_scene_range:
+            scene.frame_start = int(math.floor(frames[0]))
+            scene.frame_end = max(int(math.ceil(frames[-1])), scene.frame_start)
+    except BaseException:
+        if prev_action is not None and obj is not None and obj.animation_data is not None:
+            try:
+                keying.assign_action(obj, prev_action)
+            except Exception:
+                pass
+        _remove_ids(created)
+        raise
+    return out
+
+
+def _write_trackers(targets, frames, scene, options, out, created):
+    coll = bpy.data.collections.new(options.tracker_collection)
+    created.append(coll)
+    scene.collection.children.link(coll)
+    out.tracker_collection = coll
+    n = len(frames)
+    for dev in targets.devices:
+        pos = np.asarray(targets.pos[dev], dtype=np.float64)
+        if pos.shape[0] != n:
+            raise ValueError(f"tracker {dev!r} has {pos.shape[0]} frames, the solve {n}")
+        empty = bpy.data.objects.new(f"MANIKIN_{dev}", None)
+        created.append(empty)
+        coll.objects.link(empty)
+        empty.empty_display_type = 'ARROWS'
+        empty.empty_display_size = 0.1
+        empty.rotation_mode = 'QUATERNION'
+        ch = [("location", i, "Object Transforms", np.nan_to_num(pos[:, i])) for i in range(3)]
+        R = targets.rot.get(dev) if targets.rot else None
+        if R is not None:
+            q = rot.quat_continuous(rot.matrix_to_quat(np.asarray(R, dtype=np.float64)), axis=0)
+            q = np.where(np.isfinite(q), q, np.array([1.0, 0.0, 0.0, 0.0]))
+            ch += [("rotation_quaternion", i, "Object Transforms", q[:, i]) for i in range(4)]
+        action = keying.new_action(f"MANIKIN_tracker_{dev}")
+        action.use_fake_user = False
+        created.append(action)
+        keying.assign_action(empty, action)
+        keying.key_channels(action, empty, frames, ch, options.interpolation)
+        out.trackers[dev] = empty
+        out.tracker_actions[dev] = action
+
+
+def remove_output(out: WriteOutput):
+    """Delete everything :func:`write_result` created (armature only if it created it)."""
+    ids = []
+    if out.created_armature:
+        ids += [out.armature.data, out.armature]
+    ids.append(out.action)
+    if out.tracker_collection is not None:
+        ids.append(out.tracker_collection)
+    ids += list(out.trackers.values()) + list(out.tracker_actions.values())
+    _remove_ids(ids)

@@ -1,0 +1,42 @@
+"""Registration of every Blender class of the add-on and of ``Scene.manikin``.
+
+``register()`` → ``unregister()`` → ``register()`` works cleanly: classes are
+registered in dependency order (property groups first) and unregistered in
+reverse; ``Scene.manikin`` is added after its property group and removed
+before it.  No handlers, keymaps or timers stay behind (the solve operator's
+timer lives only while a modal solve runs and is removed when it ends).
+"""
+from __future__ import annotations
+
+import bpy
+
+from .blender import properties
+from . import operators, panels
+
+CLASSES = properties.CLASSES + operators.CLASSES + panels.CLASSES
+
+
+def _is_registered(cls):
+    return getattr(cls, "is_registered", False) or \
+        getattr(bpy.types, cls.__name__, None) is cls
+
+
+def register():
+    for cls in CLASSES:
+        if _is_registered(cls):          # tolerate a second register() without unregister()
+            bpy.utils.unregister_class(cls)
+        bpy.utils.register_class(cls)
+    bpy.types.Scene.manikin = bpy.props.PointerProperty(type=properties.MANIKIN_Settings)
+
+
+def unregister():
+    from .operators import solve
+    job = solve._ACTIVE.get("job")
+    if job is not None:
+        job.cancel()
+        solve._ACTIVE["job"] = None
+    if hasattr(bpy.types.Scene, "manikin"):
+        del bpy.types.Scene.manikin
+    for cls in reversed(CLASSES):
+        if _is_registered(cls):
+            bpy.utils.unregister_class(cls)

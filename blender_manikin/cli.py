@@ -1,0 +1,260 @@
+"""Headless batch conversion: tracker recordings → .blend / .fbx / .bvh / .json.
+
+Two ways to run it (the same code)::
+
+    blender -b --python <add-on dir>/cli.py -- solve INPUT... --out DIR [options]
+    python -m blender_manikin solve INPUT... --out DIR [options]     # with the bpy module
+
+INPUT is a recording (``.csv`` native format, ``.bsor`` Beat Saber replay) or
+a folder (its ``*.csv`` and ``*.bsor`` files, sorted).  For every input the
+scene is reset to an empty factory scene, the recording is solved and
+``DIR/STEM.<ext>`` is written for each format.  One line per converted input
+on stdout (``OK INPUT -> outputs (summary)``); problems on stderr as
+``ERROR INPUT: message``; a bad file does not stop the others.  Exit status
+0 only when every input converted, 1 when any failed, 2 for usage errors.
+
+Options mirror the panel:
+
+--axes openxr|unity|blender   override the file's axes metadata
+--units m|cm|mm               override the file's units metadata
+--fps N                       solve/scene frame rate (default 30)
+--calibration-time SECONDS    T-pose at that time (seconds after the first sample)
+--height METRES               performer's stature (with --calibration-time it
+                              overrides the measured stature; alone it is the
+                              body measurement)
+--arm-span METRES             wrist-to-wrist span (with --height)
+--offsets none|PRESET|FILE    device offsets preset name or a JSON file
+--format blend,fbx,bvh,json   one or several (default blend,fbx,json)
+--bvh-units cm|m              BVH length unit (default cm)
+--trackers                    also create (and export) keyed tracker empties
+
+When run by a Blender binary as a plain script, this file puts its parent
+directory on ``sys.path`` and imports the package, so it works from any
+installed location.
+"""
+from __future__ import annotations
+
+import argparse
+import contextlib
+import os
+import sys
+
+FORMATS = ("blend", "fbx", "bvh", "json")
+DEFAULT_FORMATS = ("blend", "fbx", "json")
+INPUT_EXTENSIONS = (".csv", ".bsor")
+
+
+def build_parser():
+    p = argparse.ArgumentParser(
+        prog="blender_manikin",
+        description="Convert VR tracker recordings to full-body animation (MANIKIN).")
+    sub = p.add_subparsers(dest="command", required=True)
+    s = sub.add_parser("solve", help="solve recordings and write animation files")
+    s.add_argument("inputs", nargs="+", metavar="INPUT", help="recording files or folders")
+    s.add_argument("--out", required=True, metavar="DIR", help="output folder (created if missing)")
+    s.add_argument("--axes", choices=("openxr", "unity", "blender"), default=None)
+    s.add_argument("--units", choices=("m", "cm", "mm"), default=None)
+    s.add_argument("--fps", type=float, default=30.0)
+    s.add_argument("--calibration-time", type=float, default=None, metavar="SECONDS")
+    s.add_argument("--height", type=float, default=None, metavar="METRES")
+    s.add_argument("--arm-span", type=float, default=None, metavar="METRES")
+    s.add_argument("--offsets", default="none", metavar="none|PRESET|FILE")
+    s.add_argument("--format", default=",".join(DEFAULT_FORMATS), metavar="LIST",
+                   help="comma-separated: " + ",".join(FORMATS))
+    s.add_argument("--bvh-units", choices=("cm", "m"), default="cm")
+    s.add_argument("--trackers", action="store_true", help="create keyed tracker empties")
+    return p
+
+
+def parse_formats(text):
+    fmts = [f.strip().lower().lstrip(".") for f in str(text).split(",") if f.strip()]
+    bad = [f for f in fmts if f not in FORMATS]
+    if bad or not fmts:
+        raise ValueError(f"unknown format(s) {', '.join(bad) or '(none)'}: choose from {', '.join(FORMATS)}")
+    return tuple(dict.fromkeys(fmts))
+
+
+def expand_inputs(inputs):
+    """Files of ``inputs`` with folders expanded to their recordings (sorted).  Order kept."""
+    out = []
+    for item in inputs:
+        if os.path.isdir(item):
+            found = sorted(os.path.join(item, n) for n in os.listdir(item)
+                           if n.lower().endswith(INPUT_EXTENSIONS)
+                           and os.path.isfile(os.path.join(item, n)))
+            out.extend(found)
+        else:
+            out.append(item)
+    return out
+
+
+def _config(path, args):
+    from .blender.solve_job import SolveConfig
+    from .core import device_offsets
+    offsets = args.offsets
+    if offsets and offsets.lower().endswith(".json"):
+        offsets = device_offsets.load_offsets(offsets)
+    cfg = SolveConfig(source="FILE", filepath=path, axes=args.axes, units=args.units, fps=float(args.fps),
+                      offsets=offsets, frame_start=1, create_trackers=bool(args.trackers),
+                      set_scene_range=True, armature_name="MANIKIN_body")
+    if args.calibration_time is not None:
+        cfg.calibration = "TPOSE"
+        cfg.tpose_time = float(args.calibration_time)
+        cfg.height = args.height
+        cfg.arm_span = args.arm_span
+    elif args.height is not None:
+        cfg.calibration = "MEASURE"
+        cfg.height = float(args.height)
+        cfg.arm_span = args.arm_span
+    else:
+        cfg.calibration = "AUTO"
+    return cfg
+
+
+def reset_scene(fps):
+    """Empty factory scene at ``fps`` (integer ``render.fps`` and ``fps_base``)."""
+    import bpy
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    scene = bpy.context.scene
+    n = max(1, int(round(fps)))
+    scene.render.fps = n
+    scene.render.fps_base = n / float(fps)
+    return scene
+
+
+def export_fbx(path, output):
+    """FBX of the armature (and tracker empties), animation baked."""
+    import bpy
+    objs = [output.armature] + list(output.trackers.values())
+    for o in bpy.context.view_layer.objects:
+        o.select_set(o in objs)
+    bpy.context.view_layer.objects.active = output.armature
+    types = {'ARMATURE'} | ({'EMPTY'} if output.trackers else set())
+    res = bpy.ops.export_scene.fbx(filepath=path, use_selection=True, object_types=types,
+                                   add_leaf_bones=False, bake_anim=True,
+                                   bake_anim_use_all_bones=True, bake_anim_use_nla_strips=False,
+                                   bake_anim_use_all_actions=False, bake_anim_force_startend_keying=True,
+                                   bake_anim_simplify_factor=0.0, armature_nodetype='NULL',
+                                   primary_bone_axis='Y', secondary_bone_axis='X')
+    if 'FINISHED' not in res:
+        raise RuntimeError(f"FBX export failed ({res})")
+
+
+def convert_one(path, out_dir, args, formats):
+    """Solve one recording and write its outputs; returns ``(written paths, job)``."""
+    import bpy
+    from .blender.solve_job import SolveJob
+    from .core import export_bvh, export_json
+
+    reset_scene(args.fps)
+    job = SolveJob(_config(path, args))
+    job.run(bpy.context)
+    stem = os.path.splitext(os.path.basename(path))[0]
+    written = []
+    for fmt in formats:
+        dst = os.path.join(out_dir, f"{stem}.{fmt}")
+        if fmt == "json":
+            export_json.write_json(dst, job.result, source=os.path.basename(path))
+        elif fmt == "bvh":
+            export_bvh.write_bvh(dst, job.result, units=args.bvh_units)
+        elif fmt == "fbx":
+            export_fbx(dst, job.output)
+        elif fmt == "blend":
+            bpy.ops.wm.save_as_mainfile(filepath=dst, copy=True, compress=True)
+        written.append(dst)
+    return written, job
+
+
+@contextlib.contextmanager
+def quiet_stdout():
+    """Silence stdout (Python and C level, e.g. Blender's "Info: Saved ..." and the FBX
+    exporter's progress) so that stdout carries exactly one line per input."""
+    sys.stdout.flush()
+    saved = None
+    try:
+        fd = sys.__stdout__.fileno() if sys.__stdout__ is not None else None
+    except (AttributeError, ValueError, OSError):
+        fd = None
+    if fd is not None:
+        try:
+            saved = os.dup(fd)
+            devnull = os.open(os.devnull, os.O_WRONLY)
+            os.dup2(devnull, fd)
+            os.close(devnull)
+        except OSError:
+            saved = None
+    try:
+        with open(os.devnull, "w") as sink, contextlib.redirect_stdout(sink):
+            yield
+    finally:
+        if saved is not None:
+            try:
+                sys.__stdout__.flush()
+            except (AttributeError, ValueError, OSError):
+                pass
+            os.dup2(saved, fd)
+            os.close(saved)
+
+
+def main(argv=None):
+    """Command-line entry; returns the exit status."""
+    parser = build_parser()
+    if argv is None:
+        argv = sys.argv[sys.argv.index("--") + 1:] if "--" in sys.argv else sys.argv[1:]
+    try:
+        args = parser.parse_args(argv)
+    except SystemExit as exc:         # argparse: usage error (2) or --help (0)
+        return int(exc.code or 0)
+    try:
+        formats = parse_formats(args.format)
+    except ValueError as exc:
+        print(f"blender_manikin: error: {exc}", file=sys.stderr)
+        return 2
+    if not (args.fps > 0):
+        print("blender_manikin: error: --fps must be positive", file=sys.stderr)
+        return 2
+    try:
+        import bpy  # noqa: F401  (availability check)
+    except ImportError:
+        print("blender_manikin: error: the bpy module is not available: run with Blender "
+              "(blender -b --python cli.py -- ...) or install bpy", file=sys.stderr)
+        return 2
+    from .blender.solve_job import error_message
+
+    os.makedirs(args.out, exist_ok=True)
+    inputs = expand_inputs(args.inputs)
+    if not inputs:
+        print("blender_manikin: error: no recordings found in the inputs", file=sys.stderr)
+        return 1
+    failed = 0
+    for path in inputs:
+        try:
+            if not os.path.isfile(path):
+                raise FileNotFoundError("no such file")
+            with quiet_stdout():
+                written, job = convert_one(path, args.out, args, formats)
+        except Exception as exc:      # one bad input does not stop the others
+            failed += 1
+            print(f"ERROR {path}: {error_message(exc)}", file=sys.stderr, flush=True)
+            continue
+        print(f"OK {path} -> {', '.join(written)} ({job.summary()})", flush=True)
+    return 1 if failed else 0
+
+
+def _script_main():
+    """Entry when this file is run as a plain script (``blender -b --python cli.py -- ...``)."""
+    here = os.path.dirname(os.path.abspath(__file__))
+    parent = os.path.dirname(here)
+    if parent not in sys.path:
+        sys.path.insert(0, parent)
+    import importlib
+    pkg = os.path.basename(here)
+    cli = importlib.import_module(f"{pkg}.cli")
+    code = cli.main()
+    sys.stdout.flush()
+    sys.stderr.flush()
+    sys.exit(code)
+
+
+if __name__ == "__main__" and not __package__:
+    _script_main()

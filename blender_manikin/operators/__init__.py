@@ -1,0 +1,5 @@
+"""Operators of the add-on (import bpy).  ``CLASSES`` lists them for registration."""
+from .solve import CLASSES as _SOLVE
+from .tools import CLASSES as _TOOLS
+
+CLASSES = _SOLVE + _TOOLS

@@ -1,0 +1,147 @@
+"""MANIKIN_OT_solve_full_body: the "Solve full body" button.
+
+Invoked from the UI it is modal: the numpy/onnxruntime work runs in a worker
+thread while a window-manager timer updates ``wm.progress_*`` and the status
+bar; Esc cancels.  Nothing in the scene changes until the solve is complete
+(see :mod:`blender_manikin.blender.solve_job`): cancelling or an error leaves
+no data behind, and on success everything is created in one step, followed
+by the operator's undo push (``bl_options`` ``UNDO``), so Ctrl+Z removes the
+whole solve.  Run with ``EXEC_DEFAULT`` (scripts, background mode) it runs
+synchronously.  Errors are shown with ``self.report({'ERROR'}, ...)``.
+"""
+from __future__ import annotations
+
+import bpy
+from bpy.types import Operator
+
+from ..blender import solve_job as sj
+
+#: the job of the modal solve in progress (one at a time)
+_ACTIVE = {"job": None}
+
+
+def _finish_report(op, context, job):
+    s = context.scene.manikin
+    out = job.output
+    summary = job.summary()
+    s.last_report = summary
+    if out is not None:
+        s.armature = out.armature
+    for note in job.info:
+        if note.startswith("calibration:"):
+            op.report({'WARNING'}, note)
+    if job.report is not None:
+        for g in getattr(job.report, "gaps", [])[:5]:
+            op.report({'INFO'}, f"bridged {g}")
+    op.report({'INFO'}, f"MANIKIN: {out.armature.name} / {out.action.name}: {summary}")
+
+
+class MANIKIN_OT_solve_full_body(Operator):
+    """Solve the full body from the trackers and key it on a new armature action"""
+    bl_idname = "manikin.solve_full_body"
+    bl_label = "Solve Full Body"
+    bl_description = ("Solve full-body animation from the tracker recording or scene objects and "
+                      "write it as a new action (Esc cancels)")
+    bl_options = {'REGISTER', 'UNDO'}
+
+    @classmethod
+    def poll(cls, context):
+        if _ACTIVE["job"] is not None:
+            cls.poll_message_set("a solve is already running")
+            return False
+        return context.scene is not None and hasattr(context.scene, "manikin")
+
+    # -- synchronous
+    def execute(self, context):
+        try:
+            job = sj.SolveJob(self._config(context))
+            job.run(context)
+        except sj.SolveCancelled:
+            self.report({'WARNING'}, "MANIKIN: solve cancelled")
+            return {'CANCELLED'}
+        except Exception as exc:
+            self.report({'ERROR'}, f"MANIKIN: {sj.error_message(exc)}")
+            return {'CANCELLED'}
+        _finish_report(self, context, job)
+        return {'FINISHED'}
+
+    def _config(self, context):
+        from ..blender.properties import config_from_settings
+        return config_from_settings(context)
+
+    # -- modal
+    def invoke(self, context, event):
+        wm = context.window_manager
+        if bpy.app.background or context.window is None:
+            return self.execute(context)
+        try:
+            self._job = sj.SolveJob(self._config(context))
+            self._job.gather(context)
+        except Exception as exc:
+            self.report({'ERROR'}, f"MANIKIN: {sj.error_message(exc)}")
+            return {'CANCELLED'}
+        _ACTIVE["job"] = self._job
+        self._job.start_background()
+        wm.progress_begin(0, 100)
+        self._timer = wm.event_timer_add(0.1, window=context.window)
+        wm.modal_handler_add(self)
+        self._status(context)
+        return {'RUNNING_MODAL'}
+
+    def _status(self, context, text=None):
+        ws = getattr(context, "workspace", None)
+        if ws is None:
+            return
+        if text is None and self._job is not None:
+            text = (f"MANIKIN: {self._job.stage} {100 * self._job.progress:.0f}%  "
+                    f"(Esc to cancel)")
+        ws.status_text_set(text)
+
+    def _cleanup(self, context):
+        wm = context.window_manager
+        if getattr(self, "_timer", None) is not None:
+            wm.event_timer_remove(self._timer)
+            self._timer = None
+        wm.progress_end()
+        ws = getattr(context, "workspace", None)
+        if ws is not None:
+            ws.status_text_set(None)
+        _ACTIVE["job"] = None
+
+    def modal(self, context, event):
+        job = self._job
+        if event.type == 'ESC' and event.value == 'PRESS':
+            job.cancel()
+            job.join(timeout=0.5)     # the worker never touches Blender data: safe to leave
+            self._cleanup(context)
+            self.report({'WARNING'}, "MANIKIN: solve cancelled, nothing was written")
+            return {'CANCELLED'}
+        if event.type != 'TIMER':
+            return {'PASS_THROUGH'}
+        context.window_manager.progress_update(int(100 * job.progress))
+        self._status(context)
+        if not job.done:
+            return {'RUNNING_MODAL'}
+        self._cleanup(context)
+        if job.error is not None:
+            if isinstance(job.error, sj.SolveCancelled):
+                self.report({'WARNING'}, "MANIKIN: solve cancelled, nothing was written")
+            else:
+                self.report({'ERROR'}, f"MANIKIN: {sj.error_message(job.error)}")
+            return {'CANCELLED'}
+        try:
+            job.write(context)
+        except Exception as exc:
+            self.report({'ERROR'}, f"MANIKIN: {sj.error_message(exc)}")
+            return {'CANCELLED'}
+        _finish_report(self, context, job)
+        return {'FINISHED'}
+
+    def cancel(self, context):
+        """Called by Blender when the modal operator is aborted (e.g. file load)."""
+        if getattr(self, "_job", None) is not None:
+            self._job.cancel()
+        self._cleanup(context)
+
+
+CLASSES = (MANIKIN_OT_solve_full_body,)

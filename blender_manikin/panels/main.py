@@ -1,0 +1,117 @@
+"""The MANIKIN tab of the 3D Viewport sidebar: "Solve full body"."""
+from __future__ import annotations
+
+from bpy.types import Panel
+
+from ..blender.properties import DEVICE_LABELS
+from ..core.pose_result import DEVICES
+
+
+class _Base:
+    bl_space_type = 'VIEW_3D'
+    bl_region_type = 'UI'
+    bl_category = "MANIKIN"
+
+    @classmethod
+    def poll(cls, context):
+        return context.scene is not None and hasattr(context.scene, "manikin")
+
+
+class MANIKIN_PT_solve(_Base, Panel):
+    bl_label = "Solve Full Body"
+    bl_idname = "MANIKIN_PT_solve"
+
+    def draw(self, context):
+        layout = self.layout
+        s = context.scene.manikin
+        layout.use_property_split = True
+        layout.use_property_decorate = False
+        layout.prop(s, "source", expand=True)
+        col = layout.column()
+        if s.source == 'FILE':
+            col.prop(s, "filepath")
+            col.prop(s, "axes")
+            col.prop(s, "units")
+        else:
+            for d in DEVICES:
+                src = getattr(s, d)
+                row = col.row(align=True)
+                row.prop(src, "object", text=DEVICE_LABELS[d])
+                if src.object is not None and src.object.type == 'ARMATURE':
+                    col.prop_search(src, "bone", src.object.data, "bones", text="Bone")
+        row = layout.row()
+        row.scale_y = 1.6
+        row.operator("manikin.solve_full_body", icon='ARMATURE_DATA')
+        if s.last_report:
+            box = layout.box()
+            box.label(text=s.last_report, icon='INFO')
+
+
+class MANIKIN_PT_calibration(_Base, Panel):
+    bl_label = "Calibration"
+    bl_parent_id = "MANIKIN_PT_solve"
+    bl_options = {'DEFAULT_CLOSED'}
+
+    def draw(self, context):
+        layout = self.layout
+        s = context.scene.manikin
+        layout.use_property_split = True
+        layout.use_property_decorate = False
+        layout.prop(s, "calibration")
+        if s.calibration == 'TPOSE':
+            row = layout.row(align=True)
+            row.prop(s, "tpose_time")
+            row.operator("manikin.find_tpose", text="", icon='VIEWZOOM')
+        elif s.calibration == 'AUTO':
+            layout.operator("manikin.find_tpose", icon='VIEWZOOM')
+        if s.calibration == 'MEASURE':
+            layout.prop(s, "height")
+        else:
+            row = layout.row(heading="Height")
+            row.prop(s, "use_height", text="")
+            sub = row.row()
+            sub.active = s.use_height
+            sub.prop(s, "height", text="")
+        layout.prop(s, "arm_span")
+        layout.separator()
+        row = layout.row(align=True)
+        row.prop(s, "offsets_preset")
+        row.operator("manikin.load_offsets_preset", text="", icon='TEXT')
+        layout.prop(s, "offsets_text")
+
+
+class MANIKIN_PT_output(_Base, Panel):
+    bl_label = "Frames and Output"
+    bl_parent_id = "MANIKIN_PT_solve"
+    bl_options = {'DEFAULT_CLOSED'}
+
+    def draw(self, context):
+        layout = self.layout
+        s = context.scene.manikin
+        layout.use_property_split = True
+        layout.use_property_decorate = False
+        if s.source == 'FILE':
+            layout.prop(s, "use_scene_fps")
+            sub = layout.column()
+            sub.active = not s.use_scene_fps
+            sub.prop(s, "fps")
+        layout.prop(s, "use_scene_range")
+        col = layout.column(align=True)
+        col.active = not s.use_scene_range
+        col.prop(s, "frame_start")
+        if s.source == 'FILE':
+            row = layout.row(heading="Limit")
+            row.prop(s, "limit_frames", text="")
+            sub = row.row()
+            sub.active = s.limit_frames
+            sub.prop(s, "frame_end", text="End")
+        else:
+            col.prop(s, "frame_end")
+        layout.separator()
+        layout.prop(s, "create_trackers")
+        layout.prop(s, "set_scene_range")
+        layout.prop(s, "reuse_armature")
+        layout.prop(s, "armature")
+
+
+CLASSES = (MANIKIN_PT_solve, MANIKIN_PT_calibration, MANIKIN_PT_output)

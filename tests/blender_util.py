@@ -1,0 +1,121 @@
+"""Helpers for the Blender tests (tests/test_blender_*.py): a fresh scene and synthetic solves."""
+import numpy as np
+
+from blender_manikin.core import limb_solver as ls
+from blender_manikin.core import rotations as rot
+from blender_manikin.core import skeleton as sk
+from blender_manikin.core.pose_result import PoseResult, TrackerTargets
+
+
+def fresh_scene():
+    """Empty factory scene (no objects), 24 fps unless changed."""
+    import bpy
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    return bpy.context.scene
+
+
+def smooth_local_rotations(T, seed=0, spread=0.6):
+    """``(T, 22, 3, 3)`` smooth random local rotations; elbows/knees are hinges about ``ls.H0``."""
+    rng = np.random.default_rng(seed)
+    t = np.linspace(0.0, 1.0, T)[:, None, None]
+    freq = rng.uniform(0.5, 2.0, size=(1, sk.NUM_JOINTS, 3))
+    phase = rng.uniform(0, 2 * np.pi, size=(1, sk.NUM_JOINTS, 3))
+    aa = spread * np.sin(2 * np.pi * freq * t + phase)
+    local = rot.axis_angle_to_matrix(aa)
+    for li, (_, b, m, e) in enumerate(sk.LIMBS):
+        flex = 0.2 + 0.8 * (1 + np.sin(2 * np.pi * (li + 1) * t[:, 0, 0]))
+        local[:, m] = rot.axis_angle_rotation(ls.H0[li], flex)
+    # whole-body turn of more than pi over the clip: exercises quaternion sign continuity
+    yaw = np.linspace(0.0, 1.5 * np.pi, T)
+    local[:, 0] = rot.axis_angle_rotation(np.array([0.0, 0, 1]), yaw) @ local[:, 0]
+    return local
+
+
+def synthetic_result(T=40, fps=24.0, seed=0, stature=1.8, with_targets=True):
+    """A :class:`PoseResult` with smooth motion, swivel angles crossing ±pi, and tracker targets."""
+    body = sk.make_body(stature)
+    local = smooth_local_rotations(T, seed)
+    t = np.arange(T) / fps
+    root = body.root_rest + np.stack([0.3 * np.sin(t), 0.5 * t, 0.05 * np.sin(3 * t)], -1)
+    swivel = np.stack([np.angle(np.exp(1j * (3.0 + 2.0 * t))), np.sin(t), -0.3 * t, 0.1 * np.ones(T)], -1)
+    res = PoseResult(fps=fps, body=body, local_rot=local, root_pos=root, swivel=swivel,
+                     contacts=np.zeros((T, 2), bool), t0=12.5)
+    if with_targets:
+        pos, wr = res.fk()
+        devs = {"head": "head", "left_hand": "left_wrist", "right_hand": "right_wrist"}
+        res.targets = TrackerTargets(
+            fps=fps, pos={d: pos[:, sk.J[j]].copy() for d, j in devs.items()},
+            rot={d: wr[:, sk.J[j]].copy() for d, j in devs.items()},
+            valid={d: np.ones(T, bool) for d in devs})
+    return res
+
+
+def evaluated_heads(obj, frames):
+    """World positions ``(len(frames), 22, 3)`` of every bone head after ``scene.frame_set``."""
+    import bpy
+    scene = bpy.context.scene
+    out = np.empty((len(frames), sk.NUM_JOINTS, 3))
+    rots = np.empty((len(frames), sk.NUM_JOINTS, 3, 3))
+    for k, f in enumerate(frames):
+        scene.frame_set(int(f))
+        mw = np.array(obj.matrix_world)
+        for j, name in enumerate(sk.JOINT_NAMES):
+            pb = obj.pose.bones[name]
+            m = mw @ np.array(pb.matrix)
+            out[k, j] = m[:3, 3]
+            rots[k, j] = m[:3, :3]
+    return out, rots
+
+
+def write_recording_csv(path, res, axes="openxr", jitter=0.0, seed=0, rates=None):
+    """Write ``res.targets`` (joint poses, offsets ``none``) as a native CSV recording.
+
+    Each device is sampled at its own rate (``rates``: device -> Hz, default
+    the result's fps) from the result's FK (linear interpolation of positions,
+    nearest rotation), with optional timestamp jitter (seconds std).
+    """
+    from blender_manikin.core import rotations as rot
+    from blender_manikin.core.io_csv import write_csv
+    from blender_manikin.core.recording import TrackerStream
+    rng = np.random.default_rng(seed)
+    T = res.num_frames
+    t_grid = res.t0 + np.arange(T) / res.fps
+    streams = []
+    for dev in res.targets.devices:
+        rate = (rates or {}).get(dev, res.fps)
+        n = int(np.floor((T - 1) / res.fps * rate)) + 1
+        t = res.t0 + np.arange(n) / rate
+        if jitter:
+            t = t + rng.normal(scale=jitter, size=n)
+            t[0] = t_grid[0]
+            t = np.maximum.accumulate(t) + np.arange(n) * 1e-7
+            t[-1] = t_grid[-1]
+            t[:-1] = np.minimum(t[:-1], t_grid[-1] - 1e-4)
+        p = np.stack([np.interp(t, t_grid, res.targets.pos[dev][:, i]) for i in range(3)], -1)
+        k = np.clip(np.round((t - res.t0) * res.fps).astype(int), 0, T - 1)
+        q = rot.matrix_to_quat(res.targets.rot[dev][k])
+        streams.append(TrackerStream(dev, t, p, q))
+    write_csv(path, streams, axes=axes, precision=9)
+    return path
+
+
+def stub_solver(targets, body, progress=None):
+    """Stand-in for ``pipeline.solve`` (no network): straight T-pose carried by the head target,
+    local rotations identity except a slow spine bend, swivel from time."""
+    from blender_manikin.core import rotations as rot
+    T = targets.num_frames
+    if progress is not None:
+        progress(0.5)
+    local = np.broadcast_to(np.eye(3), (T, sk.NUM_JOINTS, 3, 3)).copy()
+    local[:, sk.J["spine2"]] = rot.axis_angle_rotation(
+        np.tile([1.0, 0.0, 0.0], (T, 1)), np.linspace(0, 0.5, T))
+    rest = body.rest_positions()
+    pos0, _ = sk.forward_kinematics(local, np.zeros((T, 3)), body)
+    root = targets.pos["head"] - pos0[:, sk.J["head"]]
+    res = PoseResult(fps=float(targets.fps), body=body, local_rot=local, root_pos=root,
+                     swivel=np.tile(np.linspace(-1, 1, T)[:, None], (1, 4)),
+                     contacts=np.zeros((T, 2), bool), targets=targets)
+    if progress is not None:
+        progress(1.0)
+    assert rest.shape == (22, 3)
+    return res

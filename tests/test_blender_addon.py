@@ -1,0 +1,345 @@
+"""Add-on registration, the solve operator (with a stand-in solver), errors, cancel and undo."""
+import os
+import threading
+
+import numpy as np
+import pytest
+
+bpy = pytest.importorskip("bpy")
+
+import blender_manikin  # noqa: E402
+from blender_manikin.blender import keying, solve_job  # noqa: E402
+from blender_manikin.core import skeleton as sk  # noqa: E402
+
+from blender_util import fresh_scene, stub_solver, synthetic_result, write_recording_csv  # noqa: E402
+
+
+@pytest.fixture
+def addon(monkeypatch):
+    fresh_scene()
+    blender_manikin.register()
+    monkeypatch.setattr(solve_job, "run_solver", stub_solver)
+    yield
+    blender_manikin.unregister()
+
+
+@pytest.fixture
+def recording(tmp_path):
+    res = synthetic_result(T=48, fps=24.0)
+    return str(write_recording_csv(tmp_path / "take.csv", res, jitter=0.002, rates={"head": 72.0}))
+
+
+def _settings(path):
+    s = bpy.context.scene.manikin
+    s.source = 'FILE'
+    s.filepath = path
+    s.calibration = 'MEASURE'
+    s.height = 1.8
+    s.create_trackers = True
+    return s
+
+
+def test_register_unregister_register():
+    fresh_scene()
+    for _ in range(2):
+        blender_manikin.register()
+        assert hasattr(bpy.types.Scene, "manikin")
+        assert bpy.context.scene.manikin.source == 'FILE'
+        for name in ("MANIKIN_OT_solve_full_body", "MANIKIN_OT_find_tpose", "MANIKIN_OT_load_offsets_preset",
+                     "MANIKIN_PT_solve", "MANIKIN_PT_calibration", "MANIKIN_PT_output"):
+            assert hasattr(bpy.types, name), name
+        from blender_manikin.blender.properties import MANIKIN_Settings
+        assert MANIKIN_Settings.is_registered
+        assert bpy.types.MANIKIN_PT_solve.bl_category == "MANIKIN"
+        assert bpy.types.MANIKIN_OT_solve_full_body.bl_options == {'REGISTER', 'UNDO'}
+        assert bpy.ops.manikin.solve_full_body.idname() == "MANIKIN_OT_solve_full_body"
+        blender_manikin.unregister()
+        assert not hasattr(bpy.types.Scene, "manikin")
+        assert not hasattr(bpy.types, "MANIKIN_OT_solve_full_body")
+
+
+def test_addon_utils_enable_disable():
+    import addon_utils
+    import sys
+    root = os.path.dirname(os.path.dirname(os.path.abspath(blender_manikin.__file__)))
+    assert root in sys.path
+    fresh_scene()
+    mod = addon_utils.enable("blender_manikin", default_set=False, handle_error=None)
+    assert mod is not None and hasattr(bpy.types.Scene, "manikin")
+    addon_utils.disable("blender_manikin", default_set=False, handle_error=None)
+    assert not hasattr(bpy.types.Scene, "manikin")
+    mod = addon_utils.enable("blender_manikin", default_set=False, handle_error=None)
+    assert hasattr(bpy.types.Scene, "manikin")
+    addon_utils.disable("blender_manikin", default_set=False, handle_error=None)
+
+
+def test_solve_operator_file(addon, recording):
+    s = _settings(recording)
+    assert bpy.ops.manikin.solve_full_body() == {'FINISHED'}
+    obj = s.armature
+    assert obj is not None and obj.type == 'ARMATURE'
+    act = obj.animation_data.action
+    assert act.name.startswith("MANIKIN_solve")
+    fcs = keying.action_fcurves(act, obj)
+    n = len(fcs[0].keyframe_points)
+    assert n == 48 and all(len(fc.keyframe_points) == n for fc in fcs)
+    sc = bpy.context.scene
+    assert (sc.frame_start, sc.frame_end) == (1, 48)
+    assert "swivel_left_arm" in obj.keys()
+    assert abs(obj.data.bones["head"].head_local[2] - sk.make_body(1.8).rest_positions()[15, 2]) < 1e-5
+    assert set(o.name for o in bpy.data.collections["MANIKIN trackers"].objects) == {
+        "MANIKIN_head", "MANIKIN_left_hand", "MANIKIN_right_hand"}
+    assert "frames" in s.last_report
+    # the head target and the head joint agree (stand-in solver pins the head)
+    sc.frame_set(10)
+    head = np.array(obj.matrix_world) @ np.append(np.array(obj.pose.bones["head"].head), 1)
+    tracker = np.array(bpy.data.objects["MANIKIN_head"].matrix_world)[:3, 3]
+    assert np.max(np.abs(head[:3] - tracker)) < 1e-4
+
+    # re-solve: same body -> same armature, new action; the first one is kept intact
+    first_action = act
+    first_keys = [tuple(kp.co) for fc in fcs for kp in fc.keyframe_points]
+    assert bpy.ops.manikin.solve_full_body() == {'FINISHED'}
+    assert s.armature == obj and obj.animation_data.action != first_action
+    assert first_action.name in bpy.data.actions
+    assert first_keys == [tuple(kp.co) for fc in keying.action_fcurves(first_action, None)
+                          for kp in fc.keyframe_points]
+
+
+def test_errors_are_reported(addon, tmp_path):
+    s = _settings(str(tmp_path / "missing.csv"))
+    n = len(bpy.data.objects)
+    with pytest.raises(RuntimeError, match="missing.csv: no such file"):
+        bpy.ops.manikin.solve_full_body()
+    bad = tmp_path / "bad.csv"
+    bad.write_text("time,device,px\n0,head,1\n")
+    s.filepath = str(bad)
+    with pytest.raises(RuntimeError, match="bad.csv"):
+        bpy.ops.manikin.solve_full_body()
+    s.filepath = ""
+    with pytest.raises(RuntimeError, match="no recording file"):
+        bpy.ops.manikin.solve_full_body()
+    assert len(bpy.data.objects) == n
+
+
+def test_undo_restores_scene(addon, recording):
+    _settings(recording)
+    bpy.ops.ed.undo_push(message="before solve")
+    names = sorted(o.name for o in bpy.data.objects)
+    n_act = len(bpy.data.actions)
+    # called from Python an operator pushes its undo step only when asked (2nd argument),
+    # as the UI does for operators with bl_options UNDO
+    assert bpy.ops.manikin.solve_full_body('EXEC_DEFAULT', True) == {'FINISHED'}
+    assert len(bpy.data.objects) > len(names)
+    bpy.ops.ed.undo()
+    assert sorted(o.name for o in bpy.data.objects) == names
+    assert len(bpy.data.actions) == n_act
+    assert bpy.context.scene.manikin.armature is None
+    bpy.ops.ed.redo()
+    assert any(o.type == 'ARMATURE' for o in bpy.data.objects)
+
+
+def test_cancel_leaves_nothing(addon, recording, monkeypatch):
+    """The modal path: compute in a worker thread, cancel while it runs, nothing written."""
+    started, release = threading.Event(), threading.Event()
+
+    def slow_solver(targets, body, progress=None):
+        started.set()
+        release.wait(5)
+        progress(0.5)               # raises SolveCancelled after cancel()
+        return stub_solver(targets, body, progress)
+
+    monkeypatch.setattr(solve_job, "run_solver", slow_solver)
+    _settings(recording)
+    from blender_manikin.blender.properties import config_from_settings
+    before = (len(bpy.data.objects), len(bpy.data.actions), len(bpy.data.armatures))
+    job = solve_job.SolveJob(config_from_settings(bpy.context))
+    job.gather(bpy.context)
+    job.start_background()
+    assert started.wait(5)
+    assert 0.0 < job.progress < 1.0
+    job.cancel()
+    release.set()
+    job.join(5)
+    assert job.done and isinstance(job.error, solve_job.SolveCancelled)
+    with pytest.raises(solve_job.SolveCancelled):
+        job.write(bpy.context)
+    assert (len(bpy.data.objects), len(bpy.data.actions), len(bpy.data.armatures)) == before
+
+
+def test_scene_objects_as_trackers(addon):
+    """Keyed empties mapped to devices are sampled and solved like a recording."""
+    sc = bpy.context.scene
+    sc.render.fps = 24
+    res = synthetic_result(T=30, fps=24.0)
+    from blender_manikin.blender import writer
+    src = writer.write_result(res, writer.WriteOptions(create_trackers=True))   # keyed empties
+    s = bpy.context.scene.manikin
+    s.source = 'SCENE'
+    for dev, empty in src.trackers.items():
+        getattr(s, dev).object = empty
+    s.calibration = 'MEASURE'
+    s.height = 1.8
+    s.create_trackers = False
+    s.use_scene_range = False
+    s.frame_start, s.frame_end = 1, 30
+    s.reuse_armature = False
+    assert bpy.ops.manikin.solve_full_body() == {'FINISHED'}
+    out = s.armature
+    assert out != src.armature
+    sc.frame_set(12)
+    head = np.array(out.matrix_world) @ np.append(np.array(out.pose.bones["head"].head), 1)
+    np.testing.assert_allclose(head[:3], res.targets.pos["head"][11], atol=1e-4)
+
+
+def test_find_tpose_and_offsets_preset(addon, tmp_path):
+    res = synthetic_result(T=72, fps=24.0)
+    # frames 20-50: arms straight out (identity rotations): a clean T-pose held > 1 s
+    res.local_rot[20:51] = np.eye(3)
+    res.root_pos[20:51] = res.body.root_rest
+    res._fk = None
+    pos, wr = res.fk()
+    for dev, j in (("head", "head"), ("left_hand", "left_wrist"), ("right_hand", "right_wrist")):
+        res.targets.pos[dev] = pos[:, sk.J[j]].copy()
+        res.targets.rot[dev] = wr[:, sk.J[j]].copy()
+    path = write_recording_csv(tmp_path / "tpose.csv", res)
+    s = _settings(str(path))
+    s.calibration = 'AUTO'
+    assert bpy.ops.manikin.find_tpose() == {'FINISHED'}
+    assert s.calibration == 'TPOSE' and 26 / 24 - 1e-6 <= s.tpose_time <= 44 / 24 + 1e-6
+    assert bpy.ops.manikin.solve_full_body() == {'FINISHED'}
+    assert s.armature["manikin_body"] is not None
+    stature = s.armature.data.bones["head"].head_local[2] / sk.PROPORTIONS["head_height"]
+    assert abs(stature - 1.8) < 0.02
+    s.offsets_preset = 'quest_touch'
+    assert bpy.ops.manikin.load_offsets_preset() == {'FINISHED'}
+    assert s.offsets_text is not None and '"left_hand"' in s.offsets_text.as_string()
+    s.offsets_text.clear()
+    s.offsets_text.write("{not json")
+    with pytest.raises(RuntimeError, match="not valid JSON"):
+        bpy.ops.manikin.solve_full_body()
+
+
+class _Layout:
+    """Records panel drawing and checks every drawn property / operator exists."""
+
+    def __init__(self, log):
+        self.log = log
+        self.use_property_split = self.use_property_decorate = False
+        self.active = True
+        self.scale_y = 1.0
+
+    def _child(self, *a, **k):
+        return _Layout(self.log)
+    row = column = box = _child
+
+    def prop(self, data, name, **k):
+        assert name in data.bl_rna.properties, f"no property {name!r} on {data}"
+        self.log.append(("prop", name))
+
+    def prop_search(self, data, name, search_data, search_name, **k):
+        assert name in data.bl_rna.properties and search_name in search_data.bl_rna.properties
+        self.log.append(("prop_search", name))
+
+    def operator(self, idname, **k):
+        mod, name = idname.split(".")
+        assert hasattr(getattr(bpy.ops, mod), name), idname
+        self.log.append(("operator", idname))
+
+    def label(self, **k):
+        self.log.append(("label", k.get("text")))
+
+    def separator(self, **k):
+        pass
+
+
+def test_panels_draw(addon):
+    from blender_manikin.panels import main as panels
+    from types import SimpleNamespace
+    s = bpy.context.scene.manikin
+    arm = bpy.data.objects.new("rig", bpy.data.armatures.new("rig"))
+    bpy.context.scene.collection.objects.link(arm)
+    s.last_report = "40 frames"
+    for source in ('FILE', 'SCENE'):
+        s.source = source
+        s.left_hand.object = arm
+        for cal in ('AUTO', 'TPOSE', 'MEASURE'):
+            s.calibration = cal
+            for cls in (panels.MANIKIN_PT_solve, panels.MANIKIN_PT_calibration, panels.MANIKIN_PT_output):
+                assert cls.poll(bpy.context)
+                log = []
+                cls.draw(SimpleNamespace(layout=_Layout(log)), bpy.context)
+                assert log
+    log = []
+    s.source = 'FILE'
+    panels.MANIKIN_PT_solve.draw(SimpleNamespace(layout=_Layout(log)), bpy.context)
+    assert ("operator", "manikin.solve_full_body") in log and ("prop", "filepath") in log
+
+
+def test_modal_progress_cancel_and_finish(addon, recording, monkeypatch):
+    """Drive the operator's modal() with timer / Esc events (no UI event loop in background)."""
+    from types import SimpleNamespace
+    from blender_manikin.blender.properties import config_from_settings
+    from blender_manikin.operators import solve as solve_op
+    cls = solve_op.MANIKIN_OT_solve_full_body
+
+    class FakeOp:
+        _status = cls._status
+        _cleanup = cls._cleanup
+        modal = cls.modal
+        cancel = cls.cancel
+
+        def __init__(self, job):
+            self._job, self._timer, self.reports = job, None, []
+
+        def report(self, kind, msg):
+            self.reports.append((kind, msg))
+
+    gate = threading.Event()
+
+    def gated_solver(targets, body, progress=None):
+        progress(0.3)
+        gate.wait(5)
+        return stub_solver(targets, body, progress)
+
+    monkeypatch.setattr(solve_job, "run_solver", gated_solver)
+    _settings(recording)
+    timer = SimpleNamespace(type='TIMER', value='NOTHING')
+    esc = SimpleNamespace(type='ESC', value='PRESS')
+    mouse = SimpleNamespace(type='MOUSEMOVE', value='NOTHING')
+    before = len(bpy.data.objects)
+
+    # cancelled while the worker runs
+    job = solve_job.SolveJob(config_from_settings(bpy.context))
+    op = FakeOp(job)
+    solve_op._ACTIVE["job"] = job
+    job.start_background()
+    assert not cls.poll(bpy.context)                       # one solve at a time
+    assert op.modal(bpy.context, timer) == {'RUNNING_MODAL'}
+    assert op.modal(bpy.context, mouse) == {'PASS_THROUGH'}
+    assert op.modal(bpy.context, esc) == {'CANCELLED'}
+    gate.set()
+    job.join(5)
+    assert solve_op._ACTIVE["job"] is None and cls.poll(bpy.context)
+    assert len(bpy.data.objects) == before
+    assert op.reports[-1][0] == {'WARNING'} and "nothing was written" in op.reports[-1][1]
+
+    # runs to the end: the timer tick after the worker finishes writes the result
+    job = solve_job.SolveJob(config_from_settings(bpy.context))
+    op = FakeOp(job)
+    solve_op._ACTIVE["job"] = job
+    job.start_background()
+    job.join(5)
+    assert op.modal(bpy.context, timer) == {'FINISHED'}
+    assert len(bpy.data.objects) > before and solve_op._ACTIVE["job"] is None
+    assert op.reports[-1][0] == {'INFO'} and "MANIKIN_solve" in op.reports[-1][1]
+
+    # a failing worker is reported as an error
+    monkeypatch.setattr(solve_job, "run_solver", lambda *a, **k: (_ for _ in ()).throw(ValueError("boom")))
+    n = len(bpy.data.objects)
+    job = solve_job.SolveJob(config_from_settings(bpy.context))
+    op = FakeOp(job)
+    job.start_background()
+    job.join(5)
+    assert op.modal(bpy.context, timer) == {'CANCELLED'}
+    assert op.reports[-1] == ({'ERROR'}, "MANIKIN: boom") and len(bpy.data.objects) == n
