@@ -245,7 +245,8 @@ def resample(recording: Recording, fps, t_start=None, t_end=None, required=REQUI
     if not (t1 >= t0):
         raise RecordingError(f"no time covered by all of {', '.join(required)}: grid would end at "
                              f"{t1:.3f} s before it starts at {t0:.3f} s", path=path)
-    T = int(np.floor((t1 - t0) * fps + 1e-6)) + 1
+    # 1e-3 frame of slack: timestamps written with 6 decimals must not lose the last frame
+    T = int(np.floor((t1 - t0) * fps + 1e-3)) + 1
     times = t0 + np.arange(T) / fps
     report = GapReport(fps=fps, t0=t0, t_end=float(times[-1]), num_frames=T,
                        devices=tuple(d for d in DEVICES if d in prep), warnings=warnings)
