@@ -63,6 +63,9 @@ def build_parser():
                    help="comma-separated: " + ",".join(FORMATS))
     s.add_argument("--bvh-units", choices=("cm", "m"), default="cm")
     s.add_argument("--trackers", action="store_true", help="create keyed tracker empties")
+    s.add_argument("--no-live-rig", dest="live_rig", action="store_false",
+                   help="write plain FK keys only (default: the live swivel rig, whose elbows and knees "
+                        "follow the swivel properties)")
     return p
 
 
@@ -96,6 +99,7 @@ def _config(path, args):
         offsets = device_offsets.load_offsets(offsets)
     cfg = SolveConfig(source="FILE", filepath=path, axes=args.axes, units=args.units, fps=float(args.fps),
                       offsets=offsets, frame_start=1, create_trackers=bool(args.trackers),
+                      live_rig=bool(args.live_rig),
                       set_scene_range=True, armature_name="MANIKIN_body")
     if args.calibration_time is not None:
         cfg.calibration = "TPOSE"

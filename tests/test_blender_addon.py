@@ -75,6 +75,7 @@ def test_addon_utils_enable_disable():
 
 def test_solve_operator_file(addon, recording):
     s = _settings(recording)
+    s.live_rig = False            # plain FK keys; the live rig is checked below
     assert bpy.ops.manikin.solve_full_body() == {'FINISHED'}
     obj = s.armature
     assert obj is not None and obj.type == 'ARMATURE'
@@ -104,6 +105,36 @@ def test_solve_operator_file(addon, recording):
     assert first_action.name in bpy.data.actions
     assert first_keys == [tuple(kp.co) for fc in keying.action_fcurves(first_action, None)
                           for kp in fc.keyframe_points]
+
+
+def test_solve_operator_builds_live_rig_by_default(addon, recording):
+    """The live rig (limbs driven by controls + swivel) reproduces the solved FK pose."""
+    from blender_manikin.blender import live_rig
+    s = _settings(recording)
+    assert s.live_rig
+    assert bpy.ops.manikin.solve_full_body() == {'FINISHED'}
+    obj = s.armature
+    live_action = obj.animation_data.action
+    assert live_action.name.startswith("MANIKIN_live") and live_rig.is_live_rig(obj)
+    fk_actions = [a for a in bpy.data.actions if a.name.startswith("MANIKIN_solve")]
+    assert len(fk_actions) == 1                      # the plain FK keys are kept as well
+    sc = bpy.context.scene
+    names = ["left_elbow", "right_elbow", "left_wrist", "right_wrist", "left_knee", "left_ankle"]
+
+    def joints(frames):
+        out = []
+        for f in frames:
+            sc.frame_set(f)
+            mw = np.array(obj.matrix_world)
+            out.append([(mw @ np.append(np.array(obj.pose.bones[n].head), 1))[:3] for n in names])
+        return np.array(out)
+
+    frames = (5, 20, 40)
+    live = joints(frames)
+    live_rig.set_rig_enabled(obj, False)
+    keying.assign_action(obj, fk_actions[0])
+    fk = joints(frames)
+    assert np.max(np.abs(live - fk)) < 1e-4
 
 
 def test_errors_are_reported(addon, tmp_path):

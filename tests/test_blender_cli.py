@@ -60,7 +60,7 @@ def test_blend_and_fbx_contents(folder, tmp_path, monkeypatch):
                      "--fps", "30", "--height", "1.8"]) == 0
     bpy.ops.wm.open_mainfile(filepath=str(out / "walk.blend"))
     arms = [o for o in bpy.data.objects if o.type == 'ARMATURE']
-    assert len(arms) == 1 and arms[0].animation_data.action.name.startswith("MANIKIN_solve")
+    assert len(arms) == 1 and arms[0].animation_data.action.name.startswith("MANIKIN_live")
     assert bpy.context.scene.render.fps == 30 and bpy.context.scene.frame_end == 30
     bpy.ops.wm.read_factory_settings(use_empty=True)
     bpy.ops.import_scene.fbx(filepath=str(out / "walk.fbx"))

@@ -108,6 +108,9 @@ class MANIKIN_Settings(PropertyGroup):
     limit_frames: BoolProperty(name="Limit", default=False,
                                description="Recordings: stop at the End frame")
 
+    live_rig: BoolProperty(name="Live Swivel Rig", default=True,
+                           description="Elbows and knees follow the swivel properties and the "
+                                       "hand/foot controls live (constraints + drivers); off: plain FK keys")
     create_trackers: BoolProperty(name="Tracker Empties", default=True,
                                   description="Also create keyed empties at the device targets")
     set_scene_range: BoolProperty(name="Set Scene Range", default=True,
@@ -150,6 +153,7 @@ def config_from_settings(context):
     else:
         cfg.offsets = s.offsets_preset or "none"
     cfg.create_trackers = s.create_trackers
+    cfg.live_rig = s.live_rig
     cfg.set_scene_range = s.set_scene_range
     cfg.reuse_armature = s.armature if (s.reuse_armature and s.armature is not None
                                         and s.armature.name in scene.objects) else None

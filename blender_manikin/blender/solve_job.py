@@ -64,6 +64,9 @@ class SolveConfig:
     offsets: device offsets preset name (``"none"`` when the devices already
     give joint poses) or an offsets dict (:mod:`core.device_offsets`).  frame_start: scene frame of the first solved frame;
     max_frames: crop (None = whole recording).
+    live_rig: convert the solved armature to the live swivel rig
+    (:mod:`.live_rig`): elbows/knees follow the swivel properties and the
+    hand/foot controls.  False keeps plain FK keys only.
     """
     source: str = "FILE"
     filepath: str = ""
@@ -78,6 +81,7 @@ class SolveConfig:
     frame_start: int = 1
     max_frames: int | None = None
     create_trackers: bool = False
+    live_rig: bool = True
     set_scene_range: bool = False
     armature_name: str = "MANIKIN_body"
     reuse_armature: object = None
@@ -304,7 +308,20 @@ class SolveJob:
                                    armature_name=cfg.armature_name,
                                    create_trackers=cfg.create_trackers,
                                    set_scene_range=cfg.set_scene_range)
-        self.output = writer.write_result(self.result, opts, context=context)
+        out = writer.write_result(self.result, opts, context=context)
+        if cfg.live_rig:
+            from . import live_rig
+            try:
+                out.live_action = live_rig.build_live_rig(out.armature, self.result, frames=out.frames,
+                                                          context=context)
+            except BaseException:
+                writer.remove_output(out)
+                raise
+        elif out.armature is not None:
+            from . import live_rig
+            if live_rig.is_live_rig(out.armature):      # re-solved onto a live rig: plain FK wins
+                live_rig.set_rig_enabled(out.armature, False)
+        self.output = out
         self.timings["keying"] = _time.perf_counter() - t
         self.progress = 1.0
         self.stage = "done"

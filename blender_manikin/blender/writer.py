@@ -70,6 +70,7 @@ class WriteOutput:
     trackers: dict = field(default_factory=dict)          # device -> empty object
     tracker_actions: dict = field(default_factory=dict)   # device -> action
     tracker_collection: object = None
+    live_action: object = None                            # set when the live swivel rig was built
 
 
 def scene_fps(scene) -> float:

@@ -1,0 +1,198 @@
+"""Swivel tools: make the live rig, key / smooth / reset swivel curves, bake to plain FK.
+
+All operate on the active object, a MANIKIN armature (see
+:mod:`blender_manikin.blender.live_rig`).  Angles are radians in the data
+(custom properties with subtype ANGLE; the UI shows degrees); frames are
+scene frames.  Every operator has ``bl_options = {'REGISTER', 'UNDO'}``, so
+one Ctrl+Z undoes it.
+
+Register with :func:`register` / :func:`unregister` or the ``CLASSES`` tuple.
+"""
+from __future__ import annotations
+
+import bpy
+from bpy.props import EnumProperty, FloatProperty, IntProperty, BoolProperty
+from bpy.types import Operator
+
+from ..core import skeleton as sk
+
+_LIMB_ITEMS = [('ALL', "All Limbs", "All four limbs")] + [
+    (limb, limb.replace("_", " ").title(), f"Only the {limb.replace('_', ' ')}") for limb in sk.LIMB_NAMES]
+
+
+def _limbs(choice):
+    return sk.LIMB_NAMES if choice == 'ALL' else (choice,)
+
+
+def _live_object(context):
+    from ..blender import live_rig
+    obj = getattr(context, "active_object", None)
+    return obj if live_rig.is_live_rig(obj) else None
+
+
+def _frame_range(op, context):
+    scene = context.scene
+    if op.use_scene_range:
+        if scene.use_preview_range:
+            return scene.frame_preview_start, scene.frame_preview_end
+        return scene.frame_start, scene.frame_end
+    return op.frame_start, op.frame_end
+
+
+class _LivePoll:
+    @classmethod
+    def poll(cls, context):
+        if _live_object(context) is None:
+            cls.poll_message_set("the active object is not a MANIKIN live rig (use Make Live Rig)")
+            return False
+        return True
+
+
+class MANIKIN_OT_make_live_rig(Operator):
+    """Convert the active solved MANIKIN armature to the live swivel rig (hand/foot controls,
+    swivel-driven elbows and knees); its solve action is kept and a new action is keyed"""
+    bl_idname = "manikin.make_live_rig"
+    bl_label = "Make Live Rig"
+    bl_options = {'REGISTER', 'UNDO'}
+
+    @classmethod
+    def poll(cls, context):
+        from ..blender import armature as arm_mod
+        obj = getattr(context, "active_object", None)
+        if obj is None or obj.type != 'ARMATURE' or arm_mod.PROP_BODY not in obj.keys():
+            cls.poll_message_set("select a solved MANIKIN armature")
+            return False
+        if obj.animation_data is None or obj.animation_data.action is None:
+            cls.poll_message_set("the armature has no solve action")
+            return False
+        return True
+
+    def execute(self, context):
+        from ..blender import live_rig, writer
+        obj = context.active_object
+        try:
+            result, frames = live_rig.result_from_fk_action(obj, writer.scene_fps(context.scene))
+            action = live_rig.build_live_rig(obj, result, frames=frames, context=context)
+        except Exception as exc:
+            self.report({'ERROR'}, f"MANIKIN: {exc}")
+            return {'CANCELLED'}
+        self.report({'INFO'}, f"MANIKIN: live rig on {obj.name!r}, action {action.name!r} "
+                    f"({len(frames)} frames)")
+        return {'FINISHED'}
+
+
+class MANIKIN_OT_key_swivel(_LivePoll, Operator):
+    """Key the current swivel value(s) at the current frame (keeps a slider edit)"""
+    bl_idname = "manikin.key_swivel"
+    bl_label = "Key Swivel"
+    bl_options = {'REGISTER', 'UNDO'}
+
+    limb: EnumProperty(name="Limb", items=_LIMB_ITEMS, default='ALL')
+
+    def execute(self, context):
+        from ..blender import live_rig
+        obj = _live_object(context)
+        frame = context.scene.frame_current + context.scene.frame_subframe
+        n = live_rig.key_swivel(obj, _limbs(self.limb), frame)
+        self.report({'INFO'}, f"MANIKIN: keyed {n} swivel value(s) at frame {frame:g}")
+        return {'FINISHED'}
+
+
+class MANIKIN_OT_smooth_swivel(_LivePoll, Operator):
+    """Smooth the swivel keys over a frame range (Gaussian or box filter of the unwrapped angles)"""
+    bl_idname = "manikin.smooth_swivel"
+    bl_label = "Smooth Swivel"
+    bl_options = {'REGISTER', 'UNDO'}
+
+    limb: EnumProperty(name="Limb", items=_LIMB_ITEMS, default='ALL')
+    method: EnumProperty(name="Filter", items=[
+        ('GAUSSIAN', "Gaussian", "Gaussian weights, window ±3 sigma"),
+        ('BOX', "Box", "Moving average over ±width frames")], default='GAUSSIAN')
+    sigma: FloatProperty(name="Width", description="Gaussian sigma / box half width, in frames",
+                         default=2.0, min=0.0, soft_max=20.0)
+    use_scene_range: BoolProperty(name="Scene Range", default=True,
+                                  description="Use the scene's (preview) frame range")
+    frame_start: IntProperty(name="Start", default=1)
+    frame_end: IntProperty(name="End", default=250)
+
+    def execute(self, context):
+        from ..blender import live_rig
+        obj = _live_object(context)
+        f0, f1 = _frame_range(self, context)
+        n = live_rig.smooth_swivel(obj, _limbs(self.limb), f0, f1, self.sigma, self.method)
+        self.report({'INFO'}, f"MANIKIN: smoothed {n} swivel keys in frames {f0}-{f1}")
+        return {'FINISHED'}
+
+
+class MANIKIN_OT_reset_swivel(_LivePoll, Operator):
+    """Restore the solver's swivel (stored at solve time) on the swivel curves"""
+    bl_idname = "manikin.reset_swivel"
+    bl_label = "Reset Swivel to Solved"
+    bl_options = {'REGISTER', 'UNDO'}
+
+    limb: EnumProperty(name="Limb", items=_LIMB_ITEMS, default='ALL')
+    scope: EnumProperty(name="Frames", items=[
+        ('ALL', "All", "Every key"),
+        ('RANGE', "Scene Range", "Keys in the scene's (preview) frame range"),
+        ('CURRENT', "Current Frame", "Only the key at the current frame")], default='ALL')
+
+    def execute(self, context):
+        from ..blender import live_rig
+        obj = _live_object(context)
+        scene = context.scene
+        if self.scope == 'ALL':
+            f0 = f1 = None
+        elif self.scope == 'RANGE':
+            f0, f1 = ((scene.frame_preview_start, scene.frame_preview_end) if scene.use_preview_range
+                      else (scene.frame_start, scene.frame_end))
+        else:
+            f0 = f1 = scene.frame_current
+        n = live_rig.reset_swivel(obj, _limbs(self.limb), f0, f1)
+        if n == 0:
+            self.report({'WARNING'}, "MANIKIN: no solved swivel stored on this armature")
+            return {'CANCELLED'}
+        scene.frame_set(scene.frame_current, subframe=scene.frame_subframe)
+        self.report({'INFO'}, f"MANIKIN: reset the swivel of {n} limb(s)")
+        return {'FINISHED'}
+
+
+class MANIKIN_OT_bake_live_rig(_LivePoll, Operator):
+    """Bake the live rig to plain FK keys on a new armature (deform bones only, no constraints,
+    drivers or add-on logic) for FBX / BVH / game-engine export"""
+    bl_idname = "manikin.bake_live_rig"
+    bl_label = "Bake to FK"
+    bl_options = {'REGISTER', 'UNDO'}
+
+    use_scene_range: BoolProperty(name="Scene Range", default=True,
+                                  description="Bake the scene's (preview) frame range")
+    frame_start: IntProperty(name="Start", default=1)
+    frame_end: IntProperty(name="End", default=250)
+
+    def execute(self, context):
+        from ..blender import live_rig
+        obj = _live_object(context)
+        f0, f1 = _frame_range(self, context)
+        try:
+            new = live_rig.bake_live_rig(obj, f0, f1, context=context)
+        except Exception as exc:
+            self.report({'ERROR'}, f"MANIKIN: {exc}")
+            return {'CANCELLED'}
+        self.report({'INFO'}, f"MANIKIN: baked frames {f0}-{f1} of {obj.name!r} into {new.name!r}")
+        return {'FINISHED'}
+
+
+CLASSES = (MANIKIN_OT_make_live_rig, MANIKIN_OT_key_swivel, MANIKIN_OT_smooth_swivel,
+           MANIKIN_OT_reset_swivel, MANIKIN_OT_bake_live_rig)
+
+
+def register():
+    for cls in CLASSES:
+        if getattr(cls, "is_registered", False):
+            bpy.utils.unregister_class(cls)
+        bpy.utils.register_class(cls)
+
+
+def unregister():
+    for cls in reversed(CLASSES):
+        if getattr(cls, "is_registered", False):
+            bpy.utils.unregister_class(cls)

@@ -1,0 +1,87 @@
+"""The "Swivel & Posing" section of the MANIKIN sidebar tab (3D Viewport > Sidebar > MANIKIN).
+
+Shows, for the active MANIKIN armature, each limb's swivel angle as a slider
+(the keyed custom property ``["swivel_<limb>"]``, radians in the data,
+displayed in the scene's rotation unit, degrees by default) with the
+solver's value next to it, and the swivel tools of
+:mod:`blender_manikin.operators.swivel_tools`.  It does not depend on
+``Scene.manikin`` and can be registered on its own (:func:`register`).
+"""
+from __future__ import annotations
+
+import math
+
+import bpy
+from bpy.types import Panel
+
+from ..core import skeleton as sk
+
+_LABELS = {"left_arm": "Left Elbow", "right_arm": "Right Elbow",
+           "left_leg": "Left Knee", "right_leg": "Right Knee"}
+
+
+class MANIKIN_PT_swivel(Panel):
+    bl_label = "Swivel & Posing"
+    bl_idname = "MANIKIN_PT_swivel"
+    bl_space_type = 'VIEW_3D'
+    bl_region_type = 'UI'
+    bl_category = "MANIKIN"
+    bl_order = 10
+
+    @classmethod
+    def poll(cls, context):
+        from ..blender import armature as arm_mod
+        obj = getattr(context, "active_object", None)
+        return obj is not None and obj.type == 'ARMATURE' and arm_mod.PROP_BODY in obj.keys()
+
+    def draw(self, context):
+        from ..blender import live_rig, writer
+        layout = self.layout
+        obj = context.active_object
+        live = live_rig.is_live_rig(obj)
+        if not live:
+            col = layout.column()
+            col.label(text="Plain FK solve: make it live to edit", icon='INFO')
+            col.label(text="elbows and knees by their swivel.")
+            col.operator("manikin.make_live_rig", icon='CON_KINEMATIC')
+        col = layout.column(align=True)
+        for limb in sk.LIMB_NAMES:
+            prop = writer.SWIVEL_PROPS[limb]
+            if prop not in obj.keys():
+                continue
+            row = col.row(align=True)
+            row.enabled = live
+            row.prop(obj, f'["{prop}"]', text=_LABELS[limb], slider=True)
+            solved = live_rig.SOLVED_PROPS[limb]
+            if solved in obj.keys():
+                sub = row.row(align=True)
+                sub.alignment = 'RIGHT'
+                sub.label(text=f"{math.degrees(float(obj[solved])):.0f}°")
+        if not live:
+            return
+        row = layout.row(align=True)
+        row.operator("manikin.key_swivel", icon='KEY_HLT').limb = 'ALL'
+        row.operator("manikin.reset_swivel", text="Reset", icon='LOOP_BACK').scope = 'CURRENT'
+        row = layout.row(align=True)
+        row.operator("manikin.smooth_swivel", icon='SMOOTHCURVE')
+        row.operator("manikin.reset_swivel", text="Reset All", icon='FILE_REFRESH').scope = 'ALL'
+        layout.operator("manikin.bake_live_rig", icon='ACTION')
+        box = layout.box()
+        box.label(text="Pose mode: grab ctrl_hand.L/.R and", icon='BONE_DATA')
+        box.label(text="ctrl_foot.L/.R; torso and head are FK.")
+
+
+CLASSES = (MANIKIN_PT_swivel,)
+
+
+def register():
+    for cls in CLASSES:
+        if getattr(cls, "is_registered", False):
+            bpy.utils.unregister_class(cls)
+        bpy.utils.register_class(cls)
+
+
+def unregister():
+    for cls in reversed(CLASSES):
+        if getattr(cls, "is_registered", False):
+            bpy.utils.unregister_class(cls)
