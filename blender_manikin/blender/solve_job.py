@@ -294,6 +294,8 @@ class SolveJob:
             result.targets = self.targets
         self.result = result
         self.timings["solve"] = _time.perf_counter() - t
+        for k, v in getattr(result, "timings", {}).items():     # network / solver split
+            self.timings[f"solve.{k}"] = v
         self._set(_P_SOLVE, "writing")
         return result
 
@@ -309,6 +311,8 @@ class SolveJob:
                                    create_trackers=cfg.create_trackers,
                                    set_scene_range=cfg.set_scene_range)
         out = writer.write_result(self.result, opts, context=context)
+        self.timings["keying"] = _time.perf_counter() - t
+        t = _time.perf_counter()
         if cfg.live_rig:
             from . import live_rig
             try:
@@ -322,7 +326,8 @@ class SolveJob:
             if live_rig.is_live_rig(out.armature):      # re-solved onto a live rig: plain FK wins
                 live_rig.set_rig_enabled(out.armature, False)
         self.output = out
-        self.timings["keying"] = _time.perf_counter() - t
+        if cfg.live_rig:
+            self.timings["live rig"] = _time.perf_counter() - t
         self.progress = 1.0
         self.stage = "done"
         return self.output

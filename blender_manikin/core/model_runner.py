@@ -95,7 +95,7 @@ class ModelRunner:
     """
 
     def __init__(self, path=None, threads=None, batch=256):
-        path = path or DEFAULT_MODEL
+        path = path or default_model_path()
         if not os.path.isfile(path):
             raise ModelError(f"pose model not found: {path} (reinstall the add-on, or train one with "
                              "'python -m blender_manikin.training.train')")
@@ -132,9 +132,14 @@ class ModelRunner:
 _CACHE = {}
 
 
+def default_model_path():
+    """``$BLENDER_MANIKIN_MODEL`` when set (a model you trained), else the shipped model."""
+    return os.environ.get("BLENDER_MANIKIN_MODEL") or DEFAULT_MODEL
+
+
 def load_model(path=None) -> ModelRunner:
-    """Cached :class:`ModelRunner` for ``path`` (default: the shipped model)."""
-    key = os.path.abspath(path or DEFAULT_MODEL)
+    """Cached :class:`ModelRunner` for ``path`` (default: :func:`default_model_path`)."""
+    key = os.path.abspath(path or default_model_path())
     if key not in _CACHE:
         _CACHE[key] = ModelRunner(key)
     return _CACHE[key]

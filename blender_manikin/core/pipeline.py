@@ -286,7 +286,10 @@ def solve(targets: TrackerTargets, body: Body, runner=None, progress=None, lock_
         if progress is not None:
             progress(x)
 
+    import time
+    t_start = time.perf_counter()
     net = run_network(targets, body, runner, progress=lambda x: report(0.6 * x))
+    t_net = time.perf_counter()
     if runner.contract.kind != "manikin":
         raise ValueError(f"{runner.path}: solve() needs a MANIKIN model, got kind {runner.contract.kind!r}")
     head_pos, head_rot = targets.pos["head"], targets.rot["head"]
@@ -338,6 +341,7 @@ def solve(targets: TrackerTargets, body: Body, runner=None, progress=None, lock_
     report(0.95)
     result = PoseResult(fps=float(targets.fps), body=body, local_rot=local, root_pos=root_pos,
                         swivel=swivel, contacts=contact > CONTACT_THRESHOLD,
-                        reach_error=sol.reach_error, targets=targets)
+                        reach_error=sol.reach_error, targets=targets,
+                        timings={"network": t_net - t_start, "solver": time.perf_counter() - t_net})
     report(1.0)
     return result

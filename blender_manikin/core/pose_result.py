@@ -55,6 +55,7 @@ class PoseResult:
     reach_error: np.ndarray | None = None
     targets: TrackerTargets | None = None
     t0: float = 0.0
+    timings: dict = field(default_factory=dict)      # seconds per stage, e.g. network / solver
     _fk: tuple | None = field(default=None, repr=False)
 
     @property
