@@ -1,0 +1,661 @@
+"""Training data: BVH sources -> cached ground-truth clips -> window batches.
+
+Cache (:func:`build_cache`)
+---------------------------
+Every BVH from :func:`core.bvh.iter_bvh_sources` (a folder, a file or a tar
+archive such as ``bandai-namco-motion.tar.xz``) is
+
+1. read (:func:`core.bvh.read_bvh`) and mapped onto the 22-joint body
+   (:func:`core.joint_maps.clip_to_body_motion`: positions in metres,
+   Blender axes, floor z = 0, world orientations of the pelvis, head, wrists
+   and ankles, a :class:`~core.skeleton.Body` with the clip's own bone
+   lengths, a take id);
+2. resampled to the model rate (30 fps; positions linearly, orientations by
+   slerp) when the file has another rate;
+3. solved by :func:`core.hybrik.ik_from_positions` (adaptive HybrIK with the
+   end orientations) into local rotations whose limbs are biomechanical
+   (hinge elbows/knees within limits, elbow twist clamped): this, posed by FK
+   on the clip's body, *is* the ground truth the network learns;
+4. stored as one ``.npz`` per clip (float32 where possible): ``offsets``
+   (22, 3), ``root_rest`` (3,), ``stature``, ``local_quat`` (T, 22, 4) wxyz
+   (sign-continuous over time), ``root_pos`` (T, 3), ``swivel`` (T, 4)
+   radians (LIMB_NAMES order), ``contacts`` (T, 2) uint8 (left, right),
+   ``fps``, ``name``, ``take_id``, ``source``.
+
+Foot contacts: a foot is in contact on a frame when its ankle joint **or**
+its foot (ball) joint moves slower than ``CONTACT_SPEED`` = 0.25 m/s
+horizontally (central differences) **and** is within ``CONTACT_HEIGHT`` =
+6 cm of that joint type's lowest height in the clip (the 1st percentile of
+both sides' heights, so a single glitch frame cannot set the reference).
+
+The cache lives outside the repository: ``$BLENDER_MANIKIN_CACHE/dataset``
+or ``~/.cache/blender_manikin/dataset``, in a folder named by a hash of the
+source (absolute path, size and mtime of the archive/file, or of every BVH
+in a folder), of :data:`PREPROCESS_VERSION` and of the code (syntax tree
+without docstrings) of the core modules the ground truth depends on.  ``index.json`` is written last;
+when it exists a second call returns the clip files without reading any
+BVH.  An interrupted build keeps the clips it finished.
+
+Split
+-----
+Whole takes are held out: a clip is in the validation set when
+``int(sha1(take_id).hexdigest(), 16) % 100 < VAL_PERCENT`` (10).  This is
+deterministic, independent of the order or number of files, and keeps every
+clip of a take on the same side.  When that leaves the validation set empty
+(tiny sources) the take with the smallest bucket goes to validation; with a
+single take validation reuses the training clips (flagged in the JSON).
+``split.json`` in the cache lists both sides.
+
+Windows (:class:`WindowSampler`)
+--------------------------------
+A window is W frames (default 40 at 30 fps) of one clip, the clip chosen
+with probability proportional to its length, the start uniformly.  Ground
+truth is posed by FK; tracker inputs are synthesised from it (head joint,
+wrist joints, optionally pelvis and ankles: 6-DoF each) and fed through
+:func:`core.features.make_inputs`; targets through
+:func:`core.features.encode_targets`.  Augmentation (training only): the
+window is time-resampled by a factor 0.8-1.25 (log-uniform; slerp/linear),
+with probability 5 % shifted against the clip's edge and edge-padded the
+way inference pads, uniform body scale 0.85-1.15 (offsets and positions),
+floor offset ±2 cm, tracker noise (positions σ = 4 mm, orientations 2° rms,
+per frame) and a constant per-window orientation offset of the hand
+trackers (random axis, up to 5°).
+"""
+from __future__ import annotations
+
+import hashlib
+import json
+import math
+import multiprocessing as mp
+import os
+import re
+import sys
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from ..core import features
+from ..core import hybrik
+from ..core import limb_solver as ls
+from ..core import rotations as rot
+from ..core.skeleton import Body, J, LIMBS, NUM_JOINTS, forward_kinematics
+
+#: bump when the stored ground truth changes meaning
+PREPROCESS_VERSION = 1
+MODEL_FPS = 30.0
+VAL_PERCENT = 10
+CONTACT_SPEED = 0.25      # m/s, horizontal
+CONTACT_HEIGHT = 0.06     # m above the clip's lowest height of that joint type
+#: core modules whose source is part of the cache key
+_KEY_MODULES = ("bvh.py", "joint_maps.py", "hybrik.py", "limb_solver.py", "skeleton.py")
+
+_CORE_DIR = Path(__file__).resolve().parent.parent / "core"
+_END_JOINTS = (J["pelvis"], J["head"], J["left_wrist"], J["right_wrist"], J["left_ankle"], J["right_ankle"])
+
+
+def default_cache_root():
+    base = os.environ.get("BLENDER_MANIKIN_CACHE") or os.path.join(os.path.expanduser("~"), ".cache",
+                                                                    "blender_manikin")
+    return os.path.join(base, "dataset")
+
+
+def _log(msg):
+    print(msg, file=sys.stderr, flush=True)
+
+
+# --------------------------------------------------------------------------
+# cache key
+def _source_fingerprint(source):
+    p = Path(source).resolve()
+    h = hashlib.sha1(str(p).encode())
+    if p.is_dir():
+        for f in sorted(x for x in p.rglob("*") if x.is_file() and x.name.lower().endswith((".bvh", ".bvh.gz"))):
+            st = f.stat()
+            h.update(f"{f.relative_to(p).as_posix()}|{st.st_size}|{st.st_mtime_ns}\n".encode())
+    else:
+        st = p.stat()
+        h.update(f"|{st.st_size}|{st.st_mtime_ns}".encode())
+    return h.hexdigest()
+
+
+def _code_digest(path):
+    """Digest of a module's code: its AST without docstrings, so edits of
+    comments, docstrings or formatting keep the cache."""
+    import ast
+    src = path.read_text(encoding="utf-8")
+    try:
+        tree = ast.parse(src)
+    except SyntaxError:
+        return hashlib.sha1(src.encode()).hexdigest()
+    for node in ast.walk(tree):
+        body = getattr(node, "body", None)
+        if (isinstance(body, list) and body and isinstance(body[0], ast.Expr)
+                and isinstance(body[0].value, ast.Constant) and isinstance(body[0].value.value, str)):
+            node.body = body[1:] or [ast.Pass()]
+    return hashlib.sha1(ast.dump(tree, include_attributes=False).encode()).hexdigest()
+
+
+def code_version():
+    """Hash of PREPROCESS_VERSION and the code of the core modules the ground truth depends on."""
+    h = hashlib.sha1(f"preprocess={PREPROCESS_VERSION};fps={MODEL_FPS}".encode())
+    for m in _KEY_MODULES:
+        f = _CORE_DIR / m
+        h.update(m.encode())
+        if f.exists():
+            h.update(_code_digest(f).encode())
+    return h.hexdigest()[:12]
+
+
+def cache_key(source, fps=MODEL_FPS):
+    h = hashlib.sha1(f"{_source_fingerprint(source)}|{code_version()}|{float(fps)}".encode())
+    return h.hexdigest()[:16]
+
+
+def cache_dir_for(source, cache_dir=None, fps=MODEL_FPS):
+    root = cache_dir or default_cache_root()
+    stem = re.sub(r"[^A-Za-z0-9_.-]+", "_", Path(source).name)[:40] or "source"
+    return os.path.join(root, f"{stem}-{cache_key(source, fps)}")
+
+
+# --------------------------------------------------------------------------
+# per-clip processing
+def _resample(positions, rots, fps_in, fps_out):
+    """Positions ``(T, 22, 3)`` linear, dict of ``(T, 3, 3)`` slerp; same time span."""
+    T = positions.shape[0]
+    t_in = np.arange(T) / fps_in
+    n_out = int(np.floor(t_in[-1] * fps_out + 1e-9)) + 1
+    t = np.arange(n_out) / fps_out * fps_in            # in input frames
+    i0 = np.clip(np.floor(t).astype(int), 0, max(T - 2, 0))
+    i1 = np.minimum(i0 + 1, T - 1)
+    w = np.clip(t - i0, 0.0, 1.0)
+    pos = positions[i0] * (1 - w)[:, None, None] + positions[i1] * w[:, None, None]
+    out = {}
+    for j, R in rots.items():
+        q = rot.quat_continuous(rot.matrix_to_quat(R))
+        out[j] = rot.quat_to_matrix(rot.quat_slerp(q[i0], q[i1], w))
+    return pos, out
+
+
+def foot_contacts(positions, fps, speed=CONTACT_SPEED, height=CONTACT_HEIGHT):
+    """``(T, 2)`` uint8 contacts (left, right) from joint positions ``(T, 22, 3)`` (see module doc)."""
+    P = np.asarray(positions, np.float64)
+    T = P.shape[0]
+    out = np.zeros((T, 2), bool)
+    for a, b in ((J["left_ankle"], J["right_ankle"]), (J["left_foot"], J["right_foot"])):
+        z_ref = np.percentile(P[:, [a, b], 2], 1.0) if T else 0.0
+        for side, j in enumerate((a, b)):
+            p = P[:, j]
+            if T > 1:
+                v = np.gradient(p[:, :2], axis=0) * fps
+                v = np.linalg.norm(v, axis=-1)
+            else:
+                v = np.zeros(T)
+            out[:, side] |= (v < speed) & (p[:, 2] < z_ref + height)
+    return out.astype(np.uint8)
+
+
+def _end_rotations(mc):
+    """World orientations ``{joint index: (T, 3, 3)}`` of a MotionClip (tolerant of field names)."""
+    for attr in ("end_rot", "rotations", "world_rot", "orientations", "rot"):
+        val = getattr(mc, attr, None)
+        if val is None:
+            continue
+        if isinstance(val, dict):
+            out = {}
+            for k, R in val.items():
+                j = J[k] if isinstance(k, str) else int(k)
+                if j in _END_JOINTS:
+                    out[j] = np.asarray(R, np.float64)
+            return out
+        arr = np.asarray(val, np.float64)
+        if arr.ndim == 4 and arr.shape[1] == NUM_JOINTS:
+            return {j: arr[:, j] for j in _END_JOINTS if np.isfinite(arr[:, j]).all()}
+    raise ValueError(f"MotionClip has no world rotations of the end joints (fields: {list(vars(mc))})")
+
+
+def motion_to_record(mc, name, source_label, fps=MODEL_FPS):
+    """Ground-truth arrays of one MotionClip (see module doc) as a dict for ``np.savez``."""
+    positions = np.asarray(mc.positions, np.float64)
+    ends = _end_rotations(mc)
+    fps_in = float(mc.fps)
+    if abs(fps_in - fps) > 1e-3:
+        positions, ends = _resample(positions, ends, fps_in, fps)
+    body = mc.body
+    res = hybrik.ik_from_positions(positions, body, end_rot=ends)
+    quat = rot.quat_continuous(rot.matrix_to_quat(res.local_rot))
+    contacts = foot_contacts(res.positions, fps)
+    err = np.linalg.norm(res.positions - positions, axis=-1)
+    return dict(
+        name=np.str_(name), take_id=np.str_(str(getattr(mc, "take_id", name))),
+        source=np.str_(source_label), fps=np.float32(fps),
+        offsets=np.asarray(body.offsets, np.float32), root_rest=np.asarray(body.root_rest, np.float32),
+        stature=np.float32(body.stature), local_quat=quat.astype(np.float32),
+        root_pos=res.root_pos.astype(np.float32), swivel=res.swivel.astype(np.float32),
+        contacts=contacts, ik_error_mean=np.float32(err.mean()), ik_error_max=np.float32(err.max()),
+    )
+
+
+def _safe_name(name):
+    base = re.sub(r"\.bvh(\.gz)?$", "", name, flags=re.IGNORECASE)
+    return re.sub(r"[^A-Za-z0-9_.-]+", "_", base)[:120] + "-" + hashlib.sha1(name.encode()).hexdigest()[:8]
+
+
+def _process(job):
+    """Worker: parse one BVH (bytes), map, solve, write its npz.  Returns index info or an error."""
+    name, data, clips_dir, source_label, fps = job
+    import io
+    from ..core import bvh, joint_maps
+    out = os.path.join(clips_dir, _safe_name(name) + ".npz")
+    try:
+        if os.path.exists(out):          # finished by an interrupted earlier build
+            with np.load(out) as z:
+                return dict(file=os.path.basename(out), name=name, take_id=str(z["take_id"]),
+                            frames=int(z["local_quat"].shape[0]), ik_error_mean=float(z["ik_error_mean"]))
+        clip = bvh.read_bvh(io.BytesIO(data), name)
+        mc = joint_maps.clip_to_body_motion(clip)
+        if mc is None or np.asarray(mc.positions).shape[0] < 2:
+            return dict(name=name, error="fewer than 2 frames")
+        rec = motion_to_record(mc, name, source_label, fps)
+        tmp = out + f".tmp{os.getpid()}.npz"
+        np.savez(tmp, **rec)
+        os.replace(tmp, out)
+        return dict(file=os.path.basename(out), name=name, take_id=str(rec["take_id"]),
+                    frames=int(rec["local_quat"].shape[0]), ik_error_mean=float(rec["ik_error_mean"]))
+    except Exception as exc:  # a bad file must not stop the build
+        return dict(name=name, error=f"{type(exc).__name__}: {exc}")
+
+
+# --------------------------------------------------------------------------
+# split
+def take_bucket(take_id):
+    return int(hashlib.sha1(str(take_id).encode("utf-8")).hexdigest(), 16) % 100
+
+
+def make_split(clips, val_percent=VAL_PERCENT):
+    """``{"train": [files], "val": [files], ...}`` from index entries (see module doc)."""
+    takes = sorted({c["take_id"] for c in clips})
+    val_takes = {t for t in takes if take_bucket(t) < val_percent}
+    note = f"sha1(take_id) % 100 < {val_percent} -> validation"
+    if not val_takes and len(takes) > 1:
+        val_takes = {min(takes, key=lambda t: (take_bucket(t), t))}
+        note += "; no take fell in the bucket, so the take with the smallest bucket was held out"
+    train = [c["file"] for c in clips if c["take_id"] not in val_takes]
+    val = [c["file"] for c in clips if c["take_id"] in val_takes]
+    val_is_train = False
+    if not val:
+        val, val_is_train = list(train), True
+        note += "; a single take: validation reuses the training clips"
+    frames = {c["file"]: c["frames"] for c in clips}
+    return dict(rule=note, val_percent=val_percent, val_is_train=val_is_train,
+                train_takes=len(set(takes) - val_takes) if not val_is_train else len(takes),
+                val_takes=len(val_takes) if not val_is_train else len(takes),
+                train_frames=int(sum(frames[f] for f in train)), val_frames=int(sum(frames[f] for f in val)),
+                train=train, val=val)
+
+
+# --------------------------------------------------------------------------
+def build_cache(source, cache_dir=None, fps=MODEL_FPS, workers=2, verbose=True):
+    """Parse, solve and cache every BVH of ``source``; returns the clip ``.npz`` paths.
+
+    ``cache_dir``: the cache *root* (default :func:`default_cache_root`); the
+    clips go to ``<root>/<name>-<hash>/clips``.  A second call with the same
+    source and code returns at once without reading any BVH.
+    """
+    source = os.fspath(source)
+    if not os.path.exists(source):
+        raise FileNotFoundError(f"BVH source not found: {source}")
+    d = cache_dir_for(source, cache_dir, fps)
+    index_path = os.path.join(d, "index.json")
+    if os.path.exists(index_path):
+        with open(index_path) as f:
+            index = json.load(f)
+        if verbose:
+            _log(f"[dataset] cache hit: {d} ({len(index['clips'])} clips, {index['frames']} frames)")
+        return [os.path.join(d, "clips", c["file"]) for c in index["clips"]]
+
+    from ..core import bvh
+    clips_dir = os.path.join(d, "clips")
+    os.makedirs(clips_dir, exist_ok=True)
+    label = os.path.basename(os.path.abspath(source))
+    t0 = time.time()
+    is_archive = os.path.isfile(source) and not source.lower().endswith((".bvh", ".bvh.gz"))
+    jobs = ((name, opener().read(), clips_dir, label, float(fps))
+            for name, opener in bvh.iter_bvh_sources(source, **({"sort": False} if is_archive else {})))
+    results, errors, frames, last = [], [], 0, 0.0
+    if verbose:
+        _log(f"[dataset] building cache {d} from {source} ({workers} workers)")
+
+    def consume(it):
+        nonlocal frames, last
+        for r in it:
+            if "error" in r:
+                errors.append(r)
+                if verbose:
+                    _log(f"[dataset] skipped {r['name']}: {r['error']}")
+                continue
+            results.append(r)
+            frames += r["frames"]
+            now = time.time()
+            if verbose and (now - last > 2.0):
+                last = now
+                _log(f"[dataset] {len(results)} clips, {frames} frames, {now - t0:.0f} s")
+
+    if workers and workers > 1:
+        ctx = mp.get_context("fork") if "fork" in mp.get_all_start_methods() else mp.get_context()
+        with ctx.Pool(workers) as pool:
+            consume(pool.imap_unordered(_process, jobs, chunksize=2))
+    else:
+        consume(map(_process, jobs))
+    if not results:
+        raise RuntimeError(f"no usable BVH clips in {source}"
+                           + (f" ({len(errors)} failed, first: {errors[0]['error']})" if errors else ""))
+    results.sort(key=lambda r: r["name"])
+    split = make_split(results)
+    elapsed = time.time() - t0
+    index = dict(source=os.path.abspath(source), source_name=label, fps=float(fps),
+                 code_version=code_version(), preprocess_version=PREPROCESS_VERSION,
+                 clips=results, frames=int(frames), skipped=errors, build_seconds=round(elapsed, 1),
+                 contact_rule=dict(speed_mps=CONTACT_SPEED, height_m=CONTACT_HEIGHT))
+    with open(os.path.join(d, "split.json"), "w") as f:
+        json.dump(split, f, indent=1)
+    tmp = index_path + ".tmp"
+    with open(tmp, "w") as f:
+        json.dump(index, f, indent=1)
+    os.replace(tmp, index_path)
+    if verbose:
+        _log(f"[dataset] done: {len(results)} clips, {frames} frames ({frames / fps / 3600:.2f} h), "
+             f"{len(errors)} skipped, {elapsed:.0f} s; split: {len(split['train'])} train / "
+             f"{len(split['val'])} val clips ({split['val_takes']} val takes)")
+    return [os.path.join(d, "clips", r["file"]) for r in results]
+
+
+def load_index(clip_files):
+    """``(index, split)`` dicts of the cache the clip files belong to."""
+    d = os.path.dirname(os.path.dirname(os.path.abspath(clip_files[0])))
+    with open(os.path.join(d, "index.json")) as f:
+        index = json.load(f)
+    with open(os.path.join(d, "split.json")) as f:
+        split = json.load(f)
+    return index, split
+
+
+def split_files(clip_files):
+    """``(train_files, val_files, split)`` for clip files of one cache."""
+    _, split = load_index(clip_files)
+    d = os.path.dirname(os.path.abspath(clip_files[0]))
+    return ([os.path.join(d, f) for f in split["train"]], [os.path.join(d, f) for f in split["val"]], split)
+
+
+# --------------------------------------------------------------------------
+# windows
+@dataclass
+class Augment:
+    """Training augmentation (see module doc); ``Augment.off()`` disables all."""
+    speed: tuple = (0.8, 1.25)
+    scale: tuple = (0.85, 1.15)
+    floor: float = 0.02
+    pos_noise: float = 0.004
+    rot_noise_deg: float = 2.0
+    hand_offset_deg: float = 5.0
+    edge_prob: float = 0.05
+
+    @classmethod
+    def off(cls):
+        return cls(speed=(1.0, 1.0), scale=(1.0, 1.0), floor=0.0, pos_noise=0.0, rot_noise_deg=0.0,
+                   hand_offset_deg=0.0, edge_prob=0.0)
+
+
+@dataclass
+class ClipSet:
+    """Clips concatenated in memory."""
+    quat: np.ndarray          # (N, 22, 4) float32
+    root_pos: np.ndarray      # (N, 3)
+    contacts: np.ndarray      # (N, 2) uint8
+    starts: np.ndarray        # (C,) first frame of each clip
+    lengths: np.ndarray       # (C,)
+    offsets: np.ndarray       # (C, 22, 3) float64
+    stature: np.ndarray       # (C,)
+    names: list = field(default_factory=list)
+
+    @classmethod
+    def load(cls, files):
+        if not files:
+            raise ValueError("no clip files")
+        q, rp, ct, lens, offs, st, names = [], [], [], [], [], [], []
+        for f in files:
+            with np.load(f) as z:
+                q.append(z["local_quat"])
+                rp.append(z["root_pos"])
+                ct.append(z["contacts"])
+                lens.append(z["local_quat"].shape[0])
+                offs.append(z["offsets"].astype(np.float64))
+                st.append(float(z["stature"]))
+                names.append(str(z["name"]))
+        lens = np.array(lens, np.int64)
+        return cls(np.concatenate(q), np.concatenate(rp), np.concatenate(ct),
+                   np.concatenate([[0], np.cumsum(lens)[:-1]]).astype(np.int64), lens,
+                   np.stack(offs), np.array(st), names)
+
+    @property
+    def frames(self):
+        return int(self.lengths.sum())
+
+
+def _small_rotations(rng, shape, sigma_rad):
+    """Random rotation matrices with per-axis N(0, sigma/sqrt(3)) (rms angle sigma)."""
+    return rot.axis_angle_to_matrix(rng.normal(size=shape + (3,)) * (sigma_rad / math.sqrt(3.0)))
+
+
+class WindowSampler:
+    """Random training windows as numpy batches.
+
+    ``sample(B)`` returns a dict of float32 arrays:
+
+    * ``x`` ``(B, W, 12 D)`` network input (:func:`features.make_inputs`);
+    * ``y`` ``(B, W, F_out)`` targets (:func:`features.encode_targets`, ``kind``);
+    * ``pos`` ``(B, W, 22, 3)`` ground-truth joint positions in the canonical
+      frame, in statures; ``offsets`` ``(B, 22, 3)`` rest offsets in statures;
+      ``stature`` ``(B,)`` metres (after the scale augmentation).
+    """
+
+    def __init__(self, clips, window=40, kind="manikin", devices=features.INPUT_DEVICES,
+                 augment=None, seed=0, fps=MODEL_FPS):
+        self.clips = clips if isinstance(clips, ClipSet) else ClipSet.load(list(clips))
+        self.window = int(window)
+        self.kind = kind
+        self.devices = tuple(devices)
+        self.aug = Augment() if augment is None else augment
+        self.fps = float(fps)
+        self.rng = np.random.default_rng(seed)
+        w = self.clips.lengths.astype(np.float64)
+        self.p = w / w.sum()
+
+    # rng state, for exact resume
+    def get_state(self):
+        return self.rng.bit_generator.state
+
+    def set_state(self, state):
+        self.rng.bit_generator.state = state
+
+    def batch_for_step(self, step, B, seed=0):
+        """The batch of training step ``step``: a pure function of ``(seed, step)``,
+        so batches can be made ahead in another process and a resumed run
+        sees exactly the batches an uninterrupted one would."""
+        return self.sample(B, np.random.default_rng([int(seed), int(step)]))
+
+    def _times(self, B, rng):
+        """Clip ids ``(B,)`` and fractional frame times ``(B, W)`` within each clip."""
+        W, a = self.window, self.aug
+        cid = rng.choice(len(self.p), size=B, p=self.p)
+        lo, hi = np.log(a.speed[0]), np.log(a.speed[1])
+        f = np.exp(rng.uniform(lo, hi, B)) if hi > lo else np.full(B, a.speed[0])
+        L = self.clips.lengths[cid].astype(np.float64)
+        span = (W - 1) * f
+        room = np.maximum(L - 1 - span, 0.0)
+        start = rng.uniform(0.0, 1.0, B) * room
+        if hi <= lo and a.speed[0] == 1.0:
+            start = np.floor(start)
+        t = start[:, None] + np.arange(W)[None] * f[:, None]
+        if a.edge_prob > 0:
+            edge = rng.uniform(size=B) < a.edge_prob
+            shift = rng.uniform(-W / 2, W / 2, B)
+            t = np.where(edge[:, None], t + shift[:, None], t)
+        return cid, np.clip(t, 0.0, L[:, None] - 1)
+
+    def sample(self, B, rng=None):
+        rng = self.rng if rng is None else rng
+        W, a, cs = self.window, self.aug, self.clips
+        cid, t = self._times(B, rng)
+        base = cs.starts[cid][:, None]
+        i0 = np.floor(t).astype(np.int64)
+        i1 = np.minimum(i0 + 1, cs.lengths[cid][:, None] - 1)
+        w = t - i0
+        q0 = cs.quat[base + i0].astype(np.float64)
+        if np.any(w > 0):
+            q1 = cs.quat[base + i1].astype(np.float64)
+            q = rot.quat_slerp(q0, q1, np.broadcast_to(w[..., None], q0.shape[:-1]))
+        else:
+            q = q0
+        local = rot.quat_to_matrix(q)                                         # (B, W, 22, 3, 3)
+        root = (cs.root_pos[base + i0] * (1 - w)[..., None] + cs.root_pos[base + i1] * w[..., None]).astype(np.float64)
+        contacts = cs.contacts[base + np.rint(t).astype(np.int64)].astype(np.float64)
+
+        scale = rng.uniform(a.scale[0], a.scale[1], B) if a.scale[1] > a.scale[0] else np.full(B, a.scale[0])
+        offsets = cs.offsets[cid] * scale[:, None, None]                      # (B, 22, 3)
+        stature = cs.stature[cid] * scale
+        root = root * scale[:, None, None]
+        if a.floor > 0:
+            root[..., 2] += rng.uniform(-a.floor, a.floor, B)[:, None]
+        N = B * W
+        P, Rw = forward_kinematics(local.reshape(N, NUM_JOINTS, 3, 3), root.reshape(N, 3), None,
+                                   offsets=np.repeat(offsets, W, 0))
+        bases = [b for _, b, _, _ in LIMBS]
+        mids = [m for _, _, m, _ in LIMBS]
+        ends = [e for _, _, _, e in LIMBS]
+        swivel = ls.swivel_from_positions(P[:, bases], P[:, mids], P[:, ends], Rw[:, list(ls.LIMB_PARENT)],
+                                          base_rot=Rw[:, bases])
+        P = P.reshape(B, W, NUM_JOINTS, 3)
+        Rw = Rw.reshape(B, W, NUM_JOINTS, 3, 3)
+        local = local.reshape(B, W, NUM_JOINTS, 3, 3)
+        swivel = swivel.reshape(B, W, 4)
+
+        pos_in, rot_in = {}, {}
+        for dev in self.devices:
+            j = features.DEVICE_JOINT[dev]
+            p = P[:, :, j].copy()
+            R = Rw[:, :, j].copy()
+            if a.pos_noise > 0:
+                p += rng.normal(scale=a.pos_noise, size=p.shape)
+            if a.rot_noise_deg > 0:
+                R = R @ _small_rotations(rng, (B, W), math.radians(a.rot_noise_deg))
+            if a.hand_offset_deg > 0 and dev in ("left_hand", "right_hand"):
+                axis = rot.normalize(rng.normal(size=(B, 3)))
+                ang = rng.uniform(0.0, math.radians(a.hand_offset_deg), B)
+                R = R @ rot.axis_angle_to_matrix(axis * ang[:, None])[:, None]
+            pos_in[dev], rot_in[dev] = p, R
+        x, C, o = features.make_inputs(pos_in, rot_in, stature, self.fps, devices=self.devices)
+        y = features.encode_targets(Rw, local, P, swivel, contacts, C, o, stature, kind=self.kind)
+        Ct = np.swapaxes(C, -1, -2)
+        pos_can = np.einsum("bij,bwkj->bwki", Ct, P - o[:, None, None]) / stature[:, None, None, None]
+        return dict(x=x, y=y, pos=pos_can.astype(np.float32),
+                    offsets=(offsets / stature[:, None, None]).astype(np.float32),
+                    stature=stature.astype(np.float32))
+
+
+class Prefetcher:
+    """Makes ``sampler.batch_for_step`` batches ahead in one forked process.
+
+    ``get(step)`` must be called with consecutive steps.  With ``workers=0``
+    (or where fork is unavailable) batches are made in-process; the batches
+    are identical either way.
+    """
+
+    def __init__(self, sampler, batch, seed, first_step, workers=1, ahead=3):
+        self.sampler, self.batch, self.seed = sampler, int(batch), int(seed)
+        self.next = int(first_step)
+        self.pool = None
+        self.queue = []
+        if workers > 0 and "fork" in mp.get_all_start_methods():
+            global _PREFETCH_SAMPLER
+            _PREFETCH_SAMPLER = sampler          # inherited by the forked worker
+            self.pool = mp.get_context("fork").Pool(1)
+            for _ in range(ahead):
+                self._submit()
+
+    def _submit(self):
+        self.queue.append((self.next, self.pool.apply_async(_prefetch_batch, (self.next, self.batch, self.seed))))
+        self.next += 1
+
+    def get(self, step):
+        if self.pool is None:
+            return self.sampler.batch_for_step(step, self.batch, self.seed)
+        s, res = self.queue.pop(0)
+        if s != step:
+            raise RuntimeError(f"prefetcher asked for step {step}, has {s}")
+        self._submit()
+        return res.get()
+
+    def close(self):
+        if self.pool is not None:
+            self.pool.terminate()
+            self.pool.join()
+            self.pool = None
+
+
+_PREFETCH_SAMPLER = None
+
+
+def _prefetch_batch(step, batch, seed):
+    return _PREFETCH_SAMPLER.batch_for_step(step, batch, seed)
+
+
+def fixed_batches(clips, n_windows, batch, window=40, kind="manikin", devices=features.INPUT_DEVICES,
+                  seed=12345):
+    """A deterministic list of un-augmented batches (validation)."""
+    s = WindowSampler(clips, window=window, kind=kind, devices=devices, augment=Augment.off(), seed=seed)
+    out, left = [], int(n_windows)
+    while left > 0:
+        b = min(batch, left)
+        out.append(s.sample(b))
+        left -= b
+    return out
+
+
+# --------------------------------------------------------------------------
+# synthetic motion (tests, benchmarks, development without BVH data)
+@dataclass
+class SyntheticMotion:
+    """Stand-in for ``core.joint_maps.MotionClip`` (same fields)."""
+    fps: float
+    positions: np.ndarray
+    end_rot: dict
+    body: Body
+    take_id: str
+    name: str = ""
+
+
+def synthetic_motion(rng, T=120, stature=1.75, fps=MODEL_FPS, take_id="synthetic"):
+    """Smooth random motion posed by FK: sums of sinusoids per joint (elbows and
+    knees bend as hinges within limits), the pelvis drifting over the floor and
+    lowered so the lowest foot joint touches z = 0."""
+    from ..core.skeleton import make_body
+    body = make_body(float(stature))
+    t = np.arange(T) / fps
+    freq = rng.uniform(0.2, 1.5, (3, NUM_JOINTS, 3))
+    amp = rng.uniform(0.0, 0.35, (3, NUM_JOINTS, 3)) / 3
+    phase = rng.uniform(0, 2 * np.pi, (3, NUM_JOINTS, 3))
+    aa = (amp[None] * np.sin(2 * np.pi * freq[None] * t[:, None, None, None] + phase[None])).sum(1)
+    aa[:, 0] += np.array([0, 0, 1.0]) * rng.uniform(-np.pi, np.pi)            # heading
+    local = rot.axis_angle_to_matrix(aa)
+    for li, (_, b, m, e) in enumerate(LIMBS):
+        flex = 0.6 + 0.5 * np.sin(2 * np.pi * rng.uniform(0.2, 1.0) * t + rng.uniform(0, 6))
+        local[:, m] = rot.axis_angle_rotation(np.broadcast_to(ls.H0[li], (T, 3)), flex)
+    root = np.zeros((T, 3))
+    root[:, :2] = rng.normal(size=2) + np.cumsum(rng.normal(size=(T, 2)) * 0.01, 0)
+    P, R = forward_kinematics(local, root, body)
+    lowest = P[:, [J["left_ankle"], J["right_ankle"], J["left_foot"], J["right_foot"]], 2].min(1)
+    P[..., 2] -= lowest[:, None]
+    return SyntheticMotion(fps=float(fps), positions=P, end_rot={j: R[:, j] for j in _END_JOINTS},
+                           body=body, take_id=str(take_id), name=str(take_id))

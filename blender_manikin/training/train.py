@@ -1,0 +1,348 @@
+"""Train the pose network from a folder / archive of BVH files.
+
+    python -m blender_manikin.training.train --bvh DIR_OR_ARCHIVE --out DIR
+        [--kind manikin|fk] [--minutes 60] [--steps N] [--batch 48] [--window 40]
+        [--seed 0] [--resume] [--threads 2] [--d-model 160] [--six-trackers] ...
+
+* Data: :func:`dataset.build_cache` (parsed once, cached outside the repo),
+  whole takes held out for validation (``split.json`` in the cache).
+* Plan: ``--steps`` and/or ``--minutes`` (wall clock of this run plus any
+  resumed runs; 60 when neither is given).  The learning rate warms up
+  linearly, then follows a cosine to 5 % over the plan; with a time budget
+  the plan's progress is the elapsed fraction of it.
+* AdamW, gradient clipping at 1, fixed seed (torch and numpy); a one-line
+  progress bar on stderr (step, loss, steps/s, ETA).
+* ``DIR/checkpoint.pt`` (model, optimizer, step, elapsed time, config, rng
+  states, data description, validation history) every ``--ckpt-minutes``
+  and at the end, written atomically.  ``--resume`` continues from it
+  exactly (same batches, same dropout) and may extend the plan.
+* Validation loss and metrics (MPJPE, hand/upper/lower errors in cm, root
+  orientation error, contact accuracy) on fixed windows of the held-out
+  takes, printed on stdout at every checkpoint and appended to
+  ``DIR/metrics.jsonl``.
+
+Then export: ``python -m blender_manikin.training.export --checkpoint DIR/checkpoint.pt
+--out blender_manikin/models/manikin_s.onnx``.
+"""
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import json
+import math
+import os
+import sys
+import time
+
+
+from ..core import features
+
+SIX_TRACKERS = ("head", "left_hand", "right_hand", "pelvis", "left_foot", "right_foot")
+BANDAI_LICENCE = ("CC BY-NC 4.0: trained on the Bandai Namco Research Motiondataset; "
+                  "weights for non-commercial use")
+
+
+def licence_for(source):
+    name = os.path.basename(os.path.abspath(str(source))).lower()
+    return BANDAI_LICENCE if "bandai" in name else "see training data"
+
+
+def build_parser():
+    p = argparse.ArgumentParser(prog="python -m blender_manikin.training.train", description=__doc__.split("\n\n")[0])
+    p.add_argument("--bvh", help="folder, .bvh file or tar archive of BVH files")
+    p.add_argument("--out", required=True, help="run folder (checkpoint.pt, metrics.jsonl)")
+    p.add_argument("--kind", choices=sorted(features.OUTPUT_BLOCKS), default="manikin")
+    p.add_argument("--minutes", type=float, default=None, help="time budget (default 60 without --steps)")
+    p.add_argument("--steps", type=int, default=None, help="number of optimizer steps")
+    p.add_argument("--batch", type=int, default=48)
+    p.add_argument("--window", type=int, default=40)
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--resume", action="store_true",
+                   help="continue OUT/checkpoint.pt with its model, data, seed, batch and optimizer settings "
+                        "(--steps / --minutes may extend the plan)")
+    p.add_argument("--overwrite", action="store_true", help="start afresh even if OUT/checkpoint.pt exists")
+    p.add_argument("--threads", type=int, default=2)
+    p.add_argument("--d-model", type=int, default=160)
+    p.add_argument("--layers", type=int, default=3)
+    p.add_argument("--heads", type=int, default=4)
+    p.add_argument("--ff-mult", type=int, default=4)
+    p.add_argument("--head-hidden", type=int, default=256)
+    p.add_argument("--dropout", type=float, default=0.05)
+    p.add_argument("--causal", action="store_true", help="live variant: attend to past frames only")
+    p.add_argument("--six-trackers", action="store_true", help="inputs: head, hands, pelvis and feet")
+    p.add_argument("--lr", type=float, default=1e-3)
+    p.add_argument("--weight-decay", type=float, default=0.01)
+    p.add_argument("--warmup", type=int, default=300, help="warm-up steps (at most 5 %% of a step plan)")
+    p.add_argument("--ckpt-minutes", type=float, default=5.0, help="checkpoint + validation interval")
+    p.add_argument("--ckpt-steps", type=int, default=None, help="also checkpoint every N steps")
+    p.add_argument("--val-windows", type=int, default=384)
+    p.add_argument("--cache-dir", default=None, help="dataset cache root (default ~/.cache/blender_manikin/dataset)")
+    p.add_argument("--workers", type=int, default=2, help="processes for building the cache")
+    p.add_argument("--data-workers", type=int, default=0,
+                   help="processes making training batches ahead; 0 (default) makes them in the training "
+                        "process, faster on 2 cores where a worker competes with torch's threads")
+    p.add_argument("--stop-at", type=int, default=None,
+                   help="stop this invocation at this step (checkpointed) without changing the plan; "
+                        "--resume continues it")
+    p.add_argument("--quiet", action="store_true")
+    return p
+
+
+class Progress:
+    """One updating status line on stderr (a plain line every 30 s when not a terminal)."""
+
+    def __init__(self, enabled=True):
+        self.enabled = enabled
+        self.tty = sys.stderr.isatty()
+        self.last = 0.0
+        self.width = 0
+
+    def update(self, text, force=False):
+        if not self.enabled:
+            return
+        now = time.time()
+        if not force and now - self.last < (0.5 if self.tty else 30.0):
+            return
+        self.last = now
+        if self.tty:
+            sys.stderr.write("\r" + text.ljust(self.width))
+            self.width = len(text)
+        else:
+            sys.stderr.write(text + "\n")
+        sys.stderr.flush()
+
+    def newline(self):
+        if self.enabled and self.tty and self.width:
+            sys.stderr.write("\n")
+            sys.stderr.flush()
+            self.width = 0
+
+
+def _fmt_time(s):
+    s = max(int(s), 0)
+    return f"{s // 3600}:{s // 60 % 60:02d}:{s % 60:02d}" if s >= 3600 else f"{s // 60}:{s % 60:02d}"
+
+
+def lr_factor(progress, step, warmup):
+    if warmup > 0 and step < warmup:
+        return (step + 1) / warmup
+    return 0.05 + 0.95 * 0.5 * (1.0 + math.cos(math.pi * min(max(progress, 0.0), 1.0)))
+
+
+def _save(path, obj):
+    import torch
+    tmp = path + ".tmp"
+    torch.save(obj, tmp)
+    os.replace(tmp, path)
+
+
+def evaluate(model, val_batches, kind, devices):
+    import torch
+    from . import losses
+    model.eval()
+    parts, loss_sum, n = [], 0.0, 0
+    with torch.no_grad():
+        for b in val_batches:
+            bt = losses.to_torch(b)
+            y = model(bt["x"])
+            tot, _, a = losses.compute_loss(y, bt, kind, devices)
+            B = y.shape[0]
+            loss_sum += float(tot) * B
+            n += B
+            parts.append(losses.metrics(y, bt, kind, devices, assembled=a))
+    model.train()
+    m = losses.reduce_metrics(parts)
+    m["loss"] = loss_sum / max(n, 1)
+    return m
+
+
+def main(argv=None):
+    args = build_parser().parse_args(argv)
+    import torch
+    from . import dataset, losses
+    from .model import ModelConfig, PoseNet, count_parameters
+    from .. import __version__
+
+    torch.set_num_threads(max(1, args.threads))
+    try:
+        torch.set_num_interop_threads(1)
+    except RuntimeError:
+        pass
+    os.makedirs(args.out, exist_ok=True)
+    ckpt_path = os.path.join(args.out, "checkpoint.pt")
+    say = (lambda *a: None) if args.quiet else (lambda *a: print(*a, flush=True))
+
+    ckpt = None
+    if os.path.exists(ckpt_path):
+        if args.resume:
+            ckpt = torch.load(ckpt_path, map_location="cpu", weights_only=False)
+        elif not args.overwrite:
+            raise SystemExit(f"{ckpt_path} exists: pass --resume to continue it or --overwrite to start afresh")
+    elif args.resume:
+        say(f"no checkpoint at {ckpt_path}; starting a new run")
+
+    if ckpt is not None:
+        # a resumed run keeps its identity: data, seed, batch and optimizer settings
+        prev = ckpt["args"]
+        for k in ("bvh", "cache_dir"):
+            if getattr(args, k) is None:
+                setattr(args, k, prev.get(k))
+        for k in ("seed", "batch", "lr", "weight_decay", "warmup"):
+            if k in prev:
+                setattr(args, k, prev[k])
+        if args.steps is None and args.minutes is None:
+            args.steps, args.minutes = prev.get("steps"), prev.get("minutes")
+        cfg = ModelConfig.from_dict(ckpt["config"])
+        args.kind, args.window = cfg.kind, cfg.window
+    if args.steps is None and args.minutes is None:
+        args.minutes = 60.0
+    if not args.bvh:
+        raise SystemExit("--bvh is required")
+    if ckpt is None:
+        devices = SIX_TRACKERS if args.six_trackers else features.INPUT_DEVICES
+        cfg = ModelConfig(kind=args.kind, devices=devices, window=args.window, d_model=args.d_model,
+                          layers=args.layers, heads=args.heads, ff_mult=args.ff_mult,
+                          head_hidden=args.head_hidden, dropout=args.dropout, causal=args.causal)
+
+    # ---------------------------------------------------------------- data
+    files = dataset.build_cache(args.bvh, args.cache_dir, workers=args.workers, verbose=not args.quiet)
+    train_files, val_files, split = dataset.split_files(files)
+    index, _ = dataset.load_index(files)
+    train_set = dataset.ClipSet.load(train_files)
+    val_set = train_set if split.get("val_is_train") else dataset.ClipSet.load(val_files)
+    sampler = dataset.WindowSampler(train_set, window=cfg.window, kind=cfg.kind, devices=cfg.devices,
+                                    seed=args.seed)
+    val_batches = dataset.fixed_batches(val_set, args.val_windows, 64, window=cfg.window, kind=cfg.kind,
+                                        devices=cfg.devices, seed=args.seed + 12345)
+    # fork the batch maker before torch starts its thread pool
+    prefetch = dataset.Prefetcher(sampler, args.batch, args.seed, int(ckpt["step"]) if ckpt else 0,
+                                  workers=args.data_workers)
+    data_info = dict(source=os.path.basename(os.path.abspath(args.bvh)), source_path=os.path.abspath(args.bvh),
+                     cache=os.path.dirname(os.path.dirname(files[0])), clips=len(files),
+                     frames=int(index["frames"]), fps=float(index["fps"]),
+                     split=dict(rule=split["rule"], train_clips=len(train_files), val_clips=len(val_files),
+                                train_takes=split["train_takes"], val_takes=split["val_takes"],
+                                train_frames=split["train_frames"], val_frames=split["val_frames"],
+                                val_is_train=bool(split.get("val_is_train"))),
+                     licence=licence_for(args.bvh), contact_rule=index.get("contact_rule"),
+                     augmentation=dataclasses.asdict(sampler.aug),
+                     validation=f"{args.val_windows} fixed windows of the held-out takes, no augmentation")
+    say(f"data: {data_info['clips']} clips, {data_info['frames']} frames from {data_info['source']}; "
+        f"train {len(train_files)} clips / {split['train_frames']} frames, "
+        f"val {len(val_files)} clips / {split['val_frames']} frames ({split['val_takes']} takes)")
+
+    # --------------------------------------------------------------- model
+    torch.manual_seed(args.seed)
+    model = PoseNet(cfg)
+    opt = torch.optim.AdamW(model.parameters(), lr=args.lr, weight_decay=args.weight_decay)
+    step, elapsed, history = 0, 0.0, []
+    if ckpt is not None:
+        model.load_state_dict(ckpt["model"])
+        opt.load_state_dict(ckpt["optimizer"])
+        step, elapsed, history = int(ckpt["step"]), float(ckpt["elapsed"]), list(ckpt.get("history", []))
+        torch.set_rng_state(ckpt["torch_rng"])
+        say(f"resumed {ckpt_path} at step {step} ({elapsed / 60:.1f} min trained)")
+    nparams = count_parameters(model)
+    say(f"model: {cfg.kind}, d_model {cfg.d_model}, {cfg.layers} layers, {cfg.heads} heads, window "
+        f"{cfg.window}, inputs {list(cfg.devices)}: {nparams:,} parameters; batch {args.batch}, "
+        f"{args.threads} threads; plan: "
+        + (f"{args.steps} steps" if args.steps else "") + (" / " if args.steps and args.minutes else "")
+        + (f"{args.minutes:g} min" if args.minutes else ""))
+
+    warmup = args.warmup if not args.steps else min(args.warmup, max(1, args.steps // 20))
+
+    def progress_of(step_, elapsed_):
+        p = 0.0
+        if args.steps:
+            p = max(p, step_ / args.steps)
+        if args.minutes:
+            p = max(p, elapsed_ / (args.minutes * 60.0))
+        return p
+
+    def checkpoint(val):
+        _save(ckpt_path, dict(model=model.state_dict(), optimizer=opt.state_dict(), step=step,
+                              elapsed=elapsed, config=cfg.to_dict(), args=vars(args),
+                              torch_rng=torch.get_rng_state(),
+                              data=data_info, history=history, val=val, num_parameters=nparams,
+                              code_version=__version__, saved=time.strftime("%Y-%m-%d %H:%M:%S")))
+
+    def validate():
+        m = evaluate(model, val_batches, cfg.kind, cfg.devices)
+        rec = dict(step=step, minutes=round(elapsed / 60, 2), **{k: round(v, 5) for k, v in m.items()})
+        history.append(rec)
+        with open(os.path.join(args.out, "metrics.jsonl"), "a") as f:
+            f.write(json.dumps(rec) + "\n")
+        bar.newline()
+        say(f"[val] step {step} ({elapsed / 60:.1f} min): loss {m['loss']:.4f}  MPJPE {m['mpjpe_cm']:.2f} cm  "
+            f"hand {m['hand_cm']:.2f}  upper {m['upper_cm']:.2f}  lower {m['lower_cm']:.2f} cm  "
+            f"root {m['root_deg']:.2f} deg  contact acc {m['contact_acc']:.3f}")
+        return rec
+
+    bar = Progress(not args.quiet)
+    model.train()
+    t_start = time.time() - elapsed
+    last_ckpt = time.time()
+    ema, rate, rate_t, rate_s = None, 0.0, time.time(), step
+    val = history[-1] if history else None
+    interrupted = False
+    try:
+        while True:
+            elapsed = time.time() - t_start
+            if (args.steps and step >= args.steps) or (args.minutes and elapsed >= args.minutes * 60.0):
+                break
+            if args.stop_at is not None and step >= args.stop_at:
+                break
+            f = lr_factor(progress_of(step, elapsed), step, warmup)
+            for g in opt.param_groups:
+                g["lr"] = args.lr * f
+            batch = losses.to_torch(prefetch.get(step))
+            y = model(batch["x"])
+            total, terms, _ = losses.compute_loss(y, batch, cfg.kind, cfg.devices)
+            opt.zero_grad(set_to_none=True)
+            total.backward()
+            torch.nn.utils.clip_grad_norm_(model.parameters(), 1.0)
+            opt.step()
+            step += 1
+            lv = total.item()
+            if not math.isfinite(lv):
+                raise SystemExit(f"loss is {lv} at step {step}; terms {terms}")
+            ema = lv if ema is None else 0.98 * ema + 0.02 * lv
+            now = time.time()
+            if now - rate_t > 2.0 or rate == 0.0:       # first estimate at once, then every 2 s
+                rate = (step - rate_s) / max(now - rate_t, 1e-6)
+                if now - rate_t > 2.0:
+                    rate_t, rate_s = now, step
+            elapsed = now - t_start
+            if rate > 0:
+                left = []
+                if args.steps:
+                    left.append((args.steps - step) / rate)
+                if args.minutes:
+                    left.append(args.minutes * 60.0 - elapsed)
+                eta = _fmt_time(min(left))
+            else:
+                eta = "?"
+            bar.update(f"step {step}" + (f"/{args.steps}" if args.steps else "") + f" | loss {ema:.4f} | "
+                       f"{rate:.2f} steps/s | lr {args.lr * f:.2e} | {_fmt_time(elapsed)} elapsed | ETA {eta}")
+            if (now - last_ckpt >= args.ckpt_minutes * 60.0) or (args.ckpt_steps and step % args.ckpt_steps == 0):
+                val = validate()
+                checkpoint(val)
+                last_ckpt = time.time()
+    except KeyboardInterrupt:
+        interrupted = True
+        bar.newline()
+        say(f"interrupted at step {step}: saving the checkpoint (--resume continues)")
+    finally:
+        prefetch.close()
+    elapsed = time.time() - t_start
+    bar.newline()
+    if not history or history[-1]["step"] != step:
+        val = validate()
+    checkpoint(val)
+    say(f"done: {step} steps in {elapsed / 60:.1f} min; checkpoint {ckpt_path}")
+    return dict(step=step, elapsed=elapsed, val=val, checkpoint=ckpt_path, num_parameters=nparams,
+                interrupted=interrupted)
+
+
+if __name__ == "__main__":
+    main()

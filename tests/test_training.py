@@ -1,0 +1,277 @@
+"""Training pipeline: torch geometry vs numpy, BVH -> cache -> windows -> train -> resume -> ONNX.
+
+Needs torch and onnx (requirements-train.txt); skipped without them.  Uses
+only synthetic BVH files written into tmp dirs (no /work/shared data) and a
+tiny network, so the whole module runs in a few seconds on 2 cores.
+"""
+import json
+import os
+
+import numpy as np
+import pytest
+
+torch = pytest.importorskip("torch")
+pytest.importorskip("onnx")
+
+from blender_manikin.core import bvh, features, limb_solver as ls, rotations as rot, skeleton as sk  # noqa: E402
+from blender_manikin.training import dataset as ds, losses, torch_geometry as tg  # noqa: E402
+from blender_manikin.training.model import ModelConfig, PoseNet, count_parameters  # noqa: E402
+
+TINY = ["--d-model", "32", "--heads", "2", "--layers", "1", "--head-hidden", "32", "--batch", "8",
+        "--threads", "1", "--val-windows", "16", "--workers", "1", "--quiet", "--ckpt-minutes", "100"]
+
+
+def _t(a):
+    return torch.as_tensor(np.asarray(a, np.float64))
+
+
+# --------------------------------------------------------------------------
+# geometry
+def test_sixd_and_rotation_between_match_numpy():
+    rng = np.random.default_rng(0)
+    d6 = rng.normal(size=(50, 3, 6))
+    assert np.abs(tg.sixd_to_matrix(_t(d6)).numpy() - rot.sixd_to_matrix(d6)).max() < 1e-10
+    R = rot.axis_angle_to_matrix(rng.normal(size=(20, 3)))
+    assert np.abs(tg.matrix_to_6d(_t(R)).numpy() - rot.matrix_to_6d(R)).max() < 1e-12
+    a = rng.normal(size=(40, 3))
+    b = rng.normal(size=(40, 3))
+    b[:5] = -a[:5] * 2.0           # antiparallel
+    b[5:10] = a[5:10]              # parallel
+    assert np.abs(tg.rotation_between(_t(a), _t(b)).numpy() - rot.rotation_between(a, b)).max() < 1e-10
+    q = rng.normal(size=(30, 4))
+    assert np.abs(tg.quat_to_matrix(_t(q)).numpy() - rot.quat_to_matrix(q)).max() < 1e-10
+
+
+def _limb_case(rng, T=200):
+    base = rng.normal(size=(T, 4, 3))
+    end = base + rng.normal(size=(T, 4, 3)) * 0.35
+    end[:5] = base[:5]                                                  # coincident
+    end[5:10] = base[5:10] + rng.normal(size=(5, 4, 3)) * 3.0           # out of reach
+    parent = rot.axis_angle_to_matrix(rng.normal(size=(T, 4, 3)))
+    # base->end exactly against the neutral axis (u undefined): still finite
+    end[10:15] = base[10:15] - 0.3 * np.einsum("tlij,lj->tli", parent[10:15], ls.N0)
+    swivel = rng.uniform(-np.pi, np.pi, (T, 4))
+    lengths = rng.uniform(0.2, 0.5, (T, 4, 2))
+    return base, end, parent, swivel, lengths
+
+
+def test_swivel_frame_and_mid_from_swivel_match_numpy():
+    rng = np.random.default_rng(1)
+    base, end, parent, swivel, lengths = _limb_case(rng)
+    for got, ref in zip(tg.swivel_frame(_t(base), _t(end), _t(parent)), ls.swivel_frame(base, end, parent)):
+        assert np.abs(got.numpy() - ref).max() < 1e-5
+    ref = ls.mid_from_swivel(base, end, swivel, lengths, parent)
+    got = tg.mid_from_swivel(_t(base), _t(end), _t(swivel), _t(lengths), _t(parent)).numpy()
+    assert np.abs(got - ref).max() < 1e-5
+    # (cos, sin) pairs of any scale give the same joint (the network's form)
+    cs = np.stack([np.cos(swivel), np.sin(swivel)], -1) * rng.uniform(0.3, 3.0, (len(swivel), 4, 1))
+    got = tg.mid_from_swivel(_t(base), _t(end), _t(cs), _t(lengths), _t(parent)).numpy()
+    assert np.abs(got - ref).max() < 1e-5
+    # a subset of limbs, float32
+    got = tg.mid_from_swivel(_t(base[:, 2:]).float(), _t(end[:, 2:]).float(), _t(swivel[:, 2:]).float(),
+                             _t(lengths[:, 2:]).float(), _t(parent[:, 2:]).float(), limb_ids=[2, 3]).numpy()
+    assert np.abs(got - ls.mid_from_swivel(base[:, 2:], end[:, 2:], swivel[:, 2:], lengths[:, 2:],
+                                           parent[:, 2:], limb_ids=[2, 3])).max() < 1e-5
+
+
+def test_mid_from_swivel_gradients_finite():
+    rng = np.random.default_rng(2)
+    base, end, parent, swivel, lengths = _limb_case(rng, 60)
+    end[15:20] = base[15:20] + np.array([lengths[15:20, :, 0] + lengths[15:20, :, 1]]).transpose(1, 2, 0) * \
+        rot.normalize(rng.normal(size=(5, 4, 3)))                      # exactly straight
+    ins = [_t(a).requires_grad_() for a in (base, end)]
+    cs = _t(np.stack([np.cos(swivel), np.sin(swivel)], -1)).requires_grad_()
+    out = tg.mid_from_swivel(ins[0], ins[1], cs, _t(lengths), _t(parent))
+    out.sum().backward()
+    for x in ins + [cs]:
+        assert torch.isfinite(x.grad).all()
+
+
+def test_torso_and_full_fk_match_numpy():
+    rng = np.random.default_rng(3)
+    B, W = 3, 5
+    local = rot.axis_angle_to_matrix(rng.normal(size=(B, W, 22, 3)) * 0.6)
+    offsets = np.stack([sk.make_body(h).offsets for h in (1.5, 1.7, 1.9)])      # per-sample bodies
+    P = np.empty((B, W, 22, 3))
+    R = np.empty((B, W, 22, 3, 3))
+    for b in range(B):
+        P[b], R[b] = sk.forward_kinematics(local[b], np.zeros((W, 3)), None, offsets=offsets[b])
+    pos, wrot = tg.torso_fk(_t(local[:, :, 0]), _t(local[:, :, list(features.TORSO_LOCAL_IDX)]),
+                            _t(offsets[:, None]))
+    ref = P[:, :, list(tg.TORSO_FK_JOINTS)] - P[:, :, [sk.J["head"]]]
+    assert np.abs(pos.numpy() - ref).max() < 1e-10
+    for j, Rj in wrot.items():
+        assert np.abs(Rj.numpy() - R[:, :, j]).max() < 1e-10
+    fp, fr = tg.full_fk(_t(local[:, :, 0]), _t(local[:, :, 1:]), _t(offsets[:, None]))
+    assert np.abs(fp.numpy() - P).max() < 1e-10
+    assert np.abs(fr.numpy() - R).max() < 1e-10
+
+
+# --------------------------------------------------------------------------
+# data
+@pytest.fixture(scope="module")
+def bvh_dir(tmp_path_factory):
+    """Six Bandai-layout takes at 30 fps and one CMU-layout take at 120 fps."""
+    import sys
+    sys.path.insert(0, os.path.dirname(__file__))
+    from fixtures_bvh import bandai_clip, cmu_clip, synthetic_motion, write_fixture
+    d = tmp_path_factory.mktemp("bvh")
+    for i in range(6):
+        body, _, _, pos, R = synthetic_motion(sk.make_body(1.6 + 0.05 * i), frames=90, fps=30.0, seed=i)
+        write_fixture(str(d / f"dataset-t_walk_{i:03d}.bvh"), bandai_clip(body, pos, R, name=f"walk_{i:03d}"))
+    body, _, _, pos, R = synthetic_motion(frames=240, fps=120.0, seed=7)
+    write_fixture(str(d / "cmu_07_01.bvh"), cmu_clip(body, pos, R, name="cmu_07_01"))
+    return str(d)
+
+
+@pytest.fixture(scope="module")
+def cache(bvh_dir, tmp_path_factory):
+    root = str(tmp_path_factory.mktemp("cache"))
+    files = ds.build_cache(bvh_dir, root, workers=2, verbose=False)
+    return root, files
+
+
+def test_cache_contents_and_split(cache):
+    root, files = cache
+    assert len(files) == 7 and all(f.startswith(root) and os.path.exists(f) for f in files)
+    index, split = ds.load_index(files)
+    assert index["frames"] == 6 * 90 + 60                    # the 120 fps take resampled to 30 fps
+    with np.load(files[0]) as z:
+        T = z["local_quat"].shape[0]
+        assert z["local_quat"].dtype == np.float32 and z["local_quat"].shape == (T, 22, 4)
+        assert z["root_pos"].shape == (T, 3) and z["swivel"].shape == (T, 4)
+        assert z["contacts"].shape == (T, 2) and set(np.unique(z["contacts"])) <= {0, 1}
+        assert z["offsets"].shape == (22, 3) and float(z["stature"]) > 1.0
+        assert float(z["ik_error_max"]) < 0.02                  # the IK reproduces the mocap
+    # the split holds out whole takes, deterministically
+    names = {os.path.basename(f) for f in files}
+    assert set(split["train"]) | set(split["val"]) == names and split["train"] and split["val"]
+    tk = {c["file"]: c["take_id"] for c in index["clips"]}
+    assert not {tk[f] for f in split["train"]} & {tk[f] for f in split["val"]}
+    assert ds.make_split(index["clips"]) == split
+
+
+def test_second_build_does_not_parse(cache, bvh_dir, monkeypatch):
+    root, files = cache
+
+    def boom(*a, **k):
+        raise AssertionError("BVH read again")
+    monkeypatch.setattr(bvh, "read_bvh", boom)
+    monkeypatch.setattr(bvh, "iter_bvh_sources", boom)
+    assert ds.build_cache(bvh_dir, root, verbose=False) == files
+
+
+def test_foot_contacts_rule():
+    P = np.zeros((30, 22, 3))
+    P[:, :, 2] = 0.5
+    P[:, [sk.J["left_ankle"], sk.J["left_foot"]], 2] = 0.05          # left stands still on the floor
+    P[:, [sk.J["right_ankle"], sk.J["right_foot"]], 2] = 0.05
+    P[:, [sk.J["right_ankle"], sk.J["right_foot"]], 0] = np.arange(30)[:, None] * 0.05   # right slides 1.5 m/s
+    c = ds.foot_contacts(P, 30.0)
+    assert c[:, 0].all() and not c[:, 1].any()
+
+
+def test_sampler_ground_truth_is_consistent(cache):
+    _, files = cache
+    for kind in ("manikin", "fk"):
+        s = ds.WindowSampler(files, window=16, kind=kind, augment=ds.Augment.off(), seed=0)
+        b = s.sample(6)
+        assert b["x"].shape == (6, 16, features.input_dim()) and b["y"].shape == (6, 16, features.output_dim(kind))
+        bt = losses.to_torch(b)
+        _, terms, _ = losses.compute_loss(bt["y"], bt, kind)
+        assert terms["fk"] < 1e-5 and terms.get("mid", 0.0) < 1e-4 and terms.get("swivel", 0.0) < 1e-4
+        m = losses.reduce_metrics([losses.metrics(bt["y"], bt, kind)])
+        assert m["mpjpe_cm"] < 0.05, m          # ground truth through the pipeline = ground truth
+    # augmented batches (speed, scale, noise, six trackers) stay finite and sized
+    s = ds.WindowSampler(files, window=16, devices=("head", "left_hand", "right_hand", "pelvis", "left_foot",
+                                                    "right_foot"), seed=1)
+    b = s.sample(5)
+    assert b["x"].shape == (5, 16, 72) and all(np.isfinite(v).all() for v in b.values())
+
+
+def test_model_size_and_loss_decreases(cache):
+    _, files = cache
+    cfg = ModelConfig(window=16, d_model=32, heads=2, layers=1, head_hidden=32, dropout=0.0)
+    assert count_parameters(PoseNet(ModelConfig())) < 2_000_000
+    torch.manual_seed(0)
+    model = PoseNet(cfg)
+    batch = losses.to_torch(ds.WindowSampler(files, window=16, seed=0).sample(8))
+    opt = torch.optim.Adam(model.parameters(), 3e-3)
+    first = None
+    for _ in range(30):
+        total, _, _ = losses.compute_loss(model(batch["x"]), batch)
+        opt.zero_grad()
+        total.backward()
+        opt.step()
+        first = total.item() if first is None else first
+    assert total.item() < 0.7 * first
+
+
+# --------------------------------------------------------------------------
+# train, resume, export
+def test_train_resume_and_export(cache, bvh_dir, tmp_path):
+    from blender_manikin.training import train, export
+    root, _ = cache
+    common = ["--bvh", bvh_dir, "--cache-dir", root, "--window", "16", "--steps", "6"] + TINY
+    straight = train.main(common + ["--out", str(tmp_path / "a"), "--data-workers", "0"])
+    assert straight["step"] == 6
+    part = train.main(common + ["--out", str(tmp_path / "b"), "--stop-at", "3"])
+    assert part["step"] == 3
+    resumed = train.main(common + ["--out", str(tmp_path / "b"), "--resume"])   # batches made ahead in a worker
+    assert resumed["step"] == 6
+    a = torch.load(tmp_path / "a" / "checkpoint.pt", weights_only=False)
+    b = torch.load(tmp_path / "b" / "checkpoint.pt", weights_only=False)
+    for k in a["model"]:
+        assert torch.allclose(a["model"][k], b["model"][k], atol=1e-6), k
+    assert b["step"] == 6 and "optimizer" in b and b["config"]["d_model"] == 32
+    with pytest.raises(SystemExit):               # no silent overwrite of a run
+        train.main(common + ["--out", str(tmp_path / "b")])
+
+    out = tmp_path / "m.onnx"
+    contract, diff = export.export(str(tmp_path / "b" / "checkpoint.pt"), str(out), quiet=True)
+    assert diff <= 1e-4 and os.path.getsize(out) < 10 * 1024 * 1024
+    c = export.read_contract(str(out))
+    assert c == json.loads(json.dumps(contract))
+    assert c["kind"] == "manikin" and c["window"] == 16 and c["fps"] == 30.0
+    assert [tuple(x) for x in c["output_blocks"]] == list(features.OUTPUT_BLOCKS["manikin"])
+    assert c["joint_names"] == list(sk.JOINT_NAMES) and c["input_devices"] == list(features.INPUT_DEVICES)
+    assert c["normalisation"]["vel_scale"] == features.VEL_SCALE
+    assert c["training_data"]["clips"] == 7 and c["training"]["steps"] == 6
+    assert c["licence"] == "see training data" and "mpjpe_cm" in c["validation"]
+    # the add-on's reader accepts it, and onnxruntime equals torch on a real batch
+    from blender_manikin.core.model_runner import ModelRunner
+    runner = ModelRunner(str(out), threads=1)
+    assert runner.contract.kind == "manikin" and runner.num_parameters == c["num_parameters"]
+    model = PoseNet(ModelConfig.from_dict(b["config"]))
+    model.load_state_dict(b["model"])
+    model.eval()
+    x = ds.WindowSampler(ds.build_cache(bvh_dir, root, verbose=False), window=16, seed=3).sample(3)["x"]
+    with torch.no_grad():
+        ref = model(torch.from_numpy(x)).numpy()
+    assert np.abs(runner.predict(x) - ref).max() < 1e-4
+
+
+def test_fk_kind_six_trackers_causal_export(cache, bvh_dir, tmp_path):
+    from blender_manikin.training import train, export
+    from blender_manikin.core.model_runner import ModelRunner
+    root, _ = cache
+    r = train.main(["--bvh", bvh_dir, "--cache-dir", root, "--window", "12", "--steps", "2", "--kind", "fk",
+                    "--six-trackers", "--causal", "--out", str(tmp_path / "fk")] + TINY)
+    assert r["step"] == 2 and np.isfinite(r["val"]["mpjpe_cm"])
+    out = tmp_path / "fk.onnx"
+    contract, diff = export.export(r["checkpoint"], str(out), quiet=True)
+    assert diff <= 1e-4 and contract["kind"] == "fk" and contract["causal"] is True
+    assert len(contract["input_devices"]) == 6 and contract["input_shape"] == ["batch", 12, 72]
+    assert contract["output_shape"][-1] == features.output_dim("fk")
+    assert ModelRunner(str(out), threads=1).contract.kind == "fk"
+    # causal: a frame's output does not depend on later frames
+    ck = torch.load(r["checkpoint"], weights_only=False)
+    model = PoseNet(ModelConfig.from_dict(ck["config"]))
+    model.load_state_dict(ck["model"])
+    model.eval()
+    x = torch.randn(1, 12, 72)
+    x2 = x.clone()
+    x2[:, 8:] += 1.0
+    with torch.no_grad():
+        assert torch.allclose(model(x)[:, :8], model(x2)[:, :8], atol=1e-6)
+        assert not torch.allclose(model(x)[:, 8:], model(x2)[:, 8:])
