@@ -149,3 +149,25 @@ def test_vectorised_over_limb_subsets():
     phi = ls.swivel_from_positions(pos[:, B[ids]], pos[:, M[ids]], pos[:, E[ids]], wr[:, P[ids]], limb_ids=ids)
     sol = ls.solve_limbs(pos[:, B[ids]], pos[:, E[ids]], phi, body.limb_lengths()[ids], wr[:, P[ids]], limb_ids=ids)
     assert np.abs(sol.mid_pos - pos[:, M[ids]]).max() < 1e-9
+
+
+def test_hip_axial_rotation_is_kept_within_range():
+    """A knee swivel pointing the knee backwards is moved to the hip's limit; the foot stays put."""
+    body = sk.make_body(1.75)
+    rest = body.rest_positions()
+    T = 60
+    base = np.broadcast_to(rest[B], (T, 4, 3)).copy()
+    end = base + np.array([[0.1, -0.25, -0.35], [-0.1, -0.25, -0.35], [0.0, -0.1, -0.75], [0.0, -0.1, -0.75]])
+    R = np.broadcast_to(np.eye(3), (T, 4, 3, 3))
+    phi = np.tile(np.linspace(-np.pi, np.pi, T)[:, None], (1, 4))
+    sol, used = ls.solve_limbs_within_limits(base, end, phi, body.limb_lengths(), R, end_rot=R)
+    bt = ls.base_twist(sol.base_local)
+    lo, hi = -ls.BASE_TWIST_RANGE[:, 1], ls.BASE_TWIST_RANGE[:, 0]
+    assert np.all(bt[:, 2:] >= lo[2:] - 1e-4) and np.all(bt[:, 2:] <= hi[2:] + 1e-4)
+    assert np.allclose(used[:, :2], phi[:, :2])                      # arms untouched
+    inside = (np.abs(phi[:, 2]) < 0.3)
+    assert np.allclose(used[inside, 2], phi[inside, 2])              # natural knees untouched
+    assert not np.allclose(used[:, 2], phi[:, 2])                    # backwards knees moved
+    assert np.abs(sol.end_pos - end).max() < 1e-9 and sol.reach_error.max() < 1e-9
+    knee_dir = sol.mid_pos[:, 2] - (base[:, 2] + end[:, 2]) / 2
+    assert np.all(knee_dir[:, 1] < 0.02)                             # knees never point backwards

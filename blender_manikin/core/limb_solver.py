@@ -56,10 +56,10 @@ Elbow flexion 0-150 (AAOS: Greene & Heckman 1994 give 0-150), knee 0-145
 (ibid.: 0-135 active, ~145 passive).  Forearm pronation 80 / supination 80
 from the T-pose neutral (palm down, elbow crease forward; AAOS).  Shoulder
 internal/external rotation 70/90 and hip 45/45 (AAOS) are measured as the
-twist of the base's local rotation about the bone axis relative to the
-zero-swivel configuration of the same swing and are reported by
-:func:`limit_report` (they constrain φ, which the network predicts from
-data that respect them).  Hinge limits are enforced by clamping the
+twist of the base's local rotation about the bone axis (see
+:func:`base_twist`); :func:`solve_limbs_within_limits` enforces the hip
+range by moving the swivel, the shoulder's is reported by
+:func:`limit_report`.  Hinge limits are enforced by clamping the
 base-end distance to ``[d_min, l1 + l2]``: a target out of reach gets a
 fully extended limb pointing at it and its distance in ``reach_error``; a
 target too close gets the most-flexed elbow/knee.
@@ -311,6 +311,68 @@ def base_twist(base_local, limb_ids=None):
     ids = _ids(limb_ids)
     a0 = np.broadcast_to(A0[ids], base_local.shape[:-1])
     return INTERNAL_SIGN[ids] * rot.twist_angle(base_local, a0)
+
+
+#: limbs whose base axial rotation is enforced by :func:`solve_limbs_within_limits` (hips);
+#: the shoulder's is left to the data-driven swivel (see :func:`solve_limbs_within_limits`)
+ENFORCE_BASE_TWIST = np.array([False, False, True, True])
+
+
+def solve_limbs_within_limits(base_pos, end_pos, swivel, lengths, parent_rot, end_rot=None,
+                              limb_ids=None, iterations=4):
+    """:func:`solve_limbs`, with the swivel moved where it would break a base twist limit.
+
+    For the limbs in :data:`ENFORCE_BASE_TWIST` (the hips: AAOS internal /
+    external rotation 45° / 45°) a swivel that would rotate the thigh beyond
+    its axial range (e.g. a knee pointing backwards) is moved to the nearest
+    angle at the limit by a few secant/Newton steps on the affected frames
+    only; the foot stays exactly on its target.  The shoulder's axial
+    rotation is not clamped: measured from the T-pose it is not the clinical
+    angle (which changes reference with arm elevation), and clamping it
+    would fight the swivel learnt from real motion; it is reported by
+    :func:`limit_report`.  Returns ``(solution, swivel_used)``.
+    """
+    ids = _ids(limb_ids)
+    swivel = np.array(swivel, np.float64, copy=True)
+    sol = solve_limbs(base_pos, end_pos, swivel, lengths, parent_rot, end_rot=end_rot, limb_ids=ids)
+    lo_all = -BASE_TWIST_RANGE[ids, 1]
+    hi_all = BASE_TWIST_RANGE[ids, 0]
+    changed = False
+    base_pos = np.asarray(base_pos, np.float64)
+    end_pos = np.asarray(end_pos, np.float64)
+    parent_rot = np.asarray(parent_rot, np.float64)
+    lengths = np.broadcast_to(np.asarray(lengths, np.float64), swivel.shape + (2,))
+    for k, li in enumerate(ids):
+        if not ENFORCE_BASE_TWIST[li]:
+            continue
+        bt = base_twist(sol.base_local[:, k:k + 1], [li])[:, 0]
+        bad = np.nonzero((bt < lo_all[k]) | (bt > hi_all[k]))[0]
+        if bad.size == 0:
+            continue
+        changed = True
+        args = (base_pos[bad, k:k + 1], end_pos[bad, k:k + 1])
+        rest = dict(lengths=lengths[bad, k:k + 1], parent_rot=parent_rot[bad, k:k + 1],
+                    end_rot=None if end_rot is None else np.asarray(end_rot)[bad, k:k + 1], limb_ids=[li])
+
+        def twist_at(phi):
+            s = solve_limbs(*args, phi[:, None], **rest)
+            return base_twist(s.base_local, [li])[:, 0]
+
+        phi = swivel[bad, k]
+        for _ in range(iterations):
+            t = twist_at(phi)
+            goal = np.clip(t, lo_all[k], hi_all[k])
+            err = np.angle(np.exp(1j * (t - goal)))
+            if np.all(np.abs(err) < 1e-6):
+                break
+            eps = 1e-4
+            slope = np.angle(np.exp(1j * (twist_at(phi + eps) - t))) / eps
+            slope = np.where(np.abs(slope) < 0.1, np.sign(slope + 1e-12) * 0.1, slope)
+            phi = phi - np.where(np.abs(err) < 1e-6, 0.0, err / slope)
+        swivel[bad, k] = np.angle(np.exp(1j * phi))
+    if changed:
+        sol = solve_limbs(base_pos, end_pos, swivel, lengths, parent_rot, end_rot=end_rot, limb_ids=ids)
+    return sol, swivel
 
 
 def limit_report(solution: LimbSolution, limb_ids=None):

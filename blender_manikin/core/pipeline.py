@@ -15,7 +15,9 @@
    when the recording has them;
 5. the analytic limb solver for the four limbs with the predicted swivel
    angles: hands land exactly on their targets (when an arm cannot reach,
-   the collar is swung towards the target first) and legs on the feet.
+   the collar is swung towards the target first) and legs on the feet; a
+   predicted knee swivel that would turn the thigh beyond the hip's axial
+   range is moved to the limit.
 
 Shapes: targets ``(T, 3)`` positions (metres, Blender axes, floor z = 0) and
 ``(T, 3, 3)`` orientations per device; results in :class:`PoseResult`.
@@ -326,11 +328,11 @@ def solve(targets: TrackerTargets, body: Body, runner=None, progress=None, lock_
     par = world[:, ls.LIMB_PARENT]
     ends = np.stack([targets.pos["left_hand"], targets.pos["right_hand"], ankle_pos[:, 0], ankle_pos[:, 1]], 1)
     end_rot = np.stack([targets.rot["left_hand"], targets.rot["right_hand"], ankle_rot[:, 0], ankle_rot[:, 1]], 1)
-    sol = ls.solve_limbs(base, ends, net.swivel, body.limb_lengths(), par, end_rot=end_rot)
+    sol, swivel = ls.solve_limbs_within_limits(base, ends, net.swivel, body.limb_lengths(), par,
+                                               end_rot=end_rot)
     local[:, ls.LIMB_BASE] = sol.base_local
     local[:, ls.LIMB_MID] = sol.mid_local
     local[:, ls.LIMB_END] = sol.end_local
-    swivel = net.swivel.copy()
     if lower_body == "fk":
         if fk_runner is None:
             raise ValueError("lower_body='fk' needs fk_runner (the network-only model)")
