@@ -1,11 +1,12 @@
 #!/usr/bin/env bash
 # Create (or reuse) a virtual environment with everything the add-on's tests
 # and the batch converter need.  Usage: bash tools/setup.sh [VENV_DIR] [REQUIREMENTS]
-# Defaults: .venv and requirements-test.txt (bpy 5.0.1, Python 3.11).
+# Defaults: .venv and requirements-train.txt (bpy 5.0.1, onnxruntime, pytest, plus the
+# CPU build of torch 2.13.0 and onnx for the training tests; Python 3.11).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 VENV="${1:-.venv}"
-REQ="${2:-requirements-test.txt}"
+REQ="${2:-requirements-train.txt}"
 PY="${PYTHON:-python3.11}"
 command -v "$PY" >/dev/null 2>&1 || PY=python3
 if [ ! -x "$VENV/bin/python" ]; then
