@@ -175,7 +175,7 @@ def calibrate(config: SolveConfig, targets: TrackerTargets, times, offsets):
         t = cand.time
     try:
         res = cal.calibrate(targets, time=t, offsets=offsets, t0=t0, measurements=meas)
-        body = sk.make_body(res.measurements)
+        body = cal.body_for(res.measurements)
     except ValueError as exc:
         raise SolveError(f"calibration at {t - t0:.2f} s: {exc}") from exc
     info.append(f"calibrated on a {res.pose}-pose at {t - t0:.2f} s: stature "

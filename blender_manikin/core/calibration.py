@@ -371,3 +371,26 @@ def calibrate(targets: TrackerTargets, time=None, offsets=None, window=0.25, pos
     if strict and problems:
         raise CalibrationError(f"not a usable {kind}-pose at {time:.2f} s: " + "; ".join(problems))
     return result
+
+
+#: metres added to each arm when a body is built from a measured span (see :func:`body_for`)
+REACH_MARGIN = 0.01
+
+
+def body_for(measurements: BodyMeasurements, reach_margin: float = REACH_MARGIN):
+    """The :class:`~.skeleton.Body` to solve with, from calibrated measurements.
+
+    A span measured in a T-pose is the wrist distance with *locked* elbows;
+    building the arms exactly that long leaves no slack for the ~1 cm the
+    predicted shoulders may be off, and the hands would miss fully
+    extended targets.  Each arm gets ``reach_margin`` metres (default 1 cm,
+    below the uncertainty of a controller-to-wrist offset), so such targets
+    stay reachable with a barely bent elbow.  Without an arm span the
+    proportions are used unchanged.
+    """
+    from dataclasses import replace
+    m = measurements
+    if m.arm_span is not None and m.upper_arm is None and m.forearm is None:
+        m = replace(m, arm_span=float(m.arm_span) + 2.0 * float(reach_margin))
+    return make_body(m)
+

