@@ -2,7 +2,7 @@
 
     python benchmarks/bench_pose.py [--bvh ../shared/data/bandai-namco-motion.tar.xz]
         [--model blender_manikin/models/manikin_s.onnx]
-        [--fk-model blender_manikin/models/baseline_fk.onnx] [--max-clips N]
+        [--fk-model benchmarks/models/baseline_fk.onnx] [--max-clips N]
 
 For every validation clip of the training cache (whole takes the network
 never saw, see ``training/dataset.py``) the ground truth is posed by FK on
@@ -62,7 +62,8 @@ def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--bvh", default=DEFAULT_BVH, help="the training source (folder or archive)")
     ap.add_argument("--model", default=os.path.join(MODELS_DIR, "manikin_s.onnx"))
-    ap.add_argument("--fk-model", default=os.path.join(MODELS_DIR, "baseline_fk.onnx"))
+    ap.add_argument("--fk-model", default=os.path.join(ROOT, "benchmarks", "models", "baseline_fk.onnx"),
+                    help="the network-only baseline (kind fk; not shipped in the add-on)")
     ap.add_argument("--max-clips", type=int, default=0, help="limit the validation clips (0: all)")
     ap.add_argument("--markdown", action="store_true", help="print only the table")
     args = ap.parse_args(argv)
