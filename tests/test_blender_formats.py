@@ -12,22 +12,12 @@ import pytest
 
 bpy = pytest.importorskip("bpy")
 
-import blender_manikin  # noqa: E402
 from blender_manikin.core import rotations as rot  # noqa: E402
 from blender_manikin.core.io_csv import write_csv  # noqa: E402
 from blender_manikin.core.recording import TrackerStream, from_blender  # noqa: E402
 
-from blender_util import fresh_scene  # noqa: E402
 from fixtures_recordings import bsor_bytes  # noqa: E402
-from test_blender_pipeline import _check_wrists, _solve, upright_motion  # noqa: E402
-
-
-@pytest.fixture
-def addon():
-    fresh_scene()
-    blender_manikin.register()
-    yield
-    blender_manikin.unregister()
+from test_blender_pipeline import _check_wrists, _solve, addon, upright_motion  # noqa: E402,F401
 
 
 def _streams(res, rates, jitter, seed=0):
