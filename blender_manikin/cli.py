@@ -52,13 +52,20 @@ def build_parser():
     s = sub.add_parser("solve", help="solve recordings and write animation files")
     s.add_argument("inputs", nargs="+", metavar="INPUT", help="recording files or folders")
     s.add_argument("--out", required=True, metavar="DIR", help="output folder (created if missing)")
-    s.add_argument("--axes", choices=("openxr", "unity", "blender"), default=None)
-    s.add_argument("--units", choices=("m", "cm", "mm"), default=None)
-    s.add_argument("--fps", type=float, default=30.0)
-    s.add_argument("--calibration-time", type=float, default=None, metavar="SECONDS")
-    s.add_argument("--height", type=float, default=None, metavar="METRES")
-    s.add_argument("--arm-span", type=float, default=None, metavar="METRES")
-    s.add_argument("--offsets", default="none", metavar="none|PRESET|FILE")
+    s.add_argument("--axes", choices=("openxr", "unity", "blender"), default=None,
+                   help="axes of the input (default: the file's metadata; OpenXR for CSV, Unity for .bsor)")
+    s.add_argument("--units", choices=("m", "cm", "mm"), default=None,
+                   help="position units of the input (default: the file's metadata, else metres)")
+    s.add_argument("--fps", type=float, default=30.0, help="frame rate of the output animation (default 30)")
+    s.add_argument("--calibration-time", type=float, default=None, metavar="SECONDS",
+                   help="calibrate on the T-pose this many seconds after the first sample "
+                        "(default: the most T-pose-like moment, else the standing head height)")
+    s.add_argument("--height", type=float, default=None, metavar="METRES", help="performer's stature")
+    s.add_argument("--arm-span", type=float, default=None, metavar="METRES",
+                   help="wrist-to-wrist distance in a T-pose")
+    s.add_argument("--offsets", default="auto", metavar="auto|none|PRESET|FILE",
+                   help="device-to-joint offsets: a preset name, a JSON file, or auto (default: the "
+                        "recording's '# offsets:' metadata, beat_saber for .bsor, else none)")
     s.add_argument("--format", default=",".join(DEFAULT_FORMATS), metavar="LIST",
                    help="comma-separated: " + ",".join(FORMATS))
     s.add_argument("--bvh-units", choices=("cm", "m"), default="cm")

@@ -169,7 +169,8 @@ def main(argv=None):
     write_csv(out, rec, axes="openxr", units="m",
               metadata={"description": "T-pose 0-1 s, then walking in place, right-hand reach 2.3-4.1 s, "
                                        "left-hand wave 4.3-6.9 s",
-                        "devices": "head 90 Hz, hands 72 Hz (OpenXR view and grip poses)"})
+                        "devices": "head 90 Hz, hands 72 Hz (OpenXR view and grip poses)",
+                        "offsets": "openxr_generic"})
     print(f"wrote {out} ({os.path.getsize(out) / 1024:.0f} KiB)")
 
 

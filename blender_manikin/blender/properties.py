@@ -39,8 +39,9 @@ def _preset_items(self, context):
             desc = {n: device_offsets.get_preset(n).get("description", "") for n in names}
         except Exception:          # pragma: no cover - module missing
             names, desc = ("none",), {"none": "Device poses are the joint poses"}
-        _preset_items_cache = [(n, n.replace("_", " ").title() if n != "none" else "None", desc[n])
-                               for n in names]
+        _preset_items_cache = [("auto", "Auto", "From the recording: its '# offsets:' metadata, "
+                                                "Beat Saber for .bsor replays, else None")] + \
+            [(n, n.replace("_", " ").title() if n != "none" else "None", desc[n]) for n in names]
     return _preset_items_cache
 
 

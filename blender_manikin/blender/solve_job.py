@@ -62,7 +62,8 @@ class SolveConfig:
     sample) or ``"MEASURE"`` (``height`` and optional ``arm_span``, metres).
     With TPOSE/AUTO a given ``height`` overrides the measured stature.
     offsets: device offsets preset name (``"none"`` when the devices already
-    give joint poses) or an offsets dict (:mod:`core.device_offsets`).  frame_start: scene frame of the first solved frame;
+    give joint poses; ``"auto"``: see :func:`resolve_offsets`) or an offsets
+    dict (:mod:`core.device_offsets`).  frame_start: scene frame of the first solved frame;
     max_frames: crop (None = whole recording).
     live_rig: convert the solved armature to the live swivel rig
     (:mod:`.live_rig`): elbows/knees follow the swivel properties and the
@@ -77,7 +78,7 @@ class SolveConfig:
     tpose_time: float | None = None
     height: float | None = None
     arm_span: float | None = None
-    offsets: str = "none"
+    offsets: str = "auto"
     frame_start: int = 1
     max_frames: int | None = None
     create_trackers: bool = False
@@ -108,6 +109,24 @@ def resample_recording(recording, fps):
     """``(times, pos, quat, valid, report)`` on a grid at ``fps`` (see :func:`core.resample.resample`)."""
     from ..core.resample import resample
     return resample(recording, fps)
+
+
+def resolve_offsets(offsets, recording):
+    """``"auto"`` → the preset the recording implies, else ``offsets`` unchanged.
+
+    auto: the file's ``# offsets: PRESET`` metadata when it names a preset;
+    ``beat_saber`` for a ``.bsor`` replay (its hand poses are saber poses);
+    otherwise ``none`` (the device poses are taken as joint poses).
+    """
+    if not (isinstance(offsets, str) and offsets.lower() == "auto"):
+        return offsets
+    from ..core import device_offsets
+    meta = (getattr(recording, "metadata", None) or {}).get("offsets")
+    if isinstance(meta, str) and meta.strip() in device_offsets.PRESET_NAMES:
+        return meta.strip()
+    if str(getattr(recording, "source", "")).lower().endswith(".bsor"):
+        return "beat_saber"
+    return "none"
 
 
 def make_targets(times, pos, quat, valid, fps, offsets="none"):
@@ -276,7 +295,8 @@ class SolveJob:
             pos = {d: v[:n] for d, v in pos.items()}
             quat = {d: v[:n] for d, v in quat.items()}
             valid = {d: v[:n] for d, v in valid.items()}
-        self.targets, offsets = make_targets(times, pos, quat, valid, cfg.fps, cfg.offsets)
+        self.targets, offsets = make_targets(times, pos, quat, valid, cfg.fps,
+                                             resolve_offsets(cfg.offsets, self.recording))
         self.timings["resample"] = _time.perf_counter() - t
         self._set(_P_RESAMPLE, "calibrating")
         t = _time.perf_counter()
@@ -402,6 +422,7 @@ def find_tpose_time(config: SolveConfig, context=None):
     if config.fps is None:
         raise SolveError("no frame rate: set fps")
     times, pos, quat, valid, _ = resample_recording(job.recording, config.fps)
-    targets, _ = make_targets(times, pos, quat, valid, config.fps, config.offsets)
+    targets, _ = make_targets(times, pos, quat, valid, config.fps,
+                              resolve_offsets(config.offsets, job.recording))
     cand = cal.find_tpose(targets, t0=float(times[0]))
     return float(cand.time - times[0]), cand

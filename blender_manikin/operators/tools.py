@@ -55,6 +55,9 @@ class MANIKIN_OT_load_offsets_preset(Operator):
         from ..core import device_offsets
         s = context.scene.manikin
         name = self.preset or s.offsets_preset
+        if name == "auto":
+            self.report({'ERROR'}, "MANIKIN: choose a preset to edit (Auto picks one per recording)")
+            return {'CANCELLED'}
         try:
             data = device_offsets.get_preset(name)
         except ValueError as exc:
