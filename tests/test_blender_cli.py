@@ -120,3 +120,14 @@ def test_blender_binary(tmp_path):
                         os.path.join(ROOT, "blender_manikin", "cli.py"), "--", "solve", str(bad),
                         "--out", str(tmp_path / "o")], capture_output=True, text=True, timeout=300)
     assert p.returncode == 1 and "bad.csv" in p.stderr
+
+
+def test_offsets_auto_resolution():
+    from types import SimpleNamespace as NS
+    from blender_manikin.blender.solve_job import resolve_offsets
+    assert resolve_offsets("auto", NS(metadata={"offsets": "quest_touch"}, source="a.csv")) == "quest_touch"
+    assert resolve_offsets("auto", NS(metadata={"offsets": "no_such"}, source="a.csv")) == "none"
+    assert resolve_offsets("auto", NS(metadata={}, source="/x/replay.BSOR")) == "beat_saber"
+    assert resolve_offsets("auto", NS(metadata={}, source="a.csv")) == "none"
+    assert resolve_offsets("index_knuckles", NS(metadata={"offsets": "quest_touch"}, source="a.csv")) == \
+        "index_knuckles"
