@@ -54,7 +54,10 @@ def test_reach_collars_brings_far_hand_within_reach():
     L = body.limb_lengths()[0].sum()
     sh = pos[:, sk.J["left_shoulder"]]
     wrists = np.stack([sh + [0.0, -(L + 0.02), 0.0], pos[:, sk.J["right_wrist"]]], 0)
-    new = pl._reach_collars(local.copy(), root, wrists, body)
+    pos0, world0 = (np.array(a) for a in sk.forward_kinematics(local, root, body))
+    new = pl._reach_collars(local.copy(), pos0, world0, wrists, body)
+    assert np.allclose(pos0[:, sk.J["left_shoulder"]],
+                       sk.forward_kinematics(new, root, body)[0][:, sk.J["left_shoulder"]])
     pos2, _ = sk.forward_kinematics(new, root, body)
     d = np.linalg.norm(wrists[0] - pos2[:, sk.J["left_shoulder"]], axis=-1)
     assert np.all(d <= L + 1e-9)

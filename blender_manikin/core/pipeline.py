@@ -34,7 +34,8 @@ from . import rotations as rot
 from .pose_result import PoseResult, TrackerTargets
 from .skeleton import Body, J, NUM_JOINTS, PARENTS, forward_kinematics
 
-CONTACT_THRESHOLD = 0.5
+CONTACT_THRESHOLD = 0.5          # reported contacts
+LOCK_THRESHOLD = 0.8             # feet are locked only where the network is confident
 CONTACT_BLEND_FRAMES = 4
 COLLAR_MAX_SWING = np.radians(25.0)
 
@@ -167,7 +168,7 @@ def _segments(mask):
     return list(zip(np.nonzero(d == 1)[0], np.nonzero(d == -1)[0]))
 
 
-def lock_planted_feet(ankle_pos, contact, threshold=CONTACT_THRESHOLD, blend=CONTACT_BLEND_FRAMES):
+def lock_planted_feet(ankle_pos, contact, threshold=LOCK_THRESHOLD, blend=CONTACT_BLEND_FRAMES):
     """Hold each ankle still while its foot is planted.
 
     ankle_pos ``(T, 2, 3)``; contact ``(T, 2)`` probabilities.  Over each
@@ -209,26 +210,35 @@ def keep_feet_above_floor(ankle_pos, ankle_rot, body: Body, floor=0.0):
     return out
 
 
-def _torso_fk(root_rot, torso_rot, head_rot, head_pos, body: Body):
-    """World rotations/positions of pelvis, torso, head, collars, shoulders, hips.
+def _torso_fk(root_rot, torso_rot, head_rot, head_pos, body: Body, root_pos=None):
+    """Torso FK placed so the head joint lands on ``head_pos``.
 
-    The root is placed so the head joint lands on ``head_pos``.  Returns
-    ``(local (T,22,3,3) with torso+head filled, root_pos (T,3))``.
+    Returns ``(local (T,22,3,3) with root, torso and head filled, root_pos
+    (T,3), pos (T,22,3), world (T,22,3,3))``; limb joints are at rest below
+    their bases until the limb solver replaces them.  ``root_pos`` given
+    (a pelvis tracker) overrides the head anchoring.
     """
     T = root_rot.shape[0]
     local = np.broadcast_to(np.eye(3), (T, NUM_JOINTS, 3, 3)).copy()
     local[:, 0] = root_rot
     local[:, list(features.TORSO_LOCAL_IDX)] = torso_rot
-    pos0, world0 = forward_kinematics(local, np.zeros((T, 3)), body)
-    neck = J["neck"]
-    local[:, J["head"]] = np.swapaxes(world0[:, neck], -1, -2) @ head_rot
-    root_pos = head_pos - pos0[:, J["head"]]
-    return local, root_pos
+    pos, world = forward_kinematics(local, np.zeros((T, 3)), body)
+    pos, world = np.array(pos), np.array(world)
+    neck, head = J["neck"], J["head"]
+    local[:, head] = np.swapaxes(world[:, neck], -1, -2) @ head_rot
+    world[:, head] = head_rot
+    if root_pos is None:
+        root_pos = head_pos - pos[:, head]
+    pos += root_pos[:, None]
+    return local, root_pos, pos, world
 
 
-def _reach_collars(local, root_pos, targets_pos, body: Body, max_swing=COLLAR_MAX_SWING):
-    """Swing the collars (≤ ``max_swing``) on frames where a hand is out of reach."""
-    pos, world = forward_kinematics(local, root_pos, body)
+def _reach_collars(local, pos, world, targets_pos, body: Body, max_swing=COLLAR_MAX_SWING):
+    """Swing the collars (≤ ``max_swing``) on frames where a hand is out of reach.
+
+    Updates ``local`` and, on the frames that need it, the collar rotations
+    and shoulder positions in ``pos`` / ``world`` (in place).
+    """
     L = body.limb_lengths()
     for li, side in ((0, "left"), (1, "right")):
         col, sh = J[f"{side}_collar"], J[f"{side}_shoulder"]
@@ -257,6 +267,8 @@ def _reach_collars(local, root_pos, targets_pos, body: Body, max_swing=COLLAR_MA
         Rm = rot.axis_angle_rotation(axis, hi)
         new_world = Rm @ world[f, col]
         local[f, col] = np.swapaxes(world[f, PARENTS[col]], -1, -2) @ new_world
+        world[f, col] = new_world
+        pos[f, sh] = c + np.einsum("nij,j->ni", new_world, body.offsets[sh])
     return local
 
 
@@ -295,16 +307,15 @@ def solve(targets: TrackerTargets, body: Body, runner=None, progress=None, lock_
     if runner.contract.kind != "manikin":
         raise ValueError(f"{runner.path}: solve() needs a MANIKIN model, got kind {runner.contract.kind!r}")
     head_pos, head_rot = targets.pos["head"], targets.rot["head"]
-    local, root_pos = _torso_fk(net.root_rot, net.torso_rot, head_rot, head_pos, body)
     if "pelvis" in targets.pos:   # six-tracker setting: the pelvis tracker wins
-        local[:, 0] = targets.rot["pelvis"]
-        local, root_pos = _torso_fk(targets.rot["pelvis"], local[:, list(features.TORSO_LOCAL_IDX)],
-                                    head_rot, head_pos, body)
-        root_pos = targets.pos["pelvis"]
+        local, root_pos, pos, world = _torso_fk(targets.rot["pelvis"], net.torso_rot, head_rot, head_pos,
+                                                body, root_pos=targets.pos["pelvis"])
+    else:
+        local, root_pos, pos, world = _torso_fk(net.root_rot, net.torso_rot, head_rot, head_pos, body)
     report(0.65)
 
     wrist_pos = np.stack([targets.pos["left_hand"], targets.pos["right_hand"]], 0)
-    local = _reach_collars(local, root_pos, wrist_pos, body)
+    local = _reach_collars(local, pos, world, wrist_pos, body)
 
     # feet
     ankle_pos, ankle_rot = net.ankle_pos.copy(), net.ankle_rot.copy()
@@ -322,8 +333,7 @@ def solve(targets: TrackerTargets, body: Body, runner=None, progress=None, lock_
     ankle_pos = keep_feet_above_floor(ankle_pos, ankle_rot, body)
     report(0.75)
 
-    # limbs
-    pos, world = forward_kinematics(local, root_pos, body)
+    # limbs (bases and their parents from the torso FK above)
     base = pos[:, ls.LIMB_BASE]
     par = world[:, ls.LIMB_PARENT]
     ends = np.stack([targets.pos["left_hand"], targets.pos["right_hand"], ankle_pos[:, 0], ankle_pos[:, 1]], 1)
