@@ -64,14 +64,11 @@ def test_inference_hands_on_trackers_and_feet_above_floor(runner, example):
     assert np.abs(pos[:, sk.J["head"]] - targets.pos["head"]).max() < 1e-6
     assert metrics.ground_penetration(pos) < 1e-7                               # cm
     assert pos[..., 2].min() > -1e-9
-    # hinges: elbows and knees only flex within their limits
-    assert np.all(res.contacts.sum(0) > 0)                                       # feet get planted
-    # planted feet do not slide
+    # planted feet do not slide: between two planted frames the ankle moves < 1 mm horizontally
     for k, ankle in enumerate((sk.J["left_ankle"], sk.J["right_ankle"])):
-        c = res.contacts[:, k]
-        inner = c[1:-1] & c[:-2] & c[2:]
-        step = np.linalg.norm(np.diff(pos[:, ankle], axis=0), axis=-1)
-        assert step[1:][inner[:len(step) - 1]].max() < 1e-3 if inner.any() else True
+        both = res.contacts[:-1, k] & res.contacts[1:, k]
+        step = np.linalg.norm(np.diff(pos[:, ankle, :2], axis=0), axis=-1)
+        assert both.any() and step[both].max() < 1e-3
 
 
 def test_solve_is_deterministic_and_any_fps(runner, example):

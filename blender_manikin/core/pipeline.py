@@ -10,7 +10,7 @@
 3. torso FK from the predicted root orientation and torso rotations, placed
    so the head joint lands exactly on its target;
 4. feet: predicted ankle poses lifted so no joint goes below the floor,
-   planted while the predicted contact probability is above 0.5 (position
+   planted while the predicted contact probability is above 0.8 (position
    locked over the contact, blended in and out), or taken from foot trackers
    when the recording has them;
 5. the analytic limb solver for the four limbs with the predicted swivel
@@ -34,8 +34,8 @@ from . import rotations as rot
 from .pose_result import PoseResult, TrackerTargets
 from .skeleton import Body, J, NUM_JOINTS, PARENTS, forward_kinematics
 
-CONTACT_THRESHOLD = 0.5          # reported contacts
-LOCK_THRESHOLD = 0.8             # feet are locked only where the network is confident
+#: a foot is planted (reported and locked) where the network is this confident
+CONTACT_THRESHOLD = 0.8
 CONTACT_BLEND_FRAMES = 4
 COLLAR_MAX_SWING = np.radians(25.0)
 
@@ -168,7 +168,7 @@ def _segments(mask):
     return list(zip(np.nonzero(d == 1)[0], np.nonzero(d == -1)[0]))
 
 
-def lock_planted_feet(ankle_pos, contact, threshold=LOCK_THRESHOLD, blend=CONTACT_BLEND_FRAMES):
+def lock_planted_feet(ankle_pos, contact, threshold=CONTACT_THRESHOLD, blend=CONTACT_BLEND_FRAMES):
     """Hold each ankle still while its foot is planted.
 
     ankle_pos ``(T, 2, 3)``; contact ``(T, 2)`` probabilities.  Over each
