@@ -37,6 +37,8 @@ from .skeleton import Body, J, NUM_JOINTS, PARENTS, forward_kinematics
 #: a foot is planted (reported and locked) where the network is this confident
 CONTACT_THRESHOLD = 0.8
 CONTACT_BLEND_FRAMES = 4
+#: window stride as a fraction of the window (0.5: every frame is seen by two windows)
+WINDOW_STRIDE = 0.5
 COLLAR_MAX_SWING = np.radians(25.0)
 
 
@@ -90,8 +92,13 @@ def resample_pose_targets(pos, rotm, fps_in, fps_out):
     return p, rot.quat_to_matrix(qo), t_in, t_out
 
 
-def run_network(targets: TrackerTargets, body: Body, runner, progress=None):
-    """Windows → onnxruntime → blended per-frame :class:`NetworkOutput` at the scene fps."""
+def run_network(targets: TrackerTargets, body: Body, runner, progress=None, stride=None):
+    """Windows → onnxruntime → blended per-frame :class:`NetworkOutput` at the scene fps.
+
+    stride: frames between window starts at the model's rate (default
+    :data:`WINDOW_STRIDE` × window); smaller strides average more windows per
+    frame (smoother, slower).
+    """
     c = runner.contract
     W = c.window
     fps = float(targets.fps)
@@ -101,7 +108,7 @@ def run_network(targets: TrackerTargets, body: Body, runner, progress=None):
             raise ValueError(f"the pose model needs a '{d}' tracker; the recording has {list(targets.pos)}")
         pos_m[d], rot_m[d], t_in, t_out = resample_pose_targets(targets.pos[d], targets.rot[d], fps, c.fps)
     N = t_out.shape[0]
-    stride = max(W // 2, 1)
+    stride = max(int(stride or round(WINDOW_STRIDE * W)), 1)
     pad = W // 2
     starts = np.arange(-pad, max(N - pad, 1), stride)
     idx = np.clip(starts[:, None] + np.arange(W)[None], 0, N - 1)          # (B, W) edge padding
