@@ -37,6 +37,8 @@ from .skeleton import Body, J, NUM_JOINTS, PARENTS, forward_kinematics
 #: a foot is planted (reported and locked) where the network is this confident
 CONTACT_THRESHOLD = 0.8
 CONTACT_BLEND_FRAMES = 4
+#: seconds (Gaussian sigma) of smoothing of the locked ankle paths, so locking adds no jerk
+LOCK_SMOOTH_S = 0.05
 #: window stride as a fraction of the window (0.5: every frame is seen by two windows)
 WINDOW_STRIDE = 0.5
 COLLAR_MAX_SWING = np.radians(25.0)
@@ -202,6 +204,21 @@ def lock_planted_feet(ankle_pos, contact, threshold=CONTACT_THRESHOLD, blend=CON
     return out
 
 
+def smooth_frames(x, sigma):
+    """Gaussian smoothing along axis 0 (``sigma`` in frames, edges held), vectorised."""
+    x = np.asarray(x, np.float64)
+    if sigma <= 0 or x.shape[0] < 3:
+        return x.copy()
+    r = int(np.ceil(3 * sigma))
+    k = np.exp(-0.5 * (np.arange(-r, r + 1) / sigma) ** 2)
+    k /= k.sum()
+    pad = np.concatenate([np.repeat(x[:1], r, 0), x, np.repeat(x[-1:], r, 0)], 0)
+    out = np.zeros_like(x)
+    for i, w in enumerate(k):
+        out += w * pad[i:i + x.shape[0]]
+    return out
+
+
 def keep_feet_above_floor(ankle_pos, ankle_rot, body: Body, floor=0.0):
     """Lift ankle targets so the ankle and the foot (ball) joint stay above ``floor``.
 
@@ -280,7 +297,7 @@ def _reach_collars(local, pos, world, targets_pos, body: Body, max_swing=COLLAR_
 
 
 def solve(targets: TrackerTargets, body: Body, runner=None, progress=None, lock_feet=True,
-          fk_runner=None, lower_body="ik"):
+          fk_runner=None, lower_body="ik", stride=None):
     """Full-body pose for every frame of ``targets``.
 
     runner: a :class:`~.model_runner.ModelRunner` (default: the shipped model).
@@ -309,7 +326,7 @@ def solve(targets: TrackerTargets, body: Body, runner=None, progress=None, lock_
 
     import time
     t_start = time.perf_counter()
-    net = run_network(targets, body, runner, progress=lambda x: report(0.6 * x))
+    net = run_network(targets, body, runner, progress=lambda x: report(0.6 * x), stride=stride)
     t_net = time.perf_counter()
     if runner.contract.kind != "manikin":
         raise ValueError(f"{runner.path}: solve() needs a MANIKIN model, got kind {runner.contract.kind!r}")
@@ -333,7 +350,7 @@ def solve(targets: TrackerTargets, body: Body, runner=None, progress=None, lock_
             ankle_rot[:, k] = targets.rot[d]
     contact = net.contact.copy()
     if lock_feet:
-        locked = lock_planted_feet(ankle_pos, contact)
+        locked = smooth_frames(lock_planted_feet(ankle_pos, contact), LOCK_SMOOTH_S * targets.fps)
         for k in range(2):
             if not foot_tracked[k]:
                 ankle_pos[:, k] = locked[:, k]
