@@ -350,7 +350,10 @@ def solve(targets: TrackerTargets, body: Body, runner=None, progress=None, lock_
             ankle_rot[:, k] = targets.rot[d]
     contact = net.contact.copy()
     if lock_feet:
-        locked = smooth_frames(lock_planted_feet(ankle_pos, contact), LOCK_SMOOTH_S * targets.fps)
+        locked = lock_planted_feet(ankle_pos, contact)
+        # ease the blends in and out of each plant (no jerk); planted frames stay exactly put
+        planted = (contact > CONTACT_THRESHOLD)[..., None]
+        locked = np.where(planted, locked, smooth_frames(locked, LOCK_SMOOTH_S * targets.fps))
         for k in range(2):
             if not foot_tracked[k]:
                 ankle_pos[:, k] = locked[:, k]
