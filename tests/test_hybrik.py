@@ -2,7 +2,6 @@ import numpy as np
 import pytest
 
 from blender_manikin.core import hybrik
-from blender_manikin.core import limb_solver as ls
 from blender_manikin.core import rotations as rot
 from blender_manikin.core import skeleton as sk
 from pose_sampling import random_pose
