@@ -11,21 +11,14 @@ from __future__ import annotations
 import bpy
 
 from .blender import properties
+from .blender.class_registry import register_classes, unregister_classes
 from . import operators, panels
 
 CLASSES = properties.CLASSES + operators.CLASSES + panels.CLASSES
 
 
-def _is_registered(cls):
-    return getattr(cls, "is_registered", False) or \
-        getattr(bpy.types, cls.__name__, None) is cls
-
-
 def register():
-    for cls in CLASSES:
-        if _is_registered(cls):          # tolerate a second register() without unregister()
-            bpy.utils.unregister_class(cls)
-        bpy.utils.register_class(cls)
+    register_classes(CLASSES)            # tolerates a second register() without unregister()
     bpy.types.Scene.manikin = bpy.props.PointerProperty(type=properties.MANIKIN_Settings)
 
 
@@ -37,6 +30,4 @@ def unregister():
         solve._ACTIVE["job"] = None
     if hasattr(bpy.types.Scene, "manikin"):
         del bpy.types.Scene.manikin
-    for cls in reversed(CLASSES):
-        if _is_registered(cls):
-            bpy.utils.unregister_class(cls)
+    unregister_classes(CLASSES)

@@ -54,7 +54,7 @@ import numpy as np
 
 from .recording import (
     Recording, RecordingError, TrackerStream, UNITS, canonical_axes, canonical_units,
-    increasing_mask, to_blender,
+    increasing_mask, read_file_bytes, to_blender,
 )
 from .rotations import normalize
 
@@ -135,11 +135,7 @@ def read_bsor(path, axes=None, units=None) -> Recording:
     truncated or corrupted files.
     """
     path = os.fspath(path)
-    try:
-        with open(path, "rb") as fh:
-            data = fh.read()
-    except OSError as exc:
-        raise RecordingError(f"cannot read file ({exc.strerror or exc})", path=path) from None
+    data = read_file_bytes(path)
     if not data:
         raise RecordingError("file is empty", path=path, offset=0)
     return parse_bsor(data, path=path, axes=axes, units=units)

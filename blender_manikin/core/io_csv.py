@@ -44,7 +44,7 @@ import numpy as np
 from .pose_result import DEVICES
 from .recording import (
     Recording, RecordingError, TrackerStream, UNITS, canonical_axes, canonical_device,
-    canonical_units, from_blender, to_blender,
+    canonical_units, from_blender, read_file_bytes, to_blender,
 )
 from .rotations import normalize
 
@@ -87,11 +87,7 @@ def read_csv(path, axes=None, units=None) -> Recording:
     ``metadata['axes']``/``['units']`` set to what was applied.
     """
     path = os.fspath(path)
-    try:
-        with open(path, "rb") as fh:
-            raw = fh.read()
-    except OSError as exc:
-        raise RecordingError(f"cannot read file ({exc.strerror or exc})", path=path) from None
+    raw = read_file_bytes(path)
     try:
         text = raw.decode("utf-8-sig")
     except UnicodeDecodeError as exc:

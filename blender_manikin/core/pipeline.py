@@ -24,6 +24,7 @@ Shapes: targets ``(T, 3)`` positions (metres, Blender axes, floor z = 0) and
 """
 from __future__ import annotations
 
+import time
 from dataclasses import dataclass
 
 import numpy as np
@@ -324,7 +325,6 @@ def solve(targets: TrackerTargets, body: Body, runner=None, progress=None, lock_
         if progress is not None:
             progress(x)
 
-    import time
     t_start = time.perf_counter()
     net = run_network(targets, body, runner, progress=lambda x: report(0.6 * x), stride=stride)
     t_net = time.perf_counter()

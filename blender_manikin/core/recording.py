@@ -104,6 +104,15 @@ class RecordingError(ValueError):
         super().__init__(msg)
 
 
+def read_file_bytes(path) -> bytes:
+    """The whole file, or :class:`RecordingError` naming it and why it cannot be read."""
+    try:
+        with open(path, "rb") as fh:
+            return fh.read()
+    except OSError as exc:
+        raise RecordingError(f"cannot read file ({exc.strerror or exc})", path=path) from None
+
+
 def canonical_axes(axes) -> str:
     """Canonical axes name (see :data:`AXES`) for ``axes`` (case-insensitive, aliases allowed)."""
     key = str(axes).strip().lower()

@@ -14,6 +14,7 @@ import bpy
 from bpy.props import EnumProperty, FloatProperty, IntProperty, BoolProperty
 from bpy.types import Operator
 
+from ..blender.class_registry import register_classes, unregister_classes
 from ..core import skeleton as sk
 
 _LIMB_ITEMS = [('ALL', "All Limbs", "All four limbs")] + [
@@ -186,13 +187,8 @@ CLASSES = (MANIKIN_OT_make_live_rig, MANIKIN_OT_key_swivel, MANIKIN_OT_smooth_sw
 
 
 def register():
-    for cls in CLASSES:
-        if getattr(cls, "is_registered", False):
-            bpy.utils.unregister_class(cls)
-        bpy.utils.register_class(cls)
+    register_classes(CLASSES)
 
 
 def unregister():
-    for cls in reversed(CLASSES):
-        if getattr(cls, "is_registered", False):
-            bpy.utils.unregister_class(cls)
+    unregister_classes(CLASSES)

@@ -14,6 +14,7 @@ import math
 import bpy
 from bpy.types import Panel
 
+from ..blender.class_registry import register_classes, unregister_classes
 from ..core import skeleton as sk
 
 _LABELS = {"left_arm": "Left Elbow", "right_arm": "Right Elbow",
@@ -75,13 +76,8 @@ CLASSES = (MANIKIN_PT_swivel,)
 
 
 def register():
-    for cls in CLASSES:
-        if getattr(cls, "is_registered", False):
-            bpy.utils.unregister_class(cls)
-        bpy.utils.register_class(cls)
+    register_classes(CLASSES)
 
 
 def unregister():
-    for cls in reversed(CLASSES):
-        if getattr(cls, "is_registered", False):
-            bpy.utils.unregister_class(cls)
+    unregister_classes(CLASSES)
