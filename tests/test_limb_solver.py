@@ -161,13 +161,87 @@ def test_hip_axial_rotation_is_kept_within_range():
     R = np.broadcast_to(np.eye(3), (T, 4, 3, 3))
     phi = np.tile(np.linspace(-np.pi, np.pi, T)[:, None], (1, 4))
     sol, used = ls.solve_limbs_within_limits(base, end, phi, body.limb_lengths(), R, end_rot=R)
-    bt = ls.base_twist(sol.base_local)
-    lo, hi = -ls.BASE_TWIST_RANGE[:, 1], ls.BASE_TWIST_RANGE[:, 0]
-    assert np.all(bt[:, 2:] >= lo[2:] - 1e-4) and np.all(bt[:, 2:] <= hi[2:] + 1e-4)
-    assert np.allclose(used[:, :2], phi[:, :2])                      # arms untouched
+    bt, elev = ls.axial_rotation(sol.base_local)
+    lo, hi = ls.axial_range(elev)
+    assert np.all(bt >= lo - 1e-4) and np.all(bt <= hi + 1e-4)
     inside = (np.abs(phi[:, 2]) < 0.3)
     assert np.allclose(used[inside, 2], phi[inside, 2])              # natural knees untouched
     assert not np.allclose(used[:, 2], phi[:, 2])                    # backwards knees moved
     assert np.abs(sol.end_pos - end).max() < 1e-9 and sol.reach_error.max() < 1e-9
     knee_dir = sol.mid_pos[:, 2] - (base[:, 2] + end[:, 2]) / 2
     assert np.all(knee_dir[:, 1] < 0.02)                             # knees never point backwards
+
+
+def _arm_pose(limb, bone_dir, forearm_dir, l1=0.3, l2=0.25):
+    """Solve one limb (identity parent) with the elbow/knee bent 90° between the two directions."""
+    base = np.zeros((1, 1, 3))
+    mid = base + l1 * rot.normalize(np.asarray(bone_dir, float))
+    end = mid + l2 * rot.normalize(np.asarray(forearm_dir, float))
+    R = np.eye(3)[None, None]
+    phi = ls.swivel_from_positions(base, mid, end, R, limb_ids=[limb])
+    sol = ls.solve_limbs(base, end, phi, np.array([[l1, l2]]), R, limb_ids=[limb])
+    assert np.abs(sol.mid_pos - mid).max() < 1e-9
+    return ls.axial_rotation(sol.base_local, [limb])
+
+
+@pytest.mark.parametrize("limb,medial", [(0, -1.0), (1, 1.0)])
+def test_shoulder_axial_rotation_is_the_clinical_angle(limb, medial):
+    """Arm at the side or abducted 90°, elbow at 90°: forearm forward is 0, towards the
+    body (or down when abducted) is internal rotation, outwards (or up) external."""
+    down, fwd, lat, up = (0, 0, -1), (0, -1, 0), (-medial, 0, 0), (0, 0, 1)
+    cases = [(down, fwd, 0.0, 0.0), (down, (medial, 0, 0), 90.0, 0.0), (down, lat, -90.0, 0.0),
+             (lat, fwd, 0.0, 90.0), (lat, down, 90.0, 90.0), (lat, up, -90.0, 90.0)]
+    for bone, fore, want, want_elev in cases:
+        psi, elev = _arm_pose(limb, bone, fore)
+        assert np.degrees(psi[0, 0]) == pytest.approx(want, abs=1e-6), (bone, fore)
+        assert np.degrees(elev[0, 0]) == pytest.approx(want_elev, abs=1e-6)
+
+
+@pytest.mark.parametrize("limb,medial", [(2, -1.0), (3, 1.0)])
+def test_hip_axial_rotation_is_the_clinical_angle(limb, medial):
+    """Thigh down, knee at 90°: shin straight back is 0; internal hip rotation swings the
+    shin outwards (the knee cap turns in)."""
+    psi, _ = _arm_pose(limb, (0, 0, -1), (0, 1, 0))
+    assert abs(psi[0, 0]) < 1e-9
+    psi, _ = _arm_pose(limb, (0, 0, -1), (-medial, 1, 0))
+    assert np.degrees(psi[0, 0]) == pytest.approx(45.0, abs=1e-6)
+
+
+def test_shoulder_axial_rotation_is_kept_within_range():
+    """Hand in front of the belly, the elbow swept round its whole circle: elbows that would
+    need the humerus turned past the clinical range are moved to the limit, the hand never moves."""
+    body = sk.make_body(1.75)
+    rest = body.rest_positions()
+    T = 91
+    base = np.broadcast_to(rest[B], (T, 4, 3)).copy()
+    L = body.limb_lengths()
+    end = base.copy()
+    end[:, 0] += [-0.12, -0.28, -0.30]           # left hand in front of the belly, elbow bent
+    end[:, 1] += [0.12, -0.28, -0.30]
+    end[:, 2:] += [0.0, -0.1, -0.75]
+    R = np.broadcast_to(np.eye(3), (T, 4, 3, 3))
+    phi = np.tile(np.linspace(-np.pi, np.pi, T)[:, None], (1, 4))
+    raw = ls.solve_limbs(base, end, phi, L, R, end_rot=R)
+    psi_raw, elev_raw = ls.axial_rotation(raw.base_local)
+    lo_raw, hi_raw = ls.axial_range(elev_raw)
+    outside = (psi_raw < lo_raw) | (psi_raw > hi_raw)
+    assert outside[:, :2].any(0).all()                                # the sweep does leave the range
+    sol, used = ls.solve_limbs_within_limits(base, end, phi, L, R, end_rot=R)
+    psi, elev = ls.axial_rotation(sol.base_local)
+    lo, hi = ls.axial_range(elev)
+    assert np.all(psi >= lo - 1e-4) and np.all(psi <= hi + 1e-4)
+    assert np.allclose(used[~outside], phi[~outside])                 # plausible elbows untouched
+    assert not np.allclose(used[:, :2], phi[:, :2])
+    assert np.abs(sol.end_pos - end).max() < 1e-9 and sol.reach_error.max() < 1e-9
+    assert not ls.limit_report(sol)["base_twist"].any()
+    assert ls.limit_report(raw)["base_twist"][:, :2].any()
+
+
+def test_shoulder_axial_limit_widens_with_elevation():
+    lo, hi = ls.axial_range(np.radians([[0.0] * 4, [90.0] * 4, [125.0] * 4]))
+    margin = np.degrees(ls.SHOULDER_PASSIVE_MARGIN)
+    assert np.degrees(hi[0, :2]) == pytest.approx([70 + margin] * 2)
+    assert np.degrees(lo[0, :2]) == pytest.approx([-90 - margin] * 2)
+    assert np.all(hi[1, :2] > hi[0, :2]) and np.all(lo[1, :2] < lo[0, :2])
+    assert np.degrees(hi[2, :2]) == pytest.approx([180, 180]) and np.degrees(lo[2, :2]) == pytest.approx([-180, -180])
+    assert np.degrees(hi[:, 2:]) == pytest.approx(45.0) and np.degrees(lo[:, 2:]) == pytest.approx(-45.0)

@@ -32,6 +32,20 @@ def test_lock_planted_feet_holds_position_during_contact():
     assert step.max() < 0.05                             # eased in and out, no pop
 
 
+def test_lock_planted_feet_horizontal_only_keeps_the_predicted_height():
+    """The pipeline locks x, y (sliding) and leaves z to the network (the knee depends on it)."""
+    T = 60
+    ankle = np.zeros((T, 2, 3))
+    ankle[:, 0, 0] = np.linspace(0, 0.3, T)
+    ankle[:, 0, 2] = 0.08 + 0.01 * np.sin(np.linspace(0, 6, T))
+    contact = np.zeros((T, 2))
+    contact[20:40, 0] = 0.9
+    out = pl.lock_planted_feet(ankle, contact, axes=pl.LOCK_AXES)
+    assert pl.LOCK_AXES == (0, 1)
+    assert np.ptp(out[20:40, 0, 0]) == 0.0 and np.ptp(out[20:40, 0, 1]) == 0.0
+    assert np.allclose(out[:, 0, 2], ankle[:, 0, 2])
+
+
 def test_keep_feet_above_floor():
     body = sk.make_body(1.75)
     T = 5

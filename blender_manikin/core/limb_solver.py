@@ -55,11 +55,12 @@ Limits (degrees)
 Elbow flexion 0-150 (AAOS: Greene & Heckman 1994 give 0-150), knee 0-145
 (ibid.: 0-135 active, ~145 passive).  Forearm pronation 80 / supination 80
 from the T-pose neutral (palm down, elbow crease forward; AAOS).  Shoulder
-internal/external rotation 70/90 and hip 45/45 (AAOS) are measured as the
-twist of the base's local rotation about the bone axis (see
-:func:`base_twist`); :func:`solve_limbs_within_limits` enforces the hip
-range by moving the swivel, the shoulder's is reported by
-:func:`limit_report`.  Hinge limits are enforced by clamping the
+internal/external rotation 70/90 (+20 passive, widening above 60° of arm
+elevation) and hip 45/45 (AAOS) are measured clinically, from the limb
+hanging down with the forearm forward / knee cap forward, carried by the
+minimal swing to the bone's direction (:func:`axial_rotation`,
+:func:`axial_range`); :func:`solve_limbs_within_limits` enforces them by
+moving the swivel, so the hand or foot never moves.  Hinge limits are enforced by clamping the
 base-end distance to ``[d_min, l1 + l2]``: a target out of reach gets a
 fully extended limb pointing at it and its distance in ``reach_error``; a
 target too close gets the most-flexed elbow/knee.
@@ -90,10 +91,19 @@ FLEX_MAX = np.radians([150.0, 150.0, 145.0, 145.0])
 TWIST_RANGE = np.radians([[-80.0, 80.0], [-80.0, 80.0], [0.0, 0.0], [0.0, 0.0]])
 #: sign that turns a twist about a0 into "pronation positive"
 PRONATION_SIGN = np.array([1.0, -1.0, 0.0, 0.0])
-#: base twist limits (internal, external rotation), radians: shoulders, hips
+#: axial rotation limits of the base (internal, external), radians: shoulders, hips (AAOS,
+#: Greene & Heckman 1994); see :func:`axial_range` for how the shoulders' depend on elevation
 BASE_TWIST_RANGE = np.radians([[70.0, 90.0], [70.0, 90.0], [45.0, 45.0], [45.0, 45.0]])
-#: sign taking a twist about a0 to "internal rotation positive"
-INTERNAL_SIGN = np.array([1.0, -1.0, -1.0, 1.0])
+#: added to both shoulder limits (passive range beyond the active clinical one), radians
+SHOULDER_PASSIVE_MARGIN = np.radians(20.0)
+#: arm elevation (radians) where the shoulder's axial limit starts to widen, and where it is gone
+SHOULDER_FADE_ELEVATION = np.radians([60.0, 120.0])
+#: neutral pose for measuring axial rotation, parent frame: bone hanging down, hinge flexing
+#: the forearm forward (arms) / the shin backward (legs)
+AXIAL_NEUTRAL_BONE = np.array([[0, 0, -1.0]] * 4)
+AXIAL_NEUTRAL_FLEX = np.array([[0, -1.0, 0], [0, -1.0, 0], [0, 1.0, 0], [0, 1.0, 0]])
+#: sign taking a rotation about the bone (right-handed) to "internal rotation positive"
+INTERNAL_SIGN = np.array([1.0, -1.0, 1.0, -1.0])
 
 LIMB_BASE = np.array([b for _, b, _, _ in LIMBS])
 LIMB_MID = np.array([m for _, _, m, _ in LIMBS])
@@ -300,53 +310,91 @@ def solve_limbs(base_pos, end_pos, swivel, lengths, parent_rot, end_rot=None, li
                         reach_error=reach_error, swivel=swivel)
 
 
-def base_twist(base_local, limb_ids=None):
-    """Axial rotation of the base joint (radians, internal rotation positive).
+def axial_rotation(base_local, limb_ids=None):
+    """Clinical axial rotation of the shoulder / hip and the limb's elevation.
 
-    Measured as the twist about the rest bone axis of ``R_zero^T R`` where
-    ``R_zero`` is the minimal swing from the rest bone direction to the
-    current one, i.e. the bone's roll away from swinging straight out of the
-    T-pose.  ``base_local``: ``(..., L, 3, 3)``.
+    The rotation is measured as in the clinic, from a neutral pose with the
+    limb hanging straight down (``AXIAL_NEUTRAL_BONE``) and the hinge flexing
+    towards ``AXIAL_NEUTRAL_FLEX`` (elbow: forearm forward; knee: shin
+    backward, knee cap forward).  For any other bone direction ``b`` the
+    neutral flexing direction is carried along by the minimal swing from the
+    hanging direction to ``b`` (the swing-twist parametrisation of Baerlocher
+    & Boulic 2001, ball-and-socket joints), so abducting the arm sideways
+    keeps "forearm forward" as neutral, which is where the AAOS ranges are
+    measured (arm at 90° abduction).  The rotation is the signed angle about
+    ``b`` from that neutral to the actual flexing direction ``f = h × b``
+    (``h`` the mid joint's hinge axis), internal rotation positive.
+
+    base_local: ``(..., L, 3, 3)`` local rotation of the base (parent frame).
+    Returns ``(rotation, elevation)``, both ``(..., L)`` radians; elevation
+    is the angle between the bone and the hanging direction (0 hanging,
+    π/2 horizontal, π straight up, where the measure is undefined).
     """
     ids = _ids(limb_ids)
-    a0 = np.broadcast_to(A0[ids], base_local.shape[:-1])
-    return INTERNAL_SIGN[ids] * rot.twist_angle(base_local, a0)
+    base_local = np.asarray(base_local, np.float64)
+    shape = base_local.shape[:-1]
+    b = np.einsum("...ij,...j->...i", base_local, np.broadcast_to(A0[ids], shape))
+    h = np.einsum("...ij,...j->...i", base_local, np.broadcast_to(H0[ids], shape))
+    f = np.cross(h, b)
+    down = np.broadcast_to(AXIAL_NEUTRAL_BONE[ids], shape)
+    ref = np.einsum("...ij,...j->...i", rot.rotation_between(down, b),
+                    np.broadcast_to(AXIAL_NEUTRAL_FLEX[ids], shape))
+    psi = np.arctan2(_dot(np.cross(ref, f), b), _dot(ref, f))
+    elevation = np.arccos(np.clip(_dot(b, down), -1.0, 1.0))
+    return INTERNAL_SIGN[ids] * psi, elevation
 
 
-#: limbs whose base axial rotation is enforced by :func:`solve_limbs_within_limits` (hips);
-#: the shoulder's is left to the data-driven swivel (see :func:`solve_limbs_within_limits`)
-ENFORCE_BASE_TWIST = np.array([False, False, True, True])
+def axial_range(elevation, limb_ids=None):
+    """Allowed axial rotation ``(lo, hi)`` radians (``(..., L)``, internal positive).
+
+    Hips: AAOS internal / external rotation 45° / 45° at every elevation.
+    Shoulders: AAOS internal 70° / external 90° (measured at 90° abduction)
+    widened by :data:`SHOULDER_PASSIVE_MARGIN` (passive range and soft-tissue
+    give that active clinical ranges leave out; real motion capture goes
+    past the active range in ~2 % of frames).  Above
+    :data:`SHOULDER_FADE_ELEVATION` [0] of elevation the range widens
+    smoothly to no limit at [1]: as the arm approaches vertical its axial
+    rotation loses its clinical reference (Codman's paradox) and the
+    measure's neutral direction turns quickly with small arm motions.
+    """
+    ids = _ids(limb_ids)
+    elevation = np.asarray(elevation, np.float64)
+    internal = np.broadcast_to(BASE_TWIST_RANGE[ids, 0], elevation.shape)
+    external = np.broadcast_to(BASE_TWIST_RANGE[ids, 1], elevation.shape)
+    is_arm = ids < 2
+    e0, e1 = SHOULDER_FADE_ELEVATION
+    x = np.clip((elevation - e0) / (e1 - e0), 0.0, 1.0)
+    fade = x * x * (3.0 - 2.0 * x)                                 # smoothstep 0 → 1
+    hi = np.where(is_arm, internal + SHOULDER_PASSIVE_MARGIN + fade * (np.pi - internal - SHOULDER_PASSIVE_MARGIN),
+                  internal)
+    lo = -np.where(is_arm, external + SHOULDER_PASSIVE_MARGIN + fade * (np.pi - external - SHOULDER_PASSIVE_MARGIN),
+                   external)
+    return lo, hi
 
 
 def solve_limbs_within_limits(base_pos, end_pos, swivel, lengths, parent_rot, end_rot=None,
-                              limb_ids=None, iterations=4):
-    """:func:`solve_limbs`, with the swivel moved where it would break a base twist limit.
+                              limb_ids=None, iterations=6):
+    """:func:`solve_limbs`, with the swivel moved where it would break an axial limit.
 
-    For the limbs in :data:`ENFORCE_BASE_TWIST` (the hips: AAOS internal /
-    external rotation 45° / 45°) a swivel that would rotate the thigh beyond
-    its axial range (e.g. a knee pointing backwards) is moved to the nearest
-    angle at the limit by a few secant/Newton steps on the affected frames
-    only; the foot stays exactly on its target.  The shoulder's axial
-    rotation is not clamped: measured from the T-pose it is not the clinical
-    angle (which changes reference with arm elevation), and clamping it
-    would fight the swivel learnt from real motion; it is reported by
-    :func:`limit_report`.  Returns ``(solution, swivel_used)``.
+    A swivel that would rotate the upper arm or thigh about its own axis
+    beyond :func:`axial_range` (e.g. a knee pointing backwards, an elbow
+    flipped up beside a hanging arm) is moved to the nearest angle at the
+    limit by a few secant/Newton steps on the affected frames only; the
+    hand / foot stays exactly on its target (the swivel circle keeps it
+    there).  Returns ``(solution, swivel_used)``.
     """
     ids = _ids(limb_ids)
     swivel = np.array(swivel, np.float64, copy=True)
     sol = solve_limbs(base_pos, end_pos, swivel, lengths, parent_rot, end_rot=end_rot, limb_ids=ids)
-    lo_all = -BASE_TWIST_RANGE[ids, 1]
-    hi_all = BASE_TWIST_RANGE[ids, 0]
     changed = False
     base_pos = np.asarray(base_pos, np.float64)
     end_pos = np.asarray(end_pos, np.float64)
     parent_rot = np.asarray(parent_rot, np.float64)
     lengths = np.broadcast_to(np.asarray(lengths, np.float64), swivel.shape + (2,))
     for k, li in enumerate(ids):
-        if not ENFORCE_BASE_TWIST[li]:
-            continue
-        bt = base_twist(sol.base_local[:, k:k + 1], [li])[:, 0]
-        bad = np.nonzero((bt < lo_all[k]) | (bt > hi_all[k]))[0]
+        psi, elev = axial_rotation(sol.base_local[:, k:k + 1], [li])
+        lo, hi = axial_range(elev, [li])
+        bad = np.nonzero(((psi < lo) | (psi > hi))[:, 0])[0]
         if bad.size == 0:
             continue
         changed = True
@@ -354,21 +402,24 @@ def solve_limbs_within_limits(base_pos, end_pos, swivel, lengths, parent_rot, en
         rest = dict(lengths=lengths[bad, k:k + 1], parent_rot=parent_rot[bad, k:k + 1],
                     end_rot=None if end_rot is None else np.asarray(end_rot)[bad, k:k + 1], limb_ids=[li])
 
-        def twist_at(phi):
-            s = solve_limbs(*args, phi[:, None], **rest)
-            return base_twist(s.base_local, [li])[:, 0]
+        def excess_at(phi):
+            """Signed angle beyond the nearest limit (0 inside), and the rotation."""
+            s_ = solve_limbs(*args, phi[:, None], **rest)
+            r, e = axial_rotation(s_.base_local, [li])
+            lo_, hi_ = axial_range(e, [li])
+            return (r - np.clip(r, lo_, hi_))[:, 0], r[:, 0]
 
         phi = swivel[bad, k]
         for _ in range(iterations):
-            t = twist_at(phi)
-            goal = np.clip(t, lo_all[k], hi_all[k])
-            err = np.angle(np.exp(1j * (t - goal)))
+            err, r = excess_at(phi)
             if np.all(np.abs(err) < 1e-6):
                 break
             eps = 1e-4
-            slope = np.angle(np.exp(1j * (twist_at(phi + eps) - t))) / eps
+            _, r2 = excess_at(phi + eps)
+            slope = np.angle(np.exp(1j * (r2 - r))) / eps
             slope = np.where(np.abs(slope) < 0.1, np.sign(slope + 1e-12) * 0.1, slope)
-            phi = phi - np.where(np.abs(err) < 1e-6, 0.0, err / slope)
+            step = np.clip(np.where(np.abs(err) < 1e-6, 0.0, err / slope), -0.5, 0.5)
+            phi = phi - step
         swivel[bad, k] = np.angle(np.exp(1j * phi))
     if changed:
         sol = solve_limbs(base_pos, end_pos, swivel, lengths, parent_rot, end_rot=end_rot, limb_ids=ids)
@@ -380,16 +431,15 @@ def limit_report(solution: LimbSolution, limb_ids=None):
 
     Keys: ``reach`` (target out of reach or too close), ``pronation``
     (forearm twist clamped), ``base_twist`` (shoulder/hip axial rotation
-    beyond the AAOS range).
+    outside :func:`axial_range`).
     """
     ids = _ids(limb_ids)
-    bt = base_twist(solution.base_local, ids)
-    lo = -BASE_TWIST_RANGE[ids, 1]
-    hi = BASE_TWIST_RANGE[ids, 0]
+    bt, elev = axial_rotation(solution.base_local, ids)
+    lo, hi = axial_range(elev, ids)
     tol = 1e-9
     tw = solution.elbow_twist
     return {
         "reach": solution.reach_error > 1e-6,
         "pronation": (ids < 2) & ((tw <= TWIST_RANGE[ids, 0] + tol) | (tw >= TWIST_RANGE[ids, 1] - tol)),
-        "base_twist": (bt < lo) | (bt > hi),
+        "base_twist": (bt < lo - 1e-4) | (bt > hi + 1e-4),         # 0.006° solver tolerance
     }

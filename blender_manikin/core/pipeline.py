@@ -10,9 +10,10 @@
 3. torso FK from the predicted root orientation and torso rotations, placed
    so the head joint lands exactly on its target;
 4. feet: predicted ankle poses lifted so no joint goes below the floor,
-   planted while the predicted contact probability is above 0.8 (position
-   locked over the contact, blended in and out), or taken from foot trackers
-   when the recording has them;
+   planted while the predicted contact probability is above 0.8 (horizontal
+   position locked over the contact, blended in and out; the height stays
+   the network's, which keeps the knee consistent with the predicted hips),
+   or taken from foot trackers when the recording has them;
 5. the analytic limb solver for the four limbs with the predicted swivel
    angles: hands land exactly on their targets (when an arm cannot reach,
    the collar is swung towards the target first) and legs on the feet; a
@@ -42,6 +43,10 @@ CONTACT_BLEND_FRAMES = 4
 LOCK_SMOOTH_S = 0.05
 #: window stride as a fraction of the window (0.5: every frame is seen by two windows)
 WINDOW_STRIDE = 0.5
+#: axes a planted ankle is locked on: x, y stop the sliding; locking z too moved the ankle
+#: away from the height the network predicted with the hips and bent the knees wrongly
+#: (held-out knees 2.1 → 2.4 cm, measured with benchmarks/bench_pose.py)
+LOCK_AXES = (0, 1)
 COLLAR_MAX_SWING = np.radians(25.0)
 
 
@@ -178,12 +183,13 @@ def _segments(mask):
     return list(zip(np.nonzero(d == 1)[0], np.nonzero(d == -1)[0]))
 
 
-def lock_planted_feet(ankle_pos, contact, threshold=CONTACT_THRESHOLD, blend=CONTACT_BLEND_FRAMES):
+def lock_planted_feet(ankle_pos, contact, threshold=CONTACT_THRESHOLD, blend=CONTACT_BLEND_FRAMES, axes=(0, 1, 2)):
     """Hold each ankle still while its foot is planted.
 
     ankle_pos ``(T, 2, 3)``; contact ``(T, 2)`` probabilities.  Over each
-    contact run the ankle keeps the (x, y, z) it has at the run's median
-    frame; ``blend`` frames on either side ease in and out linearly.
+    contact run the ankle keeps, on ``axes`` (0, 1, 2 = x, y, z), the
+    coordinates it has at the run's median frame; ``blend`` frames on either
+    side ease in and out linearly.
     Returns a new array.
     """
     out = np.array(ankle_pos, np.float64, copy=True)
@@ -201,7 +207,8 @@ def lock_planted_feet(ankle_pos, contact, threshold=CONTACT_THRESHOLD, blend=CON
             for i in range(b, hi):
                 w[i - lo] = ((b + blend) - i) / (blend + 1)
             w = np.clip(w, 0.0, 1.0)[:, None]
-            out[lo:hi, k] = out[lo:hi, k] * (1 - w) + anchor * w
+            ax = list(axes)
+            out[lo:hi, k, ax] = out[lo:hi, k, ax] * (1 - w) + anchor[ax] * w
     return out
 
 
@@ -350,7 +357,7 @@ def solve(targets: TrackerTargets, body: Body, runner=None, progress=None, lock_
             ankle_rot[:, k] = targets.rot[d]
     contact = net.contact.copy()
     if lock_feet:
-        locked = lock_planted_feet(ankle_pos, contact)
+        locked = lock_planted_feet(ankle_pos, contact, axes=LOCK_AXES)
         # ease the blends in and out of each plant (no jerk); planted frames stay exactly put
         planted = (contact > CONTACT_THRESHOLD)[..., None]
         locked = np.where(planted, locked, smooth_frames(locked, LOCK_SMOOTH_S * targets.fps))

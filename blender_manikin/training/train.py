@@ -71,6 +71,9 @@ def build_parser():
     p.add_argument("--causal", action="store_true", help="live variant: attend to past frames only")
     p.add_argument("--six-trackers", action="store_true", help="inputs: head, hands, pelvis and feet")
     p.add_argument("--lr", type=float, default=1e-3)
+    p.add_argument("--lam", action="append", default=None, metavar="TERM=WEIGHT",
+                   help="override a loss weight of losses.LAMBDA, e.g. --lam mid=1.0 (repeatable; "
+                        "a resumed run keeps its weights unless given again)")
     p.add_argument("--weight-decay", type=float, default=0.01)
     p.add_argument("--warmup", type=int, default=300, help="warm-up steps (at most 5 %% of a step plan)")
     p.add_argument("--ckpt-minutes", type=float, default=5.0, help="checkpoint + validation interval")
@@ -136,7 +139,22 @@ def _save(path, obj):
     os.replace(tmp, path)
 
 
-def evaluate(model, val_batches, kind, devices):
+def parse_lam(items):
+    """``["mid=1.0", ...]`` → ``{"mid": 1.0}``, checked against :data:`losses.LAMBDA`."""
+    from . import losses
+    out = {}
+    for it in items or []:
+        k, sep, v = it.partition("=")
+        if not sep or k.strip() not in losses.LAMBDA:
+            raise SystemExit(f"--lam {it!r}: expected TERM=WEIGHT with TERM one of {sorted(losses.LAMBDA)}")
+        try:
+            out[k.strip()] = float(v)
+        except ValueError:
+            raise SystemExit(f"--lam {it!r}: {v!r} is not a number") from None
+    return out
+
+
+def evaluate(model, val_batches, kind, devices, lam=None):
     import torch
     from . import losses
     model.eval()
@@ -145,7 +163,7 @@ def evaluate(model, val_batches, kind, devices):
         for b in val_batches:
             bt = losses.to_torch(b)
             y = model(bt["x"])
-            tot, _, a = losses.compute_loss(y, bt, kind, devices)
+            tot, _, a = losses.compute_loss(y, bt, kind, devices, lam=lam)
             B = y.shape[0]
             loss_sum += float(tot) * B
             n += B
@@ -190,6 +208,8 @@ def main(argv=None):
         for k in ("seed", "batch", "lr", "weight_decay", "warmup"):
             if k in prev:
                 setattr(args, k, prev[k])
+        if args.lam is None:
+            args.lam = prev.get("lam")
         if args.steps is None and args.minutes is None:
             args.steps, args.minutes = prev.get("steps"), prev.get("minutes")
         cfg = ModelConfig.from_dict(ckpt["config"])
@@ -198,6 +218,7 @@ def main(argv=None):
         args.minutes = 60.0
     if not args.bvh:
         raise SystemExit("--bvh is required")
+    lam = parse_lam(args.lam)
     if ckpt is None:
         devices = SIX_TRACKERS if args.six_trackers else features.INPUT_DEVICES
         cfg = ModelConfig(kind=args.kind, devices=devices, window=args.window, d_model=args.d_model,
@@ -245,7 +266,7 @@ def main(argv=None):
     nparams = count_parameters(model)
     say(f"model: {cfg.kind}, d_model {cfg.d_model}, {cfg.layers} layers, {cfg.heads} heads, window "
         f"{cfg.window}, inputs {list(cfg.devices)}: {nparams:,} parameters; batch {args.batch}, "
-        f"{args.threads} threads; plan: "
+        f"{args.threads} threads; loss weights {dict(losses.LAMBDA, **lam)}; plan: "
         + (f"{args.steps} steps" if args.steps else "") + (" / " if args.steps and args.minutes else "")
         + (f"{args.minutes:g} min" if args.minutes else ""))
 
@@ -267,7 +288,7 @@ def main(argv=None):
                               code_version=__version__, saved=time.strftime("%Y-%m-%d %H:%M:%S")))
 
     def validate():
-        m = evaluate(model, val_batches, cfg.kind, cfg.devices)
+        m = evaluate(model, val_batches, cfg.kind, cfg.devices, lam=lam)
         rec = dict(step=step, minutes=round(elapsed / 60, 2), **{k: round(v, 5) for k, v in m.items()})
         history.append(rec)
         with open(os.path.join(args.out, "metrics.jsonl"), "a") as f:
@@ -297,7 +318,7 @@ def main(argv=None):
                 g["lr"] = args.lr * f
             batch = losses.to_torch(prefetch.get(step))
             y = model(batch["x"])
-            total, terms, _ = losses.compute_loss(y, batch, cfg.kind, cfg.devices)
+            total, terms, _ = losses.compute_loss(y, batch, cfg.kind, cfg.devices, lam=lam)
             opt.zero_grad(set_to_none=True)
             total.backward()
             torch.nn.utils.clip_grad_norm_(model.parameters(), 1.0)
