@@ -381,14 +381,20 @@ def solve(targets: TrackerTargets, body: Body, runner=None, progress=None, lock_
             ankle_pos[:, k] = targets.pos[d]
             ankle_rot[:, k] = targets.rot[d]
     contact = net.contact.copy()
+    contacts = contact > CONTACT_THRESHOLD
     if lock_feet:
         locked = lock_planted_feet(ankle_pos, contact, axes=LOCK_AXES)
         # ease the blends in and out of each plant (no jerk); planted frames stay exactly put
-        planted = (contact > CONTACT_THRESHOLD)[..., None]
+        planted = contacts[..., None]
         locked = np.where(planted, locked, smooth_frames(locked, LOCK_SMOOTH_S * targets.fps))
+        # a foot is reported planted on the frames it is actually held still (not while it
+        # eases from one plant to the next, see lock_planted_feet's max_drift)
+        step = np.linalg.norm(np.diff(locked[..., :2], axis=0), axis=-1)         # (T-1, 2)
+        still_next = np.concatenate([step < 1e-9, np.ones((1, 2), bool)], 0)
         for k in range(2):
             if not foot_tracked[k]:
                 ankle_pos[:, k] = locked[:, k]
+                contacts[:, k] &= still_next[:, k]
     ankle_pos = keep_feet_above_floor(ankle_pos, ankle_rot, body)
     report(0.75)
 
@@ -411,7 +417,7 @@ def solve(targets: TrackerTargets, body: Body, runner=None, progress=None, lock_
         local[:, legs] = fk_net.local_rot[:, [j - 1 for j in legs]]
     report(0.95)
     result = PoseResult(fps=float(targets.fps), body=body, local_rot=local, root_pos=root_pos,
-                        swivel=swivel, contacts=contact > CONTACT_THRESHOLD,
+                        swivel=swivel, contacts=contacts,
                         reach_error=sol.reach_error, targets=targets,
                         timings={"network": t_net - t_start, "solver": time.perf_counter() - t_net})
     report(1.0)
