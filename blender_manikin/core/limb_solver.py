@@ -351,11 +351,14 @@ def axial_range(elevation, limb_ids=None):
     Shoulders: AAOS internal 70° / external 90° (measured at 90° abduction)
     widened by :data:`SHOULDER_PASSIVE_MARGIN` (passive range and soft-tissue
     give that active clinical ranges leave out; real motion capture goes
-    past the active range in ~2 % of frames).  Above
+    past the active range in 2-3 % of arm frames).  Above
     :data:`SHOULDER_FADE_ELEVATION` [0] of elevation the range widens
     smoothly to no limit at [1]: as the arm approaches vertical its axial
     rotation loses its clinical reference (Codman's paradox) and the
     measure's neutral direction turns quickly with small arm motions.
+    ``python benchmarks/bench_limits.py`` reports how much ground-truth
+    mocap breaks these ranges and what enforcing them costs (under 0.5 % of
+    frames, elbows and knees moved by at most 4 mm).
     """
     ids = _ids(limb_ids)
     elevation = np.asarray(elevation, np.float64)

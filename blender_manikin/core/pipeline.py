@@ -12,13 +12,15 @@
 4. feet: predicted ankle poses lifted so no joint goes below the floor,
    planted while the predicted contact probability is above 0.8 (horizontal
    position locked over the contact, blended in and out; the height stays
-   the network's, which keeps the knee consistent with the predicted hips),
-   or taken from foot trackers when the recording has them;
+   the network's, which keeps the knee consistent with the predicted hips;
+   a plant never holds the ankle more than 5 cm from the prediction), or
+   taken from foot trackers when the recording has them;
 5. the analytic limb solver for the four limbs with the predicted swivel
    angles: hands land exactly on their targets (when an arm cannot reach,
    the collar is swung towards the target first) and legs on the feet; a
-   predicted knee swivel that would turn the thigh beyond the hip's axial
-   range is moved to the limit.
+   predicted swivel that would turn the upper arm or thigh beyond the
+   shoulder's or hip's axial range is moved to the limit
+   (:func:`.limb_solver.solve_limbs_within_limits`).
 
 Shapes: targets ``(T, 3)`` positions (metres, Blender axes, floor z = 0) and
 ``(T, 3, 3)`` orientations per device; results in :class:`PoseResult`.
