@@ -251,6 +251,22 @@ def test_train_resume_and_export(cache, bvh_dir, tmp_path):
     assert np.abs(runner.predict(x) - ref).max() < 1e-4
 
 
+def test_resume_with_new_loss_weights(cache, bvh_dir, tmp_path):
+    """Stage 2 of the shipped recipe: resume a run to a longer plan with --lam mid=1."""
+    from blender_manikin.training import train
+    root, _ = cache
+    common = ["--bvh", bvh_dir, "--cache-dir", root, "--window", "16"] + TINY + ["--out", str(tmp_path / "r")]
+    train.main(common + ["--steps", "3"])
+    res = train.main(common + ["--steps", "5", "--resume", "--lam", "mid=1.0"])
+    assert res["step"] == 5
+    ck = torch.load(tmp_path / "r" / "checkpoint.pt", weights_only=False)
+    assert ck["args"]["lam"] == ["mid=1.0"] and ck["step"] == 5
+    assert train.parse_lam(["mid=1", "foot=0.5"]) == {"mid": 1.0, "foot": 0.5}
+    for bad in (["knee=1"], ["mid"], ["mid=x"]):
+        with pytest.raises(SystemExit, match="--lam"):
+            train.parse_lam(bad)
+
+
 def test_fk_kind_six_trackers_causal_export(cache, bvh_dir, tmp_path):
     from blender_manikin.training import train, export
     from blender_manikin.core.model_runner import ModelRunner
