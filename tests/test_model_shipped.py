@@ -62,6 +62,7 @@ def test_inference_hands_on_trackers_and_feet_above_floor(runner, example):
         err = np.linalg.norm(pos[:, j] - targets.pos[dev], axis=-1)
         assert err.max() < 1e-4, (dev, err.max(), int(np.argmax(err)))          # < 0.1 mm, every frame
     assert np.abs(pos[:, sk.J["head"]] - targets.pos["head"]).max() < 1e-6
+    assert res.at_limit.shape == (T, 4) and res.at_limit.dtype == bool
     assert metrics.ground_penetration(pos) < 1e-7                               # cm
     assert pos[..., 2].min() > -1e-9
     # planted feet do not slide: between two planted frames the ankle moves < 1 mm horizontally

@@ -96,3 +96,22 @@ def test_reach_collars_brings_far_hand_within_reach():
     d = np.linalg.norm(wrists[0] - pos2[:, sk.J["left_shoulder"]], axis=-1)
     assert np.all(d <= L + 1e-9)
     assert np.allclose(new[:, sk.J["right_collar"]], np.eye(3))
+
+
+def test_quality_notes_name_what_gave_way():
+    from blender_manikin.core.pose_result import PoseResult
+    body = sk.make_body(1.75)
+    T = 10
+    reach = np.zeros((T, 4))
+    reach[3:5, 1] = [0.02, 0.034]                      # right hand 3.4 cm beyond the arm
+    reach[6, 0] = 0.001                                # 1 mm: within tolerance
+    lim = np.zeros((T, 4), bool)
+    lim[2:9, 2] = True
+    res = PoseResult(fps=30.0, body=body, local_rot=np.broadcast_to(np.eye(3), (T, 22, 3, 3)),
+                     root_pos=np.zeros((T, 3)), swivel=np.zeros((T, 4)), reach_error=reach, at_limit=lim)
+    notes = res.quality_notes()
+    assert notes == ["right hand out of reach on 2 frame(s), by up to 3.4 cm (check the body size)",
+                     "left leg swivel held at the hip's rotation limit on 7 frame(s)"]
+    clean = PoseResult(fps=30.0, body=body, local_rot=res.local_rot, root_pos=res.root_pos,
+                       swivel=res.swivel, reach_error=np.zeros((T, 4)), at_limit=np.zeros((T, 4), bool))
+    assert clean.quality_notes() == []

@@ -379,10 +379,11 @@ class SolveJob:
             self._thread.join(timeout)
 
     def summary(self) -> str:
-        """One line: frames, fps, stature, devices, gaps, timings."""
+        """One line: frames, fps, stature, devices, gaps, where the solve gave way, timings."""
         parts = []
         if self.result is not None:
             parts.append(f"{self.result.num_frames} frames at {self.result.fps:g} fps")
+            parts.extend(self.result.quality_notes())
         if self.body is not None:
             parts.append(f"stature {self.body.stature:.2f} m")
         for note in self.info:

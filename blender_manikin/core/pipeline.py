@@ -421,6 +421,7 @@ def solve(targets: TrackerTargets, body: Body, runner=None, progress=None, lock_
     result = PoseResult(fps=float(targets.fps), body=body, local_rot=local, root_pos=root_pos,
                         swivel=swivel, contacts=contacts,
                         reach_error=sol.reach_error, targets=targets,
+                        at_limit=np.abs(np.angle(np.exp(1j * (swivel - net.swivel)))) > 1e-9,
                         timings={"network": t_net - t_start, "solver": time.perf_counter() - t_net})
     report(1.0)
     return result

@@ -44,6 +44,8 @@ class PoseResult:
     swivel: ``(T, 4)`` radians, limbs in ``LIMB_NAMES`` order.
     contacts: ``(T, 2)`` bool, left/right foot planted.
     reach_error: ``(T, 4)`` metres the limb end missed its target (0 = exact).
+    at_limit: ``(T, 4)`` bool, frames where the swivel was moved to the
+    shoulder's / hip's axial rotation limit (the prediction was implausible).
     Frame k is at time ``t0 + k / fps`` seconds of the recording clock.
     """
     fps: float
@@ -53,6 +55,7 @@ class PoseResult:
     swivel: np.ndarray
     contacts: np.ndarray | None = None
     reach_error: np.ndarray | None = None
+    at_limit: np.ndarray | None = None
     targets: TrackerTargets | None = None
     t0: float = 0.0
     timings: dict = field(default_factory=dict)      # seconds per stage, e.g. network / solver
@@ -78,3 +81,30 @@ class PoseResult:
 
     def swivel_dict(self):
         return {name: self.swivel[:, i] for i, name in enumerate(LIMB_NAMES)}
+
+    def quality_notes(self, reach_tolerance=0.005):
+        """Plain-language notes on where the solve had to give way, for the user.
+
+        One string per limb that missed its target by more than
+        ``reach_tolerance`` metres on some frames (e.g. a hand tracker further
+        than the calibrated arm can reach: check the body size), and per limb
+        whose predicted swivel was moved to a joint limit.  ``[]`` when the
+        solve is clean.
+        """
+        notes = []
+        limb_end = {"left_arm": "left hand", "right_arm": "right hand",
+                    "left_leg": "left foot", "right_leg": "right foot"}
+        if self.reach_error is not None:
+            for i, name in enumerate(LIMB_NAMES):
+                bad = self.reach_error[:, i] > reach_tolerance
+                if bad.any():
+                    notes.append(f"{limb_end[name]} out of reach on {int(bad.sum())} frame(s), by up to "
+                                 f"{100 * float(self.reach_error[:, i].max()):.1f} cm (check the body size)")
+        if self.at_limit is not None:
+            for i, name in enumerate(LIMB_NAMES):
+                n = int(np.count_nonzero(self.at_limit[:, i]))
+                if n:
+                    joint = "shoulder" if "arm" in name else "hip"
+                    notes.append(f"{name.replace('_', ' ')} swivel held at the {joint}'s rotation limit on "
+                                 f"{n} frame(s)")
+        return notes

@@ -30,6 +30,9 @@ def _finish_report(op, context, job):
     for note in job.info:
         if note.startswith("calibration:"):
             op.report({'WARNING'}, note)
+    if job.result is not None:
+        for note in job.result.quality_notes():
+            op.report({'WARNING'}, f"MANIKIN: {note}")
     if job.report is not None:
         for g in getattr(job.report, "gaps", [])[:5]:
             op.report({'INFO'}, f"bridged {g}")
