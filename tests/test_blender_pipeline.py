@@ -129,3 +129,23 @@ def test_shipped_model(addon, tmp_path):
     path = write_recording_csv(tmp_path / "arms.csv", res)
     obj = _solve(path, 1.78)
     assert _check_wrists(obj, 60) < 1e-4
+
+
+def test_job_lengthens_short_proportional_arms_and_says_so():
+    """Measured height only (no arm span, no T-pose used) and too short for the performer's
+    reach: the job re-solves with arms from the recording's reach and notes it."""
+    root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+    cfg = solve_job.SolveConfig(source='FILE', filepath=os.path.join(root, "examples", "example_recording.csv"),
+                                fps=30.0, calibration='MEASURE', height=1.45)
+    job = solve_job.SolveJob(cfg)
+    job.compute()
+    notes = [n for n in job.info if n.startswith("arm span")]
+    assert len(notes) == 1 and "arm span" in job.summary()
+    assert job.body is job.result.body and job.body.stature == pytest.approx(1.45)
+    assert (job.result.reach_error[:, :2] > 0.005).any(1).mean() < 0.02
+    # a given arm span is the user's word: never changed
+    cfg2 = solve_job.SolveConfig(source='FILE', filepath=cfg.filepath, fps=30.0, calibration='MEASURE',
+                                 height=1.45, arm_span=1.2)
+    job2 = solve_job.SolveJob(cfg2)
+    job2.compute()
+    assert not any(n.startswith("arm span") for n in job2.info)

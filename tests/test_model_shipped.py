@@ -85,3 +85,38 @@ def test_solve_is_deterministic_and_any_fps(runner, example):
     shared = np.arange(0, r24.num_frames, 2)              # 24 fps frame 2k == 60 fps frame 5k
     d = np.linalg.norm(r24.positions[shared] - a.positions[shared * 5 // 2], axis=-1)
     assert np.median(d) < 0.03
+
+
+def test_arms_too_short_are_lengthened_from_the_reach(runner, example):
+    """No calibration pose: arms from a too-short span miss the hands; the span the
+    recording's reach asks for (capped at +8 %) brings them back on the trackers."""
+    targets, body, _ = example
+    short = sk.make_body(sk.BodyMeasurements(stature=body.stature, arm_span=1.25))
+    res = pipeline.solve(targets, short, runner)
+    far_before = (res.reach_error[:, :2] > 0.005).any(1).sum()
+    assert far_before > 0.02 * targets.num_frames
+    assert any("out of reach" in n and "body size" in n for n in res.quality_notes())
+    first = calibration.arm_span_for_reach(res)
+    assert first is not None and first > 1.25
+    new_body, again, span = calibration.adapt_arms_to_reach(res, lambda b: pipeline.solve(targets, b, runner))
+    proportional = sk.make_body(body.stature).rest_positions()
+    cap = calibration.MAX_REACH_SPAN_FACTOR * np.linalg.norm(proportional[sk.J["left_wrist"]]
+                                                             - proportional[sk.J["right_wrist"]])
+    assert first <= span <= cap + 1e-9 and again.body is new_body
+    assert (again.reach_error[:, :2] > 0.005).any(1).sum() < 0.1 * far_before
+    # arms that reach are left alone
+    assert calibration.arm_span_for_reach(pipeline.solve(targets, body, runner)) is None
+
+
+def test_hand_on_the_shoulder_is_reported_as_an_offset_problem(runner, example):
+    targets, body, _ = example
+    res0 = pipeline.solve(targets, body, runner)
+    moved = type(targets)(fps=targets.fps, pos={d: v.copy() for d, v in targets.pos.items()},
+                          rot=dict(targets.rot))
+    f = slice(60, 90)
+    moved.pos["right_hand"][f] = res0.positions[f, sk.J["right_shoulder"]] + [0.0, -0.03, -0.03]
+    res = pipeline.solve(moved, body, runner)
+    notes = res.quality_notes()
+    assert any(n.startswith("right hand closer to the shoulder than the elbow can fold") and "device offsets" in n
+               for n in notes), notes
+    assert not any(n.startswith("right hand out of reach") for n in notes)

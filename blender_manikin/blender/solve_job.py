@@ -309,6 +309,7 @@ class SolveJob:
         span = _P_SOLVE - _P_BODY
         result = run_solver(self.targets, self.body,
                             progress=lambda f: self._set(_P_BODY + span * float(f)))
+        result = self._adapt_arms(result, span)
         result.t0 = float(times[0])
         if result.targets is None:
             result.targets = self.targets
@@ -318,6 +319,29 @@ class SolveJob:
             self.timings[f"solve.{k}"] = v
         self._set(_P_SOLVE, "writing")
         return result
+
+    def _adapt_arms(self, result, span):
+        """Lengthen arms built from proportions when the hands cannot reach their trackers.
+
+        Only when no arm span was measured (no T/A-pose calibration) or given:
+        the span comes from :func:`core.calibration.arm_span_for_reach` and the
+        recording is solved again with it.  Notes it in ``self.info``.
+        """
+        from ..core import calibration as cal
+        if self.config.arm_span or any(n.startswith("calibrated") for n in self.info):
+            return result
+        if result.reach_error is None or not (result.reach_error[:, :2] > 0.005).any():
+            return result
+        before = int((result.reach_error[:, :2] > 0.005).any(1).sum())
+        self._set(_P_BODY + 0.5 * span, "solving again with arms for the reach")
+        body, again, new_span = cal.adapt_arms_to_reach(result, lambda b: run_solver(self.targets, b))
+        if new_span is None:
+            return result
+        after = int((again.reach_error[:, :2] > 0.005).any(1).sum())
+        self.info.append(f"arm span {new_span:.2f} m from the recording's reach (no T-pose; hands off their "
+                         f"trackers on {before} frame(s) with proportional arms, {after} now)")
+        self.body = body
+        return again
 
     # -- stage 3 (main thread)
     def write(self, context):
@@ -387,7 +411,7 @@ class SolveJob:
         if self.body is not None:
             parts.append(f"stature {self.body.stature:.2f} m")
         for note in self.info:
-            if note.startswith("calibrated"):
+            if note.startswith(("calibrated", "arm span")):
                 parts.append(note)
         if self.report is not None:
             gaps = getattr(self.report, "gaps", [])

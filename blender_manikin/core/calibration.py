@@ -38,7 +38,7 @@ import numpy as np
 from .device_offsets import validate_offsets
 from .pose_result import TrackerTargets
 from .rotations import geodesic_angle, matrix_to_quat, normalize, orthonormalize, quat_to_matrix, rotation_between
-from .skeleton import PROPORTIONS, BodyMeasurements, make_body
+from .skeleton import J, PROPORTIONS, BodyMeasurements, make_body
 
 #: eye (HMD) height as a fraction of stature (Drillis & Contini, Winter 2009 Fig. 4.1)
 EYE_HEIGHT = 0.936
@@ -394,3 +394,60 @@ def body_for(measurements: BodyMeasurements, reach_margin: float = REACH_MARGIN)
         m = replace(m, arm_span=float(m.arm_span) + 2.0 * float(reach_margin))
     return make_body(m)
 
+
+
+#: the longest wrist-to-wrist span reach adaptation may give, as a multiple of the span the
+#: proportions give for the stature (adult arm span / stature varies by about ±6 %)
+MAX_REACH_SPAN_FACTOR = 1.08
+#: the share of hand samples (%) the adapted arms must reach: arms are only lengthened
+#: when more than 2 % of the samples are out of reach (a few odd frames are not the body)
+REACH_QUANTILE = 98.0
+
+
+def arm_span_for_reach(result, quantile=REACH_QUANTILE, margin=REACH_MARGIN,
+                       max_factor=MAX_REACH_SPAN_FACTOR):
+    """Wrist-to-wrist T-pose span (metres) whose arms reach the hand targets of ``result``.
+
+    For recordings without a calibration pose (a game replay, say), where
+    the arms come from the stature's proportions: the distance from each
+    solved shoulder to its hand target, at the ``quantile`` over frames and both arms, plus
+    ``margin``, is the arm length needed (SparsePoser-style body-size
+    adaptation, from the motion instead of a T-pose).  Returns ``None`` when
+    the proportional arms already reach; never more than ``max_factor``
+    times the proportional span.  ``result``: a
+    :class:`~.pose_result.PoseResult` with ``targets``.
+    """
+    body = result.body
+    if result.targets is None or not {"left_hand", "right_hand"} <= set(result.targets.pos):
+        return None
+    pos = result.positions
+    need = np.concatenate([np.linalg.norm(result.targets.pos[f"{s}_hand"] - pos[:, J[f"{s}_shoulder"]], axis=-1)
+                           for s in ("left", "right")])
+    need = float(np.percentile(need, quantile))
+    arm = float(body.limb_lengths()[:2].sum(-1).mean())
+    if need <= arm:
+        return None
+    rest = body.rest_positions()
+    shoulder_width = float(np.linalg.norm(rest[J["left_shoulder"]] - rest[J["right_shoulder"]]))
+    proportional = float(np.linalg.norm(rest[J["left_wrist"]] - rest[J["right_wrist"]]))
+    return min(shoulder_width + 2.0 * (need + margin), max_factor * proportional)
+
+
+def adapt_arms_to_reach(result, solve, iterations=3):
+    """Lengthen the arms of ``result.body`` until the hands reach (see :func:`arm_span_for_reach`).
+
+    ``solve(body) -> PoseResult`` re-solves the same targets with another
+    body.  Re-solving matters: with longer arms the collars swing less, so
+    the shoulders sit further from far targets and one estimate falls short;
+    a few rounds converge (each only lengthens, up to the cap).  Returns
+    ``(body, result, span)``; ``span`` is None when the arms were left alone.
+    """
+    span = None
+    for _ in range(max(int(iterations), 1)):
+        new = arm_span_for_reach(result)
+        if new is None or (span is not None and new <= span + 1e-3):
+            break
+        span = new
+        body = make_body(BodyMeasurements(stature=result.body.stature, arm_span=span))
+        result = solve(body)
+    return result.body, result, span

@@ -5,7 +5,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .skeleton import Body, LIMB_NAMES, forward_kinematics
+from .skeleton import Body, J, LIMB_NAMES, forward_kinematics
 
 #: device names, in this order wherever devices are listed
 DEVICES = ("head", "left_hand", "right_hand", "pelvis", "left_foot", "right_foot")
@@ -86,20 +86,38 @@ class PoseResult:
         """Plain-language notes on where the solve had to give way, for the user.
 
         One string per limb that missed its target by more than
-        ``reach_tolerance`` metres on some frames (e.g. a hand tracker further
-        than the calibrated arm can reach: check the body size), and per limb
-        whose predicted swivel was moved to a joint limit.  ``[]`` when the
+        ``reach_tolerance`` metres on some frames: further than the arm or leg
+        reaches (check the body size) or closer to the shoulder / hip than the
+        elbow / knee folds (check the device offsets); and one per limb whose
+        predicted swivel was moved to a joint limit.  ``[]`` when the
         solve is clean.
         """
         notes = []
         limb_end = {"left_arm": "left hand", "right_arm": "right hand",
                     "left_leg": "left foot", "right_leg": "right foot"}
         if self.reach_error is not None:
+            pos = self.positions if self.targets is not None else None
             for i, name in enumerate(LIMB_NAMES):
                 bad = self.reach_error[:, i] > reach_tolerance
-                if bad.any():
-                    notes.append(f"{limb_end[name]} out of reach on {int(bad.sum())} frame(s), by up to "
-                                 f"{100 * float(self.reach_error[:, i].max()):.1f} cm (check the body size)")
+                if not bad.any():
+                    continue
+                side = name.split("_")[0]
+                dev = f"{side}_hand" if "arm" in name else f"{side}_foot"
+                far = bad
+                if pos is not None and dev in self.targets.pos:
+                    base = pos[:, J[f"{side}_shoulder" if "arm" in name else f"{side}_hip"]]
+                    reached = pos[:, J[f"{side}_wrist" if "arm" in name else f"{side}_ankle"]]
+                    far = bad & (np.linalg.norm(self.targets.pos[dev] - base, axis=-1)
+                                 > np.linalg.norm(reached - base, axis=-1))
+                close = bad & ~far
+                if far.any():
+                    notes.append(f"{limb_end[name]} out of reach on {int(far.sum())} frame(s), by up to "
+                                 f"{100 * float(self.reach_error[far, i].max()):.1f} cm (check the body size)")
+                if close.any():
+                    notes.append(f"{limb_end[name]} closer to the {'shoulder' if 'arm' in name else 'hip'} than "
+                                 f"the {'elbow' if 'arm' in name else 'knee'} can fold on {int(close.sum())} "
+                                 f"frame(s), by up to {100 * float(self.reach_error[close, i].max()):.1f} cm "
+                                 f"(check the device offsets)")
         if self.at_limit is not None:
             for i, name in enumerate(LIMB_NAMES):
                 n = int(np.count_nonzero(self.at_limit[:, i]))
