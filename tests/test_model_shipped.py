@@ -120,3 +120,11 @@ def test_hand_on_the_shoulder_is_reported_as_an_offset_problem(runner, example):
     assert any(n.startswith("right hand closer to the shoulder than the elbow can fold") and "device offsets" in n
                for n in notes), notes
     assert not any(n.startswith("right hand out of reach") for n in notes)
+    # the collar swings the shoulder away first, so the hand misses by less than the fold limit
+    from blender_manikin.core import limb_solver as ls
+    l1, l2 = body.limb_lengths()[1]
+    d_min = np.sqrt(l1 ** 2 + l2 ** 2 + 2 * l1 * l2 * np.cos(ls.FLEX_MAX[1]))
+    miss = res.reach_error[f, 1]
+    assert miss.max() < d_min - np.hypot(0.03, 0.03) - 0.02
+    assert np.all(np.linalg.norm(res.positions[f, sk.J["right_wrist"]] - res.positions[f, sk.J["right_shoulder"]],
+                                 axis=-1) >= d_min - 1e-6)

@@ -17,7 +17,8 @@
    taken from foot trackers when the recording has them;
 5. the analytic limb solver for the four limbs with the predicted swivel
    angles: hands land exactly on their targets (when an arm cannot reach,
-   the collar is swung towards the target first) and legs on the feet; a
+   or the hand is closer than the elbow folds, the collar is swung towards
+   or away from the target first, up to 25°) and legs on the feet; a
    predicted swivel that would turn the upper arm or thigh beyond the
    shoulder's or hip's axial range is moved to the limit
    (:func:`.limb_solver.solve_limbs_within_limits`).
@@ -293,41 +294,50 @@ def _torso_fk(root_rot, torso_rot, head_rot, head_pos, body: Body, root_pos=None
 
 
 def _reach_collars(local, pos, world, targets_pos, body: Body, max_swing=COLLAR_MAX_SWING):
-    """Swing the collars (≤ ``max_swing``) on frames where a hand is out of reach.
+    """Swing the collars (≤ ``max_swing``) on frames where a hand is out of the arm's range.
 
-    Updates ``local`` and, on the frames that need it, the collar rotations
-    and shoulder positions in ``pos`` / ``world`` (in place).
+    A hand further than the straight arm reaches swings the shoulder towards
+    it; a hand closer to the shoulder than the elbow can fold (hands raised
+    beside the head, say) swings the shoulder away from it.  Each time the
+    smallest swing that brings the hand into range is used.  Updates
+    ``local`` and, on the frames that need it, the collar rotations and
+    shoulder positions in ``pos`` / ``world`` (in place).
     """
     L = body.limb_lengths()
     for li, side in ((0, "left"), (1, "right")):
         col, sh = J[f"{side}_collar"], J[f"{side}_shoulder"]
         wrist = targets_pos[li]
-        reach = L[li].sum() * (1 - 1e-9)
-        far = np.linalg.norm(wrist - pos[:, sh], axis=-1) > L[li].sum() + 1e-9
-        if not far.any():
-            continue
-        f = np.nonzero(far)[0]
-        c = pos[f, col]
-        cur = rot.normalize(pos[f, sh] - c)
-        goal = rot.normalize(wrist[f] - c)
-        r = np.linalg.norm(body.offsets[sh])
-        full = rot.rotation_between(cur, goal)
-        ang_full = rot.geodesic_angle(np.eye(3)[None], full)
-        axis = rot.normalize(rot.matrix_to_axis_angle(full))
-        lo, hi = np.zeros(len(f)), np.minimum(ang_full, max_swing)
-        # smallest swing bringing the wrist within reach (bisection), capped
-        for _ in range(30):
-            mid = 0.5 * (lo + hi)
-            Rm = rot.axis_angle_rotation(axis, mid)
-            s_new = c + r * np.einsum("nij,nj->ni", Rm, cur)
-            ok = np.linalg.norm(wrist[f] - s_new, axis=-1) <= reach
-            hi = np.where(ok, mid, hi)
-            lo = np.where(ok, lo, mid)
-        Rm = rot.axis_angle_rotation(axis, hi)
-        new_world = Rm @ world[f, col]
-        local[f, col] = np.swapaxes(world[f, PARENTS[col]], -1, -2) @ new_world
-        world[f, col] = new_world
-        pos[f, sh] = c + np.einsum("nij,j->ni", new_world, body.offsets[sh])
+        l1, l2 = L[li]
+        reach = (l1 + l2) * (1 - 1e-9)
+        d_min = np.sqrt(max(l1 ** 2 + l2 ** 2 + 2 * l1 * l2 * np.cos(ls.FLEX_MAX[li]), 0.0)) * (1 + 1e-9)
+        dist = np.linalg.norm(wrist - pos[:, sh], axis=-1)
+        for kind, mask in (("far", dist > l1 + l2 + 1e-9), ("close", dist < d_min - 1e-9)):
+            if not mask.any():
+                continue
+            f = np.nonzero(mask)[0]
+            c = pos[f, col]
+            cur = rot.normalize(pos[f, sh] - c)
+            toward = rot.normalize(wrist[f] - c)
+            goal = toward if kind == "far" else -toward
+            r = np.linalg.norm(body.offsets[sh])
+            full = rot.rotation_between(cur, goal)
+            ang_full = rot.geodesic_angle(np.eye(3)[None], full)
+            axis = rot.normalize(rot.matrix_to_axis_angle(full))
+            lo, hi = np.zeros(len(f)), np.minimum(ang_full, max_swing)
+            # smallest swing bringing the wrist into range (bisection), capped
+            for _ in range(30):
+                mid = 0.5 * (lo + hi)
+                Rm = rot.axis_angle_rotation(axis, mid)
+                s_new = c + r * np.einsum("nij,nj->ni", Rm, cur)
+                dn = np.linalg.norm(wrist[f] - s_new, axis=-1)
+                ok = dn <= reach if kind == "far" else dn >= d_min
+                hi = np.where(ok, mid, hi)
+                lo = np.where(ok, lo, mid)
+            Rm = rot.axis_angle_rotation(axis, hi)
+            new_world = Rm @ world[f, col]
+            local[f, col] = np.swapaxes(world[f, PARENTS[col]], -1, -2) @ new_world
+            world[f, col] = new_world
+            pos[f, sh] = c + np.einsum("nij,j->ni", new_world, body.offsets[sh])
     return local
 
 
