@@ -334,7 +334,9 @@ class SolveJob:
             return result
         before = int((result.reach_error[:, :2] > 0.005).any(1).sum())
         self._set(_P_BODY + 0.5 * span, "solving again with arms for the reach")
-        body, again, new_span = cal.adapt_arms_to_reach(result, lambda b: run_solver(self.targets, b))
+        body, again, new_span = cal.adapt_arms_to_reach(
+            result, lambda b: run_solver(self.targets, b,
+                                         progress=lambda f: self._set(_P_BODY + span * (0.5 + 0.5 * float(f)))))
         if new_span is None:
             return result
         after = int((again.reach_error[:, :2] > 0.005).any(1).sum())
