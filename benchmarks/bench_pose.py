@@ -133,7 +133,7 @@ def main(argv=None):
               f"split {split.get('rule', 'sha1(take_id) bucket')}")
         print(f"machine: {platform.processor() or platform.machine()}, {os.cpu_count()} CPUs, "
               f"numpy {np.__version__}")
-    fmt = {"frames/s": ",.0f", "params": ",d", "H-PE": ".4f", "GP": ".4f", "MPJRE": ".2f"}
+    fmt = {"frames/s": ",.0f", "params": ",d", "H-PE": ".4f", "GP": ".4f", "MPJRE": ".2f", "MPJPE": ".3f"}
     print(metrics.format_table(rows, COLUMNS, formats=fmt, units=True))
     if not args.markdown:
         print("units: positions cm, MPJRE deg, MPJVE cm/s, Jitter 10^2 m/s^3, GP cm")
