@@ -7,7 +7,8 @@ mocap, see ``training/dataset.py``) the swivel of each limb is read off the
 ground-truth elbow/knee, the limbs are solved with
 ``limb_solver.solve_limbs_within_limits`` and the table reports, per limb:
 the share of frames whose shoulder/hip axial rotation is outside the bare
-AAOS active range and outside ``limb_solver.axial_range`` (what is enforced), the share of frames the enforcement moved, and
+AAOS active range and outside ``limb_solver.axial_range`` (what is
+enforced), the share of frames the enforcement moved, and
 the mean and largest elbow/knee displacement it caused (cm).  Needs ../shared.
 """
 from __future__ import annotations
@@ -21,7 +22,8 @@ sys.path.insert(0, ROOT)
 
 import numpy as np  # noqa: E402
 
-from blender_manikin.core import limb_solver as ls, metrics, rotations as rot, skeleton as sk  # noqa: E402
+from blender_manikin.core import limb_solver as ls, metrics, skeleton as sk  # noqa: E402
+from bench_pose import load_clip  # noqa: E402  (benchmarks/ is the script's folder)
 
 DEFAULT_BVH = os.path.join(os.path.dirname(ROOT), "shared", "data", "bandai-namco-motion.tar.xz")
 
@@ -43,11 +45,7 @@ def main(argv=None):
     B, M, E, P = ls.LIMB_BASE, ls.LIMB_MID, ls.LIMB_END, ls.LIMB_PARENT
     frames, outside, moved, disp, worst, active = 0, *(np.zeros(4) for _ in range(5))
     for f in files:
-        with np.load(f) as z:
-            body = sk.Body.from_offsets(z["offsets"], z["root_rest"], stature=float(z["stature"]))
-            local = rot.quat_to_matrix(z["local_quat"].astype(np.float64))
-            root = z["root_pos"].astype(np.float64)
-        pos, wr = sk.forward_kinematics(local, root, body)
+        body, _, pos, wr, _ = load_clip(f)
         phi = ls.swivel_from_positions(pos[:, B], pos[:, M], pos[:, E], wr[:, P])
         args_ = (pos[:, B], pos[:, E], phi, body.limb_lengths(), wr[:, P])
         free = ls.solve_limbs(*args_, end_rot=wr[:, E])
@@ -59,13 +57,14 @@ def main(argv=None):
         moved += (d > 1e-4).sum(0)
         disp += d.sum(0)
         worst = np.maximum(worst, d.max(0))
-    rows = [(name, {"outside AAOS active [%]": 100 * active[i] / frames, "outside [%]": 100 * outside[i] / frames, "moved [%]": 100 * moved[i] / frames,
-                    "mean shift [cm]": 100 * disp[i] / frames, "max shift [cm]": 100 * worst[i]})
+    rows = [(name, {"outside AAOS active [%]": 100 * active[i] / frames, "outside [%]": 100 * outside[i] / frames,
+                    "moved [%]": 100 * moved[i] / frames, "mean shift [cm]": 100 * disp[i] / frames,
+                    "max shift [cm]": 100 * worst[i]})
             for i, (name, *_) in enumerate(sk.LIMBS)]
     print(f"{len(files)} clips, {frames} ground-truth frames of {args.bvh}")
-    print(metrics.format_table(rows, name_header="limb", columns=["outside AAOS active [%]", "outside [%]", "moved [%]", "mean shift [cm]", "max shift [cm]"],
-                               formats={"outside AAOS active [%]": ".2f", "outside [%]": ".2f", "moved [%]": ".2f", "mean shift [cm]": ".4f",
-                                        "max shift [cm]": ".2f"}))
+    cols = ["outside AAOS active [%]", "outside [%]", "moved [%]", "mean shift [cm]", "max shift [cm]"]
+    fmt = {c: ".4f" if c == "mean shift [cm]" else ".2f" for c in cols}
+    print(metrics.format_table(rows, name_header="limb", columns=cols, formats=fmt))
 
 
 if __name__ == "__main__":

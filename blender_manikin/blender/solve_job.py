@@ -309,7 +309,7 @@ class SolveJob:
         span = _P_SOLVE - _P_BODY
         result = run_solver(self.targets, self.body,
                             progress=lambda f: self._set(_P_BODY + span * float(f)))
-        result = self._adapt_arms(result, span)
+        result = self._adapt_arms(result, progress_width=span)
         result.t0 = float(times[0])
         if result.targets is None:
             result.targets = self.targets
@@ -320,7 +320,7 @@ class SolveJob:
         self._set(_P_SOLVE, "writing")
         return result
 
-    def _adapt_arms(self, result, span):
+    def _adapt_arms(self, result, progress_width):
         """Lengthen arms built from proportions when the hands cannot reach their trackers.
 
         Only when no arm span was measured (no T/A-pose calibration) or given:
@@ -333,10 +333,12 @@ class SolveJob:
         if result.reach_error is None or not (result.reach_error[:, :2] > 0.005).any():
             return result
         before = int((result.reach_error[:, :2] > 0.005).any(1).sum())
-        self._set(_P_BODY + 0.5 * span, "solving again with arms for the reach")
+        self._set(_P_BODY + 0.5 * progress_width, "solving again with arms for the reach")
+        def progress(f):
+            self._set(_P_BODY + progress_width * (0.5 + 0.5 * float(f)))
+
         body, again, new_span = cal.adapt_arms_to_reach(
-            result, lambda b: run_solver(self.targets, b,
-                                         progress=lambda f: self._set(_P_BODY + span * (0.5 + 0.5 * float(f)))))
+            result, lambda b: run_solver(self.targets, b, progress=progress))
         if new_span is None:
             return result
         after = int((again.reach_error[:, :2] > 0.005).any(1).sum())

@@ -5,7 +5,11 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .skeleton import Body, J, LIMB_NAMES, forward_kinematics
+from .skeleton import Body, LIMB_NAMES, LIMBS, forward_kinematics
+
+#: (end device in words, base joint, mid joint) of each limb, for messages
+_LIMB_WORDS = {"left_arm": ("left hand", "shoulder", "elbow"), "right_arm": ("right hand", "shoulder", "elbow"),
+               "left_leg": ("left foot", "hip", "knee"), "right_leg": ("right foot", "hip", "knee")}
 
 #: device names, in this order wherever devices are listed
 DEVICES = ("head", "left_hand", "right_hand", "pelvis", "left_foot", "right_foot")
@@ -93,36 +97,31 @@ class PoseResult:
         solve is clean.
         """
         notes = []
-        limb_end = {"left_arm": "left hand", "right_arm": "right hand",
-                    "left_leg": "left foot", "right_leg": "right foot"}
         if self.reach_error is not None:
             pos = self.positions if self.targets is not None else None
-            for i, name in enumerate(LIMB_NAMES):
+            for i, (name, base_j, _, end_j) in enumerate(LIMBS):
                 bad = self.reach_error[:, i] > reach_tolerance
                 if not bad.any():
                     continue
-                side = name.split("_")[0]
-                dev = f"{side}_hand" if "arm" in name else f"{side}_foot"
+                end, base, mid = _LIMB_WORDS[name]
+                dev = end.replace(" ", "_")
                 far = bad
                 if pos is not None and dev in self.targets.pos:
-                    base = pos[:, J[f"{side}_shoulder" if "arm" in name else f"{side}_hip"]]
-                    reached = pos[:, J[f"{side}_wrist" if "arm" in name else f"{side}_ankle"]]
-                    far = bad & (np.linalg.norm(self.targets.pos[dev] - base, axis=-1)
-                                 > np.linalg.norm(reached - base, axis=-1))
+                    far = bad & (np.linalg.norm(self.targets.pos[dev] - pos[:, base_j], axis=-1)
+                                 > np.linalg.norm(pos[:, end_j] - pos[:, base_j], axis=-1))
                 close = bad & ~far
                 if far.any():
-                    notes.append(f"{limb_end[name]} out of reach on {int(far.sum())} frame(s), by up to "
+                    notes.append(f"{end} out of reach on {int(far.sum())} frame(s), by up to "
                                  f"{100 * float(self.reach_error[far, i].max()):.1f} cm (check the body size)")
                 if close.any():
-                    notes.append(f"{limb_end[name]} closer to the {'shoulder' if 'arm' in name else 'hip'} than "
-                                 f"the {'elbow' if 'arm' in name else 'knee'} can fold on {int(close.sum())} "
+                    notes.append(f"{end} closer to the {base} than the {mid} can fold on {int(close.sum())} "
                                  f"frame(s), by up to {100 * float(self.reach_error[close, i].max()):.1f} cm "
                                  f"(check the device offsets)")
         if self.at_limit is not None:
             for i, name in enumerate(LIMB_NAMES):
                 n = int(np.count_nonzero(self.at_limit[:, i]))
                 if n:
-                    joint = "shoulder" if "arm" in name else "hip"
-                    notes.append(f"{name.replace('_', ' ')} swivel held at the {joint}'s rotation limit on "
-                                 f"{n} frame(s)")
+                    joint = _LIMB_WORDS[name][1]
+                    notes.append(f"{name.replace('_', ' ')} swivel held at the {joint}'s rotation limit "
+                                 f"on {n} frame(s)")
         return notes
