@@ -11,8 +11,10 @@ Each ``dist/blender_manikin-<version>-<platform>.zip`` holds
   ``__version__`` in ``blender_manikin/__init__.py`` (read with ``ast``, bpy is never imported);
 * the add-on package (no ``__pycache__``, tests, ``training/`` or ``*.pt`` checkpoints), with the
   ONNX model(s) and their README under ``models/``;
-* ``wheels/``: the unmodified PyPI onnxruntime wheel for that platform and CPython 3.11, plus the
-  dependencies onnxruntime imports at run time (numpy excluded: Blender ships it).  Which ones
+* ``wheels/``: the unmodified PyPI onnxruntime wheels for that platform, one per CPython version
+  the supported Blender range runs (3.11 for Blender 4.2-5.0, 3.13 for 5.1-5.2; Blender installs
+  only the one matching its Python), plus the dependencies onnxruntime imports at run time (numpy
+  excluded: Blender ships it).  Which ones
   that is is not guessed: the build reads the wheel's metadata and scans the modules that
   ``import onnxruntime`` loads; see docs/PACKAGING.md.
 
@@ -39,15 +41,24 @@ ROOT = Path(__file__).resolve().parent
 PKG_DIR = ROOT / "blender_manikin"
 EXTENSION_ID = "blender_manikin"
 BLENDER_VERSION_MIN = "4.2.0"
-# Blender versions the install-time compatibility check is run against (4.2 LTS .. current).
-BLENDER_VERSIONS_CHECKED = ((4, 2, 0), (4, 5, 0), (5, 0, 1))
-PYTHON_VERSION = (3, 11)
-# The onnxruntime pin lives in ONE place: requirements-test.txt (see docs/PACKAGING.md for why 1.20.1).
-PIN_FILE = ROOT / "requirements-test.txt"
+# The supported Blender releases and the Python each runs: the install-time compatibility check
+# is run for every one of them, with its own Python version (README: "Tested Blender versions").
+BLENDER_PYTHON = {
+    (4, 2, 0): (3, 11),     # 4.2 LTS
+    (4, 5, 0): (3, 11),     # 4.5 LTS
+    (5, 0, 1): (3, 11),
+    (5, 1, 0): (3, 13),
+    (5, 2, 0): (3, 13),     # 5.2 LTS
+}
+PYTHON_VERSIONS = tuple(sorted(set(BLENDER_PYTHON.values())))
+# The onnxruntime pins, one per Python version, live in ONE place: requirements-onnxruntime.txt
+# (see docs/PACKAGING.md for why 1.20.1).  Other requirements files include it with ``-r``.
+PIN_FILE = ROOT / "requirements-onnxruntime.txt"
+LOADER_FILE = PKG_DIR / "onnx_runtime_loader.py"
 # Never shipped: Blender bundles numpy and an add-on must use that one.
 PROVIDED_BY_BLENDER = {"numpy"}
 
-TAGLINE = "Full-body animation from VR trackers, model CC BY-NC 4.0"
+TAGLINE = "Full-body animation from VR trackers, model CC BY-NC-ND 4.0"
 PERMISSIONS = {"files": "Read VR tracker recordings and write animation files"}
 LICENSE = ["SPDX:MIT"]
 TAGS = ["Animation"]
@@ -115,26 +126,65 @@ def read_bl_info(init_py: Path | None = None) -> dict:
     return {}
 
 
-def _pin_in(path: Path) -> str | None:
+_PIN_LINE = re.compile(r"""\s*onnxruntime\s*==\s*([0-9][0-9A-Za-z.]*)\s*"""
+                       r"""(?:;\s*python_version\s*==\s*["'](\d+)\.(\d+)["'])?\s*(?:#.*)?$""")
+
+
+def _pins_in(path: Path) -> dict[tuple[int, int] | None, str]:
+    """``onnxruntime==X`` lines of a requirements file: {(major, minor) or None: version}."""
+    pins = {}
     for line in path.read_text(encoding="utf-8").splitlines():
-        m = re.match(r"\s*onnxruntime\s*==\s*([0-9][0-9A-Za-z.]*)\s*(#.*)?$", line)
-        if m:
-            return m.group(1)
-    return None
+        if not re.match(r"\s*onnxruntime\b", line):
+            continue
+        m = _PIN_LINE.match(line)
+        if m is None:
+            raise BuildError(f"{path.name}: cannot read the onnxruntime pin {line.strip()!r}: expected "
+                             "'onnxruntime==X.Y.Z; python_version == \"3.NN\"'")
+        key = (int(m.group(2)), int(m.group(3))) if m.group(2) else None
+        pins[key] = m.group(1)
+    return pins
 
 
-def read_onnxruntime_pin(pin_file: Path | None = None) -> str:
-    """The onnxruntime version to bundle: the pin in requirements-test.txt.  The other
-    requirements files that pin onnxruntime (requirements-bpy42.txt) must agree."""
+def _loader_pins(loader: Path) -> dict[tuple[int, int], str]:
+    """``BUNDLED_ONNXRUNTIME`` of onnx_runtime_loader.py (parsed, not imported)."""
+    tree = ast.parse(loader.read_text(encoding="utf-8"), str(loader))
+    for node in tree.body:
+        if isinstance(node, ast.AnnAssign | ast.Assign):
+            targets = [node.target] if isinstance(node, ast.AnnAssign) else node.targets
+            if any(isinstance(t, ast.Name) and t.id == "BUNDLED_ONNXRUNTIME" for t in targets):
+                value = ast.literal_eval(node.value)
+                return {tuple(int(x) for x in k.split(".")): v for k, v in value.items()}
+    raise BuildError(f"{loader}: no BUNDLED_ONNXRUNTIME = {{...}}")
+
+
+def read_onnxruntime_pins(pin_file: Path | None = None, loader: Path | None = None) -> dict[tuple[int, int], str]:
+    """The onnxruntime version to bundle for each Python version: the pins in
+    requirements-onnxruntime.txt, one per entry of :data:`PYTHON_VERSIONS`.
+
+    The build refuses to go on if any other requirements file pins onnxruntime itself (they must
+    include the pin file with ``-r``) or if ``onnx_runtime_loader.BUNDLED_ONNXRUNTIME``, which the
+    add-on's error messages quote, disagrees."""
     pin_file = pin_file or PIN_FILE
-    pin = _pin_in(pin_file)
-    if pin is None:
-        raise BuildError(f"{pin_file}: no 'onnxruntime==X.Y.Z' pin")
+    pins = _pins_in(pin_file)
+    if None in pins:
+        raise BuildError(f"{pin_file.name}: every onnxruntime pin needs a '; python_version == \"3.NN\"' marker")
+    missing = [v for v in PYTHON_VERSIONS if v not in pins]
+    if missing:
+        raise BuildError(f"{pin_file.name}: no onnxruntime pin for Python "
+                         + ", ".join("{}.{}".format(*v) for v in missing))
     for other in sorted(pin_file.parent.glob("requirements*.txt")):
-        other_pin = _pin_in(other)
-        if other_pin is not None and other_pin != pin:
-            raise BuildError(f"{other.name} pins onnxruntime=={other_pin} but {pin_file.name} pins {pin}")
-    return pin
+        if other.resolve() != pin_file.resolve() and _pins_in(other):
+            raise BuildError(f"{other.name} pins onnxruntime itself; include {pin_file.name} with '-r' instead")
+    loader_pins = _loader_pins(loader or (pin_file.parent / LOADER_FILE.relative_to(ROOT)))
+    if loader_pins != {v: pins[v] for v in PYTHON_VERSIONS}:
+        raise BuildError(f"onnx_runtime_loader.BUNDLED_ONNXRUNTIME {loader_pins} disagrees with "
+                         f"{pin_file.name} {pins}")
+    return {v: pins[v] for v in PYTHON_VERSIONS}
+
+
+def read_onnxruntime_pin(python_version: tuple[int, int] = (3, 11)) -> str:
+    """The onnxruntime version bundled for one Python version (default 3.11)."""
+    return read_onnxruntime_pins()[tuple(python_version[:2])]
 
 
 def _toml_str(s: str) -> str:
@@ -148,7 +198,7 @@ def manifest_text(version: str, platform: str, wheel_names: list[str], pkg_dir: 
     lines = [
         "# Generated by build_addon.py: edit that script, not this file.",
         "# Code: MIT. The bundled network weights (models/) are derived from data under",
-        "# CC BY-NC 4.0: non-commercial use only; see models/README.md.",
+        "# CC BY-NC-ND 4.0: non-commercial use only; see models/README.md.",
         'schema_version = "1.0.0"',
         "",
         f"id = {_toml_str(EXTENSION_ID)}",
@@ -247,9 +297,24 @@ def _normalize(name: str) -> str:
     return re.sub(r"[-_.]+", "_", name).lower()
 
 
-def _wheel_tags(filename: str) -> tuple[str, str, str, str]:
+def _wheel_tags(filename: str) -> tuple[str, str, str, str, str]:
+    """(distribution, version, python tag, abi tag, platform tag) of a wheel file name."""
     parts = filename[:-4].split("-")
-    return _normalize(parts[0]), parts[1], parts[-3], parts[-1]   # dist, version, python tag, platform tag
+    return _normalize(parts[0]), parts[1], parts[-3], parts[-2], parts[-1]
+
+
+def _wheel_fits_python(filename: str, python_version: tuple[int, int]) -> bool:
+    """Whether a wheel installs on CPython ``python_version``: its own ``cpXY`` build, a stable-ABI
+    (``abi3``) build for an older or equal CPython, or a pure-Python ``py3`` wheel."""
+    _, _, py_tags, abi, _ = _wheel_tags(filename)
+    major, minor = python_version
+    for tag in py_tags.split("."):
+        if tag in (f"py{major}", f"py{major}{minor}", f"cp{major}{minor}"):
+            return True
+        m = re.fullmatch(r"cp(\d)(\d+)", tag)
+        if m and abi == "abi3" and (int(m.group(1)), int(m.group(2))) <= python_version:
+            return True
+    return False
 
 
 def _specifier_set(spec: str):
@@ -262,48 +327,52 @@ def _specifier_set(spec: str):
     return SpecifierSet(spec), Version
 
 
-def _wheel_matches(filename: str, dist: str, spec: str, platform: str) -> bool:
+def _wheel_matches(filename: str, dist: str, spec: str, platform: str, python_version: tuple[int, int]) -> bool:
     if not filename.endswith(".whl"):
         return False
-    w_dist, w_ver, _py, w_plat = _wheel_tags(filename)
+    w_dist, w_ver, _py, _abi, w_plat = _wheel_tags(filename)
     specifiers, _ = _specifier_set(spec)
     if w_dist != _normalize(dist) or not specifiers.contains(w_ver):
+        return False
+    if not _wheel_fits_python(filename, python_version):
         return False
     allowed = set(PLATFORMS[platform]["pip"]) | {"any"}
     return any(p in allowed for p in w_plat.split("."))
 
 
-def _cached(dest: Path, dist: str, spec: str, platform: str) -> Path | None:
+def _cached(dest: Path, dist: str, spec: str, platform: str, python_version: tuple[int, int]) -> Path | None:
     _, Version = _specifier_set("")
-    found = [p for p in dest.iterdir() if _wheel_matches(p.name, dist, spec, platform)]
+    found = [p for p in dest.iterdir() if _wheel_matches(p.name, dist, spec, platform, python_version)]
     return max(found, key=lambda p: Version(_wheel_tags(p.name)[1])) if found else None
 
 
-def fetch_wheel(dist: str, spec: str, platform: str, cache: Path, offline: bool) -> Path:
+def fetch_wheel(dist: str, spec: str, platform: str, cache: Path, offline: bool,
+                python_version: tuple[int, int] = (3, 11)) -> Path:
     """The cached wheel of ``dist`` (newest satisfying ``spec``, e.g. "==1.20.1" or "") for
-    ``platform``; downloaded once, then reused (so rebuilds are offline)."""
+    ``platform`` and CPython ``python_version``; downloaded once, then reused (so rebuilds are
+    offline)."""
     dest = cache / platform
     dest.mkdir(parents=True, exist_ok=True)
-    hit = _cached(dest, dist, spec, platform)
+    hit = _cached(dest, dist, spec, platform, python_version)
     if hit is not None:
         return hit
     req = f"{dist}{spec}"
+    py = "{}.{}".format(*python_version)
     if offline:
-        raise BuildError(f"{req} for {platform} is not in the wheel cache {dest} (--offline)")
+        raise BuildError(f"{req} for {platform}, Python {py} is not in the wheel cache {dest} (--offline)")
     cmd = [sys.executable, "-m", "pip", "download", "--quiet", "--disable-pip-version-check",
-           "--only-binary=:all:", "--no-deps", "--implementation", "cp",
-           "--python-version", "{}.{}".format(*PYTHON_VERSION),
-           "--abi", "cp{}{}".format(*PYTHON_VERSION), "--abi", "abi3", "--abi", "none"]
+           "--only-binary=:all:", "--no-deps", "--implementation", "cp", "--python-version", py,
+           "--abi", "cp{}{}".format(*python_version), "--abi", "abi3", "--abi", "none"]
     for tag in PLATFORMS[platform]["pip"]:
         cmd += ["--platform", tag]
     cmd += ["--dest", str(dest), req]
-    print(f"  downloading {req} for {platform}", flush=True)
+    print(f"  downloading {req} for {platform}, Python {py}", flush=True)
     proc = subprocess.run(cmd, capture_output=True, text=True)
     if proc.returncode != 0:
-        raise BuildError(f"pip download {req} ({platform}) failed:\n{proc.stdout}{proc.stderr}")
-    hit = _cached(dest, dist, spec, platform)
+        raise BuildError(f"pip download {req} ({platform}, Python {py}) failed:\n{proc.stdout}{proc.stderr}")
+    hit = _cached(dest, dist, spec, platform, python_version)
     if hit is None:
-        raise BuildError(f"pip download {req} ({platform}) gave no matching wheel in {dest}")
+        raise BuildError(f"pip download {req} ({platform}, Python {py}) gave no matching wheel in {dest}")
     return hit
 
 
@@ -321,11 +390,12 @@ def _requirement_tools():
     return Requirement
 
 
-def declared_requirements(wheel: Path, platform: str) -> list[tuple[str, str]]:
-    """(distribution, specifier) of the wheel's Requires-Dist that apply on ``platform``."""
+def declared_requirements(wheel: Path, platform: str, python_version: tuple[int, int] = (3, 11)) -> list[tuple[str, str]]:
+    """(distribution, specifier) of the wheel's Requires-Dist that apply on ``platform`` and
+    CPython ``python_version``."""
     Requirement = _requirement_tools()
     env = dict(PLATFORMS[platform]["env"])
-    env.update({"python_version": "{}.{}".format(*PYTHON_VERSION), "python_full_version": "{}.{}.0".format(*PYTHON_VERSION),
+    env.update({"python_version": "{}.{}".format(*python_version), "python_full_version": "{}.{}.0".format(*python_version),
                 "implementation_name": "cpython", "platform_python_implementation": "CPython", "extra": ""})
     out = []
     for line in wheel_metadata(wheel).splitlines():
@@ -424,13 +494,16 @@ def check_windows_msvc_runtime(wheel: Path) -> str:
             else "Windows runtime check: no binary uses std::mutex")
 
 
-def resolve_wheels(platform: str, ort_version: str, cache: Path, offline: bool, all_deps: bool) -> tuple[list[Path], list[str]]:
-    """Wheels to ship for ``platform`` and a human-readable account of the decision."""
+def resolve_wheels_for_python(platform: str, python_version: tuple[int, int], ort_version: str, cache: Path,
+                              offline: bool, all_deps: bool) -> tuple[list[Path], list[str]]:
+    """Wheels to ship for ``platform`` and one CPython version, and an account of the decision."""
+    py = "Python {}.{}".format(*python_version)
     notes = []
-    ort = fetch_wheel("onnxruntime", "==" + ort_version, platform, cache, offline)
+    ort = fetch_wheel("onnxruntime", "==" + ort_version, platform, cache, offline, python_version)
     ship = [ort]
-    declared = declared_requirements(ort, platform)
-    notes.append("onnxruntime {} declares: {}".format(ort_version, ", ".join(n + s for n, s in declared) or "nothing"))
+    declared = declared_requirements(ort, platform, python_version)
+    notes.append("{}: onnxruntime {} declares: {}".format(
+        py, ort_version, ", ".join(n + s for n, s in declared) or "nothing"))
     needed = runtime_imports(ort) - PROVIDED_BY_BLENDER
     candidates = [(n, s) for n, s in declared if _normalize(n) not in PROVIDED_BY_BLENDER]
     specs = {_normalize(n): s for n, s in candidates}
@@ -441,10 +514,10 @@ def resolve_wheels(platform: str, ort_version: str, cache: Path, offline: bool, 
         if needed:
             # Map the imported names to the declared distributions that provide them.
             for n, spec in candidates:
-                if top_level_names(fetch_wheel(n, spec, platform, cache, offline)) & needed:
+                if top_level_names(fetch_wheel(n, spec, platform, cache, offline, python_version)) & needed:
                     wanted.add(_normalize(n))
-        notes.append("`import onnxruntime` needs at run time: {} (numpy comes with Blender)".format(
-            ", ".join(sorted(needed)) or "nothing beyond numpy"))
+        notes.append("{}: `import onnxruntime` needs at run time: {} (numpy comes with Blender)".format(
+            py, ", ".join(sorted(needed)) or "nothing beyond numpy"))
     # Transitive closure of what is wanted.
     done: set[str] = set()
     queue = [(d, specs[d]) for d in sorted(wanted)]
@@ -453,15 +526,28 @@ def resolve_wheels(platform: str, ort_version: str, cache: Path, offline: bool, 
         if dist in done or dist in PROVIDED_BY_BLENDER:
             continue
         done.add(dist)
-        w = fetch_wheel(dist, spec, platform, cache, offline)
+        w = fetch_wheel(dist, spec, platform, cache, offline, python_version)
         ship.append(w)
-        queue.extend((_normalize(n), s) for n, s in declared_requirements(w, platform))
+        queue.extend((_normalize(n), s) for n, s in declared_requirements(w, platform, python_version))
     provided = set()
     for w in ship:
         provided |= top_level_names(w)
     missing = needed - provided
     if missing:
-        raise BuildError(f"onnxruntime imports {sorted(missing)} at run time but no shipped wheel provides it")
+        raise BuildError(f"{py}: onnxruntime imports {sorted(missing)} at run time but no shipped wheel provides it")
+    return ship, notes
+
+
+def resolve_wheels(platform: str, ort_versions: dict[tuple[int, int], str], cache: Path, offline: bool,
+                   all_deps: bool) -> tuple[list[Path], list[str]]:
+    """Wheels to ship for ``platform``: those of every Python version in ``ort_versions``
+    ({(3, 11): "1.20.1", ...}), without duplicates, and an account of the decision."""
+    ship: list[Path] = []
+    notes: list[str] = []
+    for python_version, ort_version in sorted(ort_versions.items()):
+        wheels, why = resolve_wheels_for_python(platform, python_version, ort_version, cache, offline, all_deps)
+        ship.extend(w for w in wheels if w not in ship)
+        notes.extend(why)
     if platform.startswith("windows"):
         notes.extend(check_windows_msvc_runtime(w) for w in ship if not w.name.endswith("-any.whl"))
     notes.append("shipped wheels: " + ", ".join(w.name for w in ship))
@@ -547,16 +633,23 @@ def validate_zip(zip_path: Path, platform: str, blender_ext_path: Path) -> str:
             raise BuildError(f"{zip_path.name}: {py_versions}")
         item = manifest._asdict()
         item["python_versions"] = sorted(".".join(map(str, v)) for v in py_versions)
-        if wheels and "{}.{}".format(*PYTHON_VERSION) not in item["python_versions"]:
-            raise BuildError(f"{zip_path.name}: wheels are not for Python {PYTHON_VERSION}: {item['python_versions']}")
-        for bver in BLENDER_VERSIONS_CHECKED:
+        for bver, pyver in sorted(BLENDER_PYTHON.items()):
+            label = "Blender {}.{} (Python {}.{})".format(*bver[:2], *pyver)
+            if wheels and "{}.{}".format(*pyver) not in item["python_versions"]:
+                raise BuildError(f"{zip_path.name}: no wheels for {label}: {item['python_versions']}")
             msgs: list[str] = []
             skip = bx.repository_filter_skip(
                 item, filter_blender_version=bver, filter_platform=platform,
-                filter_python_version=(*PYTHON_VERSION, 0),
+                filter_python_version=(*pyver, 0),
                 skip_message_fn=msgs.append, error_fn=lambda ex: msgs.append(str(ex)))
             if skip or msgs:
-                raise BuildError(f"{zip_path.name}: Blender {bver} would refuse it: {msgs}")
+                raise BuildError(f"{zip_path.name}: {label} would refuse it: {msgs}")
+            # What that Blender installs: the wheels whose Python tags fit its Python.  Exactly one
+            # onnxruntime, or the add-on would load none or a wrong one.
+            names = [w.rsplit("/", 1)[-1] for w in wheels]
+            ort = [n for n in names if _wheel_tags(n)[0] == "onnxruntime" and _wheel_fits_python(n, pyver)]
+            if len(ort) != 1:
+                raise BuildError(f"{zip_path.name}: {label} would install {len(ort)} onnxruntime wheels: {ort}")
     return output
 
 
@@ -573,7 +666,7 @@ def build(platforms: list[str], out_dir: Path, cache: Path, offline: bool = Fals
     log = (lambda *a: None) if quiet else (lambda *a: print(*a, flush=True))
     pkg_dir = pkg_dir or PKG_DIR
     version = read_version(pkg_dir / "__init__.py")
-    ort_version = read_onnxruntime_pin()
+    ort_versions = read_onnxruntime_pins()
     files, skipped = package_files(pkg_dir)
     check_imports(files)
     models = [rel for _, rel in files if rel.startswith("models/")]
@@ -584,7 +677,7 @@ def build(platforms: list[str], out_dir: Path, cache: Path, offline: bool = Fals
     out_dir.mkdir(parents=True, exist_ok=True)
     built = []
     for platform in platforms:
-        wheels, notes = resolve_wheels(platform, ort_version, cache, offline, all_deps)
+        wheels, notes = resolve_wheels(platform, ort_versions, cache, offline, all_deps)
         for n in notes:
             log(f"  [{platform}] {n}")
         out = out_dir / zip_name(version, platform)

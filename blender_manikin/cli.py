@@ -123,9 +123,13 @@ def _config(path, args):
 
 
 def reset_scene(fps):
-    """Empty factory scene at ``fps`` (integer ``render.fps`` and ``fps_base``)."""
+    """Empty factory scene at ``fps`` (integer ``render.fps`` and ``fps_base``).
+
+    Only the scene is reset, never the preferences: ``read_factory_settings`` would also reset
+    them, which disables every extension, this one included, and makes Blender remove the
+    extensions' wheels (onnxruntime) from disk in the middle of a batch run."""
     import bpy
-    bpy.ops.wm.read_factory_settings(use_empty=True)
+    bpy.ops.wm.read_homefile(use_factory_startup=True, use_empty=True)
     scene = bpy.context.scene
     n = max(1, int(round(fps)))
     scene.render.fps = n
@@ -177,9 +181,11 @@ def convert_one(path, out_dir, args, formats):
 
 
 @contextlib.contextmanager
-def quiet_stdout():
-    """Silence stdout (Python and C level, e.g. Blender's "Info: Saved ..." and the FBX
-    exporter's progress) so that stdout carries exactly one line per input."""
+def quiet_stdout(to_stderr=False):
+    """Keep stdout for the result lines only: inside this block anything printed to stdout,
+    at Python or C level (Blender's "Info: Saved ...", the FBX exporter's progress, warnings
+    Blender prints while ``import bpy`` starts it), is discarded, or sent to stderr with
+    ``to_stderr=True`` (for warnings a user may need)."""
     sys.stdout.flush()
     saved = None
     try:
@@ -189,13 +195,19 @@ def quiet_stdout():
     if fd is not None:
         try:
             saved = os.dup(fd)
-            devnull = os.open(os.devnull, os.O_WRONLY)
-            os.dup2(devnull, fd)
-            os.close(devnull)
-        except OSError:
+            if to_stderr:
+                sys.stderr.flush()
+                os.dup2(sys.__stderr__.fileno(), fd)
+            else:
+                devnull = os.open(os.devnull, os.O_WRONLY)
+                os.dup2(devnull, fd)
+                os.close(devnull)
+        except (AttributeError, ValueError, OSError):
             saved = None
     try:
-        with open(os.devnull, "w") as sink, contextlib.redirect_stdout(sink):
+        with contextlib.ExitStack() as stack:
+            sink = sys.stderr if to_stderr else stack.enter_context(open(os.devnull, "w"))
+            stack.enter_context(contextlib.redirect_stdout(sink))
             yield
     finally:
         if saved is not None:
@@ -225,7 +237,8 @@ def main(argv=None):
         print("blender_manikin: error: --fps must be positive", file=sys.stderr)
         return 2
     try:
-        import bpy  # noqa: F401  (availability check)
+        with quiet_stdout(to_stderr=True):   # Blender may print warnings as it starts
+            import bpy  # noqa: F401  (availability check)
     except ImportError:
         print("blender_manikin: error: the bpy module is not available: run with Blender "
               "(blender -b --python cli.py -- ...) or install bpy", file=sys.stderr)

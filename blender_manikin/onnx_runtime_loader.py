@@ -30,9 +30,12 @@ from pathlib import Path
 __all__ = ["OnnxRuntimeUnavailable", "load_onnxruntime", "import_onnxruntime", "install_kind",
            "blender_platform", "diagnostics"]
 
-# The onnxruntime version the extension zips bundle (build_addon.py reads the pin from
-# requirements-test.txt; keep this in step, it is only used in messages).
-BUNDLED_ONNXRUNTIME = "1.20.1"
+# The onnxruntime the extension zips bundle, per Python version ("3.11": Blender 4.2-5.0,
+# "3.13": Blender 5.1-5.2).  The pins themselves live in requirements-onnxruntime.txt; this copy is
+# only quoted in messages, and build_addon.py refuses to build when the two disagree.
+BUNDLED_ONNXRUNTIME = {"3.11": "1.20.1", "3.13": "1.20.1"}
+# The Blender releases each bundled Python version serves (for the messages).
+BLENDER_FOR_PYTHON = {"3.11": "Blender 4.2 LTS to 5.0", "3.13": "Blender 5.1 and 5.2 LTS"}
 
 _PACKAGE_DIR = Path(__file__).resolve().parent
 _MANIFEST = "blender_manifest.toml"
@@ -133,22 +136,41 @@ def diagnostics(kind: str | None = None, package_dir: Path | None = None) -> dic
         "platform": blender_platform(),
         "os": f"{platform.system()} {platform.release()}",
         "python": platform.python_version(),
+        "python_minor": "{}.{}".format(*sys.version_info[:2]),
         "blender": _blender_version(),
         "install": kind,
         "package_dir": str(package_dir),
     }
 
 
+def bundled_version(python: str | None = None) -> str:
+    """The onnxruntime version the zips bundle for this (or the given "3.NN") Python version;
+    the newest bundled one when this Python is not among them."""
+    python = python or "{}.{}".format(*sys.version_info[:2])
+    return BUNDLED_ONNXRUNTIME.get(python) or max(BUNDLED_ONNXRUNTIME.values())
+
+
+def _unsupported_python_advice(python: str) -> str | None:
+    """Advice when the zips carry no wheel for this Python version (a newer Blender)."""
+    if python in BUNDLED_ONNXRUNTIME:
+        return None
+    served = "; ".join(f"Python {py}: {what}" for py, what in BLENDER_FOR_PYTHON.items())
+    return (f"This Blender runs Python {python}, and this version of the add-on bundles onnxruntime only for "
+            f"{served}. Install a release of the add-on made for this Blender, or use one of those Blender "
+            "versions.")
+
+
 def _advice(ex: BaseException, kind: str, details: dict, where: Path | None) -> str:
     text = f"{type(ex).__name__}: {ex}"
     plat = details["platform"]
+    unsupported = _unsupported_python_advice(details["python_minor"])
     zip_hint = f"blender_manikin-<version>-{plat.replace('-', '_')}.zip"
     windows = plat.startswith("windows")
     dll = windows and ("DLL" in text or isinstance(ex, OSError) or "initialization routine" in text)
     if dll:
         return ("On Windows install the latest Microsoft Visual C++ Redistributable 2015-2022 (x64) from "
                 "Microsoft, then restart Blender. If it still fails, reinstall the extension zip for your "
-                f"platform ({zip_hint}), which bundles onnxruntime {BUNDLED_ONNXRUNTIME}: newer onnxruntime "
+                f"platform ({zip_hint}), which bundles onnxruntime {bundled_version()}: newer onnxruntime "
                 "releases need a newer msvcp140.dll (14.40+) than Blender 4.2-5.0 load, so do not replace it "
                 "with a newer onnxruntime from pip.")
     if "numpy" in text.lower():
@@ -156,6 +178,8 @@ def _advice(ex: BaseException, kind: str, details: dict, where: Path | None) -> 
                 "installs from Blender's Python and your user site-packages so that the bundled one is used, "
                 f"then reinstall the extension zip for your platform ({zip_hint}).")
     if isinstance(ex, ModuleNotFoundError) and (ex.name or "").split(".")[0] == "onnxruntime":
+        if kind == "extension" and unsupported:
+            return unsupported
         if kind == "extension":
             where_txt = f" (looked in {where})" if where else " (no extension site-packages found)"
             return ("The onnxruntime wheel bundled with the extension is not installed" + where_txt + ". "
@@ -165,7 +189,7 @@ def _advice(ex: BaseException, kind: str, details: dict, where: Path | None) -> 
             return ("This copy was installed as a legacy add-on, which cannot install the bundled wheels. "
                     f"Remove it and install the extension zip for your platform ({zip_hint}) with Edit > "
                     "Preferences > Get Extensions > Install from Disk (Blender 4.2 or newer).")
-        return f"Install it into this Python: pip install onnxruntime=={BUNDLED_ONNXRUNTIME}"
+        return f"Install it into this Python: pip install onnxruntime=={bundled_version()}"
     return (f"Reinstall the extension zip for your platform ({zip_hint}) and restart Blender. If the problem "
             "persists, report it with this message.")
 

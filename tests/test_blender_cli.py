@@ -13,7 +13,8 @@ from blender_manikin import cli  # noqa: E402
 from blender_manikin.blender import solve_job  # noqa: E402
 from blender_manikin.core import export_json  # noqa: E402
 
-from blender_util import stub_solver, synthetic_result, write_recording_csv  # noqa: E402
+from blender_util import (BLENDER_BANNER, blender_binary, blender_binary_env, stub_solver, synthetic_result,  # noqa: E402
+                          write_recording_csv)
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
@@ -99,8 +100,7 @@ def test_python_m_and_plain_script(tmp_path):
 def test_real_conversion_subprocess(tmp_path):
     """The real pipeline end to end (needs the shipped network)."""
     from blender_manikin.core import model_runner
-    if not os.path.isfile(model_runner.DEFAULT_MODEL):
-        pytest.skip("no shipped pose model yet")
+    assert os.path.isfile(model_runner.DEFAULT_MODEL), "the shipped pose model is missing"
     rec = write_recording_csv(tmp_path / "take.csv", synthetic_result(T=60, fps=30.0))
     p = _run(["-m", "blender_manikin", "solve", str(rec), "--out", str(tmp_path / "o"),
               "--format", "blend,fbx,json", "--height", "1.8"], ROOT)
@@ -111,15 +111,17 @@ def test_real_conversion_subprocess(tmp_path):
 
 
 def test_blender_binary(tmp_path):
-    blender = shutil.which("blender")
-    if blender is None:
-        pytest.skip("no blender binary on PATH")
+    """``blender -b --python cli.py -- solve``: a bad input fails with the error on stderr, and
+    stdout holds nothing but Blender's own banner."""
+    blender, _ = blender_binary()
     bad = tmp_path / "bad.csv"
     bad.write_text("garbage\n")
     p = subprocess.run([blender, "-b", "--factory-startup", "--python",
                         os.path.join(ROOT, "blender_manikin", "cli.py"), "--", "solve", str(bad),
-                        "--out", str(tmp_path / "o")], capture_output=True, text=True, timeout=300)
-    assert p.returncode == 1 and "bad.csv" in p.stderr
+                        "--out", str(tmp_path / "o")], capture_output=True, text=True, timeout=300,
+                       env=blender_binary_env())
+    assert p.returncode == 1 and "bad.csv" in p.stderr, (p.stdout, p.stderr)
+    assert all(BLENDER_BANNER.match(line) for line in p.stdout.splitlines()), p.stdout
 
 
 def test_offsets_auto_resolution():

@@ -5,16 +5,15 @@ is started with ``-I -S`` (no site-packages at all) and gets a path holding only
 bpy and numpy.  Blender's own installer (``bpy.ops.extensions.package_install_files``) puts the
 zip into a user directory under ``tmp_path`` (BLENDER_USER_* variables), installs the bundled
 wheel, and the add-on is enabled; the test then checks that the onnxruntime that got imported
-is the one from the extension's site-packages, that it runs a model, and that the add-on
-registered.  Solving the bundled example end to end runs once blender_manikin/models/*.onnx
-exists.
+is the one from the extension's site-packages, that it runs a model, that the add-on
+registered, and solves the bundled example end to end with the shipped model.  With a real
+``blender`` binary the same zip is installed by ``blender --command extension install-file``.
 """
 from __future__ import annotations
 
 import importlib.util
 import json
 import os
-import shutil
 import subprocess
 import sys
 import textwrap
@@ -36,7 +35,6 @@ PKG = ROOT / "blender_manikin"
 PLATFORM = "linux-x64"
 MODELS = sorted((PKG / "models").glob("*.onnx"))
 EXAMPLE = ROOT / "examples" / "example_recording.csv"
-HAS_REGISTRATION = (PKG / "blender_registration.py").exists() or (PKG / "blender_registration").is_dir()
 EXT_MODULE = "bl_ext.user_default.blender_manikin"
 
 
@@ -112,8 +110,12 @@ CHILD = textwrap.dedent(r'''
             import numpy as np
             sess = onnxruntime.InferenceSession(tiny_model, providers=["CPUExecutionProvider"])
             y = sess.run(None, {"x": np.array([1.0, 2.0, 3.0], dtype=np.float32)})[0]
+            capi = os.path.join(os.path.dirname(onnxruntime.__file__), "capi")
             return {"file": onnxruntime.__file__, "version": onnxruntime.__version__, "y": y.tolist(),
-                    "numpy": np.__version__, "numpy_file": np.__file__}
+                    "numpy": np.__version__, "numpy_file": np.__file__,
+                    "dist_infos": sorted(n for n in os.listdir(report["site_packages"])
+                                         if n.startswith("onnxruntime-") and n.endswith(".dist-info")),
+                    "extension_modules": sorted(n for n in os.listdir(capi) if n.endswith((".so", ".pyd")))}
 
         @step("loader")
         def _():
@@ -187,16 +189,10 @@ def _isolated_site(dest: Path) -> Path:
 
 @pytest.fixture(scope="module")
 def build_dir(tmp_path_factory) -> dict:
-    """Build the linux-x64 zip (from a copy with a stub blender_registration while the real one is
-    not in the tree yet, so the install path is still exercised)."""
+    """Build the linux-x64 zip of the repository's package."""
+    assert MODELS, "no shipped model in blender_manikin/models"
     base = tmp_path_factory.mktemp("extension")
-    pkg_dir = PKG
-    if not HAS_REGISTRATION:
-        pkg_dir = base / "pkg" / "blender_manikin"
-        shutil.copytree(PKG, pkg_dir, ignore=shutil.ignore_patterns("__pycache__", "training", "*.pt"))
-        (pkg_dir / "blender_registration.py").write_text(
-            "def register():\n    pass\n\n\ndef unregister():\n    pass\n")
-    (zip_path,) = build_addon.build([PLATFORM], base / "dist", _wheel_cache(), quiet=True, pkg_dir=pkg_dir)
+    (zip_path,) = build_addon.build([PLATFORM], base / "dist", _wheel_cache(), quiet=True)
     return {"base": base, "zip": zip_path}
 
 
@@ -220,7 +216,7 @@ def installed(build_dir) -> dict:
         "BLENDER_USER_CONFIG": str(home / "config"),
         "BLENDER_USER_SCRIPTS": str(home / "scripts"),
     }
-    solve = "1" if MODELS else "0"
+    solve = "1"
     bootstrap = (f"import sys; sys.path.insert(0, {str(site)!r}); "
                  f"sys.argv = [{str(script)!r}] + sys.argv[1:]; "
                  f"exec(compile(open({str(script)!r}).read(), {str(script)!r}, 'exec'))")
@@ -256,7 +252,11 @@ def test_zip_layout_and_manifest(build_dir):
     assert manifest["platforms"] == [PLATFORM]
     wheels = [w.removeprefix("./") for w in manifest["wheels"]]
     assert sorted(wheels) == sorted(n for n in names if n.startswith("wheels/"))
-    assert any(w.startswith(f"wheels/onnxruntime-{build_addon.read_onnxruntime_pin()}-cp311-") for w in wheels)
+    # One zip per platform serves every supported Blender: an onnxruntime wheel per Python version.
+    for py, version in build_addon.read_onnxruntime_pins().items():
+        tag = "cp{}{}".format(*py)
+        assert sum(w.startswith(f"wheels/onnxruntime-{version}-{tag}-{tag}-") for w in wheels) == 1, (py, wheels)
+    assert build_addon.PYTHON_VERSIONS == ((3, 11), (3, 13))
     assert not any("numpy" in w for w in wheels), "Blender ships numpy; bundling one breaks it"
     assert "__init__.py" in names and "onnx_runtime_loader.py" in names
     for n in names:
@@ -303,6 +303,47 @@ def test_build_refuses_imports_that_break_inside_blender(tmp_path):
     assert "ok.py" not in text
 
 
+def test_onnxruntime_pins_live_in_one_place(tmp_path):
+    """requirements-onnxruntime.txt holds one pin per Python; any other requirements file pinning
+    onnxruntime itself, a missing Python, or a loader that quotes another version stops the build."""
+    pins = build_addon.read_onnxruntime_pins()
+    assert set(pins) == set(build_addon.PYTHON_VERSIONS)
+    from blender_manikin import onnx_runtime_loader as loader
+    assert loader.BUNDLED_ONNXRUNTIME == {"{}.{}".format(*k): v for k, v in pins.items()}
+    for name in ("requirements-test.txt", "requirements-bpy42.txt", "requirements-bpy52.txt"):
+        assert "-r requirements-onnxruntime.txt" in (ROOT / name).read_text().splitlines(), name
+
+    def tree(pin_text, other_text="", loader_text=None):
+        d = tmp_path / f"t{len(list(tmp_path.iterdir()))}"
+        (d / "blender_manikin").mkdir(parents=True)
+        (d / "requirements-onnxruntime.txt").write_text(pin_text)
+        (d / "requirements-x.txt").write_text(other_text)
+        (d / "blender_manikin" / "onnx_runtime_loader.py").write_text(
+            loader_text or 'BUNDLED_ONNXRUNTIME = {"3.11": "1.20.1", "3.13": "1.20.1"}\n')
+        return d / "requirements-onnxruntime.txt"
+
+    good = 'onnxruntime==1.20.1; python_version == "3.11"\nonnxruntime==1.20.1 ; python_version=="3.13"  # ok\n'
+    assert build_addon.read_onnxruntime_pins(tree(good)) == {(3, 11): "1.20.1", (3, 13): "1.20.1"}
+    with pytest.raises(build_addon.BuildError, match="requirements-x.txt pins onnxruntime itself"):
+        build_addon.read_onnxruntime_pins(tree(good, "onnxruntime==1.22.0\n"))
+    with pytest.raises(build_addon.BuildError, match="no onnxruntime pin for Python 3.13"):
+        build_addon.read_onnxruntime_pins(tree('onnxruntime==1.20.1; python_version == "3.11"\n'))
+    with pytest.raises(build_addon.BuildError, match="disagrees"):
+        build_addon.read_onnxruntime_pins(tree(good, loader_text='BUNDLED_ONNXRUNTIME = {"3.11": "1.20.1", "3.13": "1.22.0"}\n'))
+    with pytest.raises(build_addon.BuildError, match="cannot read"):
+        build_addon.read_onnxruntime_pins(tree("onnxruntime>=1.20\n"))
+
+
+def test_wheels_are_matched_to_each_python():
+    fits = build_addon._wheel_fits_python
+    assert fits("onnxruntime-1.20.1-cp313-cp313-win_amd64.whl", (3, 13))
+    assert not fits("onnxruntime-1.20.1-cp313-cp313-win_amd64.whl", (3, 11))
+    assert not fits("onnxruntime-1.20.1-cp311-cp311-win_amd64.whl", (3, 13))
+    assert fits("flatbuffers-25.1.24-py2.py3-none-any.whl", (3, 13))
+    assert fits("cryptography-44.0.0-cp39-abi3-manylinux_2_28_x86_64.whl", (3, 11))
+    assert not fits("cryptography-44.0.0-cp314-abi3-manylinux_2_28_x86_64.whl", (3, 13))
+
+
 def test_windows_binaries_needing_msvcp140_14_40_are_refused(tmp_path):
     """onnxruntime >= 1.21 (constexpr std::mutex, no _Mtx_init_in_situ import) cannot load in
     Blender 4.2-5.0 on Windows; the build must refuse such a wheel."""
@@ -334,7 +375,12 @@ def test_onnxruntime_comes_from_the_extension_wheels(installed):
     ort = _step(installed, "onnxruntime")
     site_packages = Path(installed["site_packages"]).resolve()
     assert Path(ort["file"]).resolve().is_relative_to(site_packages), (ort["file"], site_packages)
-    assert ort["version"] == build_addon.read_onnxruntime_pin()
+    assert ort["version"] == build_addon.read_onnxruntime_pin(sys.version_info[:2])
+    # Blender installed only the wheel for its own Python.
+    assert ort["dist_infos"] == [f"onnxruntime-{ort['version']}.dist-info"], ort["dist_infos"]
+    tag = "cpython-{}{}".format(*sys.version_info[:2])
+    assert any(tag in name for name in ort["extension_modules"]), \
+        ("the onnxruntime extension module is not built for this Python", ort["extension_modules"])
     assert ort["y"] == [1.0, 4.0, 9.0]
     loader = _step(installed, "loader")
     assert loader["kind"] == "extension"
@@ -343,18 +389,13 @@ def test_onnxruntime_comes_from_the_extension_wheels(installed):
 
 
 def test_addon_registered(installed):
-    if not HAS_REGISTRATION:
-        pytest.skip("blender_manikin/blender_registration.py is not in the tree yet (installed with a stub)")
     reg = _step(installed, "registered")
     assert reg["ops"] or reg["scene_props"], "the add-on registered no bpy.ops.manikin operator and no scene property"
     assert _step(installed, "disable") == [False, False], "unregister() failed or left the add-on enabled"
 
 
 def test_solve_bundled_example_end_to_end(installed):
-    if not MODELS:
-        pytest.skip("blender_manikin/models/*.onnx is not there yet")
-    assert EXAMPLE.exists(), f"a model is shipped but {EXAMPLE} is missing"
-    assert HAS_REGISTRATION, "a model is shipped but blender_registration.py is missing"
+    assert EXAMPLE.exists(), f"{EXAMPLE} is missing"
     solved = _step(installed, "solve")
     assert solved["result"] == ["FINISHED"], solved
     assert solved["actions"] >= 1 and solved["max_keyframes"] > 1, solved
@@ -394,6 +435,35 @@ def test_loader_message_for_windows_dll_failure(monkeypatch):
     assert loader.import_onnxruntime is loader.load_onnxruntime
 
 
+def test_loader_message_names_the_supported_blenders_on_another_python(monkeypatch, tmp_path):
+    """A future Blender on a Python the zip has no wheel for gets told which Blenders this zip serves."""
+    from blender_manikin import onnx_runtime_loader as loader
+
+    ext_dir = tmp_path / "extensions" / "user_default" / "blender_manikin"
+    ext_dir.mkdir(parents=True)
+    (ext_dir / "blender_manifest.toml").write_text("")
+
+    class Missing:
+        def find_spec(self, name, path=None, target=None):
+            if name == "onnxruntime":
+                raise ModuleNotFoundError("No module named 'onnxruntime'", name="onnxruntime")
+            return None
+
+    for k in [k for k in sys.modules if k == "onnxruntime" or k.startswith("onnxruntime.")]:
+        monkeypatch.delitem(sys.modules, k)
+    monkeypatch.setattr(sys, "meta_path", [Missing()] + sys.meta_path)
+    monkeypatch.setattr(loader, "_PACKAGE_DIR", ext_dir)
+    monkeypatch.setattr(loader, "_extension_site_packages", lambda d: None)
+    real = loader.diagnostics
+    monkeypatch.setattr(loader, "diagnostics", lambda kind=None, package_dir=None: {
+        **real(kind, package_dir), "python": "3.14.1", "python_minor": "3.14"})
+    with pytest.raises(loader.OnnxRuntimeUnavailable) as info:
+        loader.load_onnxruntime()
+    msg = str(info.value)
+    assert "Python 3.14" in msg
+    assert "Python 3.11: Blender 4.2 LTS to 5.0" in msg and "Python 3.13: Blender 5.1 and 5.2 LTS" in msg
+
+
 def test_loader_message_when_the_wheel_is_missing(monkeypatch, tmp_path):
     from blender_manikin import onnx_runtime_loader as loader
 
@@ -419,3 +489,62 @@ def test_loader_message_when_the_wheel_is_missing(monkeypatch, tmp_path):
     msg = str(info.value)
     assert "installed as extension" in msg
     assert "Install from Disk" in msg and loader.blender_platform().replace("-", "_") in msg
+
+
+# ----------------------------------------------------------------------------- a real Blender binary
+
+def test_blender_binary_installs_the_zip_and_solves_with_its_onnxruntime(build_dir, tmp_path):
+    """With a real ``blender`` (CI: Debian 13's Blender 4.3, Python 3.13, numpy 2): Blender's own
+    command-line installer puts the zip into a fresh user directory, and the installed copy's
+    ``cli.py`` solves the bundled example with the onnxruntime from the zip's wheels."""
+    from blender_util import BLENDER_BANNER, binary_path, blender_binary
+    blender, version = blender_binary()
+    home = tmp_path / "home"
+    env = {"PATH": binary_path(), "HOME": str(home), "LANG": "C.UTF-8"}
+    for key, sub in (("RESOURCES", "resources"), ("CONFIG", "config"), ("SCRIPTS", "scripts")):
+        (home / sub).mkdir(parents=True)
+        env[f"BLENDER_USER_{key}"] = str(home / sub)
+
+    def blender_run(*args, timeout=600):
+        return subprocess.run([blender, *args], env=env, cwd=tmp_path, capture_output=True, text=True,
+                              timeout=timeout)
+
+    p = blender_run("-b", "--factory-startup", "--python-exit-code", "1", "--python-expr",
+                    "import importlib.util, sys; sys.exit(importlib.util.find_spec('onnxruntime') is not None)")
+    assert p.returncode == 0, "this Blender sees an onnxruntime before the zip is installed:\n" + p.stdout + p.stderr
+    p = blender_run("--command", "extension", "install-file", "-r", "user_default", "-e", str(build_dir["zip"]))
+    assert p.returncode == 0, p.stdout + p.stderr
+    ext_dirs = sorted(home.glob("**/extensions/user_default/blender_manikin"))
+    assert len(ext_dirs) == 1, list(home.rglob("*"))[:50]
+    ext = ext_dirs[0]
+    assert (ext / "blender_manifest.toml").is_file() and (ext / "cli.py").is_file()
+
+    # Where onnxruntime comes from inside that Blender, through the add-on's loader.
+    probe = tmp_path / "probe.py"
+    report = tmp_path / "probe.json"
+    probe.write_text(textwrap.dedent(f'''
+        import importlib, json, sys
+        import numpy
+        loader = importlib.import_module("{EXT_MODULE}.onnx_runtime_loader")
+        ort = loader.load_onnxruntime()
+        json.dump({{"kind": loader.install_kind(), "file": ort.__file__, "version": ort.__version__,
+                   "numpy": numpy.__version__, "python": "{{}}.{{}}".format(*sys.version_info[:2])}},
+                  open({str(report)!r}, "w"))
+    '''))
+    p = blender_run("-b", "--python-exit-code", "1", "--python", str(probe))
+    assert p.returncode == 0 and report.exists(), p.stdout + p.stderr
+    info = json.loads(report.read_text())
+    assert info["kind"] == "extension"
+    assert "/extensions/.local/lib/python" in info["file"] and Path(info["file"]).resolve().is_relative_to(home.resolve())
+    py = tuple(int(x) for x in info["python"].split("."))
+    assert info["version"] == build_addon.read_onnxruntime_pin(py)
+
+    out = tmp_path / "out"
+    p = blender_run("-b", "--python", str(ext / "cli.py"), "--", "solve", str(EXAMPLE), "--out", str(out),
+                    "--format", "json,bvh,blend")
+    assert p.returncode == 0, p.stdout + p.stderr
+    lines = [ln for ln in p.stdout.splitlines() if not BLENDER_BANNER.match(ln)]
+    assert len(lines) == 1 and lines[0].startswith(f"OK {EXAMPLE}"), p.stdout
+    doc = json.loads((out / f"{EXAMPLE.stem}.json").read_text())
+    assert len(doc["positions"]) > 30
+    assert (out / f"{EXAMPLE.stem}.bvh").stat().st_size > 0 and (out / f"{EXAMPLE.stem}.blend").stat().st_size > 0

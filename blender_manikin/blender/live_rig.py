@@ -343,9 +343,11 @@ def flexion_expression(l1: float, l2: float, flex_max: float) -> str:
     base → control, ``s`` the armature object's world scale (uniform);
     l1, l2: segment lengths in metres (armature space).
     """
-    k = l1 * l1 + l2 * l2
-    c = 1.0 / (2.0 * l1 * l2)
-    hi = -math.cos(flex_max)
+    # Plain floats: numpy 2 would write np.float64(...) into the expression (repr), which is not a
+    # simple expression and would stop the driver on Blender 5.1+.
+    k = float(l1 * l1 + l2 * l2)
+    c = float(1.0 / (2.0 * l1 * l2))
+    hi = float(-math.cos(flex_max))
     return f"pi - acos(max(-1.0, min({hi!r}, ({k!r} - d * d / (s * s)) * {c!r})))"
 
 

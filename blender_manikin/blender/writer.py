@@ -33,6 +33,7 @@ import numpy as np
 
 import bpy
 
+from ..core.plain import shown
 from ..core import rotations as rot
 from ..core import skeleton as sk
 from . import armature as arm_mod
@@ -207,7 +208,7 @@ def _write_trackers(targets, frames, scene, options, out, created):
     for dev in targets.devices:
         pos = np.asarray(targets.pos[dev], dtype=np.float64)
         if pos.shape[0] != n:
-            raise ValueError(f"tracker {dev!r} has {pos.shape[0]} frames, the solve {n}")
+            raise ValueError(f"tracker {shown(dev)} has {pos.shape[0]} frames, the solve {n}")
         empty = bpy.data.objects.new(f"MANIKIN_{dev}", None)
         created.append(empty)
         coll.objects.link(empty)

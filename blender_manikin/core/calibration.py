@@ -36,6 +36,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .device_offsets import validate_offsets
+from .plain import shown
 from .pose_result import TrackerTargets
 from .rotations import geodesic_angle, matrix_to_quat, normalize, orthonormalize, quat_to_matrix, rotation_between
 from .skeleton import J, PROPORTIONS, BodyMeasurements, make_body
@@ -324,7 +325,7 @@ def calibrate(targets: TrackerTargets, time=None, offsets=None, window=0.25, pos
         if kind == "A" and not 15.0 <= arm_angle <= 65.0:
             problems.append(f"arms are {arm_angle:.0f}° below horizontal: not an A-pose (15-65°)")
     else:
-        raise ValueError(f"pose must be 'auto', 'T' or 'A', got {pose!r}")
+        raise ValueError(f"pose must be 'auto', 'T' or 'A', got {shown(pose)}")
     if arm_angle < -20.0:
         problems.append(f"hands are {-arm_angle:.0f}° above shoulder height")
 

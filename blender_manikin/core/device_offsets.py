@@ -92,6 +92,7 @@ import os
 
 import numpy as np
 
+from .plain import shown
 from .pose_result import DEVICES, TrackerTargets
 from .rotations import (
     axis_angle_rotation, matrix_to_quat, normalize, quat_mul, quat_to_matrix, quat_conj,
@@ -240,7 +241,7 @@ def get_preset(name="openxr_generic") -> dict:
     """A fresh, editable copy of a preset (plain dict of lists, see module docstring)."""
     key = str(name).strip().lower()
     if key not in _PRESETS:
-        raise ValueError(f"unknown offsets preset {name!r}: expected one of {', '.join(PRESET_NAMES)}")
+        raise ValueError(f"unknown offsets preset {shown(name)}: expected one of {', '.join(PRESET_NAMES)}")
     return copy.deepcopy(_PRESETS[key])
 
 
@@ -270,7 +271,7 @@ def validate_offsets(offsets, where="offsets") -> dict:
     out = {}
     for d, e in devs.items():
         if d not in DEVICES:
-            raise ValueError(f"{where}: unknown device {d!r} (expected one of {', '.join(DEVICES)})")
+            raise ValueError(f"{where}: unknown device {shown(d)} (expected one of {', '.join(DEVICES)})")
         if not isinstance(e, dict):
             raise ValueError(f"{where}: {d}: expected {{'pos': [x, y, z], 'rot': [w, x, y, z]}}")
         try:
@@ -279,10 +280,10 @@ def validate_offsets(offsets, where="offsets") -> dict:
         except (TypeError, ValueError):
             raise ValueError(f"{where}: {d}: pos/rot must be lists of numbers") from None
         if pos.shape != (3,) or not np.all(np.isfinite(pos)):
-            raise ValueError(f"{where}: {d}: 'pos' must be 3 finite numbers (metres), got {e.get('pos')!r}")
+            raise ValueError(f"{where}: {d}: 'pos' must be 3 finite numbers (metres), got {shown(e.get('pos'))}")
         if rot.shape != (4,) or not np.all(np.isfinite(rot)) or np.linalg.norm(rot) < 1e-6:
             raise ValueError(f"{where}: {d}: 'rot' must be a non-zero quaternion [w, x, y, z], "
-                             f"got {e.get('rot')!r}")
+                             f"got {shown(e.get('rot'))}")
         rot = rot / np.linalg.norm(rot)
         out[d] = {"pos": [float(v) for v in pos], "rot": [float(v) for v in rot]}
     return {"name": name, "description": desc, "devices": out}

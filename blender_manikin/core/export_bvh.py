@@ -30,6 +30,7 @@ import io
 import numpy as np
 
 from . import skeleton as sk
+from .plain import shown
 
 #: change of basis Blender (Z-up, -Y forward) → BVH (Y-up, +Z forward)
 C_BLENDER_TO_BVH = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, 1.0], [0.0, -1.0, 0.0]])
@@ -95,9 +96,9 @@ def bvh_string(local_rot, root_pos, body: sk.Body, fps: float, units: str = "cm"
     per second; ``units`` ``"cm"`` or ``"m"``.
     """
     if units not in UNIT_SCALE:
-        raise ValueError(f"units must be one of {sorted(UNIT_SCALE)}, got {units!r}")
+        raise ValueError(f"units must be one of {sorted(UNIT_SCALE)}, got {shown(units)}")
     if not (np.isfinite(fps) and fps > 0):
-        raise ValueError(f"fps must be positive, got {fps!r}")
+        raise ValueError(f"fps must be positive, got {shown(fps)}")
     s = UNIT_SCALE[units]
     C = C_BLENDER_TO_BVH
     local_rot = np.asarray(local_rot, dtype=np.float64)

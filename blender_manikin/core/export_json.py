@@ -43,6 +43,7 @@ import numpy as np
 
 from . import rotations as rot
 from . import skeleton as sk
+from .plain import shown
 from .pose_result import DEVICES
 
 FORMAT_VERSION = 1
@@ -163,7 +164,7 @@ def _header(result, source, decimals, generator):
             if dev in targets.pos:
                 p = np.asarray(targets.pos[dev], dtype=np.float64).reshape(-1, 3)
                 if p.shape[0] != T:
-                    raise ValueError(f"tracker {dev!r} has {p.shape[0]} frames, the solve {T}")
+                    raise ValueError(f"tracker {shown(dev)} has {p.shape[0]} frames, the solve {T}")
                 doc["trackers"][dev] = _rounded_nullable(p, decimals)
     if getattr(result, "contacts", None) is not None:
         c = np.asarray(result.contacts, dtype=bool).reshape(T, 2)
@@ -273,9 +274,9 @@ def _validate(v, s, path, errors, max_errors):
             errors.append(f"{path}: expected {t}, got {type(v).__name__}")
             return
     if "const" in s and v != s["const"]:
-        errors.append(f"{path}: must equal {s['const']!r}")
+        errors.append(f"{path}: must equal {shown(s['const'])}")
     if "enum" in s and v not in s["enum"]:
-        errors.append(f"{path}: {v!r} not one of {s['enum']!r}")
+        errors.append(f"{path}: {shown(v)} not one of {shown(s['enum'])}")
     if _TYPES["number"](v):
         if "minimum" in s and v < s["minimum"]:
             errors.append(f"{path}: {v} < minimum {s['minimum']}")
@@ -286,17 +287,17 @@ def _validate(v, s, path, errors, max_errors):
     if isinstance(v, dict):
         for k in s.get("required", ()):
             if k not in v:
-                errors.append(f"{path}: missing required {k!r}")
+                errors.append(f"{path}: missing required {shown(k)}")
         props = s.get("properties", {})
         addl = s.get("additionalProperties", True)
         pn = s.get("propertyNames")
         for k, item in v.items():
             if pn is not None:
-                _validate(k, pn, f"{path}.<key {k!r}>", errors, max_errors)
+                _validate(k, pn, f"{path}.<key {shown(k)}>", errors, max_errors)
             if k in props:
                 _validate(item, props[k], f"{path}.{k}", errors, max_errors)
             elif addl is False:
-                errors.append(f"{path}: unexpected key {k!r}")
+                errors.append(f"{path}: unexpected key {shown(k)}")
             elif isinstance(addl, dict):
                 _validate(item, addl, f"{path}.{k}", errors, max_errors)
             if len(errors) >= max_errors:

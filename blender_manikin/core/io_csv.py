@@ -41,6 +41,7 @@ import re
 
 import numpy as np
 
+from .plain import shown
 from .pose_result import DEVICES
 from .recording import (
     Recording, RecordingError, TrackerStream, UNITS, canonical_axes, canonical_device,
@@ -70,8 +71,8 @@ def _to_float(values, name, lines, path):
             try:
                 float(s)
             except ValueError:
-                shown = s if s else "(empty)"
-                raise RecordingError(f"column '{name}': {shown!r} is not a number", path=path,
+                text = str(s) if s else "(empty)"
+                raise RecordingError(f"column '{name}': {text!r} is not a number", path=path,
                                      line=int(ln)) from None
         raise
 
@@ -165,7 +166,7 @@ def read_csv(path, axes=None, units=None) -> Recording:
     nonfinite = np.nonzero(~np.isfinite(t))[0]
     if nonfinite.size:
         k = int(nonfinite[0])
-        raise RecordingError(f"time {col['time'][k]!r} is not a finite number", path=path, line=int(lines[k]))
+        raise RecordingError(f"time {shown(col['time'][k])} is not a finite number", path=path, line=int(lines[k]))
 
     # devices: map unique names
     names, inverse = np.unique(np.asarray(col["device"], dtype=object).astype(str), return_inverse=True)
@@ -174,7 +175,7 @@ def read_csv(path, axes=None, units=None) -> Recording:
         d = canonical_device(name)
         if d is None:
             k = int(np.nonzero(inverse == j)[0][0])
-            raise RecordingError(f"unknown device {name!r} (expected one of {', '.join(DEVICES)})",
+            raise RecordingError(f"unknown device {shown(name)} (expected one of {', '.join(DEVICES)})",
                                  path=path, line=int(lines[k]))
         dev_of_name.append(d)
     dev = np.asarray(dev_of_name, dtype=object)[inverse]
@@ -186,7 +187,7 @@ def read_csv(path, axes=None, units=None) -> Recording:
         badv = np.nonzero(~(is_true | is_false))[0]
         if badv.size:
             k = int(badv[0])
-            raise RecordingError(f"column 'valid': {col['valid'][k]!r} is not 0 or 1", path=path,
+            raise RecordingError(f"column 'valid': {shown(col['valid'][k])} is not 0 or 1", path=path,
                                  line=int(lines[k]))
         valid = is_true
     else:

@@ -61,6 +61,7 @@ from typing import Callable, Iterable, Mapping, Sequence
 
 import numpy as np
 
+from .plain import shown
 from .skeleton import JOINT_NAMES, NUM_JOINTS, PARENTS, J
 
 HAND_JOINTS = (J["left_wrist"], J["right_wrist"])
@@ -115,9 +116,9 @@ def _fps(fps):
     try:
         f = float(fps)
     except (TypeError, ValueError):
-        raise ValueError(f"fps must be a positive number, got {fps!r}") from None
+        raise ValueError(f"fps must be a positive number, got {shown(fps)}") from None
     if not math.isfinite(f) or f <= 0:
-        raise ValueError(f"fps must be a positive number, got {fps!r}")
+        raise ValueError(f"fps must be a positive number, got {shown(fps)}")
     return f
 
 

@@ -35,6 +35,7 @@ import numpy as np
 
 from . import features
 from . import limb_solver as ls
+from .plain import shown
 from . import rotations as rot
 from .pose_result import PoseResult, TrackerTargets
 from .skeleton import Body, J, NUM_JOINTS, PARENTS, forward_kinematics
@@ -373,7 +374,7 @@ def solve(targets: TrackerTargets, body: Body, runner=None, progress=None, lock_
     net = run_network(targets, body, runner, progress=lambda x: report(0.6 * x), stride=stride)
     t_net = time.perf_counter()
     if runner.contract.kind != "manikin":
-        raise ValueError(f"{runner.path}: solve() needs a MANIKIN model, got kind {runner.contract.kind!r}")
+        raise ValueError(f"{runner.path}: solve() needs a MANIKIN model, got kind {shown(runner.contract.kind)}")
     head_pos, head_rot = targets.pos["head"], targets.rot["head"]
     if "pelvis" in targets.pos:   # six-tracker setting: the pelvis tracker wins
         local, root_pos, pos, world = _torso_fk(targets.rot["pelvis"], net.torso_rot, head_rot, head_pos,

@@ -44,6 +44,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from .plain import shown
 from .pose_result import DEVICES
 
 #: axis conventions understood by the readers and writers
@@ -117,7 +118,7 @@ def canonical_axes(axes) -> str:
     """Canonical axes name (see :data:`AXES`) for ``axes`` (case-insensitive, aliases allowed)."""
     key = str(axes).strip().lower()
     if key not in _AXES_ALIASES:
-        raise ValueError(f"unknown axes {axes!r}: expected one of {', '.join(AXES)}")
+        raise ValueError(f"unknown axes {shown(axes)}: expected one of {', '.join(AXES)}")
     return _AXES_ALIASES[key]
 
 
@@ -125,7 +126,7 @@ def canonical_units(units) -> str:
     """Canonical unit name (``m``, ``cm`` or ``mm``) for ``units``."""
     key = str(units).strip().lower()
     if key not in _UNITS_ALIASES:
-        raise ValueError(f"unknown units {units!r}: expected one of {', '.join(UNITS)}")
+        raise ValueError(f"unknown units {shown(units)}: expected one of {', '.join(UNITS)}")
     return _UNITS_ALIASES[key]
 
 
@@ -203,7 +204,7 @@ class TrackerStream:
     def __post_init__(self):
         dev = canonical_device(self.device)
         if dev is None:
-            raise ValueError(f"unknown device {self.device!r}: expected one of {', '.join(DEVICES)}")
+            raise ValueError(f"unknown device {shown(self.device)}: expected one of {', '.join(DEVICES)}")
         self.device = dev
         self.time = np.asarray(self.time, dtype=np.float64).reshape(-1)
         n = self.time.shape[0]

@@ -28,6 +28,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from .plain import shown
 from .pose_result import DEVICES
 from .recording import Recording, RecordingError, increasing_mask
 from .rotations import normalize, quat_continuous, quat_slerp
@@ -191,7 +192,7 @@ def resample(recording: Recording, fps, t_start=None, t_end=None, required=REQUI
     path = recording.source or None
     fps = float(fps)
     if not np.isfinite(fps) or fps <= 0:
-        raise ValueError(f"fps must be positive, got {fps!r}")
+        raise ValueError(f"fps must be positive, got {shown(fps)}")
     missing = [d for d in required if d not in recording.streams]
     if missing:
         raise RecordingError(f"the recording has no {', '.join(missing)} samples "

@@ -43,8 +43,24 @@ class MANIKIN_PT_solve(_Base, Panel):
         row.scale_y = 1.6
         row.operator("manikin.solve_full_body", icon='ARMATURE_DATA')
         if s.last_report:
-            box = layout.box()
-            box.label(text=s.last_report, icon='INFO')
+            box = layout.box().column(align=True)
+            for i, line in enumerate(wrapped(s.last_report, context)):
+                box.label(text=line, icon='INFO' if i == 0 else 'BLANK1')
+
+
+def wrapped(text, context, min_chars=24):
+    """``text`` cut into lines that fit the sidebar's width (Blender labels do not wrap).  The
+    solve summary is a few sentences; a cut-off label would hide what the solve reports."""
+    import textwrap
+    region = getattr(context, "region", None)
+    # Headless (background mode) Blender reports a UI scale of 0 and regions 1 pixel wide.
+    scale = (context.preferences.system.ui_scale if context.preferences else 0.0) or 1.0
+    width = region.width if region is not None and region.width > 100 else 300
+    chars = max(min_chars, int((width - 50 * scale) / (6.2 * scale)))
+    lines = []
+    for part in text.split("\n"):
+        lines.extend(textwrap.wrap(part, chars) or [""])
+    return lines
 
 
 class MANIKIN_PT_calibration(_Base, Panel):

@@ -38,7 +38,7 @@ import time
 from ..core import features
 
 SIX_TRACKERS = ("head", "left_hand", "right_hand", "pelvis", "left_foot", "right_foot")
-BANDAI_LICENCE = ("CC BY-NC 4.0: trained on the Bandai Namco Research Motiondataset; "
+BANDAI_LICENCE = ("CC BY-NC-ND 4.0: trained on the Bandai Namco Research Motiondataset; "
                   "weights for non-commercial use")
 
 

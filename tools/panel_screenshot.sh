@@ -1,0 +1,54 @@
+#!/usr/bin/env bash
+# The README's screenshot of the MANIKIN sidebar, taken from a real Blender window.
+#
+#   bash tools/debian13.sh run bash tools/panel_screenshot.sh [OUT.png]   # default docs/panel.png
+#
+# Inside the Debian 13 root (Debian's Blender 4.3, Xvfb, ImageMagick): builds the linux-x64
+# extension zip, installs it with Blender's own installer into a fresh user directory, starts
+# Blender in a virtual X server, lets tools/panel_screenshot.py solve the bundled example with
+# the add-on's operator and open the sidebar, switches the sidebar to the MANIKIN tab as a user
+# would (Ctrl+wheel, xdotool), then grabs the screen with ImageMagick's `import`.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+OUT="${1:-docs/panel.png}"
+WORK="$(mktemp -d)"
+trap 'rm -rf "$WORK"' EXIT
+export HOME="$WORK/home" BLENDER_USER_RESOURCES="$WORK/home/resources" \
+       BLENDER_USER_CONFIG="$WORK/home/config" BLENDER_USER_SCRIPTS="$WORK/home/scripts"
+mkdir -p "$BLENDER_USER_RESOURCES" "$BLENDER_USER_CONFIG" "$BLENDER_USER_SCRIPTS"
+python build_addon.py --platform linux-x64 --out "$WORK/dist" >/dev/null
+ZIP="$(ls "$WORK"/dist/blender_manikin-*-linux_x64.zip)"
+blender --command extension install-file -r user_default -e "$ZIP" >/dev/null
+# No splash screen over the viewport (saved into the fresh user preferences).
+blender -b --python-exit-code 1 --python-expr \
+  "import bpy; bpy.context.preferences.view.show_splash = False; bpy.ops.wm.save_userpref()" >/dev/null
+W=1600; H=1000
+xvfb-run -a -s "-screen 0 ${W}x${H}x24" bash -c '
+  set -euo pipefail
+  blender --window-geometry 0 0 '"$W"' '"$H"' --no-window-focus \
+      --python tools/panel_screenshot.py -- --example examples/example_recording.csv \
+      --ready "'"$WORK"'/ready" --done "'"$WORK"'/done" > "'"$WORK"'/blender.log" 2>&1 &
+  pid=$!
+  for _ in $(seq 1 600); do
+    [ -e "'"$WORK"'/ready" ] && break
+    kill -0 $pid 2>/dev/null || { cat "'"$WORK"'/blender.log" >&2; exit 1; }
+    sleep 0.2
+  done
+  [ -e "'"$WORK"'/ready" ] || { echo "Blender never got ready" >&2; cat "'"$WORK"'/blender.log" >&2; kill $pid; exit 1; }
+  field() { python3 -c "import json,sys; print(json.load(open(sys.argv[1]))[sys.argv[2]])" "'"$WORK"'/ready" "$1"; }
+  xdotool mousemove "$(field x)" "$(field y)"
+  for _ in $(seq 1 12); do
+    [ "$(field category)" = MANIKIN ] && break
+    xdotool keydown ctrl click 5 keyup ctrl
+    sleep 0.6
+  done
+  [ "$(field category)" = MANIKIN ] || { echo "could not switch the sidebar to the MANIKIN tab" >&2; kill $pid; exit 1; }
+  xdotool mousemove 5 5
+  sleep 1
+  import -window root "'"$WORK"'/shot.png"
+  touch "'"$WORK"'/done"
+  wait $pid
+'
+mkdir -p "$(dirname "$OUT")"
+cp "$WORK/shot.png" "$OUT"
+echo "wrote $OUT ($(identify -format '%wx%h' "$OUT"))"
