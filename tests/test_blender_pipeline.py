@@ -29,7 +29,7 @@ class NeutralRunner:
 
     def __init__(self, fps=30.0, window=16):
         self.contract = SimpleNamespace(kind="manikin", fps=fps, window=window,
-                                        devices=features.INPUT_DEVICES)
+                                        devices=features.INPUT_DEVICES, body=False)
         self.path = "<neutral>"
 
     def predict(self, x):

@@ -176,7 +176,7 @@ def test_sampler_ground_truth_is_consistent(cache):
     for kind in ("manikin", "fk"):
         s = ds.WindowSampler(files, window=16, kind=kind, augment=ds.Augment.off(), seed=0)
         b = s.sample(6)
-        assert b["x"].shape == (6, 16, features.input_dim()) and b["y"].shape == (6, 16, features.output_dim(kind))
+        assert b["x"].shape == (6, 16, features.input_dim(body=True)) and b["y"].shape == (6, 16, features.output_dim(kind))
         bt = losses.to_torch(b)
         _, terms, _ = losses.compute_loss(bt["y"], bt, kind)
         assert terms["fk"] < 1e-5 and terms.get("mid", 0.0) < 1e-4 and terms.get("swivel", 0.0) < 1e-4
@@ -186,7 +186,7 @@ def test_sampler_ground_truth_is_consistent(cache):
     s = ds.WindowSampler(files, window=16, devices=("head", "left_hand", "right_hand", "pelvis", "left_foot",
                                                     "right_foot"), seed=1)
     b = s.sample(5)
-    assert b["x"].shape == (5, 16, 72) and all(np.isfinite(v).all() for v in b.values())
+    assert b["x"].shape == (5, 16, 72 + len(features.BODY_FEATURES)) and all(np.isfinite(v).all() for v in b.values())
 
 
 def test_model_size_and_loss_decreases(cache):
@@ -277,7 +277,9 @@ def test_fk_kind_six_trackers_causal_export(cache, bvh_dir, tmp_path):
     out = tmp_path / "fk.onnx"
     contract, diff = export.export(r["checkpoint"], str(out), quiet=True)
     assert diff <= 1e-4 and contract["kind"] == "fk" and contract["causal"] is True
-    assert len(contract["input_devices"]) == 6 and contract["input_shape"] == ["batch", 12, 72]
+    F = 72 + len(features.BODY_FEATURES)
+    assert len(contract["input_devices"]) == 6 and contract["input_shape"] == ["batch", 12, F]
+    assert contract["body_features"] == list(features.BODY_FEATURES)
     assert contract["output_shape"][-1] == features.output_dim("fk")
     assert ModelRunner(str(out), threads=1).contract.kind == "fk"
     # causal: a frame's output does not depend on later frames
@@ -285,7 +287,7 @@ def test_fk_kind_six_trackers_causal_export(cache, bvh_dir, tmp_path):
     model = PoseNet(ModelConfig.from_dict(ck["config"]))
     model.load_state_dict(ck["model"])
     model.eval()
-    x = torch.randn(1, 12, 72)
+    x = torch.randn(1, 12, F)
     x2 = x.clone()
     x2[:, 8:] += 1.0
     with torch.no_grad():

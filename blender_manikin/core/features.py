@@ -19,7 +19,13 @@ same features (tested).  Heights stay measured from the floor (z = 0).
 
 Inputs ``x`` : ``(B, W, F_in)`` float32, per frame, for each input device
 in ``INPUT_DEVICES`` order: canonical position (3), canonical orientation
-6D (6), velocity (3, canonical, in statures per second / 10).
+6D (6), velocity (3, canonical, in statures per second / 10); then, for
+body-conditioned models (SparsePoser's "static encoder" idea), the same
+:data:`BODY_FEATURES` on every frame of the window: the performer's segment
+lengths in statures, minus those of the reference body (Drillis & Contini
+proportions), times :data:`BODY_SCALE`.  So one model adapts to long legs,
+short arms or a low head joint instead of assuming the training actors'
+proportions.
 
 Outputs (MANIKIN) ``y`` : ``(B, W, F_out)`` float32 with the blocks of
 :data:`OUTPUT_BLOCKS`: root (pelvis) world orientation 6D in the canonical
@@ -36,7 +42,7 @@ from __future__ import annotations
 import numpy as np
 
 from . import rotations as rot
-from .skeleton import J, NUM_JOINTS
+from .skeleton import J, NUM_JOINTS, PARENTS, make_body
 
 INPUT_DEVICES = ("head", "left_hand", "right_hand")
 DEVICE_JOINT = {"head": J["head"], "left_hand": J["left_wrist"], "right_hand": J["right_wrist"],
@@ -55,6 +61,78 @@ OUTPUT_BLOCKS = {
 }
 
 
+#: body features (each a length in statures, see :func:`body_measures`)
+BODY_FEATURES = ("thigh", "shank", "ankle_above_ball", "torso", "neck_head",
+                 "hip_width", "shoulder_width", "upper_arm", "forearm")
+#: multiplies (measure - reference) so that a ±12 % segment is about ±0.1-0.3
+BODY_SCALE = 5.0
+
+_LEFT, _RIGHT = ("left_hip", "left_knee", "left_ankle"), ("right_hip", "right_knee", "right_ankle")
+
+
+def _chain_z(offsets, names):
+    """Sum of the offsets' z along a joint chain ``(..., )``."""
+    return sum(offsets[..., J[n], 2] for n in names)
+
+
+def head_above_ankles(offsets):
+    """``(...)`` metres: the head joint above the ankle joints of a body standing straight,
+    from rest offsets ``(..., 22, 3)`` (left/right averaged)."""
+    off = np.asarray(offsets, np.float64)
+    head_z = _chain_z(off, ("spine1", "spine2", "spine3", "neck", "head"))
+    ankle_z = 0.5 * (_chain_z(off, _LEFT) + _chain_z(off, _RIGHT))
+    return head_z - ankle_z
+
+
+def stature_from_offsets(offsets):
+    """``(...)`` metres: the stature the network's features are normalised by, from rest
+    offsets ``(..., 22, 3)``.  It is defined as on the bodies the solver builds
+    (:func:`~.skeleton.make_body`, whose head joint stands 0.871 statures above its ankles),
+    so it does not depend on a source skeleton's floor convention or head-joint placement."""
+    return head_above_ankles(offsets) / HEAD_ABOVE_ANKLES
+
+
+def body_measures(offsets, stature):
+    """Segment lengths of a body in statures, :data:`BODY_FEATURES` order.
+
+    offsets ``(..., 22, 3)`` rest offsets in metres (parent frame = world at
+    rest: T-pose, +Z up), stature ``(...)`` metres.  Returns ``(..., K)``
+    float64: thigh, shank, ankle above the ball of the foot, pelvis to neck,
+    neck to head, hip and shoulder joint-centre widths, upper arm, forearm
+    (left/right averaged)."""
+    off = np.asarray(offsets, np.float64)
+    s = np.asarray(stature, np.float64)
+    L = np.linalg.norm(off, axis=-1)
+    both = lambda a, b: 0.5 * (a + b)  # noqa: E731
+    hips = off[..., J["left_hip"], 0] - off[..., J["right_hip"], 0]
+    shoulders = ((off[..., J["left_collar"], 0] + off[..., J["left_shoulder"], 0])
+                 - (off[..., J["right_collar"], 0] + off[..., J["right_shoulder"], 0]))
+    m = np.stack([
+        both(L[..., J["left_knee"]], L[..., J["right_knee"]]),
+        both(L[..., J["left_ankle"]], L[..., J["right_ankle"]]),
+        both(-off[..., J["left_foot"], 2], -off[..., J["right_foot"], 2]),
+        _chain_z(off, ("spine1", "spine2", "spine3", "neck")),
+        off[..., J["head"], 2],
+        hips, shoulders,
+        both(L[..., J["left_elbow"]], L[..., J["right_elbow"]]),
+        both(L[..., J["left_wrist"]], L[..., J["right_wrist"]]),
+    ], -1)
+    return m / s[..., None]
+
+
+_REFERENCE_BODY = make_body(1.0)
+#: statures between the head joint and the ankles of the reference body (0.871)
+HEAD_ABOVE_ANKLES = float(head_above_ankles(_REFERENCE_BODY.offsets))
+BODY_REFERENCE = body_measures(_REFERENCE_BODY.offsets, 1.0)
+
+
+def body_features(offsets, stature):
+    """Network body features ``(..., K)`` float32 (see module doc) from rest
+    offsets ``(..., 22, 3)`` metres and stature ``(...)`` metres; zero for the
+    reference (Drillis & Contini) body of any stature."""
+    return ((body_measures(offsets, stature) - BODY_REFERENCE) * BODY_SCALE).astype(np.float32)
+
+
 def output_slices(kind="manikin"):
     """``{block name: slice}`` into the last axis of ``y``."""
     out, k = {}, 0
@@ -68,8 +146,9 @@ def output_dim(kind="manikin"):
     return sum(size for _, size in OUTPUT_BLOCKS[kind])
 
 
-def input_dim(devices=INPUT_DEVICES):
-    return PER_DEVICE * len(devices)
+def input_dim(devices=INPUT_DEVICES, body=False):
+    """Per-frame input size: 12 per device, plus the body features when ``body``."""
+    return PER_DEVICE * len(devices) + (len(BODY_FEATURES) if body else 0)
 
 
 def heading_yaw(R):
@@ -98,13 +177,14 @@ def canonical_frames(head_pos, head_rot, centre=None):
     return C, o
 
 
-def make_inputs(pos, rot_m, stature, fps, devices=INPUT_DEVICES, frames=None):
-    """Network input ``(B, W, 12·D)`` float32.
+def make_inputs(pos, rot_m, stature, fps, devices=INPUT_DEVICES, frames=None, body=None):
+    """Network input ``(B, W, 12·D [+ K])`` float32.
 
     pos: dict device → ``(B, W, 3)`` joint target positions (metres, world);
     rot_m: dict device → ``(B, W, 3, 3)`` joint target orientations;
     stature: ``(B,)`` metres; fps: frames per second of the window.
-    frames: optional precomputed ``(C, o)``.  Returns ``(x, C, o)``.
+    frames: optional precomputed ``(C, o)``.  body: optional ``(B, K)``
+    :func:`body_features`, appended to every frame.  Returns ``(x, C, o)``.
     """
     C, o = canonical_frames(pos["head"], rot_m["head"]) if frames is None else frames
     s = np.asarray(stature, np.float64).reshape(-1, 1, 1)
@@ -117,14 +197,22 @@ def make_inputs(pos, rot_m, stature, fps, devices=INPUT_DEVICES, frames=None):
         vel[:, 1:] = (p[:, 1:] - p[:, :-1]) * (fps * VEL_SCALE)
         vel[:, 0] = vel[:, 1] if p.shape[1] > 1 else 0.0
         feats += [p, r6, vel]
+    if body is not None:
+        b = np.asarray(body, np.float64)
+        b = np.broadcast_to(b.reshape(-1, 1, b.shape[-1]), (feats[0].shape[0], feats[0].shape[1], b.shape[-1]))
+        feats.append(b)
     return np.concatenate(feats, -1).astype(np.float32), C, o
 
 
-def encode_targets(world_rot, local_rot, positions, swivel, contacts, C, o, stature, kind="manikin"):
+def encode_targets(world_rot, local_rot, positions, swivel, contacts, C, o, stature, kind="manikin",
+                   head_anchor=None):
     """Training targets ``(B, W, F_out)`` float32 from ground truth.
 
     world_rot/local_rot: ``(B, W, 22, 3, 3)``; positions ``(B, W, 22, 3)``;
     swivel ``(B, W, 4)`` radians; contacts ``(B, W, 2)`` in {0, 1}.
+    head_anchor: ``(B, W, 3)`` what the ankle positions are relative to
+    (default the head joint); pass the head *input* when it carries an
+    offset, since :func:`decode_outputs` anchors them at the input.
     """
     Ct = np.swapaxes(C, -1, -2)[:, None]
     s = np.asarray(stature, np.float64).reshape(-1, 1, 1)
@@ -132,7 +220,8 @@ def encode_targets(world_rot, local_rot, positions, swivel, contacts, C, o, stat
     if kind == "manikin":
         B, W = swivel.shape[:2]
         blocks.append(rot.matrix_to_6d(local_rot[:, :, list(TORSO_LOCAL_IDX)]).reshape(B, W, -1))
-        rel = positions[:, :, list(ANKLES)] - positions[:, :, J["head"]][:, :, None]
+        anchor = positions[:, :, J["head"]] if head_anchor is None else head_anchor
+        rel = positions[:, :, list(ANKLES)] - anchor[:, :, None]
         blocks.append((np.einsum("bwij,bwkj->bwki", Ct, rel) / s[..., None]).reshape(B, W, 6))
         blocks.append(rot.matrix_to_6d(Ct[:, :, None] @ world_rot[:, :, list(ANKLES)]).reshape(B, W, 12))
         blocks.append(np.stack([np.cos(swivel), np.sin(swivel)], -1).reshape(B, W, 8))

@@ -49,6 +49,11 @@ class Contract:
     output_dim: int
     raw: dict
 
+    @property
+    def body(self):
+        """Whether the model takes :data:`features.BODY_FEATURES` (the performer's proportions)."""
+        return bool(self.raw.get("body_features"))
+
     @classmethod
     def from_json(cls, text, path="<model>"):
         try:
@@ -76,8 +81,15 @@ class Contract:
                 problems.append(f"output blocks {blocks} differ from the code's")
             if self.output_dim != features.output_dim(self.kind):
                 problems.append(f"output size {self.output_dim} != {features.output_dim(self.kind)}")
-        if self.input_dim != features.input_dim(self.devices):
-            problems.append(f"input size {self.input_dim} != {features.input_dim(self.devices)}")
+        body = self.raw.get("body_features") or []
+        if body and tuple(body) != features.BODY_FEATURES:
+            problems.append(f"body features {body} differ from the code's {list(features.BODY_FEATURES)}")
+        norm = self.raw.get("body_normalisation") or {}
+        if body and (abs(float(norm.get("scale", -1)) - features.BODY_SCALE) > 1e-9
+                     or not np.allclose(norm.get("reference", []), features.BODY_REFERENCE, atol=1e-6)):
+            problems.append("body feature normalisation differs from the code's")
+        if self.input_dim != features.input_dim(self.devices, body=bool(body)):
+            problems.append(f"input size {self.input_dim} != {features.input_dim(self.devices, body=bool(body))}")
         if tuple(self.raw.get("joint_names", JOINT_NAMES)) != tuple(JOINT_NAMES):
             problems.append("joint names differ from the 22-joint body")
         vs = self.raw.get("normalisation", {}).get("vel_scale", features.VEL_SCALE)

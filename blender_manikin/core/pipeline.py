@@ -130,8 +130,12 @@ def run_network(targets: TrackerTargets, body: Body, runner, progress=None, stri
     idx = np.clip(starts[:, None] + np.arange(W)[None], 0, N - 1)          # (B, W) edge padding
     wpos = {d: pos_m[d][idx] for d in c.devices}
     wrot = {d: rot_m[d][idx] for d in c.devices}
-    stature = np.full(len(starts), body.stature)
-    x, C, o = features.make_inputs(wpos, wrot, stature, c.fps, devices=c.devices)
+    # Body-conditioned models were trained with the stature defined from the skeleton (head joint
+    # 0.871 statures above the ankles, as make_body builds); older ones with the body's own.
+    s_net = float(features.stature_from_offsets(body.offsets)) if c.body else body.stature
+    stature = np.full(len(starts), s_net)
+    body_in = features.body_features(body.offsets, s_net)[None] if c.body else None
+    x, C, o = features.make_inputs(wpos, wrot, stature, c.fps, devices=c.devices, body=body_in)
     if progress is not None:
         progress(0.1)
     y = runner.predict(x)

@@ -80,7 +80,7 @@ from ..core import features
 from ..core import hybrik
 from ..core import limb_solver as ls
 from ..core import rotations as rot
-from ..core.skeleton import Body, J, LIMBS, NUM_JOINTS, forward_kinematics
+from ..core.skeleton import PROPORTIONS, Body, J, JOINT_NAMES, LIMBS, NUM_JOINTS, forward_kinematics
 
 #: bump when the stored ground truth changes meaning
 PREPROCESS_VERSION = 1
@@ -392,19 +392,35 @@ def split_files(clip_files):
 # windows
 @dataclass
 class Augment:
-    """Training augmentation (see module doc); ``Augment.off()`` disables all."""
+    """Training augmentation (see module doc); ``Augment.off()`` disables all.
+
+    speed: time-resampling factor range (log-uniform).  stature: the body's
+    stature after retargeting, metres (uniform); ``None`` keeps the clip's.
+    segment: each segment group (legs, thigh vs shank, torso, neck and head,
+    arms, shoulder width, hip width) is scaled by its own factor in
+    ``[1 - segment, 1 + segment]`` (log-uniform) before the stature is set.
+    floor: uniform floor offset (metres).  mirror: probability of a
+    left/right mirrored window.  head_offset: metres, per axis, of a constant
+    offset of the head input in the head's frame (eye or HMD versus head
+    joint).  calibration: probability that the window holds a synthetic
+    T-pose or A-pose (:func:`calibration_pose`) blended into the motion.
+    """
     speed: tuple = (0.8, 1.25)
-    scale: tuple = (0.85, 1.15)
-    floor: float = 0.02
+    stature: tuple | None = (1.45, 2.05)
+    segment: float = 0.12
+    floor: float = 0.03
+    mirror: float = 0.5
     pos_noise: float = 0.004
     rot_noise_deg: float = 2.0
     hand_offset_deg: float = 5.0
+    head_offset: float = 0.02
     edge_prob: float = 0.05
+    calibration: float = 0.1
 
     @classmethod
     def off(cls):
-        return cls(speed=(1.0, 1.0), scale=(1.0, 1.0), floor=0.0, pos_noise=0.0, rot_noise_deg=0.0,
-                   hand_offset_deg=0.0, edge_prob=0.0)
+        return cls(speed=(1.0, 1.0), stature=None, segment=0.0, floor=0.0, mirror=0.0, pos_noise=0.0,
+                   rot_noise_deg=0.0, hand_offset_deg=0.0, head_offset=0.0, edge_prob=0.0, calibration=0.0)
 
 
 @dataclass
@@ -418,6 +434,7 @@ class ClipSet:
     offsets: np.ndarray       # (C, 22, 3) float64
     stature: np.ndarray       # (C,)
     names: list = field(default_factory=list)
+    lowest: np.ndarray = None  # (C,) 1st percentile of the lowest foot joint's height, metres
 
     @classmethod
     def load(cls, files):
@@ -434,13 +451,112 @@ class ClipSet:
                 st.append(float(z["stature"]))
                 names.append(str(z["name"]))
         lens = np.array(lens, np.int64)
-        return cls(np.concatenate(q), np.concatenate(rp), np.concatenate(ct),
-                   np.concatenate([[0], np.cumsum(lens)[:-1]]).astype(np.int64), lens,
-                   np.stack(offs), np.array(st), names)
+        out = cls(np.concatenate(q), np.concatenate(rp), np.concatenate(ct),
+                  np.concatenate([[0], np.cumsum(lens)[:-1]]).astype(np.int64), lens,
+                  np.stack(offs), np.array(st), names)
+        out.lowest = out.lowest_foot_heights()
+        return out
+
+    def lowest_foot_heights(self, chunk=65536):
+        """``(C,)`` per clip: the 1st percentile over frames of the lowest ankle or ball height
+        (metres), where the clip stands on its floor."""
+        zmin = np.empty(self.quat.shape[0])
+        cid = np.repeat(np.arange(len(self.lengths)), self.lengths)
+        for a in range(0, zmin.shape[0], chunk):
+            b = min(a + chunk, zmin.shape[0])
+            R = rot.quat_to_matrix(self.quat[a:b].astype(np.float64))
+            P, _ = forward_kinematics(R, self.root_pos[a:b].astype(np.float64), None,
+                                      offsets=self.offsets[cid[a:b]])
+            zmin[a:b] = P[:, _FOOT_JOINTS, 2].min(-1)
+        return np.array([np.percentile(zmin[s:s + n], 1.0) for s, n in zip(self.starts, self.lengths)])
 
     @property
     def frames(self):
         return int(self.lengths.sum())
+
+
+#: joint index of each joint's mirror image (left <-> right)
+MIRROR = np.array([J[n.replace("left_", "\0").replace("right_", "left_").replace("\0", "right_")]
+                   for n in JOINT_NAMES])
+_MIRROR_M = np.diag([-1.0, 1.0, 1.0])
+
+#: offsets each segment-group factor scales: (joint, axes) pairs
+SEGMENT_GROUPS = {
+    "feet": [(J["left_foot"], (0, 1, 2)), (J["right_foot"], (0, 1, 2))],
+    "thigh": [(J["left_knee"], (0, 1, 2)), (J["right_knee"], (0, 1, 2))],
+    "shank": [(J["left_ankle"], (0, 1, 2)), (J["right_ankle"], (0, 1, 2))],
+    "torso": [(J[n], (0, 1, 2)) for n in ("spine1", "spine2", "spine3", "neck")]
+             + [(J["left_collar"], (2,)), (J["right_collar"], (2,))],
+    "head": [(J["head"], (0, 1, 2))],
+    "arms": [(J[n], (0, 1, 2)) for n in ("left_elbow", "right_elbow", "left_wrist", "right_wrist")],
+    "shoulders": [(J[n], (0,)) for n in ("left_collar", "right_collar", "left_shoulder", "right_shoulder")],
+    "hips": [(J["left_hip"], (0,)), (J["right_hip"], (0,))],
+}
+#: which body measure (features.BODY_FEATURES index) each group's factor moves
+GROUP_MEASURE = {"thigh": (0,), "shank": (1,), "feet": (2,), "torso": (3,), "head": (4,), "hips": (5,),
+                 "shoulders": (6,), "arms": (7, 8)}
+_FOOT_JOINTS = [J["left_ankle"], J["right_ankle"], J["left_foot"], J["right_foot"]]
+_LEG_CHAINS = [(J["left_hip"], J["left_knee"], J["left_ankle"], J["left_foot"]),
+               (J["right_hip"], J["right_knee"], J["right_ankle"], J["right_foot"])]
+
+
+def lowest_foot_height(local, root, offsets):
+    """``(N,)`` height of the lowest ankle or ball joint: FK of the two leg chains only.
+
+    local ``(N, 22, 3, 3)``, root ``(N, 3)``, offsets ``(N, 22, 3)``."""
+    R0 = local[:, 0]
+    low = None
+    for chain in _LEG_CHAINS:
+        p, R = root, R0
+        for j in chain:
+            p = p + np.einsum("nij,nj->ni", R, offsets[:, j])
+            R = R @ local[:, j]
+            if j in _FOOT_JOINTS:
+                low = p[:, 2] if low is None else np.minimum(low, p[:, 2])
+    return low
+#: statures between the floor and the lowest foot joint of a standing foot (make_body's ball)
+FOOT_CLEARANCE = PROPORTIONS["foot_height"]
+
+
+def mirror_motion(local, root, offsets, contacts):
+    """Left/right mirror image (x -> -x) of a motion.
+
+    local ``(..., 22, 3, 3)`` local rotations, root ``(..., 3)``, offsets
+    ``(..., 22, 3)``, contacts ``(..., 2)``.  Every rest frame is world
+    aligned, so the mirrored rotation of joint j is ``M R[mirror(j)] M`` with
+    ``M = diag(-1, 1, 1)`` (a proper rotation); left and right hinge axes of
+    the limb solver are mirror images, so hinges stay hinges."""
+    M = _MIRROR_M
+    local_m = M @ local[..., MIRROR, :, :] @ M
+    root_m = root * np.array([-1.0, 1.0, 1.0])
+    offsets_m = offsets[..., MIRROR, :] * np.array([-1.0, 1.0, 1.0])
+    return local_m, root_m, offsets_m, contacts[..., ::-1]
+
+
+def calibration_pose(rng, B):
+    """``(B, 22, 4)`` local quaternions of standing calibration poses: half
+    T-poses (arms 8° below to 12° above horizontal), half A-poses (arms 30-50°
+    down), elbows bent 0-12°, head pitched ±15°, legs straight (hips ±4°
+    apart, knees 0-4°).  Root rotation identity (upright, facing -Y)."""
+    aa = np.zeros((B, NUM_JOINTS, 3))
+    a_pose = rng.uniform(size=B) < 0.5
+    down = np.where(a_pose, rng.uniform(np.radians(30), np.radians(50), B),
+                    rng.uniform(np.radians(-12), np.radians(8), B))
+    aa[:, J["left_shoulder"], 1] = down + rng.normal(0, np.radians(3), B)
+    aa[:, J["right_shoulder"], 1] = -(down + rng.normal(0, np.radians(3), B))
+    for li, (_, _, m, _) in enumerate(LIMBS):
+        top = np.radians(12.0) if li < 2 else np.radians(4.0)
+        aa[:, m] = ls.H0[li] * rng.uniform(0.0, top, B)[:, None]
+    aa[:, J["head"], 0] = rng.uniform(-np.radians(15), np.radians(15), B)
+    spread = rng.uniform(0.0, np.radians(4), B)
+    aa[:, J["left_hip"], 1] = -spread
+    aa[:, J["right_hip"], 1] = spread
+    return rot.matrix_to_quat(rot.axis_angle_to_matrix(aa))
+
+
+def _smoothstep(x):
+    x = np.clip(x, 0.0, 1.0)
+    return x * x * (3.0 - 2.0 * x)
 
 
 def _small_rotations(rng, shape, sigma_rad):
@@ -461,11 +577,12 @@ class WindowSampler:
     """
 
     def __init__(self, clips, window=40, kind="manikin", devices=features.INPUT_DEVICES,
-                 augment=None, seed=0, fps=MODEL_FPS):
+                 augment=None, seed=0, fps=MODEL_FPS, body=True):
         self.clips = clips if isinstance(clips, ClipSet) else ClipSet.load(list(clips))
         self.window = int(window)
         self.kind = kind
         self.devices = tuple(devices)
+        self.body = bool(body)
         self.aug = Augment() if augment is None else augment
         self.fps = float(fps)
         self.rng = np.random.default_rng(seed)
@@ -504,6 +621,68 @@ class WindowSampler:
             t = np.where(edge[:, None], t + shift[:, None], t)
         return cid, np.clip(t, 0.0, L[:, None] - 1)
 
+    def _random_body(self, rng, offsets):
+        """A new body for each window: ``(offsets (B, 22, 3), stature (B,), k (B,))``.
+
+        Every segment group is scaled by its own factor (see :class:`Augment`), then the whole
+        body so the stature lands in ``Augment.stature``.  The stature is defined as on the
+        bodies the solver builds (:func:`features.stature_from_offsets`: the head joint 0.871
+        statures above the ankles standing straight), whatever the source skeleton's head joint
+        or floor convention.  ``k``: new stature / the source body's stature."""
+        a, B = self.aug, offsets.shape[0]
+        s0 = features.stature_from_offsets(offsets)
+        out = offsets.copy()
+        if a.segment > 0:
+            lo, hi = np.log(1 - a.segment), np.log(1 + a.segment)
+            # Each group moves a random part of the way from the source skeleton's proportion to
+            # the reference body's (the solver's default), then by up to ±segment: so the
+            # training bodies span both, and every body the solver builds is inside that range.
+            to_ref = np.log(features.BODY_REFERENCE / features.body_measures(offsets, s0))      # (B, K)
+            g = {}
+            for name, idx in GROUP_MEASURE.items():
+                r = to_ref[:, list(idx)].mean(-1)
+                g[name] = np.exp(rng.uniform(0.0, 1.3, B) * r + rng.uniform(lo, hi, B))
+            legs = np.exp(rng.uniform(lo, hi, B))      # both leg segments together as well
+            g["thigh"] = g["thigh"] * legs
+            g["shank"] = g["shank"] * legs
+            for name, members in SEGMENT_GROUPS.items():
+                for j, axes in members:
+                    out[:, j, list(axes)] *= g[name][:, None]
+        s1 = features.stature_from_offsets(out)
+        if a.stature is not None:
+            target = rng.uniform(a.stature[0], a.stature[1], B)
+            out *= (target / s1)[:, None, None]
+            s1 = target
+        return out, s1, s1 / s0
+
+    def _blend_calibration(self, rng, q, root, contacts, offsets, lowest):
+        """Blend a held calibration pose (0.5-2 s, 0.3 s ramps) into some windows, as real
+        recordings begin: the body turns to the motion's heading, stands on the clip's floor
+        with both feet planted."""
+        a, (B, W) = self.aug, q.shape[:2]
+        pick = np.nonzero(rng.uniform(size=B) < a.calibration)[0]
+        if pick.size == 0:
+            return q, root, contacts
+        n = pick.size
+        pose = calibration_pose(rng, n)                                       # (n, 22, 4)
+        yaw = features.heading_yaw(rot.quat_to_matrix(q[pick, W // 2, 0]))
+        pose[:, 0] = rot.matrix_to_quat(features.rot_z(yaw))
+        P, _ = forward_kinematics(rot.quat_to_matrix(pose), np.zeros((n, 3)), None, offsets=offsets[pick])
+        stand = np.empty((n, 3))
+        stand[:, :2] = root[pick, W // 2, :2]
+        stand[:, 2] = lowest[pick] - P[:, _FOOT_JOINTS, 2].min(-1)
+        hold = rng.uniform(0.5, 2.0, n) * self.fps
+        ramp = 0.3 * self.fps
+        start = rng.uniform(-hold, W, n)
+        t = np.arange(W)[None]
+        wgt = (_smoothstep((t - start[:, None] + ramp) / ramp)
+               * _smoothstep((start[:, None] + hold[:, None] + ramp - t) / ramp))
+        q, root, contacts = q.copy(), root.copy(), contacts.copy()
+        q[pick] = rot.quat_slerp(q[pick], np.broadcast_to(pose[:, None], q[pick].shape), wgt[..., None])
+        root[pick] = root[pick] * (1 - wgt[..., None]) + stand[:, None] * wgt[..., None]
+        contacts[pick] = np.where(wgt[..., None] > 0.5, 1.0, contacts[pick])
+        return q, root, contacts
+
     def sample(self, B, rng=None):
         rng = self.rng if rng is None else rng
         W, a, cs = self.window, self.aug, self.clips
@@ -518,19 +697,38 @@ class WindowSampler:
             q = rot.quat_slerp(q0, q1, np.broadcast_to(w[..., None], q0.shape[:-1]))
         else:
             q = q0
-        local = rot.quat_to_matrix(q)                                         # (B, W, 22, 3, 3)
         root = (cs.root_pos[base + i0] * (1 - w)[..., None] + cs.root_pos[base + i1] * w[..., None]).astype(np.float64)
         contacts = cs.contacts[base + np.rint(t).astype(np.int64)].astype(np.float64)
+        offsets = cs.offsets[cid].copy()                                      # (B, 22, 3)
+        lowest = cs.lowest[cid] if cs.lowest is not None else np.zeros(B)
 
-        scale = rng.uniform(a.scale[0], a.scale[1], B) if a.scale[1] > a.scale[0] else np.full(B, a.scale[0])
-        offsets = cs.offsets[cid] * scale[:, None, None]                      # (B, 22, 3)
-        stature = cs.stature[cid] * scale
-        root = root * scale[:, None, None]
+        if a.calibration > 0:
+            q, root, contacts = self._blend_calibration(rng, q, root, contacts, offsets, lowest)
+        local = rot.quat_to_matrix(q)                                         # (B, W, 22, 3, 3)
+        if a.mirror > 0:
+            flip = rng.uniform(size=B) < a.mirror
+            if flip.any():
+                lm, rm, om, cm = mirror_motion(local[flip], root[flip], offsets[flip], contacts[flip])
+                local[flip], root[flip], offsets[flip], contacts[flip] = lm, rm, om, cm
+
+        # Retarget onto a new body: the same local rotations on scaled segments, the root
+        # moved so the lowest foot joint keeps its height above the clip's floor (scaled) on
+        # every frame, so standing feet stay on the floor and jumps stay jumps.
+        N = B * W
+        new_off, stature, k = self._random_body(rng, offsets)
+        loc_flat = local.reshape(N, NUM_JOINTS, 3, 3)
+        low0 = lowest_foot_height(loc_flat, root.reshape(N, 3), np.repeat(offsets, W, 0)).reshape(B, W)
+        above0 = (low0 - lowest[:, None]) * k[:, None]
+        root = root * k[:, None, None]
+        low1 = lowest_foot_height(loc_flat, root.reshape(N, 3), np.repeat(new_off, W, 0)).reshape(B, W)
+        above1 = low1 - lowest[:, None] * k[:, None]
+        # The floor: standing feet have their lowest joint (the ball) FOOT_CLEARANCE statures up,
+        # as on the body the solver builds (skeleton.make_body); then the floor augmentation.
+        offsets = new_off
+        root[..., 2] += above0 - above1 - (lowest * k)[:, None] + (FOOT_CLEARANCE * stature)[:, None]
         if a.floor > 0:
             root[..., 2] += rng.uniform(-a.floor, a.floor, B)[:, None]
-        N = B * W
-        P, Rw = forward_kinematics(local.reshape(N, NUM_JOINTS, 3, 3), root.reshape(N, 3), None,
-                                   offsets=np.repeat(offsets, W, 0))
+        P, Rw = forward_kinematics(loc_flat, root.reshape(N, 3), None, offsets=np.repeat(offsets, W, 0))
         bases = [b for _, b, _, _ in LIMBS]
         mids = [m for _, _, m, _ in LIMBS]
         ends = [e for _, _, _, e in LIMBS]
@@ -538,7 +736,6 @@ class WindowSampler:
                                           base_rot=Rw[:, bases])
         P = P.reshape(B, W, NUM_JOINTS, 3)
         Rw = Rw.reshape(B, W, NUM_JOINTS, 3, 3)
-        local = local.reshape(B, W, NUM_JOINTS, 3, 3)
         swivel = swivel.reshape(B, W, 4)
 
         pos_in, rot_in = {}, {}
@@ -554,9 +751,14 @@ class WindowSampler:
                 axis = rot.normalize(rng.normal(size=(B, 3)))
                 ang = rng.uniform(0.0, math.radians(a.hand_offset_deg), B)
                 R = R @ rot.axis_angle_to_matrix(axis * ang[:, None])[:, None]
+            if a.head_offset > 0 and dev == "head":
+                delta = rng.uniform(-a.head_offset, a.head_offset, (B, 3))
+                p = p + np.einsum("bwij,bj->bwi", Rw[:, :, j], delta)
             pos_in[dev], rot_in[dev] = p, R
-        x, C, o = features.make_inputs(pos_in, rot_in, stature, self.fps, devices=self.devices)
-        y = features.encode_targets(Rw, local, P, swivel, contacts, C, o, stature, kind=self.kind)
+        body = features.body_features(offsets, stature) if self.body else None
+        x, C, o = features.make_inputs(pos_in, rot_in, stature, self.fps, devices=self.devices, body=body)
+        y = features.encode_targets(Rw, local, P, swivel, contacts, C, o, stature, kind=self.kind,
+                                    head_anchor=pos_in["head"] if "head" in pos_in else None)
         Ct = np.swapaxes(C, -1, -2)
         pos_can = np.einsum("bij,bwkj->bwki", Ct, P - o[:, None, None]) / stature[:, None, None, None]
         return dict(x=x, y=y, pos=pos_can.astype(np.float32),
@@ -612,9 +814,10 @@ def _prefetch_batch(step, batch, seed):
 
 
 def fixed_batches(clips, n_windows, batch, window=40, kind="manikin", devices=features.INPUT_DEVICES,
-                  seed=12345):
+                  seed=12345, body=True):
     """A deterministic list of un-augmented batches (validation)."""
-    s = WindowSampler(clips, window=window, kind=kind, devices=devices, augment=Augment.off(), seed=seed)
+    s = WindowSampler(clips, window=window, kind=kind, devices=devices, augment=Augment.off(), seed=seed,
+                      body=body)
     out, left = [], int(n_windows)
     while left > 0:
         b = min(batch, left)

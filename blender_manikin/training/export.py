@@ -65,6 +65,10 @@ def build_contract(ckpt, num_parameters):
         "input_devices": list(cfg.devices),
         "device_joints": {d: JOINT_NAMES[features.DEVICE_JOINT[d]] for d in cfg.devices},
         "per_device": [["position", 3], ["rotation_6d", 6], ["velocity", 3]],
+        "body_features": list(features.BODY_FEATURES) if cfg.body else [],
+        "body_normalisation": ({"scale": features.BODY_SCALE, "reference": features.BODY_REFERENCE.tolist(),
+                                "stature": "head joint above the ankles / %.3f" % features.HEAD_ABOVE_ANKLES}
+                               if cfg.body else {}),
         "joint_names": list(JOINT_NAMES),
         "torso_joints": [JOINT_NAMES[j] for j in TORSO_JOINTS],
         "torso_local": list(features.TORSO_LOCAL),

@@ -43,10 +43,11 @@ class ModelConfig:
     head_hidden: int = 256
     dropout: float = 0.05
     causal: bool = False
+    body: bool = True          # inputs end with features.BODY_FEATURES (the performer's proportions)
 
     @property
     def input_dim(self):
-        return features.input_dim(self.devices)
+        return features.input_dim(self.devices, body=self.body)
 
     @property
     def output_dim(self):
@@ -61,6 +62,7 @@ class ModelConfig:
     def from_dict(cls, d):
         d = dict(d)
         d["devices"] = tuple(d.get("devices", features.INPUT_DEVICES))
+        d.setdefault("body", False)     # checkpoints from before body conditioning
         return cls(**{k: v for k, v in d.items() if k in cls.__dataclass_fields__})
 
 

@@ -232,9 +232,9 @@ def main(argv=None):
     train_set = dataset.ClipSet.load(train_files)
     val_set = train_set if split.get("val_is_train") else dataset.ClipSet.load(val_files)
     sampler = dataset.WindowSampler(train_set, window=cfg.window, kind=cfg.kind, devices=cfg.devices,
-                                    seed=args.seed)
+                                    seed=args.seed, body=cfg.body)
     val_batches = dataset.fixed_batches(val_set, args.val_windows, 64, window=cfg.window, kind=cfg.kind,
-                                        devices=cfg.devices, seed=args.seed + 12345)
+                                        devices=cfg.devices, seed=args.seed + 12345, body=cfg.body)
     # fork the batch maker before torch starts its thread pool
     prefetch = dataset.Prefetcher(sampler, args.batch, args.seed, int(ckpt["step"]) if ckpt else 0,
                                   workers=args.data_workers)

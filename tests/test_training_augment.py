@@ -1,0 +1,147 @@
+"""Training augmentation that makes the network generalise: randomised bodies (retargeted by FK),
+left/right mirroring, calibration poses, and the body features the network is conditioned on.
+
+numpy only (no torch): the sampler runs on synthetic clips made here.
+"""
+import numpy as np
+import pytest
+
+from blender_manikin.core import features, limb_solver as ls, rotations as rot, skeleton as sk
+from blender_manikin.training import dataset as ds
+
+J = sk.J
+
+
+def _standing_clipset(T=30, bodies=(1.75,)):
+    """Clips of a body standing still in the rest T-pose with feet flat on the floor."""
+    quat, root, contacts, offsets, statures = [], [], [], [], []
+    for s in bodies:
+        body = sk.make_body(s)
+        quat.append(np.tile([1.0, 0, 0, 0], (T, sk.NUM_JOINTS, 1)))
+        root.append(np.tile(body.root_rest, (T, 1)))
+        contacts.append(np.ones((T, 2), np.uint8))
+        offsets.append(body.offsets)
+        statures.append(s)
+    n = len(bodies)
+    cs = ds.ClipSet(np.concatenate(quat).astype(np.float32), np.concatenate(root), np.concatenate(contacts),
+                    np.arange(n) * T, np.full(n, T), np.stack(offsets), np.array(statures),
+                    [f"stand{i}" for i in range(n)])
+    cs.lowest = cs.lowest_foot_heights()
+    return cs
+
+
+def _moving_clipset(n=3, T=120, seed=0):
+    rng = np.random.default_rng(seed)
+    recs = []
+    for i in range(n):
+        mc = ds.synthetic_motion(rng, T=T, take_id=f"t{i}")
+        recs.append(ds.motion_to_record(mc, f"c{i}", "synthetic"))
+    lens = np.array([r["local_quat"].shape[0] for r in recs])
+    cs = ds.ClipSet(np.concatenate([r["local_quat"] for r in recs]), np.concatenate([r["root_pos"] for r in recs]),
+                    np.concatenate([r["contacts"] for r in recs]), np.concatenate([[0], np.cumsum(lens)[:-1]]),
+                    lens, np.stack([r["offsets"].astype(np.float64) for r in recs]),
+                    np.array([float(r["stature"]) for r in recs]), [str(r["name"]) for r in recs])
+    cs.lowest = cs.lowest_foot_heights()
+    return cs
+
+
+def test_body_features_are_zero_for_the_solvers_bodies_and_track_proportions():
+    for s in (1.5, 1.75, 2.0):
+        b = sk.make_body(s)
+        assert np.abs(features.body_features(b.offsets, s)).max() < 1e-6
+        assert features.stature_from_offsets(b.offsets) == pytest.approx(s, abs=1e-9)
+    long_legs = sk.make_body(sk.BodyMeasurements(stature=1.75, thigh=0.245 * 1.75 * 1.1))
+    f = features.body_features(long_legs.offsets, 1.75)
+    k = features.BODY_FEATURES.index("thigh")
+    assert f[k] == pytest.approx(features.BODY_SCALE * 0.1 * 0.245, rel=1e-6)
+    assert np.abs(np.delete(f, [k, features.BODY_FEATURES.index("torso")])).max() < 1e-6
+
+
+def test_random_bodies_stand_on_the_floor_with_the_stature_asked_for():
+    """A standing clip retargeted onto random bodies: feet flat at the solver's clearance,
+    every frame, and the stature within the range; segment groups really vary."""
+    cs = _standing_clipset()
+    aug = ds.Augment(speed=(1, 1), floor=0.0, mirror=0.0, pos_noise=0.0, rot_noise_deg=0.0, hand_offset_deg=0.0,
+                     head_offset=0.0, edge_prob=0.0, calibration=0.0)
+    smp = ds.WindowSampler(cs, window=10, augment=aug, seed=3)
+    b = smp.sample(64)
+    s = b["stature"].astype(np.float64)
+    assert 1.45 <= s.min() and s.max() <= 2.05 and s.max() - s.min() > 0.3
+    P = b["pos"].astype(np.float64)                                      # canonical, statures
+    low = P[:, :, [J["left_ankle"], J["right_ankle"], J["left_foot"], J["right_foot"]], 2].min(-1)
+    assert np.abs(low - ds.FOOT_CLEARANCE).max() < 1e-5
+    # the network's stature is the skeleton's (head 0.871 statures above the ankles)
+    head_above = P[:, :, J["head"], 2] - P[:, :, [J["left_ankle"], J["right_ankle"]], 2].mean(-1)
+    assert np.abs(head_above - features.HEAD_ABOVE_ANKLES).max() < 1e-5
+    bf = b["x"][:, 0, features.input_dim():]
+    assert bf.shape == (64, len(features.BODY_FEATURES))
+    assert (bf.max(0) - bf.min(0) > 0.04).all(), "every body feature must vary"
+    assert np.allclose(b["x"][:, :1, -bf.shape[1]:], b["x"][:, :, -bf.shape[1]:])   # constant over the window
+
+
+def test_random_bodies_span_the_reference_proportions():
+    """Bodies are drawn between the source skeleton's proportions and the solver's reference, so
+    the bodies the solver builds at run time (features 0) are inside the training range."""
+    cs = _standing_clipset()
+    cs.offsets = cs.offsets * 1.0
+    cs.offsets[:, [J["left_knee"], J["right_knee"]]] *= 1.15       # a source with long thighs
+    cs.offsets[:, [J["left_collar"], J["right_collar"], J["left_shoulder"], J["right_shoulder"]], 0] *= 0.7
+    cs.lowest = cs.lowest_foot_heights()
+    smp = ds.WindowSampler(cs, window=4, seed=0)
+    bf = smp.sample(400)["x"][:, 0, features.input_dim():]
+    lo, hi = np.percentile(bf, 2, axis=0), np.percentile(bf, 98, axis=0)
+    assert (lo < 0).all() and (hi > 0).all(), (lo, hi)
+
+
+def test_mirror_is_a_reflection_with_sides_swapped():
+    rng = np.random.default_rng(2)
+    mc = ds.synthetic_motion(rng, T=20)
+    body = mc.body
+    rec = ds.motion_to_record(mc, "m", "synthetic")
+    local = rot.quat_to_matrix(rec["local_quat"].astype(np.float64))
+    root = rec["root_pos"].astype(np.float64)
+    P, _ = sk.forward_kinematics(local, root, body)
+    lm, rm, om, cm = ds.mirror_motion(local, root, body.offsets, rec["contacts"])
+    Pm, _ = sk.forward_kinematics(lm, rm, None, offsets=np.broadcast_to(om, (20,) + om.shape))
+    expect = P[:, ds.MIRROR] * np.array([-1.0, 1.0, 1.0])
+    assert np.abs(Pm - expect).max() < 1e-9
+    assert np.allclose(np.linalg.det(lm), 1.0)
+    assert (cm == rec["contacts"][:, ::-1]).all()
+
+
+def test_calibration_holds_stand_straight_on_both_feet():
+    cs = _moving_clipset()
+    aug = ds.Augment(speed=(1, 1), stature=None, segment=0.0, floor=0.0, mirror=0.0, pos_noise=0.0,
+                     rot_noise_deg=0.0, hand_offset_deg=0.0, head_offset=0.0, edge_prob=0.0, calibration=1.0)
+    smp = ds.WindowSampler(cs, window=40, augment=aug, seed=5)
+    rng = np.random.default_rng(0)
+    cid, t = smp._times(32, rng)
+    b = smp.sample(32, np.random.default_rng(0))
+    P = b["pos"].astype(np.float64)
+    y = b["y"]
+    contact = y[..., features.output_slices()["contact"]]
+    # frames where both feet are planted and the legs are straight (the holds)
+    knee = []
+    for side in ("left", "right"):
+        hip, kn, an = P[..., J[f"{side}_hip"], :], P[..., J[f"{side}_knee"], :], P[..., J[f"{side}_ankle"], :]
+        u, v = kn - hip, an - kn
+        cosang = (u * v).sum(-1) / np.linalg.norm(u, axis=-1) / np.linalg.norm(v, axis=-1)
+        knee.append(np.degrees(np.arccos(np.clip(cosang, -1, 1))))
+    knee = np.maximum(*knee)
+    held = (contact.min(-1) > 0.5) & (knee < 5.0)
+    assert held.any(axis=1).mean() > 0.8, "most windows must contain a held calibration pose"
+    low = P[..., [J["left_foot"], J["right_foot"]], 2]
+    assert np.abs(low[held] - ds.FOOT_CLEARANCE).max() < 0.01        # both balls on the floor
+    # arms: T-pose (near horizontal) or A-pose (30-50 degrees down)
+    arm = P[..., J["left_elbow"], :] - P[..., J["left_shoulder"], :]
+    elev = np.degrees(np.arcsin(arm[..., 2] / np.linalg.norm(arm, axis=-1)))[held]
+    assert ((elev > -22) & (elev < 16) | (elev < -25) & (elev > -60)).mean() > 0.9
+
+
+def test_calibration_pose_shapes_and_ranges():
+    q = ds.calibration_pose(np.random.default_rng(0), 200)
+    assert q.shape == (200, sk.NUM_JOINTS, 4) and np.allclose(np.linalg.norm(q, axis=-1), 1.0)
+    R = rot.quat_to_matrix(q)
+    P, _ = sk.forward_kinematics(R, np.zeros((200, 3)), sk.make_body(1.75))
+    knee = np.degrees(rot.geodesic_angle(R[:, J["left_knee"]], np.eye(3)))
+    assert knee.max() <= 4.0 + 1e-6
