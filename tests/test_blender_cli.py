@@ -133,3 +133,17 @@ def test_offsets_auto_resolution():
     assert resolve_offsets("auto", NS(metadata={}, source="a.csv")) == "none"
     assert resolve_offsets("index_knuckles", NS(metadata={"offsets": "quest_touch"}, source="a.csv")) == \
         "index_knuckles"
+
+
+def test_implausible_stature_is_flagged_in_the_summary(tmp_path, capsys, monkeypatch):
+    """A recording whose head stands 1.1 m above its floor (a tracking origin above the floor,
+    or a seated performer) gives a 1.2 m body: the per-input line says so and why."""
+    monkeypatch.setattr(solve_job, "run_solver", stub_solver)
+    rec = write_recording_csv(tmp_path / "low.csv", synthetic_result(T=30, fps=30.0, stature=1.2))
+    assert cli.main(["solve", str(rec), "--out", str(tmp_path / "o"), "--format", "json"]) == 0
+    line = capsys.readouterr().out.strip()
+    assert "estimated stature 1.19 m is outside 1.40-2.10 m" in line and "floor" in line, line
+    # a plausible one says nothing
+    rec = write_recording_csv(tmp_path / "ok.csv", synthetic_result(T=30, fps=30.0, stature=1.75))
+    assert cli.main(["solve", str(rec), "--out", str(tmp_path / "o"), "--format", "json"]) == 0
+    assert "estimated stature" not in capsys.readouterr().out

@@ -330,3 +330,20 @@ def test_beat_saber_preset_puts_wrists_within_reach_on_real_data():
 
     assert reach_ratio("beat_saber") < 1.1
     assert reach_ratio("none") > reach_ratio("beat_saber") + 0.05
+
+
+def test_stature_warning_names_the_likely_cause():
+    from blender_manikin.core.calibration import stature_warning
+    assert stature_warning(1.75, 1.59, "T-pose") is None
+    assert stature_warning(1.40, 1.27, "head height") is None and stature_warning(2.10, 1.9, "T-pose") is None
+    low = stature_warning(0.35, 0.32, "head height")
+    assert low.startswith("estimated stature 0.35 m is outside 1.40-2.10 m") and "floor" in low
+    assert "0.32 m above height 0" in low and "set the performer's height" in low
+    # centimetres read as metres: the unit factor that makes it plausible is named
+    cm = stature_warning(175.0, 159.0, "head height", units="m")
+    assert "--units cm" in cm and "1.75 m" in cm
+    mm = stature_warning(1750.0, 1590.0, "T-pose", units="m")
+    assert "--units mm" in mm
+    assert "--units" not in low
+    typed = stature_warning(2.5, 1.6, "height setting")
+    assert "check the height setting (2.50 m)" in typed and "floor" not in typed

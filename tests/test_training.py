@@ -293,3 +293,17 @@ def test_fk_kind_six_trackers_causal_export(cache, bvh_dir, tmp_path):
     with torch.no_grad():
         assert torch.allclose(model(x)[:, :8], model(x2)[:, :8], atol=1e-6)
         assert not torch.allclose(model(x)[:, 8:], model(x2)[:, 8:])
+
+
+def test_train_cli_selects_the_dual_attention_backbone(cache, bvh_dir, tmp_path):
+    from blender_manikin.training import train, export
+    from blender_manikin.training.model_dap import DualAttentionPoser
+    from blender_manikin.training.backbones import build_model
+    root, _ = cache
+    r = train.main(["--bvh", bvh_dir, "--cache-dir", root, "--window", "12", "--steps", "2", "--arch", "dap",
+                    "--out", str(tmp_path / "dap")] + TINY)
+    ck = torch.load(r["checkpoint"], weights_only=False)
+    assert ck["config"]["arch"] == "dap"
+    assert isinstance(build_model(ModelConfig.from_dict(ck["config"])), DualAttentionPoser)
+    contract, diff = export.export(r["checkpoint"], str(tmp_path / "dap.onnx"), quiet=True)
+    assert diff <= 1e-4 and contract["architecture"]["arch"] == "dap"

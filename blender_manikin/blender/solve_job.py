@@ -301,6 +301,7 @@ class SolveJob:
         self._set(_P_RESAMPLE, "calibrating")
         t = _time.perf_counter()
         self.body, self.offsets, self.info = calibrate(cfg, self.targets, times, offsets)
+        self._check_stature()
         if self.offsets is not offsets:     # calibration refined the device rotations
             self.targets, _ = make_targets(times, pos, quat, valid, cfg.fps, self.offsets)
         self.timings["calibrate"] = _time.perf_counter() - t
@@ -319,6 +320,22 @@ class SolveJob:
             self.timings[f"solve.{k}"] = v
         self._set(_P_SOLVE, "writing")
         return result
+
+    def _check_stature(self):
+        """Warn (``self.info``, the summary) when the body's stature is implausible."""
+        from ..core import calibration as cal
+        cfg = self.config
+        if cfg.height:                      # a typed height always wins
+            sized_by = "height setting"
+        elif any(n.startswith("calibrated") for n in self.info):
+            sized_by = "T-pose"
+        else:
+            sized_by = "head height"
+        head = np.asarray(self.targets.pos["head"])[:, 2]
+        units = (getattr(self.recording, "metadata", None) or {}).get("units", "m") if cfg.units is None else cfg.units
+        note = cal.stature_warning(self.body.stature, float(np.nanpercentile(head, 90)), sized_by, units)
+        if note:
+            self.info.append(note)
 
     def _adapt_arms(self, result, progress_width):
         """Lengthen arms built from proportions when the hands cannot reach their trackers.
@@ -415,7 +432,7 @@ class SolveJob:
         if self.body is not None:
             parts.append(f"stature {self.body.stature:.2f} m")
         for note in self.info:
-            if note.startswith(("calibrated", "arm span")):
+            if note.startswith(("calibrated", "arm span", "estimated stature")):
                 parts.append(note)
         if self.report is not None:
             gaps = getattr(self.report, "gaps", [])

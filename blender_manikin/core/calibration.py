@@ -66,6 +66,40 @@ def stature_from_eye_height(z):
     return float(z) / EYE_HEIGHT
 
 
+#: statures (metres) outside which the solve summary warns (see :func:`stature_warning`)
+PLAUSIBLE_STATURE = (1.40, 2.10)
+
+
+def stature_warning(stature, head_height, sized_by, units="m", plausible=PLAUSIBLE_STATURE):
+    """A note for the solve summary when ``stature`` (metres) is outside ``plausible``, naming
+    the likely cause; ``None`` when it is plausible.
+
+    head_height: the standing head height above the recording's floor (metres, as read).
+    sized_by: ``"height setting"`` (typed by the user), ``"T-pose"`` or ``"head height"``.
+    units: the units the positions were read in.  Likely causes: a typed height; positions in
+    other units than read (a factor of 100 or 1000 would make the stature plausible); a floor
+    that is not at height 0 (a tracking origin at eye level or on a desk makes the body too
+    small, one below the floor too big)."""
+    lo, hi = plausible
+    s = float(stature)
+    if lo <= s <= hi:
+        return None
+    text = f"estimated stature {s:.2f} m is outside {lo:.2f}-{hi:.2f} m: "
+    if sized_by == "height setting":
+        return text + f"check the height setting ({s:.2f} m)"
+    causes = []
+    scale = {"m": 1.0, "cm": 0.01, "mm": 0.001}.get(units, 1.0)
+    for name, factor in (("cm", 0.01), ("mm", 0.001), ("m", 1.0)):
+        k = factor / scale
+        if name != units and lo <= s * k <= hi:
+            causes.append(f"the units (read as {units}; in {name} the stature would be {s * k:.2f} m: "
+                          f"--units {name})")
+    causes.append(f"the floor (the head stands {float(head_height):.2f} m above height 0; the recording's "
+                  "floor must be at 0)")
+    causes.append("or set the performer's height")
+    return text + "check " + ", ".join(causes)
+
+
 @dataclass
 class CalibrationResult:
     """What :func:`calibrate` measured.

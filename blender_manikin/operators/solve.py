@@ -28,7 +28,7 @@ def _finish_report(op, context, job):
     if out is not None:
         s.armature = out.armature
     for note in job.info:
-        if note.startswith("calibration:"):
+        if note.startswith(("calibration:", "estimated stature")):
             op.report({'WARNING'}, note)
     if job.result is not None:
         for note in job.result.quality_notes():

@@ -88,8 +88,11 @@ MODEL_FPS = 30.0
 VAL_PERCENT = 10
 CONTACT_SPEED = 0.25      # m/s, horizontal
 CONTACT_HEIGHT = 0.06     # m above the clip's lowest height of that joint type
-#: core modules whose source is part of the cache key
+#: core modules whose source is part of the cache key (per source format)
 _KEY_MODULES = ("bvh.py", "joint_maps.py", "hybrik.py", "limb_solver.py", "skeleton.py")
+_FORMAT_KEY_MODULES = {"bvh": (), "asf_amc": ("asf_amc.py",)}
+#: file name endings of each motion format (what a folder's fingerprint covers)
+_FORMAT_SUFFIXES = {"bvh": (".bvh", ".bvh.gz"), "asf_amc": (".amc", ".amc.gz", ".asf", ".asf.gz")}
 
 _CORE_DIR = Path(__file__).resolve().parent.parent / "core"
 _END_JOINTS = (J["pelvis"], J["head"], J["left_wrist"], J["right_wrist"], J["left_ankle"], J["right_ankle"])
@@ -107,11 +110,37 @@ def _log(msg):
 
 # --------------------------------------------------------------------------
 # cache key
+def source_format(source):
+    """``"bvh"`` or ``"asf_amc"`` (Acclaim, as CMU and HDM05 ship): what a folder, file or tar
+    archive of motion holds (an archive is judged by its first members)."""
+    p = Path(source)
+    names = []
+    if p.is_dir():
+        names = [x.name for x in p.rglob("*") if x.is_file()]
+    elif p.is_file() and not p.name.lower().endswith(_FORMAT_SUFFIXES["bvh"] + _FORMAT_SUFFIXES["asf_amc"]):
+        import tarfile
+        try:
+            with tarfile.open(p, mode="r|*") as tf:
+                for i, m in enumerate(tf):
+                    names.append(m.name)
+                    if i > 200 or m.name.lower().endswith(_FORMAT_SUFFIXES["bvh"] + (".amc", ".amc.gz")):
+                        break
+        except tarfile.TarError:
+            return "bvh"
+    else:
+        names = [p.name]
+    low = [n.lower() for n in names]
+    if any(n.endswith((".amc", ".amc.gz")) for n in low) and not any(n.endswith(_FORMAT_SUFFIXES["bvh"]) for n in low):
+        return "asf_amc"
+    return "bvh"
+
+
 def _source_fingerprint(source):
     p = Path(source).resolve()
     h = hashlib.sha1(str(p).encode())
+    suffixes = _FORMAT_SUFFIXES["bvh"] + _FORMAT_SUFFIXES["asf_amc"]
     if p.is_dir():
-        for f in sorted(x for x in p.rglob("*") if x.is_file() and x.name.lower().endswith((".bvh", ".bvh.gz"))):
+        for f in sorted(x for x in p.rglob("*") if x.is_file() and x.name.lower().endswith(suffixes)):
             st = f.stat()
             h.update(f"{f.relative_to(p).as_posix()}|{st.st_size}|{st.st_mtime_ns}\n".encode())
     else:
@@ -137,10 +166,12 @@ def _code_digest(path):
     return hashlib.sha1(ast.dump(tree, include_attributes=False).encode()).hexdigest()
 
 
-def code_version():
+def code_version(fmt="bvh"):
     """Hash of PREPROCESS_VERSION and the code of the core modules the ground truth depends on."""
     h = hashlib.sha1(f"preprocess={PREPROCESS_VERSION};fps={MODEL_FPS}".encode())
-    for m in _KEY_MODULES:
+    if fmt != "bvh":
+        h.update(f"format={fmt}".encode())
+    for m in _KEY_MODULES + _FORMAT_KEY_MODULES.get(fmt, ()):
         f = _CORE_DIR / m
         h.update(m.encode())
         if f.exists():
@@ -148,15 +179,15 @@ def code_version():
     return h.hexdigest()[:12]
 
 
-def cache_key(source, fps=MODEL_FPS):
-    h = hashlib.sha1(f"{_source_fingerprint(source)}|{code_version()}|{float(fps)}".encode())
+def cache_key(source, fps=MODEL_FPS, fmt="bvh"):
+    h = hashlib.sha1(f"{_source_fingerprint(source)}|{code_version(fmt)}|{float(fps)}".encode())
     return h.hexdigest()[:16]
 
 
-def cache_dir_for(source, cache_dir=None, fps=MODEL_FPS):
+def cache_dir_for(source, cache_dir=None, fps=MODEL_FPS, fmt=None):
     root = cache_dir or default_cache_root()
     stem = re.sub(r"[^A-Za-z0-9_.-]+", "_", Path(source).name)[:40] or "source"
-    return os.path.join(root, f"{stem}-{cache_key(source, fps)}")
+    return os.path.join(root, f"{stem}-{cache_key(source, fps, fmt or source_format(source))}")
 
 
 # --------------------------------------------------------------------------
@@ -243,7 +274,8 @@ def _safe_name(name):
 
 
 def _process(job):
-    """Worker: parse one BVH (bytes), map, solve, write its npz.  Returns index info or an error."""
+    """Worker: parse one take (BVH bytes, or AMC and ASF bytes), map, solve, write its npz.
+    Returns index info or an error."""
     name, data, clips_dir, source_label, fps = job
     import io
     from ..core import bvh, joint_maps
@@ -253,8 +285,15 @@ def _process(job):
             with np.load(out) as z:
                 return dict(file=os.path.basename(out), name=name, take_id=str(z["take_id"]),
                             frames=int(z["local_quat"].shape[0]), ik_error_mean=float(z["ik_error_mean"]))
-        clip = bvh.read_bvh(io.BytesIO(data), name)
-        mc = joint_maps.clip_to_body_motion(clip)
+        if isinstance(data, tuple):      # ("asf_amc", amc bytes, asf name, asf bytes)
+            from ..core import asf_amc
+            _, amc, asf_name, asf = data
+            skel = asf_amc.read_asf(io.BytesIO(asf), asf_name)
+            clip = asf_amc.read_amc(io.BytesIO(amc), skel, name=name)
+            mc = asf_amc.asf_clip_to_body_motion(clip, skel)
+        else:
+            clip = bvh.read_bvh(io.BytesIO(data), name)
+            mc = joint_maps.clip_to_body_motion(clip)
         if mc is None or np.asarray(mc.positions).shape[0] < 2:
             return dict(name=name, error="fewer than 2 frames")
         rec = motion_to_record(mc, name, source_label, fps)
@@ -305,8 +344,9 @@ def build_cache(source, cache_dir=None, fps=MODEL_FPS, workers=2, verbose=True):
     """
     source = os.fspath(source)
     if not os.path.exists(source):
-        raise FileNotFoundError(f"BVH source not found: {source}")
-    d = cache_dir_for(source, cache_dir, fps)
+        raise FileNotFoundError(f"motion source not found: {source}")
+    fmt = source_format(source)
+    d = cache_dir_for(source, cache_dir, fps, fmt)
     index_path = os.path.join(d, "index.json")
     if os.path.exists(index_path):
         with open(index_path) as f:
@@ -321,8 +361,16 @@ def build_cache(source, cache_dir=None, fps=MODEL_FPS, workers=2, verbose=True):
     label = os.path.basename(os.path.abspath(source))
     t0 = time.time()
     is_archive = os.path.isfile(source) and not source.lower().endswith((".bvh", ".bvh.gz"))
-    jobs = ((name, opener().read(), clips_dir, label, float(fps))
-            for name, opener in bvh.iter_bvh_sources(source, **({"sort": False} if is_archive else {})))
+    if fmt == "asf_amc":
+        from ..core import asf_amc
+
+        def _asf_job(name, src):
+            asf = src.open_asf().read() if src.open_asf is not None else b""
+            return (name, ("asf_amc", src.open_amc().read(), src.asf_name or "", asf), clips_dir, label, float(fps))
+        jobs = (_asf_job(name, src) for name, src in asf_amc.iter_asf_amc_sources(source))
+    else:
+        jobs = ((name, opener().read(), clips_dir, label, float(fps))
+                for name, opener in bvh.iter_bvh_sources(source, **({"sort": False} if is_archive else {})))
     results, errors, frames, last = [], [], 0, 0.0
     if verbose:
         _log(f"[dataset] building cache {d} from {source} ({workers} workers)")
@@ -354,8 +402,8 @@ def build_cache(source, cache_dir=None, fps=MODEL_FPS, workers=2, verbose=True):
     results.sort(key=lambda r: r["name"])
     split = make_split(results)
     elapsed = time.time() - t0
-    index = dict(source=os.path.abspath(source), source_name=label, fps=float(fps),
-                 code_version=code_version(), preprocess_version=PREPROCESS_VERSION,
+    index = dict(source=os.path.abspath(source), source_name=label, fps=float(fps), format=fmt,
+                 code_version=code_version(fmt), preprocess_version=PREPROCESS_VERSION,
                  clips=results, frames=int(frames), skipped=errors, build_seconds=round(elapsed, 1),
                  contact_rule=dict(speed_mps=CONTACT_SPEED, height_m=CONTACT_HEIGHT))
     with open(os.path.join(d, "split.json"), "w") as f:

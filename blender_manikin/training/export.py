@@ -91,11 +91,12 @@ def export(checkpoint, out, verify=True, quiet=False):
     """Write the ONNX file; returns ``(contract dict, max abs difference to torch)``."""
     import torch
     import onnx
-    from .model import ModelConfig, PoseNet, count_parameters
+    from .backbones import build_model
+    from .model import ModelConfig, count_parameters
 
     ckpt = torch.load(checkpoint, map_location="cpu", weights_only=False)
     cfg = ModelConfig.from_dict(ckpt["config"])
-    model = PoseNet(cfg)
+    model = build_model(cfg)
     model.load_state_dict(ckpt["model"])
     model.eval()
     contract = build_contract(ckpt, count_parameters(model))

@@ -44,6 +44,7 @@ class ModelConfig:
     dropout: float = 0.05
     causal: bool = False
     body: bool = True          # inputs end with features.BODY_FEATURES (the performer's proportions)
+    arch: str = "posenet"      # backbone (training/backbones.py): posenet | dap
 
     @property
     def input_dim(self):

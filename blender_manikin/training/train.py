@@ -69,6 +69,9 @@ def build_parser():
     p.add_argument("--head-hidden", type=int, default=256)
     p.add_argument("--dropout", type=float, default=0.05)
     p.add_argument("--causal", action="store_true", help="live variant: attend to past frames only")
+    p.add_argument("--arch", choices=("posenet", "dap"), default="posenet",
+                   help="backbone: posenet (shared Transformer, global + local heads) or dap (Dual Attention "
+                        "Poser: global and local paths, cross-attention mixer, gated-MLP decoders)")
     p.add_argument("--six-trackers", action="store_true", help="inputs: head, hands, pelvis and feet")
     p.add_argument("--lr", type=float, default=1e-3)
     p.add_argument("--lam", action="append", default=None, metavar="TERM=WEIGHT",
@@ -178,7 +181,8 @@ def main(argv=None):
     args = build_parser().parse_args(argv)
     import torch
     from . import dataset, losses
-    from .model import ModelConfig, PoseNet, count_parameters
+    from .backbones import build_model
+    from .model import ModelConfig, count_parameters
     from .. import __version__
 
     torch.set_num_threads(max(1, args.threads))
@@ -223,7 +227,8 @@ def main(argv=None):
         devices = SIX_TRACKERS if args.six_trackers else features.INPUT_DEVICES
         cfg = ModelConfig(kind=args.kind, devices=devices, window=args.window, d_model=args.d_model,
                           layers=args.layers, heads=args.heads, ff_mult=args.ff_mult,
-                          head_hidden=args.head_hidden, dropout=args.dropout, causal=args.causal)
+                          head_hidden=args.head_hidden, dropout=args.dropout, causal=args.causal,
+                          arch=args.arch)
 
     # ---------------------------------------------------------------- data
     files = dataset.build_cache(args.bvh, args.cache_dir, workers=args.workers, verbose=not args.quiet)
@@ -254,7 +259,7 @@ def main(argv=None):
 
     # --------------------------------------------------------------- model
     torch.manual_seed(args.seed)
-    model = PoseNet(cfg)
+    model = build_model(cfg)
     opt = torch.optim.AdamW(model.parameters(), lr=args.lr, weight_decay=args.weight_decay)
     step, elapsed, history = 0, 0.0, []
     if ckpt is not None:
@@ -264,7 +269,7 @@ def main(argv=None):
         torch.set_rng_state(ckpt["torch_rng"])
         say(f"resumed {ckpt_path} at step {step} ({elapsed / 60:.1f} min trained)")
     nparams = count_parameters(model)
-    say(f"model: {cfg.kind}, d_model {cfg.d_model}, {cfg.layers} layers, {cfg.heads} heads, window "
+    say(f"model: {cfg.kind}, {cfg.arch}, d_model {cfg.d_model}, {cfg.layers} layers, {cfg.heads} heads, window "
         f"{cfg.window}, inputs {list(cfg.devices)}: {nparams:,} parameters; batch {args.batch}, "
         f"{args.threads} threads; loss weights {dict(losses.LAMBDA, **lam)}; plan: "
         + (f"{args.steps} steps" if args.steps else "") + (" / " if args.steps and args.minutes else "")

@@ -1,0 +1,131 @@
+"""Plausibility on real VR recordings, where there is no ground truth, model against model.
+
+    python benchmarks/bench_plausibility.py [RECORDING ...] [--model M.onnx] [--previous-model P.onnx]
+
+Default recordings: the Beat Saber replay in ``../shared/data/vr`` (a real player, VIVE Pro 2 and
+Index controllers, 30 s; legs never observed) and the bundled ``examples/example_recording.csv``
+(it starts with a T-pose).  Each is solved exactly as the add-on and the CLI solve it
+(``blender/solve_job.SolveJob.compute``: read, resample to 30 fps, device offsets ``auto``,
+calibration ``AUTO``) once per model, and the table prints, per recording and model:
+
+* knee flexion (degrees; both knees pooled): median, 10th and 90th percentiles.  A player who
+  mostly stands has a median near 0-20 degrees;
+* pelvis off the feet: share of the frames with both feet planted on which the pelvis is more
+  than 15 cm (horizontally) from the midpoint of the ankles, i.e. the body leans over feet that
+  do not carry it;
+* foot skating: mean horizontal ankle speed (cm/s) on the frames a foot is planted;
+* hands off: share of frames on which a wrist misses its tracker by more than 1 cm, and the
+  largest miss (cm);
+* the estimated stature (metres) and how the body was sized.
+
+The previous model is the one shipped before the current one
+(``benchmarks/models/manikin_s_previous.onnx``); it is skipped with a note when absent.
+"""
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+sys.path.insert(0, ROOT)
+
+import numpy as np  # noqa: E402
+
+from blender_manikin.core import metrics, skeleton as sk  # noqa: E402
+from blender_manikin.core.model_runner import MODELS_DIR  # noqa: E402
+
+J = sk.J
+SHARED = os.path.join(os.path.dirname(ROOT), "shared")
+DEFAULT_RECORDINGS = [os.path.join(SHARED, "data", "vr", "beatsaber-replay-sample.bsor"),
+                      os.path.join(ROOT, "examples", "example_recording.csv")]
+PREVIOUS = os.path.join(ROOT, "benchmarks", "models", "manikin_s_previous.onnx")
+UNITS = {"knee p10": "deg", "knee median": "deg", "knee p90": "deg", "pelvis off feet": "%",
+         "foot skate": "cm/s", "hands off": "%", "hand miss max": "cm", "stature": "m"}
+COLUMNS = list(UNITS)
+
+
+def knee_flexion_deg(P):
+    """``(T, 2)`` knee flexion (0 = straight) of positions ``(T, 22, 3)``."""
+    out = []
+    for side in ("left", "right"):
+        u = P[:, J[f"{side}_knee"]] - P[:, J[f"{side}_hip"]]
+        v = P[:, J[f"{side}_ankle"]] - P[:, J[f"{side}_knee"]]
+        c = (u * v).sum(-1) / np.linalg.norm(u, axis=-1) / np.linalg.norm(v, axis=-1)
+        out.append(np.degrees(np.arccos(np.clip(c, -1.0, 1.0))))
+    return np.stack(out, -1)
+
+
+def plausibility(result, targets):
+    """The table's numbers for one solved :class:`PoseResult` and its tracker targets."""
+    P = result.positions
+    fps = float(result.fps)
+    knees = knee_flexion_deg(P).reshape(-1)
+    contacts = np.asarray(result.contacts, bool) if result.contacts is not None else np.zeros((P.shape[0], 2), bool)
+    both = contacts.all(-1)
+    mid = P[:, [J["left_ankle"], J["right_ankle"]], :2].mean(1)
+    off = np.linalg.norm(P[:, J["pelvis"], :2] - mid, axis=-1) > 0.15
+    ankles = P[:, [J["left_ankle"], J["right_ankle"]], :2]
+    speed = np.zeros((P.shape[0], 2))
+    if P.shape[0] > 1:
+        speed[1:] = np.linalg.norm(np.diff(ankles, axis=0), axis=-1) * fps
+    misses = []
+    for dev, joint in (("left_hand", "left_wrist"), ("right_hand", "right_wrist")):
+        misses.append(np.linalg.norm(P[:, J[joint]] - targets.pos[dev], axis=-1))
+    miss = np.stack(misses, -1)
+    return {
+        "knee p10": float(np.percentile(knees, 10)), "knee median": float(np.median(knees)),
+        "knee p90": float(np.percentile(knees, 90)),
+        "pelvis off feet": float(100.0 * off[both].mean()) if both.any() else 0.0,
+        "foot skate": float(100.0 * speed[contacts].mean()) if contacts.any() else 0.0,
+        "hands off": float(100.0 * (miss > 0.01).any(-1).mean()), "hand miss max": float(100.0 * miss.max()),
+        "stature": float(result.body.stature),
+    }
+
+
+def solve_file(path, model):
+    """Solve ``path`` as the add-on does, with ``model``; returns the finished SolveJob."""
+    from blender_manikin.blender.solve_job import SolveConfig, SolveJob
+    from blender_manikin.core import model_runner
+    os.environ["BLENDER_MANIKIN_MODEL"] = os.path.abspath(model)
+    model_runner._CACHE.clear()
+    job = SolveJob(SolveConfig(source="FILE", filepath=path, fps=30.0, offsets="auto", calibration="AUTO",
+                               live_rig=False))
+    job.compute()
+    return job
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("recordings", nargs="*", help="recordings to solve (default: the Beat Saber replay and the example)")
+    ap.add_argument("--model", default=os.path.join(MODELS_DIR, "manikin_s.onnx"))
+    ap.add_argument("--previous-model", default=PREVIOUS)
+    args = ap.parse_args(argv)
+    recordings = args.recordings or [p for p in DEFAULT_RECORDINGS if os.path.isfile(p)]
+    missing = [p for p in (args.recordings or DEFAULT_RECORDINGS) if not os.path.isfile(p)]
+    for p in missing:
+        print(f"skipped (not found): {p}", file=sys.stderr)
+    models = [("shipped", args.model)]
+    if os.path.isfile(args.previous_model):
+        models.append(("previous", args.previous_model))
+    else:
+        print(f"no previous model at {args.previous_model}", file=sys.stderr)
+    rows, notes = [], []
+    for path in recordings:
+        for label, model in models:
+            job = solve_file(path, model)
+            row = plausibility(job.result, job.targets)
+            rows.append((f"{os.path.basename(path)} / {label}", row))
+            if label == "shipped":
+                notes.append(f"{os.path.basename(path)}: {job.result.positions.shape[0]} frames; " + "; ".join(job.info))
+    fmt = {f"{k} [{u}]": ".1f" for k, u in UNITS.items()}
+    fmt["stature [m]"] = ".2f"
+    rows = [(name, {f"{k} [{UNITS[k]}]": v for k, v in row.items()}) for name, row in rows]
+    print(metrics.format_table(rows, list(fmt), name_header="recording / model", formats=fmt))
+    for n in notes:
+        print(n)
+    return rows
+
+
+if __name__ == "__main__":
+    main()
