@@ -237,7 +237,8 @@ def test_train_resume_and_export(cache, bvh_dir, tmp_path):
     assert c["joint_names"] == list(sk.JOINT_NAMES) and c["input_devices"] == list(features.INPUT_DEVICES)
     assert c["normalisation"]["vel_scale"] == features.VEL_SCALE
     assert c["training_data"]["clips"] == 7 and c["training"]["steps"] == 6
-    assert c["licence"] == "see training data" and "mpjpe_cm" in c["validation"]
+    assert c["licence"] == "unknown: state it in the sources file" and "mpjpe_cm" in c["validation"]
+    assert [x["name"] for x in c["training_data"]["sources"]] == [os.path.basename(bvh_dir)]
     # the add-on's reader accepts it, and onnxruntime equals torch on a real batch
     from blender_manikin.core.model_runner import ModelRunner
     runner = ModelRunner(str(out), threads=1)
@@ -307,3 +308,67 @@ def test_train_cli_selects_the_dual_attention_backbone(cache, bvh_dir, tmp_path)
     assert isinstance(build_model(ModelConfig.from_dict(ck["config"])), DualAttentionPoser)
     contract, diff = export.export(r["checkpoint"], str(tmp_path / "dap.onnx"), quiet=True)
     assert diff <= 1e-4 and contract["architecture"]["arch"] == "dap"
+
+
+@pytest.fixture(scope="module")
+def asf_dir(tmp_path_factory):
+    """An ASF/AMC source (CMU layout): one performer, two takes of swaying and bending."""
+    import sys
+    sys.path.insert(0, os.path.dirname(__file__))
+    from test_asf_amc import STAND_Y, _cmu_amc_text, _cmu_asf_text
+    d = tmp_path_factory.mktemp("asf")
+    (d / "asf").mkdir()
+    (d / "amc").mkdir()
+    (d / "asf" / "07.asf").write_text(_cmu_asf_text())
+    for take in (1, 2):
+        frames = []
+        for k in range(60):
+            a = 25 * np.sin(2 * np.pi * (k / 60) * take)
+            frames.append({"root": (0.1 * k, STAND_Y, 0, 0, 3 * a, 0), "lfemur": (-abs(a), 0, 0),
+                           "ltibia": (abs(a),), "lhumerus": (a, 0, 0), "rradius": (abs(a),)})
+        (d / "amc" / f"07_{take:02d}.amc").write_text(_cmu_amc_text(frames))
+    return str(d)
+
+
+def test_select_on_keeps_the_best_checkpoint_on_another_source(cache, bvh_dir, asf_dir, tmp_path):
+    """--select-on: an ASF/AMC source (cached like BVH) is evaluated at every checkpoint and best.pt
+    is the checkpoint that did best on it."""
+    from blender_manikin.training import train
+    root, _ = cache
+    files = ds.build_cache(asf_dir, root, workers=1, verbose=False)
+    index, _ = ds.load_index(files)
+    assert len(files) == 2 and index["format"] == "asf_amc" and index["frames"] > 0
+    out = tmp_path / "sel"
+    r = train.main(["--bvh", bvh_dir, "--cache-dir", root, "--window", "12", "--steps", "6", "--ckpt-steps", "2",
+                    "--select-on", asf_dir, "--out", str(out)] + TINY)
+    assert r["step"] == 6
+    ck = torch.load(out / "checkpoint.pt", weights_only=False)
+    hist = [h for h in ck["history"] if "select_mpjpe_cm" in h]
+    assert [h["step"] for h in hist] == [2, 4, 6]
+    best = torch.load(out / "best.pt", weights_only=False)
+    assert best["step"] == min(hist, key=lambda h: h["select_mpjpe_cm"])["step"]
+
+
+def test_sources_file_with_options_and_licences(cache, bvh_dir, asf_dir, tmp_path):
+    """--sources: several sources, each with its reading options and licence; the model's licence is
+    the most restrictive; a bad file is named with the entry at fault."""
+    from blender_manikin.training import train, export
+    root, _ = cache
+    spec = tmp_path / "sources.json"
+    spec.write_text(json.dumps([
+        {"path": bvh_dir, "name": "synthetic BVH", "licence": "CC BY 4.0"},
+        {"path": asf_dir, "name": "synthetic ASF", "joint_map": "cmu_asf", "fps": 60.0,
+         "licence": "CC BY-NC 4.0"}]))
+    r = train.main(["--sources", str(spec), "--cache-dir", root, "--window", "12", "--steps", "2",
+                    "--out", str(tmp_path / "s")] + TINY)
+    contract, _ = export.export(r["checkpoint"], str(tmp_path / "s.onnx"), quiet=True)
+    srcs = contract["training_data"]["sources"]
+    assert [x["name"] for x in srcs] == ["synthetic BVH", "synthetic ASF"]
+    assert srcs[1]["format"] == "asf_amc" and srcs[1]["options"] == {"joint_map": "cmu_asf", "fps": 60.0}
+    assert srcs[1]["frames"] == 2 * 30                 # 60 AMC frames stated as 60 fps -> 30 at 30 fps
+    assert contract["licence"] == "CC BY-NC 4.0" and contract["training_data"]["clips"] == 9
+    assert ds.combined_licence(["CC BY 4.0", "CC BY-SA 3.0", "CC BY-NC-ND 4.0", "CC BY-NC 4.0"]) == "CC BY-NC-ND 4.0"
+    bad = tmp_path / "bad.json"
+    bad.write_text(json.dumps([{"path": bvh_dir, "licence": "x", "unit": "cm"}]))
+    with pytest.raises(SystemExit, match="bad.json: source 1: unknown field"):
+        train.main(["--sources", str(bad), "--cache-dir", root, "--steps", "1", "--out", str(tmp_path / "b")] + TINY)

@@ -98,6 +98,98 @@ _CORE_DIR = Path(__file__).resolve().parent.parent / "core"
 _END_JOINTS = (J["pelvis"], J["head"], J["left_wrist"], J["right_wrist"], J["left_ankle"], J["right_ankle"])
 
 
+@dataclass
+class MotionSource:
+    """One training (or selection) source and how to read it.
+
+    path: a folder, a file or a tar archive of BVH or ASF/AMC takes.  name: what the model card
+    calls it (default: the file name).  joint_map: ``"bandai"``, ``"cmu"`` (cgspeed BVH),
+    ``"cmu_asf"`` (CMU/HDM05 ASF) or ``None`` (detected from the joint names).  unit_scale:
+    metres per source unit, ``"auto"``, or ``None`` (the map's).  up / forward: the source's
+    up and facing axes (``"y"``, ``"z"``, ...; ``None``: the map's).  fps: the take's frame rate
+    when the files do not state it (AMC; default 120).  licence: the data's licence, as the
+    model card must quote it.
+    """
+    path: str
+    name: str | None = None
+    joint_map: str | None = None
+    unit_scale: float | str | None = None
+    up: str | None = None
+    forward: str | None = None
+    fps: float | None = None
+    licence: str | None = None
+
+    @property
+    def label(self):
+        return self.name or os.path.basename(os.path.abspath(self.path))
+
+    def read_options(self):
+        """The options that change the cached ground truth (part of the cache key)."""
+        return {k: getattr(self, k) for k in ("joint_map", "unit_scale", "up", "forward", "fps")
+                if getattr(self, k) is not None}
+
+
+#: licences of the sources this project knows by name (the sources file can state any other)
+KNOWN_LICENCES = {
+    "bandai": "CC BY-NC-ND 4.0 (Bandai Namco Research Motiondataset; non-commercial, no derivatives)",
+    "hdm05": "CC BY-SA 3.0 (HDM05; share-alike)",
+    "cmu": "CMU Graphics Lab Motion Capture Database: free for all uses",
+}
+
+
+def source_licence(src):
+    """The licence of a :class:`MotionSource`: as stated, else from its known name, else unknown."""
+    if src.licence:
+        return src.licence
+    low = src.label.lower()
+    for key, text in KNOWN_LICENCES.items():
+        if key in low:
+            return text
+    return "unknown: state it in the sources file"
+
+
+def combined_licence(licences):
+    """The most restrictive of several data licences (the weights follow it): NoDerivatives,
+    then NonCommercial, then ShareAlike, then anything else."""
+    def rank(text):
+        t = text.upper()
+        return (3 if "-ND" in t or "NO DERIV" in t or "NODERIV" in t else
+                2 if "-NC" in t or "NON-COMMERCIAL" in t or "NONCOMMERCIAL" in t else
+                1 if "-SA" in t or "SHARE-ALIKE" in t or "SHAREALIKE" in t else
+                4 if t.startswith("UNKNOWN") else 0)
+    return max(licences, key=rank) if licences else "unknown"
+
+
+def load_sources(path):
+    """:class:`MotionSource` list from a JSON file (a list of objects with the fields above;
+    relative paths are relative to the file).  Errors name the file and the entry."""
+    with open(path, encoding="utf-8") as f:
+        try:
+            data = json.load(f)
+        except json.JSONDecodeError as exc:
+            raise ValueError(f"{path}: not valid JSON (line {exc.lineno}: {exc.msg})") from None
+    if not isinstance(data, list) or not data:
+        raise ValueError(f"{path}: expected a non-empty JSON list of sources")
+    fields = set(MotionSource.__dataclass_fields__)
+    out = []
+    for i, entry in enumerate(data):
+        if not isinstance(entry, dict) or "path" not in entry:
+            raise ValueError(f"{path}: source {i + 1} must be an object with a 'path'")
+        unknown = sorted(set(entry) - fields)
+        if unknown:
+            raise ValueError(f"{path}: source {i + 1}: unknown field(s) {', '.join(unknown)} "
+                             f"(expected {', '.join(sorted(fields))})")
+        src = MotionSource(**entry)
+        if not os.path.isabs(src.path):
+            src.path = os.path.join(os.path.dirname(os.path.abspath(path)), src.path)
+        out.append(src)
+    return out
+
+
+def as_source(source):
+    return source if isinstance(source, MotionSource) else MotionSource(path=os.fspath(source))
+
+
 def default_cache_root():
     base = os.environ.get("BLENDER_MANIKIN_CACHE") or os.path.join(os.path.expanduser("~"), ".cache",
                                                                     "blender_manikin")
@@ -180,14 +272,19 @@ def code_version(fmt="bvh"):
 
 
 def cache_key(source, fps=MODEL_FPS, fmt="bvh"):
-    h = hashlib.sha1(f"{_source_fingerprint(source)}|{code_version(fmt)}|{float(fps)}".encode())
+    src = as_source(source)
+    opts = src.read_options()
+    h = hashlib.sha1(f"{_source_fingerprint(src.path)}|{code_version(fmt)}|{float(fps)}".encode())
+    if opts:
+        h.update(json.dumps(opts, sort_keys=True).encode())
     return h.hexdigest()[:16]
 
 
 def cache_dir_for(source, cache_dir=None, fps=MODEL_FPS, fmt=None):
+    src = as_source(source)
     root = cache_dir or default_cache_root()
-    stem = re.sub(r"[^A-Za-z0-9_.-]+", "_", Path(source).name)[:40] or "source"
-    return os.path.join(root, f"{stem}-{cache_key(source, fps, fmt or source_format(source))}")
+    stem = re.sub(r"[^A-Za-z0-9_.-]+", "_", Path(src.path).name)[:40] or "source"
+    return os.path.join(root, f"{stem}-{cache_key(src, fps, fmt or source_format(src.path))}")
 
 
 # --------------------------------------------------------------------------
@@ -276,7 +373,7 @@ def _safe_name(name):
 def _process(job):
     """Worker: parse one take (BVH bytes, or AMC and ASF bytes), map, solve, write its npz.
     Returns index info or an error."""
-    name, data, clips_dir, source_label, fps = job
+    name, data, clips_dir, source_label, fps, opts = job
     import io
     from ..core import bvh, joint_maps
     out = os.path.join(clips_dir, _safe_name(name) + ".npz")
@@ -289,11 +386,17 @@ def _process(job):
             from ..core import asf_amc
             _, amc, asf_name, asf = data
             skel = asf_amc.read_asf(io.BytesIO(asf), asf_name)
-            clip = asf_amc.read_amc(io.BytesIO(amc), skel, name=name)
-            mc = asf_amc.asf_clip_to_body_motion(clip, skel)
+            clip = asf_amc.read_amc(io.BytesIO(amc), skel, name=name, fps=float(opts.get("fps") or 120.0))
+            jm = opts.get("joint_map")
+            mc = joint_maps.clip_to_body_motion(
+                clip, asf_amc.asf_joint_map(skel) if jm in (None, "cmu_asf") else jm,
+                unit_scale=opts.get("unit_scale"), up=opts.get("up"), forward=opts.get("forward"))
         else:
             clip = bvh.read_bvh(io.BytesIO(data), name)
-            mc = joint_maps.clip_to_body_motion(clip)
+            if opts.get("fps"):
+                clip.fps = float(opts["fps"])
+            mc = joint_maps.clip_to_body_motion(clip, opts.get("joint_map"), unit_scale=opts.get("unit_scale"),
+                                                up=opts.get("up"), forward=opts.get("forward"))
         if mc is None or np.asarray(mc.positions).shape[0] < 2:
             return dict(name=name, error="fewer than 2 frames")
         rec = motion_to_record(mc, name, source_label, fps)
@@ -336,17 +439,20 @@ def make_split(clips, val_percent=VAL_PERCENT):
 
 # --------------------------------------------------------------------------
 def build_cache(source, cache_dir=None, fps=MODEL_FPS, workers=2, verbose=True):
-    """Parse, solve and cache every BVH of ``source``; returns the clip ``.npz`` paths.
+    """Parse, solve and cache every take (BVH or ASF/AMC) of ``source`` (a path or a
+    :class:`MotionSource`); returns the clip ``.npz`` paths.
 
     ``cache_dir``: the cache *root* (default :func:`default_cache_root`); the
     clips go to ``<root>/<name>-<hash>/clips``.  A second call with the same
-    source and code returns at once without reading any BVH.
+    source, options and code returns at once without reading any file.
     """
-    source = os.fspath(source)
+    src = as_source(source)
+    source = src.path
+    opts = src.read_options()
     if not os.path.exists(source):
         raise FileNotFoundError(f"motion source not found: {source}")
     fmt = source_format(source)
-    d = cache_dir_for(source, cache_dir, fps, fmt)
+    d = cache_dir_for(src, cache_dir, fps, fmt)
     index_path = os.path.join(d, "index.json")
     if os.path.exists(index_path):
         with open(index_path) as f:
@@ -358,18 +464,19 @@ def build_cache(source, cache_dir=None, fps=MODEL_FPS, workers=2, verbose=True):
     from ..core import bvh
     clips_dir = os.path.join(d, "clips")
     os.makedirs(clips_dir, exist_ok=True)
-    label = os.path.basename(os.path.abspath(source))
+    label = src.label
     t0 = time.time()
     is_archive = os.path.isfile(source) and not source.lower().endswith((".bvh", ".bvh.gz"))
     if fmt == "asf_amc":
         from ..core import asf_amc
 
-        def _asf_job(name, src):
-            asf = src.open_asf().read() if src.open_asf is not None else b""
-            return (name, ("asf_amc", src.open_amc().read(), src.asf_name or "", asf), clips_dir, label, float(fps))
-        jobs = (_asf_job(name, src) for name, src in asf_amc.iter_asf_amc_sources(source))
+        def _asf_job(name, take):
+            asf = take.open_asf().read() if take.open_asf is not None else b""
+            return (name, ("asf_amc", take.open_amc().read(), take.asf_name or "", asf), clips_dir, label,
+                    float(fps), opts)
+        jobs = (_asf_job(name, s) for name, s in asf_amc.iter_asf_amc_sources(source))
     else:
-        jobs = ((name, opener().read(), clips_dir, label, float(fps))
+        jobs = ((name, opener().read(), clips_dir, label, float(fps), opts)
                 for name, opener in bvh.iter_bvh_sources(source, **({"sort": False} if is_archive else {})))
     results, errors, frames, last = [], [], 0, 0.0
     if verbose:
@@ -402,7 +509,7 @@ def build_cache(source, cache_dir=None, fps=MODEL_FPS, workers=2, verbose=True):
     results.sort(key=lambda r: r["name"])
     split = make_split(results)
     elapsed = time.time() - t0
-    index = dict(source=os.path.abspath(source), source_name=label, fps=float(fps), format=fmt,
+    index = dict(source=os.path.abspath(source), source_name=label, fps=float(fps), format=fmt, options=opts,
                  code_version=code_version(fmt), preprocess_version=PREPROCESS_VERSION,
                  clips=results, frames=int(frames), skipped=errors, build_seconds=round(elapsed, 1),
                  contact_rule=dict(speed_mps=CONTACT_SPEED, height_m=CONTACT_HEIGHT))

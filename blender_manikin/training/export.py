@@ -47,8 +47,12 @@ def build_contract(ckpt, num_parameters):
     from .. import __version__
     from .model import ModelConfig
     cfg = ModelConfig.from_dict(ckpt["config"])
-    data = ckpt.get("data", {})
+    data = dict(ckpt.get("data", {}))
     val = ckpt.get("val") or {}
+    if "sources" not in data and data.get("source"):      # a checkpoint from before several sources
+        data["sources"] = [dict(name=data["source"], path=data.get("source_path"), format="bvh", options={},
+                                licence=data.get("licence"), clips=data.get("clips"), frames=data.get("frames"),
+                                hours=round(float(data.get("frames") or 0) / float(data.get("fps") or 30.0) / 3600, 3))]
     return {
         "contract_version": CONTRACT_VERSION,
         "kind": cfg.kind,
@@ -77,7 +81,7 @@ def build_contract(ckpt, num_parameters):
                           "canonical_frame": CANONICAL_FRAME},
         "architecture": {k: v for k, v in cfg.to_dict().items() if k not in ("kind", "devices")},
         "num_parameters": int(num_parameters),
-        "training_data": {k: data.get(k) for k in ("source", "clips", "frames", "split", "contact_rule",
+        "training_data": {k: data.get(k) for k in ("source", "sources", "clips", "frames", "split", "contact_rule",
                                                     "augmentation", "validation")},
         "licence": data.get("licence", "see training data"),
         "code_version": __version__,

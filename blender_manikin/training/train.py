@@ -38,18 +38,13 @@ import time
 from ..core import features
 
 SIX_TRACKERS = ("head", "left_hand", "right_hand", "pelvis", "left_foot", "right_foot")
-BANDAI_LICENCE = ("CC BY-NC-ND 4.0: trained on the Bandai Namco Research Motiondataset; "
-                  "weights for non-commercial use")
-
-
-def licence_for(source):
-    name = os.path.basename(os.path.abspath(str(source))).lower()
-    return BANDAI_LICENCE if "bandai" in name else "see training data"
-
-
 def build_parser():
     p = argparse.ArgumentParser(prog="python -m blender_manikin.training.train", description=__doc__.split("\n\n")[0])
-    p.add_argument("--bvh", help="folder, .bvh file or tar archive of BVH files")
+    p.add_argument("--bvh", action="append", default=None, metavar="SOURCE",
+                   help="a training source: folder, file or tar archive of BVH or ASF/AMC takes (repeatable)")
+    p.add_argument("--sources", default=None, metavar="FILE.json",
+                   help="training sources, each with its joint map, units, axes, fps and licence "
+                        "(a JSON list; see training/dataset.py MotionSource); instead of --bvh")
     p.add_argument("--out", required=True, help="run folder (checkpoint.pt, metrics.jsonl)")
     p.add_argument("--kind", choices=sorted(features.OUTPUT_BLOCKS), default="manikin")
     p.add_argument("--minutes", type=float, default=None, help="time budget (default 60 without --steps)")
@@ -82,6 +77,10 @@ def build_parser():
     p.add_argument("--ckpt-minutes", type=float, default=5.0, help="checkpoint + validation interval")
     p.add_argument("--ckpt-steps", type=int, default=None, help="also checkpoint every N steps")
     p.add_argument("--val-windows", type=int, default=384)
+    p.add_argument("--select-on", default=None, metavar="SOURCE",
+                   help="a motion source never trained on (e.g. ../shared/data/validation/hdm05-subset.tar.xz): "
+                        "evaluated at every checkpoint, and OUT/best.pt keeps the checkpoint with the lowest "
+                        "MPJPE on it (models are chosen on other people's motion, not on held-out takes)")
     p.add_argument("--cache-dir", default=None, help="dataset cache root (default ~/.cache/blender_manikin/dataset)")
     p.add_argument("--workers", type=int, default=2, help="processes for building the cache")
     p.add_argument("--data-workers", type=int, default=0,
@@ -206,9 +205,11 @@ def main(argv=None):
     if ckpt is not None:
         # a resumed run keeps its identity: data, seed, batch and optimizer settings
         prev = ckpt["args"]
-        for k in ("bvh", "cache_dir"):
+        for k in ("bvh", "sources", "cache_dir"):
             if getattr(args, k) is None:
                 setattr(args, k, prev.get(k))
+        if isinstance(args.bvh, str):            # runs from before several sources
+            args.bvh = [args.bvh]
         for k in ("seed", "batch", "lr", "weight_decay", "warmup"):
             if k in prev:
                 setattr(args, k, prev[k])
@@ -220,8 +221,8 @@ def main(argv=None):
         args.kind, args.window = cfg.kind, cfg.window
     if args.steps is None and args.minutes is None:
         args.minutes = 60.0
-    if not args.bvh:
-        raise SystemExit("--bvh is required")
+    if not args.bvh and not args.sources:
+        raise SystemExit("--bvh SOURCE or --sources FILE.json is required")
     lam = parse_lam(args.lam)
     if ckpt is None:
         devices = SIX_TRACKERS if args.six_trackers else features.INPUT_DEVICES
@@ -231,28 +232,56 @@ def main(argv=None):
                           arch=args.arch)
 
     # ---------------------------------------------------------------- data
-    files = dataset.build_cache(args.bvh, args.cache_dir, workers=args.workers, verbose=not args.quiet)
-    train_files, val_files, split = dataset.split_files(files)
-    index, _ = dataset.load_index(files)
+    try:
+        sources = dataset.load_sources(args.sources) if args.sources else [dataset.MotionSource(p) for p in args.bvh]
+    except (OSError, ValueError) as exc:
+        raise SystemExit(f"--sources: {exc}") from None
+    train_files, val_files, per_source, val_is_train = [], [], [], False
+    for src in sources:
+        files = dataset.build_cache(src, args.cache_dir, workers=args.workers, verbose=not args.quiet)
+        tr, va, split = dataset.split_files(files)
+        index, _ = dataset.load_index(files)
+        train_files += tr
+        val_files += va
+        val_is_train |= bool(split.get("val_is_train"))
+        per_source.append(dict(name=src.label, path=os.path.abspath(src.path), format=index.get("format", "bvh"),
+                               options=src.read_options(), licence=dataset.source_licence(src), clips=len(files),
+                               frames=int(index["frames"]), hours=round(index["frames"] / index["fps"] / 3600, 3),
+                               cache=os.path.dirname(os.path.dirname(files[0])),
+                               split=dict(rule=split["rule"], train_clips=len(tr), val_clips=len(va),
+                                          train_takes=split["train_takes"], val_takes=split["val_takes"],
+                                          train_frames=split["train_frames"], val_frames=split["val_frames"])))
     train_set = dataset.ClipSet.load(train_files)
-    val_set = train_set if split.get("val_is_train") else dataset.ClipSet.load(val_files)
+    val_set = train_set if val_is_train else dataset.ClipSet.load(val_files)
     sampler = dataset.WindowSampler(train_set, window=cfg.window, kind=cfg.kind, devices=cfg.devices,
                                     seed=args.seed, body=cfg.body)
     val_batches = dataset.fixed_batches(val_set, args.val_windows, 64, window=cfg.window, kind=cfg.kind,
                                         devices=cfg.devices, seed=args.seed + 12345, body=cfg.body)
+    select_batches = None
+    if args.select_on:
+        sel_files = dataset.build_cache(args.select_on, args.cache_dir, workers=args.workers, verbose=not args.quiet)
+        select_batches = dataset.fixed_batches(dataset.ClipSet.load(sel_files), args.val_windows, 64,
+                                               window=cfg.window, kind=cfg.kind, devices=cfg.devices,
+                                               seed=args.seed + 777, body=cfg.body)
     # fork the batch maker before torch starts its thread pool
     prefetch = dataset.Prefetcher(sampler, args.batch, args.seed, int(ckpt["step"]) if ckpt else 0,
                                   workers=args.data_workers)
-    data_info = dict(source=os.path.basename(os.path.abspath(args.bvh)), source_path=os.path.abspath(args.bvh),
-                     cache=os.path.dirname(os.path.dirname(files[0])), clips=len(files),
-                     frames=int(index["frames"]), fps=float(index["fps"]),
-                     split=dict(rule=split["rule"], train_clips=len(train_files), val_clips=len(val_files),
-                                train_takes=split["train_takes"], val_takes=split["val_takes"],
-                                train_frames=split["train_frames"], val_frames=split["val_frames"],
-                                val_is_train=bool(split.get("val_is_train"))),
-                     licence=licence_for(args.bvh), contact_rule=index.get("contact_rule"),
+    first = per_source[0]
+    data_info = dict(source=" + ".join(p["name"] for p in per_source), source_path=first["path"],
+                     sources=per_source, cache=first["cache"], clips=sum(p["clips"] for p in per_source),
+                     frames=sum(p["frames"] for p in per_source), fps=dataset.MODEL_FPS,
+                     split=dict(rule=first["split"]["rule"], train_clips=len(train_files), val_clips=len(val_files),
+                                train_takes=sum(p["split"]["train_takes"] for p in per_source),
+                                val_takes=sum(p["split"]["val_takes"] for p in per_source),
+                                train_frames=sum(p["split"]["train_frames"] for p in per_source),
+                                val_frames=sum(p["split"]["val_frames"] for p in per_source),
+                                val_is_train=val_is_train),
+                     licence=dataset.combined_licence([p["licence"] for p in per_source]),
+                     contact_rule=dict(speed_mps=dataset.CONTACT_SPEED, height_m=dataset.CONTACT_HEIGHT),
                      augmentation=dataclasses.asdict(sampler.aug),
-                     validation=f"{args.val_windows} fixed windows of the held-out takes, no augmentation")
+                     validation=f"{args.val_windows} fixed windows of the held-out takes, no augmentation"
+                                + (f"; checkpoints chosen on {os.path.basename(args.select_on)}" if args.select_on else ""))
+    split = data_info["split"]
     say(f"data: {data_info['clips']} clips, {data_info['frames']} frames from {data_info['source']}; "
         f"train {len(train_files)} clips / {split['train_frames']} frames, "
         f"val {len(val_files)} clips / {split['val_frames']} frames ({split['val_takes']} takes)")
@@ -295,14 +324,29 @@ def main(argv=None):
     def validate():
         m = evaluate(model, val_batches, cfg.kind, cfg.devices, lam=lam)
         rec = dict(step=step, minutes=round(elapsed / 60, 2), **{k: round(v, 5) for k, v in m.items()})
+        if select_batches is not None:
+            sm = evaluate(model, select_batches, cfg.kind, cfg.devices, lam=lam)
+            rec.update({f"select_{k}": round(v, 5) for k, v in sm.items()})
         history.append(rec)
         with open(os.path.join(args.out, "metrics.jsonl"), "a") as f:
             f.write(json.dumps(rec) + "\n")
         bar.newline()
         say(f"[val] step {step} ({elapsed / 60:.1f} min): loss {m['loss']:.4f}  MPJPE {m['mpjpe_cm']:.2f} cm  "
             f"hand {m['hand_cm']:.2f}  upper {m['upper_cm']:.2f}  lower {m['lower_cm']:.2f} cm  "
-            f"root {m['root_deg']:.2f} deg  contact acc {m['contact_acc']:.3f}")
+            f"root {m['root_deg']:.2f} deg  contact acc {m['contact_acc']:.3f}"
+            + (f"  | select-on: MPJPE {rec['select_mpjpe_cm']:.2f}  lower {rec['select_lower_cm']:.2f} cm"
+               if select_batches is not None else ""))
         return rec
+
+    def keep_best(rec):
+        """OUT/best.pt: the checkpoint with the lowest MPJPE on the --select-on source."""
+        if select_batches is None or rec is None:
+            return
+        prior = [h["select_mpjpe_cm"] for h in history[:-1] if "select_mpjpe_cm" in h]
+        if not prior or rec["select_mpjpe_cm"] < min(prior):
+            import shutil
+            shutil.copyfile(ckpt_path, os.path.join(args.out, "best.pt.tmp"))
+            os.replace(os.path.join(args.out, "best.pt.tmp"), os.path.join(args.out, "best.pt"))
 
     bar = Progress(not args.quiet)
     model.train()
@@ -353,6 +397,7 @@ def main(argv=None):
             if (now - last_ckpt >= args.ckpt_minutes * 60.0) or (args.ckpt_steps and step % args.ckpt_steps == 0):
                 val = validate()
                 checkpoint(val)
+                keep_best(val)
                 last_ckpt = time.time()
     except KeyboardInterrupt:
         interrupted = True
@@ -362,9 +407,12 @@ def main(argv=None):
         prefetch.close()
     elapsed = time.time() - t_start
     bar.newline()
-    if not history or history[-1]["step"] != step:
+    fresh = not history or history[-1]["step"] != step
+    if fresh:
         val = validate()
     checkpoint(val)
+    if fresh:
+        keep_best(val)
     say(f"done: {step} steps in {elapsed / 60:.1f} min; checkpoint {ckpt_path}")
     return dict(step=step, elapsed=elapsed, val=val, checkpoint=ckpt_path, num_parameters=nparams,
                 interrupted=interrupted)
