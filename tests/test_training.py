@@ -372,3 +372,14 @@ def test_sources_file_with_options_and_licences(cache, bvh_dir, asf_dir, tmp_pat
     bad.write_text(json.dumps([{"path": bvh_dir, "licence": "x", "unit": "cm"}]))
     with pytest.raises(SystemExit, match="bad.json: source 1: unknown field"):
         train.main(["--sources", str(bad), "--cache-dir", root, "--steps", "1", "--out", str(tmp_path / "b")] + TINY)
+
+
+def test_aug_overrides_and_their_checks():
+    from blender_manikin.training import train
+    aug = train.parse_aug(["arm_mix=0", "stature=1.5,1.9", "dropout=0.25"])
+    assert aug.arm_mix == 0.0 and aug.stature == (1.5, 1.9) and aug.dropout == 0.25
+    assert train.parse_aug(["stature=none"]).stature is None
+    for bad, msg in (("nope=1", "FIELD one of"), ("arm_mix=x", "not a number"), ("stature=1.5", "two numbers"),
+                     ("arm_mix=1,2", "one number")):
+        with pytest.raises(SystemExit, match=msg):
+            train.parse_aug([bad])

@@ -145,3 +145,36 @@ def test_calibration_pose_shapes_and_ranges():
     P, _ = sk.forward_kinematics(R, np.zeros((200, 3)), sk.make_body(1.75))
     knee = np.degrees(rot.geodesic_angle(R[:, J["left_knee"]], np.eye(3)))
     assert knee.max() <= 4.0 + 1e-6
+
+
+def test_arm_mix_swaps_only_the_arms_between_windows():
+    cs = _moving_clipset(n=4)
+    off = dict(speed=(1, 1), stature=None, segment=0.0, floor=0.0, mirror=0.0, pos_noise=0.0, rot_noise_deg=0.0,
+               hand_offset_deg=0.0, head_offset=0.0, edge_prob=0.0, calibration=0.0, dropout=0.0)
+    plain = ds.WindowSampler(cs, window=12, augment=ds.Augment(arm_mix=0.0, **off), seed=0)
+    mixed = ds.WindowSampler(cs, window=12, augment=ds.Augment(arm_mix=1.0, **off), seed=0)
+    a, b = plain.sample(16, np.random.default_rng(4)), mixed.sample(16, np.random.default_rng(4))
+    legs = [J[n] for n in ("pelvis", "left_hip", "left_knee", "left_ankle", "right_knee", "right_ankle", "head")]
+    assert np.abs(a["pos"][:, :, legs] - b["pos"][:, :, legs]).max() < 1e-5       # legs, torso, head kept
+    wrists = [J["left_wrist"], J["right_wrist"]]
+    moved = np.linalg.norm(a["pos"][:, :, wrists] - b["pos"][:, :, wrists], axis=-1).max(axis=(1, 2))
+    assert (moved > 0.02).mean() > 0.8                                           # arms from elsewhere
+
+
+def test_tracking_gaps_are_bridged_or_frozen():
+    rng = np.random.default_rng(1)
+    B, W = 200, 30
+    t = np.linspace(0, 1, W)
+    pos = np.broadcast_to(np.stack([t, t ** 2, np.zeros(W)], -1), (B, W, 3)).copy()
+    R = rot.axis_angle_to_matrix(np.broadcast_to((t[:, None] * np.array([0, 0, 1.0])), (B, W, 3)).copy())
+    p2, R2 = ds.tracking_gaps(rng, pos, R, 0.5, 30.0)
+    changed = np.abs(p2 - pos).max(axis=(1, 2)) > 1e-9
+    assert 0.35 < changed.mean() < 0.65
+    for b in np.nonzero(changed)[0]:
+        d = np.nonzero(np.abs(p2[b] - pos[b]).max(-1) > 1e-9)[0]
+        g0, g1 = d.min(), d.max() + 1
+        assert 3 <= g1 - g0 + 1 and g1 - g0 <= 16 and g0 >= 1 and g1 <= W - 1
+        seg = p2[b, g0 - 1:g1 + 1]
+        frozen = np.allclose(seg[:-1], seg[0])
+        linear = np.allclose(np.diff(seg, 2, axis=0), 0.0, atol=1e-12)
+        assert frozen or linear

@@ -559,6 +559,11 @@ class Augment:
     offset of the head input in the head's frame (eye or HMD versus head
     joint).  calibration: probability that the window holds a synthetic
     T-pose or A-pose (:func:`calibration_pose`) blended into the motion.
+    arm_mix: probability that the window's arms (collars down) are another
+    window's, so the legs cannot be guessed from what the arms do (a saber
+    swing says nothing about the knees).  dropout: probability, per hand,
+    of a 0.1-0.5 s tracking gap in the input, bridged as the resampler
+    bridges real gaps (linear / slerp) or frozen at the last pose.
     """
     speed: tuple = (0.8, 1.25)
     stature: tuple | None = (1.45, 2.05)
@@ -571,11 +576,14 @@ class Augment:
     head_offset: float = 0.02
     edge_prob: float = 0.05
     calibration: float = 0.1
+    arm_mix: float = 0.3
+    dropout: float = 0.1
 
     @classmethod
     def off(cls):
         return cls(speed=(1.0, 1.0), stature=None, segment=0.0, floor=0.0, mirror=0.0, pos_noise=0.0,
-                   rot_noise_deg=0.0, hand_offset_deg=0.0, head_offset=0.0, edge_prob=0.0, calibration=0.0)
+                   rot_noise_deg=0.0, hand_offset_deg=0.0, head_offset=0.0, edge_prob=0.0, calibration=0.0,
+                   arm_mix=0.0, dropout=0.0)
 
 
 @dataclass
@@ -707,6 +715,32 @@ def calibration_pose(rng, B):
     aa[:, J["left_hip"], 1] = -spread
     aa[:, J["right_hip"], 1] = spread
     return rot.matrix_to_quat(rot.axis_angle_to_matrix(aa))
+
+
+#: the joints whose local rotations the arm mix exchanges (collars down to the wrists)
+ARM_JOINTS = np.array([J[f"{s}_{n}"] for s in ("left", "right") for n in ("collar", "shoulder", "elbow", "wrist")])
+
+
+def tracking_gaps(rng, pos, R, prob, fps, seconds=(0.1, 0.5)):
+    """Inputs ``pos (B, W, 3)``, ``R (B, W, 3, 3)`` with, in a ``prob`` share of the windows, one
+    tracking gap of ``seconds`` bridged linearly (slerp for the orientation) like the resampler
+    bridges lost samples, or frozen at the last pose before it (half each)."""
+    B, W = pos.shape[:2]
+    pos, R = pos.copy(), R.copy()
+    for b in np.nonzero(rng.uniform(size=B) < prob)[0]:
+        n = int(np.clip(round(rng.uniform(*seconds) * fps), 1, W - 2))
+        g0 = int(rng.integers(1, W - n))
+        g1 = g0 + n                                   # first frame after the gap (< W)
+        if rng.uniform() < 0.5:
+            w = (np.arange(1, n + 1) / (n + 1))[:, None]
+            pos[b, g0:g1] = pos[b, g0 - 1] * (1 - w) + pos[b, g1] * w
+            q0, q1 = rot.matrix_to_quat(R[b, g0 - 1]), rot.matrix_to_quat(R[b, g1])
+            R[b, g0:g1] = rot.quat_to_matrix(rot.quat_slerp(np.broadcast_to(q0, (n, 4)), np.broadcast_to(q1, (n, 4)),
+                                                            w[:, 0]))
+        else:
+            pos[b, g0:g1] = pos[b, g0 - 1]
+            R[b, g0:g1] = R[b, g0 - 1]
+    return pos, R
 
 
 def _smoothstep(x):
@@ -859,6 +893,13 @@ class WindowSampler:
 
         if a.calibration > 0:
             q, root, contacts = self._blend_calibration(rng, q, root, contacts, offsets, lowest)
+        if a.arm_mix > 0 and B > 1:
+            mix = np.nonzero(rng.uniform(size=B) < a.arm_mix)[0]
+            if mix.size:
+                donor = (mix + rng.integers(1, B, mix.size)) % B          # another window of the batch
+                q = q.copy()
+                frames = np.arange(W)
+                q[np.ix_(mix, frames, ARM_JOINTS)] = q[np.ix_(donor, frames, ARM_JOINTS)]
         local = rot.quat_to_matrix(q)                                         # (B, W, 22, 3, 3)
         if a.mirror > 0:
             flip = rng.uniform(size=B) < a.mirror
@@ -909,6 +950,8 @@ class WindowSampler:
             if a.head_offset > 0 and dev == "head":
                 delta = rng.uniform(-a.head_offset, a.head_offset, (B, 3))
                 p = p + np.einsum("bwij,bj->bwi", Rw[:, :, j], delta)
+            if a.dropout > 0 and dev in ("left_hand", "right_hand"):
+                p, R = tracking_gaps(rng, p, R, a.dropout, self.fps)
             pos_in[dev], rot_in[dev] = p, R
         body = features.body_features(offsets, stature) if self.body else None
         x, C, o = features.make_inputs(pos_in, rot_in, stature, self.fps, devices=self.devices, body=body)

@@ -72,6 +72,9 @@ def build_parser():
     p.add_argument("--lam", action="append", default=None, metavar="TERM=WEIGHT",
                    help="override a loss weight of losses.LAMBDA, e.g. --lam mid=1.0 (repeatable; "
                         "a resumed run keeps its weights unless given again)")
+    p.add_argument("--aug", action="append", default=None, metavar="FIELD=VALUE",
+                   help="override an augmentation setting of dataset.Augment, e.g. --aug arm_mix=0 "
+                        "(repeatable; a resumed run keeps its settings unless given again)")
     p.add_argument("--weight-decay", type=float, default=0.01)
     p.add_argument("--warmup", type=int, default=300, help="warm-up steps (at most 5 %% of a step plan)")
     p.add_argument("--ckpt-minutes", type=float, default=5.0, help="checkpoint + validation interval")
@@ -156,6 +159,28 @@ def parse_lam(items):
     return out
 
 
+def parse_aug(items):
+    """``["arm_mix=0", "stature=1.5,2.0", ...]`` → a :class:`dataset.Augment`, checked."""
+    from . import dataset
+    aug = dataset.Augment()
+    for it in items or []:
+        k, sep, v = it.partition("=")
+        k = k.strip()
+        if not sep or k not in dataset.Augment.__dataclass_fields__:
+            raise SystemExit(f"--aug {it!r}: expected FIELD=VALUE with FIELD one of "
+                             f"{sorted(dataset.Augment.__dataclass_fields__)}")
+        try:
+            vals = [float(x) for x in v.split(",")] if v.strip().lower() != "none" else None
+        except ValueError:
+            raise SystemExit(f"--aug {it!r}: {v!r} is not a number or a comma-separated pair") from None
+        current = getattr(aug, k)
+        if vals is not None and isinstance(current, tuple) != (len(vals) == 2) and current is not None:
+            raise SystemExit(f"--aug {it!r}: {k} takes " + ("two numbers (LOW,HIGH)" if isinstance(current, tuple)
+                                                              else "one number"))
+        setattr(aug, k, None if vals is None else (tuple(vals) if len(vals) == 2 else vals[0]))
+    return aug
+
+
 def evaluate(model, val_batches, kind, devices, lam=None):
     import torch
     from . import losses
@@ -215,6 +240,10 @@ def main(argv=None):
                 setattr(args, k, prev[k])
         if args.lam is None:
             args.lam = prev.get("lam")
+        if args.aug is None:
+            # runs from before --aug used the defaults of their time: the arm mix and tracker
+            # dropouts came later
+            args.aug = prev.get("aug", ["arm_mix=0", "dropout=0"])
         if args.steps is None and args.minutes is None:
             args.steps, args.minutes = prev.get("steps"), prev.get("minutes")
         cfg = ModelConfig.from_dict(ckpt["config"])
@@ -224,6 +253,7 @@ def main(argv=None):
     if not args.bvh and not args.sources:
         raise SystemExit("--bvh SOURCE or --sources FILE.json is required")
     lam = parse_lam(args.lam)
+    aug = parse_aug(args.aug)
     if ckpt is None:
         devices = SIX_TRACKERS if args.six_trackers else features.INPUT_DEVICES
         cfg = ModelConfig(kind=args.kind, devices=devices, window=args.window, d_model=args.d_model,
@@ -254,7 +284,7 @@ def main(argv=None):
     train_set = dataset.ClipSet.load(train_files)
     val_set = train_set if val_is_train else dataset.ClipSet.load(val_files)
     sampler = dataset.WindowSampler(train_set, window=cfg.window, kind=cfg.kind, devices=cfg.devices,
-                                    seed=args.seed, body=cfg.body)
+                                    seed=args.seed, body=cfg.body, augment=aug)
     val_batches = dataset.fixed_batches(val_set, args.val_windows, 64, window=cfg.window, kind=cfg.kind,
                                         devices=cfg.devices, seed=args.seed + 12345, body=cfg.body)
     select_batches = None
