@@ -45,22 +45,11 @@ UNITS = {"knee p10": "deg", "knee median": "deg", "knee p90": "deg", "pelvis off
 COLUMNS = list(UNITS)
 
 
-def knee_flexion_deg(P):
-    """``(T, 2)`` knee flexion (0 = straight) of positions ``(T, 22, 3)``."""
-    out = []
-    for side in ("left", "right"):
-        u = P[:, J[f"{side}_knee"]] - P[:, J[f"{side}_hip"]]
-        v = P[:, J[f"{side}_ankle"]] - P[:, J[f"{side}_knee"]]
-        c = (u * v).sum(-1) / np.linalg.norm(u, axis=-1) / np.linalg.norm(v, axis=-1)
-        out.append(np.degrees(np.arccos(np.clip(c, -1.0, 1.0))))
-    return np.stack(out, -1)
-
-
 def plausibility(result, targets):
     """The table's numbers for one solved :class:`PoseResult` and its tracker targets."""
     P = result.positions
     fps = float(result.fps)
-    knees = knee_flexion_deg(P).reshape(-1)
+    knees = metrics.knee_flexion(P).reshape(-1)
     contacts = np.asarray(result.contacts, bool) if result.contacts is not None else np.zeros((P.shape[0], 2), bool)
     both = contacts.all(-1)
     mid = P[:, [J["left_ankle"], J["right_ankle"]], :2].mean(1)

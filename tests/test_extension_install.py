@@ -435,8 +435,8 @@ def test_loader_message_for_windows_dll_failure(monkeypatch):
     assert loader.import_onnxruntime is loader.load_onnxruntime
 
 
-def test_loader_message_names_the_supported_blenders_on_another_python(monkeypatch, tmp_path):
-    """A future Blender on a Python the zip has no wheel for gets told which Blenders this zip serves."""
+def _extension_without_onnxruntime(monkeypatch, tmp_path):
+    """The loader as in an installed extension whose onnxruntime wheel is not installed."""
     from blender_manikin import onnx_runtime_loader as loader
 
     ext_dir = tmp_path / "extensions" / "user_default" / "blender_manikin"
@@ -454,6 +454,12 @@ def test_loader_message_names_the_supported_blenders_on_another_python(monkeypat
     monkeypatch.setattr(sys, "meta_path", [Missing()] + sys.meta_path)
     monkeypatch.setattr(loader, "_PACKAGE_DIR", ext_dir)
     monkeypatch.setattr(loader, "_extension_site_packages", lambda d: None)
+    return loader, ext_dir
+
+
+def test_loader_message_names_the_supported_blenders_on_another_python(monkeypatch, tmp_path):
+    """A future Blender on a Python the zip has no wheel for gets told which Blenders this zip serves."""
+    loader, _ = _extension_without_onnxruntime(monkeypatch, tmp_path)
     real = loader.diagnostics
     monkeypatch.setattr(loader, "diagnostics", lambda kind=None, package_dir=None: {
         **real(kind, package_dir), "python": "3.14.1", "python_minor": "3.14"})
@@ -465,25 +471,9 @@ def test_loader_message_names_the_supported_blenders_on_another_python(monkeypat
 
 
 def test_loader_message_when_the_wheel_is_missing(monkeypatch, tmp_path):
-    from blender_manikin import onnx_runtime_loader as loader
-
-    ext_dir = tmp_path / "extensions" / "user_default" / "blender_manikin"
-    ext_dir.mkdir(parents=True)
-    (ext_dir / "blender_manifest.toml").write_text("")
+    loader, ext_dir = _extension_without_onnxruntime(monkeypatch, tmp_path)
     assert loader.install_kind(ext_dir, "blender_manikin") == "extension"
     assert loader.install_kind(tmp_path, "bl_ext.user_default.blender_manikin") == "extension"
-
-    class Missing:
-        def find_spec(self, name, path=None, target=None):
-            if name == "onnxruntime":
-                raise ModuleNotFoundError("No module named 'onnxruntime'", name="onnxruntime")
-            return None
-
-    for k in [k for k in sys.modules if k == "onnxruntime" or k.startswith("onnxruntime.")]:
-        monkeypatch.delitem(sys.modules, k)
-    monkeypatch.setattr(sys, "meta_path", [Missing()] + sys.meta_path)
-    monkeypatch.setattr(loader, "_PACKAGE_DIR", ext_dir)
-    monkeypatch.setattr(loader, "_extension_site_packages", lambda d: None)
     with pytest.raises(loader.OnnxRuntimeUnavailable) as info:
         loader.load_onnxruntime()
     msg = str(info.value)

@@ -290,3 +290,16 @@ def test_bench_solver_smoke(capsys):
             assert r["wrist pos [m]"] < 1e-9 and r["ankle pos [m]"] < 1e-9
             assert r["wrist rot [deg]"] < 1e-8 and r["ankle rot [deg]"] < 1e-8
             assert r["elbow/knee pos [m]"] < 1e-5
+
+
+def test_knee_flexion_angle():
+    from blender_manikin.core import rotations as rot, skeleton as sk
+    from blender_manikin.core.metrics import knee_flexion
+    body = sk.make_body(1.75)
+    T = 5
+    local = np.tile(np.eye(3), (T, sk.NUM_JOINTS, 1, 1))
+    ang = np.radians([0.0, 10.0, 45.0, 90.0, 120.0])
+    local[:, sk.J["left_knee"]] = rot.axis_angle_rotation(np.array([1.0, 0, 0]), ang)
+    P, _ = sk.forward_kinematics(local, np.tile(body.root_rest, (T, 1)), body)
+    k = knee_flexion(P)
+    assert np.allclose(k[:, 0], np.degrees(ang), atol=1e-6) and np.allclose(k[:, 1], 0.0, atol=1e-6)

@@ -173,7 +173,6 @@ is present):
 """
 from __future__ import annotations
 
-import gzip
 import io
 import os
 import tarfile
@@ -185,7 +184,7 @@ from typing import Callable, Dict, Iterator, List, Optional, Sequence, Tuple
 import numpy as np
 
 from . import joint_maps
-from .bvh import BvhClip, BvhError, euler_to_matrix
+from .bvh import BvhClip, BvhError, _read_bytes, euler_to_matrix
 from .joint_maps import JointMap, OrientationSpec, bone, chain, joint, lerp, rest
 
 __all__ = [
@@ -331,21 +330,6 @@ def _ordered_euler(angles_deg, order: str) -> np.ndarray:
 
 # --------------------------------------------------------------------------
 # bytes and text
-def _read_bytes(path_or_fileobj):
-    if isinstance(path_or_fileobj, (str, os.PathLike)):
-        display = os.path.basename(os.fspath(path_or_fileobj))
-        with open(path_or_fileobj, "rb") as f:
-            data = f.read()
-    else:
-        display = os.path.basename(str(getattr(path_or_fileobj, "name", "<stream>")))
-        data = path_or_fileobj.read()
-        if isinstance(data, str):
-            data = data.encode("utf-8")
-    if data[:2] == b"\x1f\x8b":
-        data = gzip.decompress(data)
-    return data, display
-
-
 def _decode(data: bytes) -> str:
     try:
         return data.decode("utf-8")

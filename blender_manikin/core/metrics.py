@@ -218,6 +218,19 @@ def jitter(pos, fps):
     return float(np.mean(np.linalg.norm(d3, axis=-1)) * f ** 3 / 100.0)
 
 
+def knee_flexion(pos):
+    """``(T, 2)`` flexion of the left and right knee, degrees (0 = straight leg): the angle
+    between the thigh (hip → knee) and the shank (knee → ankle) of positions ``(T, 22, 3)``."""
+    p = _positions(pos, "pos", NUM_JOINTS)
+    out = []
+    for side in ("left", "right"):
+        u = p[:, J[f"{side}_knee"]] - p[:, J[f"{side}_hip"]]
+        v = p[:, J[f"{side}_ankle"]] - p[:, J[f"{side}_knee"]]
+        c = (u * v).sum(-1) / np.maximum(np.linalg.norm(u, axis=-1) * np.linalg.norm(v, axis=-1), 1e-12)
+        out.append(np.degrees(np.arccos(np.clip(c, -1.0, 1.0))))
+    return np.stack(out, -1)
+
+
 def ground_penetration(pos, floor=0.0):
     """GP, cm: mean over frames of how far the lowest joint is below ``floor`` (z, metres)."""
     p = _positions(pos, "pos")

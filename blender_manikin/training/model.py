@@ -116,26 +116,7 @@ class PoseNet(nn.Module):
         self._init_output_bias()
 
     def _init_output_bias(self):
-        """Start at the rest pose: 6D blocks at identity, ankles below the head."""
-        with torch.no_grad():
-            g = self.global_head[-1]
-            g.weight.mul_(0.1)
-            g.bias.copy_(torch.tensor(_IDENTITY_6D))
-            last = self.local_head[-1]
-            last.weight.mul_(0.1)
-            bias = np.zeros(last.bias.shape[0], np.float32)
-            k = 0
-            for name, size in features.OUTPUT_BLOCKS[self.cfg.kind][1:]:
-                if name.endswith("_rot"):
-                    bias[k:k + size] = np.tile(_IDENTITY_6D, size // 6)
-                elif name == "ankle_pos":      # statures below the head (skeleton proportions)
-                    bias[k:k + size] = [0.05, 0.0, -0.87, -0.05, 0.0, -0.87]
-                elif name == "swivel":
-                    bias[k:k + size] = np.tile([1.0, 0.0], size // 2)
-                elif name == "contact":
-                    bias[k:k + size] = 1.0
-                k += size
-            last.bias.copy_(torch.from_numpy(bias))
+        init_rest_pose(self.global_head[-1], self.local_head[-1], self.cfg.kind)
 
     def forward(self, x):
         h = self.inp(x) + self.pos[:, : x.shape[1]]
@@ -143,6 +124,30 @@ class PoseNet(nn.Module):
             h = blk(h, self.mask)
         h = self.ln(h)
         return torch.cat([self.global_head(h), self.local_head(h)], -1)
+
+
+def init_rest_pose(global_last, local_last, kind, weight_scale=0.1):
+    """Start a network at the rest pose: the last global layer outputs identity 6D, the last
+    local layer's biases are identity 6D for rotation blocks, the ankles 0.87 statures below the
+    head (skeleton proportions), swivel (cos, sin) = (1, 0) and contact logits 1; both layers'
+    weights are multiplied by ``weight_scale``."""
+    with torch.no_grad():
+        global_last.weight.mul_(weight_scale)
+        global_last.bias.copy_(torch.tensor(_IDENTITY_6D))
+        local_last.weight.mul_(weight_scale)
+        bias = np.zeros(local_last.bias.shape[0], np.float32)
+        k = 0
+        for name, size in features.OUTPUT_BLOCKS[kind][1:]:
+            if name.endswith("_rot"):
+                bias[k:k + size] = np.tile(_IDENTITY_6D, size // 6)
+            elif name == "ankle_pos":
+                bias[k:k + size] = [0.05, 0.0, -0.87, -0.05, 0.0, -0.87]
+            elif name == "swivel":
+                bias[k:k + size] = np.tile([1.0, 0.0], size // 2)
+            elif name == "contact":
+                bias[k:k + size] = 1.0
+            k += size
+        local_last.bias.copy_(torch.from_numpy(bias))
 
 
 def count_parameters(model):

@@ -83,39 +83,14 @@ Mapping to the paper and what is simplified
 """
 from __future__ import annotations
 
-import numpy as np
 import torch
 import torch.nn as nn
 import torch.nn.functional as F
 
 from ..core import features
-from .model import _IDENTITY_6D, Block, ModelConfig, PoseNet
+from .model import Block, ModelConfig, init_rest_pose
 
-__all__ = ["DualAttentionPoser", "init_rest_pose"]
-
-
-def init_rest_pose(global_last: nn.Linear, local_last: nn.Linear, kind: str, weight_scale=0.1):
-    """Start at the rest pose with :meth:`PoseNet._init_output_bias`'s biases:
-    6D blocks at identity, ankles below the head, swivel (1, 0), contact
-    logits 1; the last layers' weights multiplied by ``weight_scale`` (PoseNet:
-    0.1)."""
-    with torch.no_grad():
-        global_last.weight.mul_(weight_scale)
-        global_last.bias.copy_(torch.tensor(_IDENTITY_6D))
-        local_last.weight.mul_(weight_scale)
-        bias = np.zeros(local_last.bias.shape[0], np.float32)
-        k = 0
-        for name, size in features.OUTPUT_BLOCKS[kind][1:]:
-            if name.endswith("_rot"):
-                bias[k:k + size] = np.tile(_IDENTITY_6D, size // 6)
-            elif name == "ankle_pos":      # statures below the head (skeleton proportions)
-                bias[k:k + size] = [0.05, 0.0, -0.87, -0.05, 0.0, -0.87]
-            elif name == "swivel":
-                bias[k:k + size] = np.tile([1.0, 0.0], size // 2)
-            elif name == "contact":
-                bias[k:k + size] = 1.0
-            k += size
-        local_last.bias.copy_(torch.from_numpy(bias))
+__all__ = ["DualAttentionPoser"]
 
 
 class _Path(nn.Module):
