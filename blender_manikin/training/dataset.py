@@ -180,6 +180,7 @@ def load_sources(path):
             raise ValueError(f"{path}: source {i + 1}: unknown field(s) {', '.join(unknown)} "
                              f"(expected {', '.join(sorted(fields))})")
         src = MotionSource(**entry)
+        src.path = os.path.expanduser(src.path)
         if not os.path.isabs(src.path):
             src.path = os.path.join(os.path.dirname(os.path.abspath(path)), src.path)
         out.append(src)
