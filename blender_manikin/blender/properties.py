@@ -7,12 +7,7 @@ from bpy.props import (BoolProperty, EnumProperty, FloatProperty, IntProperty, P
                        StringProperty)
 from bpy.types import PropertyGroup
 
-from ..core.pose_result import DEVICES
-
-DEVICE_LABELS = {
-    "head": "Head", "left_hand": "Left Hand", "right_hand": "Right Hand",
-    "pelvis": "Pelvis", "left_foot": "Left Foot", "right_foot": "Right Foot",
-}
+from ..core.devices import DEVICES, LABELS as DEVICE_LABELS  # noqa: F401  (labels: the panel)
 
 _AXES_ITEMS = [
     ('AUTO', "From File", "Axes from the file's metadata, else the format's default "

@@ -37,6 +37,7 @@ import numpy as np
 
 from .device_offsets import validate_offsets
 from .plain import shown
+from .devices import HAND_DEVICES, REQUIRED_DEVICES
 from .pose_result import TrackerTargets
 from .rotations import geodesic_angle, matrix_to_quat, normalize, orthonormalize, quat_to_matrix, rotation_between
 from .skeleton import J, PROPORTIONS, BodyMeasurements, make_body
@@ -169,14 +170,14 @@ def find_tpose(targets: TrackerTargets, window=0.25, t0=0.0) -> TPoseCandidate:
     half-width in seconds over which the pose must hold.  t0: time of frame
     0 (seconds).  Vectorised over frames.
     """
-    for d in ("head", "left_hand", "right_hand"):
+    for d in REQUIRED_DEVICES:
         if d not in targets.pos:
             raise ValueError(f"find_tpose needs {d} targets")
     fps = float(targets.fps)
     n = targets.num_frames
     w = max(1, int(round(window * fps)))
     ok = np.ones(n, dtype=bool)
-    for d in ("head", "left_hand", "right_hand"):
+    for d in REQUIRED_DEVICES:
         v = targets.valid.get(d)
         if v is not None:
             ok &= np.asarray(v, dtype=bool)
@@ -236,7 +237,7 @@ def calibrate(targets: TrackerTargets, time=None, offsets=None, window=0.25, pos
     measured ones (e.g. ``{"stature": 1.80}``).
     strict: raise :class:`CalibrationError` when problems were found.
     """
-    for d in ("head", "left_hand", "right_hand"):
+    for d in REQUIRED_DEVICES:
         if d not in targets.pos:
             raise ValueError(f"calibration needs {d} targets")
     fps = float(targets.fps)
@@ -279,7 +280,7 @@ def calibrate(targets: TrackerTargets, time=None, offsets=None, window=0.25, pos
                             f"(±{window:g} s at {time:.2f} s): hold still")
         elif turned > 10.0:
             problems.append(f"{d} turned {turned:.0f}° during the calibration window: hold still")
-    for d in ("head", "left_hand", "right_hand"):
+    for d in REQUIRED_DEVICES:
         if d not in mean_pos:
             raise CalibrationError(f"cannot calibrate at {time:.2f} s: {d} is not tracked there")
 
@@ -453,7 +454,7 @@ def arm_span_for_reach(result, quantile=REACH_QUANTILE, margin=REACH_MARGIN,
     :class:`~.pose_result.PoseResult` with ``targets``.
     """
     body = result.body
-    if result.targets is None or not {"left_hand", "right_hand"} <= set(result.targets.pos):
+    if result.targets is None or not set(HAND_DEVICES) <= set(result.targets.pos):
         return None
     pos = result.positions
     need = np.concatenate([np.linalg.norm(result.targets.pos[f"{s}_hand"] - pos[:, J[f"{s}_shoulder"]], axis=-1)

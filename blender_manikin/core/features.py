@@ -42,11 +42,10 @@ from __future__ import annotations
 import numpy as np
 
 from . import rotations as rot
+from .devices import DEVICE_JOINT, REQUIRED_DEVICES  # noqa: F401  (DEVICE_JOINT: used by training)
 from .skeleton import J, NUM_JOINTS, PARENTS, make_body
 
-INPUT_DEVICES = ("head", "left_hand", "right_hand")
-DEVICE_JOINT = {"head": J["head"], "left_hand": J["left_wrist"], "right_hand": J["right_wrist"],
-                "pelvis": J["pelvis"], "left_foot": J["left_ankle"], "right_foot": J["right_ankle"]}
+INPUT_DEVICES = REQUIRED_DEVICES
 PER_DEVICE = 12
 VEL_SCALE = 0.1
 

@@ -59,6 +59,8 @@ from .recording import (
 from .rotations import normalize
 
 MAGIC = 0x442D3D69
+#: the devices of a BSOR frame, in the order their poses are stored
+FRAME_DEVICES = ("head", "left_hand", "right_hand")
 FRAME_BYTES = 92
 _INFO_STRINGS_1 = ("version", "gameVersion", "timestamp", "playerID", "playerName", "platform",
                    "trackingSystem", "hmd", "controller", "hash", "songName", "mapper", "difficulty")
@@ -193,7 +195,7 @@ def parse_bsor(data: bytes, path="<bytes>", axes=None, units=None) -> Recording:
                         f"(pause, rewind or repeated time; at t = {times}{' ...' if idx.size > 5 else ''} s)")
     lost = ok[keep] == False  # noqa: E712
     if lost.any():
-        for j, dev in enumerate(("head", "left_hand", "right_hand")):
+        for j, dev in enumerate(FRAME_DEVICES):
             c = int(lost[:, j].sum())
             if c:
                 warnings.append(f"{dev}: {c} sample(s) with an invalid pose marked invalid")
@@ -214,7 +216,7 @@ def parse_bsor(data: bytes, path="<bytes>", axes=None, units=None) -> Recording:
     scale = UNITS[units]
     pos_b, quat_b = to_blender(upos[keep] * scale, normalize(uquat[keep]), axes)
     streams = {}
-    for j, dev in enumerate(("head", "left_hand", "right_hand")):
+    for j, dev in enumerate(FRAME_DEVICES):
         streams[dev] = TrackerStream(dev, tk.copy(), pos_b[:, j], quat_b[:, j], ok[keep][:, j])
 
     meta = {k: v for k, v in info.items() if k not in _PRIVATE}

@@ -37,6 +37,7 @@ from . import features
 from . import limb_solver as ls
 from .plain import shown
 from . import rotations as rot
+from .devices import REQUIRED_DEVICES
 from .pose_result import PoseResult, TrackerTargets
 from .skeleton import Body, J, NUM_JOINTS, PARENTS, forward_kinematics
 
@@ -358,7 +359,7 @@ def solve(targets: TrackerTargets, body: Body, runner=None, progress=None, lock_
     if runner is None:
         from .model_runner import load_model
         runner = load_model()
-    for d in ("head", "left_hand", "right_hand"):
+    for d in REQUIRED_DEVICES:
         if d not in targets.pos:
             raise ValueError(f"a '{d}' tracker is required; the recording has {list(targets.pos)}")
     T = targets.num_frames

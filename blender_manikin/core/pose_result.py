@@ -11,8 +11,7 @@ from .skeleton import Body, LIMB_NAMES, LIMBS, forward_kinematics
 _LIMB_WORDS = {"left_arm": ("left hand", "shoulder", "elbow"), "right_arm": ("right hand", "shoulder", "elbow"),
                "left_leg": ("left foot", "hip", "knee"), "right_leg": ("right foot", "hip", "knee")}
 
-#: device names, in this order wherever devices are listed
-DEVICES = ("head", "left_hand", "right_hand", "pelvis", "left_foot", "right_foot")
+from .devices import DEVICES  # noqa: E402,F401  (the vocabulary lives in core/devices.py)
 
 
 @dataclass

@@ -45,7 +45,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .plain import shown
-from .pose_result import DEVICES
+from .devices import ALIASES as DEVICE_ALIASES, DEVICES, canonical_device  # noqa: F401
 
 #: axis conventions understood by the readers and writers
 AXES = ("openxr", "unity", "blender")
@@ -71,13 +71,6 @@ _UNITS_ALIASES = {
 }
 
 #: alternative device names accepted by the readers (lower case)
-DEVICE_ALIASES = {
-    "hmd": "head", "headset": "head",
-    "left": "left_hand", "lefthand": "left_hand", "left_controller": "left_hand",
-    "right": "right_hand", "righthand": "right_hand", "right_controller": "right_hand",
-    "waist": "pelvis", "hips": "pelvis", "hip": "pelvis",
-    "leftfoot": "left_foot", "rightfoot": "right_foot",
-}
 
 
 class RecordingError(ValueError):
@@ -128,14 +121,6 @@ def canonical_units(units) -> str:
     if key not in _UNITS_ALIASES:
         raise ValueError(f"unknown units {shown(units)}: expected one of {', '.join(UNITS)}")
     return _UNITS_ALIASES[key]
-
-
-def canonical_device(name):
-    """Canonical device name for ``name`` (case/space-insensitive, aliases), or None."""
-    key = str(name).strip().lower().replace(" ", "_").replace("-", "_")
-    if key in DEVICES:
-        return key
-    return DEVICE_ALIASES.get(key)
 
 
 def axes_matrix(axes) -> np.ndarray:

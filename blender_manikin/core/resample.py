@@ -29,11 +29,10 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .plain import shown
-from .pose_result import DEVICES
+from .devices import DEVICES, REQUIRED_DEVICES
 from .recording import Recording, RecordingError, increasing_mask
 from .rotations import normalize, quat_continuous, quat_slerp
 
-REQUIRED_DEVICES = ("head", "left_hand", "right_hand")
 
 #: head-joint/HMD height range (metres above the floor) accepted by the units check
 HEAD_HEIGHT_RANGE = (0.5, 3.0)

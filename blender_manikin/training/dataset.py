@@ -77,6 +77,7 @@ from pathlib import Path
 import numpy as np
 
 from ..core import features
+from ..core.devices import HAND_DEVICES
 from ..core import hybrik
 from ..core import limb_solver as ls
 from ..core import rotations as rot
@@ -944,14 +945,14 @@ class WindowSampler:
                 p += rng.normal(scale=a.pos_noise, size=p.shape)
             if a.rot_noise_deg > 0:
                 R = R @ _small_rotations(rng, (B, W), math.radians(a.rot_noise_deg))
-            if a.hand_offset_deg > 0 and dev in ("left_hand", "right_hand"):
+            if a.hand_offset_deg > 0 and dev in HAND_DEVICES:
                 axis = rot.normalize(rng.normal(size=(B, 3)))
                 ang = rng.uniform(0.0, math.radians(a.hand_offset_deg), B)
                 R = R @ rot.axis_angle_to_matrix(axis * ang[:, None])[:, None]
             if a.head_offset > 0 and dev == "head":
                 delta = rng.uniform(-a.head_offset, a.head_offset, (B, 3))
                 p = p + np.einsum("bwij,bj->bwi", Rw[:, :, j], delta)
-            if a.dropout > 0 and dev in ("left_hand", "right_hand"):
+            if a.dropout > 0 and dev in HAND_DEVICES:
                 p, R = tracking_gaps(rng, p, R, a.dropout, self.fps)
             pos_in[dev], rot_in[dev] = p, R
         body = features.body_features(offsets, stature) if self.body else None

@@ -36,8 +36,9 @@ import time
 
 
 from ..core import features
+from ..core.devices import DEVICES
 
-SIX_TRACKERS = ("head", "left_hand", "right_hand", "pelvis", "left_foot", "right_foot")
+SIX_TRACKERS = DEVICES
 def build_parser():
     p = argparse.ArgumentParser(prog="python -m blender_manikin.training.train", description=__doc__.split("\n\n")[0])
     p.add_argument("--bvh", action="append", default=None, metavar="SOURCE",

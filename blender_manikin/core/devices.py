@@ -1,0 +1,46 @@
+"""The device vocabulary, in one place: which trackers there are, what the UI calls them, which
+joint each drives, which a solve needs, and the other names recordings use for them.
+
+Everything that lists devices imports them from here (readers, resampling, calibration, the
+network's inputs, the panel, the exporters).  No bpy.
+"""
+from __future__ import annotations
+
+from .skeleton import J
+
+#: every device, in this order wherever devices are listed
+DEVICES = ("head", "left_hand", "right_hand", "pelvis", "left_foot", "right_foot")
+#: what every solve needs (and what the three-tracker network takes)
+REQUIRED_DEVICES = ("head", "left_hand", "right_hand")
+HAND_DEVICES = ("left_hand", "right_hand")
+#: optional trackers (six-tracker setups: waist and both feet)
+EXTRA_DEVICES = ("pelvis", "left_foot", "right_foot")
+
+#: labels for the user interface
+LABELS = {
+    "head": "Head", "left_hand": "Left Hand", "right_hand": "Right Hand",
+    "pelvis": "Pelvis", "left_foot": "Left Foot", "right_foot": "Right Foot",
+}
+
+#: the body joint whose pose each device's target is (after device offsets)
+DEVICE_JOINT_NAMES = {"head": "head", "left_hand": "left_wrist", "right_hand": "right_wrist",
+                      "pelvis": "pelvis", "left_foot": "left_ankle", "right_foot": "right_ankle"}
+#: the same as joint indices of the 22-joint body
+DEVICE_JOINT = {d: J[j] for d, j in DEVICE_JOINT_NAMES.items()}
+
+#: other names recordings use (lower case, spaces and dashes as underscores)
+ALIASES = {
+    "hmd": "head", "headset": "head",
+    "left": "left_hand", "lefthand": "left_hand", "left_controller": "left_hand",
+    "right": "right_hand", "righthand": "right_hand", "right_controller": "right_hand",
+    "waist": "pelvis", "hips": "pelvis", "hip": "pelvis",
+    "leftfoot": "left_foot", "rightfoot": "right_foot",
+}
+
+
+def canonical_device(name):
+    """The device named ``name`` (case-, space- and dash-insensitive, or an alias), or ``None``."""
+    key = str(name).strip().lower().replace(" ", "_").replace("-", "_")
+    if key in DEVICES:
+        return key
+    return ALIASES.get(key)
