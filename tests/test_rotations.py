@@ -1,4 +1,5 @@
 import numpy as np
+import pytest
 from hypothesis import given, settings, strategies as st
 from hypothesis.extra.numpy import arrays
 
@@ -106,3 +107,27 @@ def test_rotation_between_including_antiparallel():
 def test_geodesic_angle():
     R = rot.axis_angle_to_matrix(np.array([[0, 0.3, 0.0]]))
     assert np.isclose(rot.geodesic_angle(np.eye(3)[None], R)[0], 0.3)
+
+
+def test_the_one_euler_implementation():
+    """Intrinsic channel order (BVH), its inverse with gimbal lock, and fixed-axes orders
+    (Blender rotation modes, Acclaim ASF axes)."""
+    from blender_manikin.core import rotations as rot
+    rng = np.random.default_rng(5)
+    e = rng.uniform(-3, 3, (100, 3))
+    e[:, 1] = rng.uniform(-1.5, 1.5, 100)
+    ex = lambda a: rot.axis_angle_rotation(np.array([1.0, 0, 0]), a)  # noqa: E731
+    ey = lambda a: rot.axis_angle_rotation(np.array([0, 1.0, 0]), a)  # noqa: E731
+    ez = lambda a: rot.axis_angle_rotation(np.array([0, 0, 1.0]), a)  # noqa: E731
+    assert np.allclose(rot.euler_to_matrix(e, "ZXY"), ez(e[:, 0]) @ ex(e[:, 1]) @ ey(e[:, 2]))
+    for order in ("XYZ", "ZXY", "YXZ", "ZYX"):
+        R = rot.euler_to_matrix(e, order)
+        assert np.allclose(rot.euler_to_matrix(rot.matrix_to_euler(R, order), order), R, atol=1e-10)
+    lock = rot.euler_to_matrix([[0.3, np.pi / 2, 0.2]], "ZXY")
+    back = rot.matrix_to_euler(lock, "ZXY")
+    assert back[0, 2] == 0.0 and np.allclose(rot.euler_to_matrix(back, "ZXY"), lock, atol=1e-9)
+    # Blender's 'XYZ' mode applies X first: Rz @ Ry @ Rx, angles given as (x, y, z)
+    assert np.allclose(rot.fixed_axes_euler_to_matrix(e, "XYZ"), ez(e[:, 2]) @ ey(e[:, 1]) @ ex(e[:, 0]))
+    assert np.allclose(rot.fixed_axes_euler_to_matrix(e, "ZXY"), ey(e[:, 1]) @ ex(e[:, 0]) @ ez(e[:, 2]))
+    with pytest.raises(ValueError, match="not representable"):
+        rot.matrix_to_euler(rot.euler_to_matrix([[0.1, 0.2]], "XY"), "Z")

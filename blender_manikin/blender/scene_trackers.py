@@ -35,21 +35,6 @@ class SceneSourceError(ValueError):
     """A scene object / bone mapped to a device cannot be sampled."""
 
 
-def _euler_matrix(angles, order):
-    """``(N, 3)`` Blender Euler angles (x, y, z radians) in ``order`` (e.g. 'XYZ') → ``(N, 3, 3)``.
-
-    Blender's 'XYZ' applies X first: ``R = Rz @ Ry @ Rx``; generally
-    ``R = R[order[2]] @ R[order[1]] @ R[order[0]]``.
-    """
-    angles = np.asarray(angles, dtype=np.float64)
-    axes = {"X": np.array([1.0, 0, 0]), "Y": np.array([0, 1.0, 0]), "Z": np.array([0, 0, 1.0])}
-    idx = {"X": 0, "Y": 1, "Z": 2}
-    R = np.broadcast_to(np.eye(3), angles.shape[:-1] + (3, 3)).copy()
-    for a in order:
-        R = rot.axis_angle_rotation(axes[a], angles[..., idx[a]]) @ R
-    return R
-
-
 def _is_plain_keyed(obj):
     if obj.parent is not None or len(obj.constraints):
         return False
@@ -100,7 +85,7 @@ def _eval_plain(obj, frames):
         R = rot.axis_angle_rotation(aa[:, 1:], aa[:, 0])
     else:
         e = channel("rotation_euler", 3, tuple(obj.rotation_euler))
-        R = _euler_matrix(e, mode)
+        R = rot.fixed_axes_euler_to_matrix(e, mode)
     return pos, R
 
 

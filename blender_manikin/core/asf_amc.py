@@ -184,7 +184,8 @@ from typing import Callable, Dict, Iterator, List, Optional, Sequence, Tuple
 import numpy as np
 
 from . import joint_maps
-from .bvh import BvhClip, BvhError, _read_bytes, euler_to_matrix
+from . import rotations as rot
+from .bvh import BvhClip, BvhError, _read_bytes, euler_to_matrix  # degrees, BVH channel order
 from .joint_maps import JointMap, OrientationSpec, bone, chain, joint, lerp, rest
 
 __all__ = [
@@ -317,15 +318,10 @@ class AsfSkeleton:
 
 
 def _ordered_euler(angles_deg, order: str) -> np.ndarray:
-    """Rotation about fixed axes applied in ``order`` (first letter first).
-
-    ``angles_deg`` are about x, y, z (that order) for ``order`` a
-    permutation of ``XYZ``: ``"XYZ"`` gives ``Rz @ Ry @ Rx``.
-    """
-    a = np.asarray(angles_deg, dtype=np.float64)
-    k = {"X": 0, "Y": 1, "Z": 2}
-    rev = order.upper()[::-1]
-    return euler_to_matrix(a[..., [k[c] for c in rev]], rev)
+    """Rotation about fixed axes applied in ``order`` (first letter first): ``angles_deg`` are
+    about x, y, z (that order); ``"XYZ"`` gives ``Rz @ Ry @ Rx``
+    (:func:`.rotations.fixed_axes_euler_to_matrix`, in degrees)."""
+    return rot.fixed_axes_euler_to_matrix(np.radians(np.asarray(angles_deg, dtype=np.float64)), order)
 
 
 # --------------------------------------------------------------------------

@@ -74,6 +74,8 @@ from typing import Callable, Iterator, Optional, Tuple
 
 import numpy as np
 
+from . import rotations as rot
+
 __all__ = [
     "BvhError", "BvhClip", "read_bvh", "write_bvh", "iter_bvh_sources",
     "euler_to_matrix", "matrix_to_euler", "POSITION_CHANNELS", "ROTATION_CHANNELS",
@@ -101,83 +103,19 @@ class BvhError(ValueError):
 
 # --------------------------------------------------------------------------
 # Euler angles (BVH channel order)
-def _elementary(axis: str, angle_rad):
-    """Rotation matrices ``(..., 3, 3)`` about one coordinate axis."""
-    a = np.asarray(angle_rad, dtype=np.float64)
-    c, s = np.cos(a), np.sin(a)
-    R = np.zeros(a.shape + (3, 3))
-    i = _AXIS[axis]
-    j, k = (i + 1) % 3, (i + 2) % 3
-    R[..., i, i] = 1.0
-    R[..., j, j] = c
-    R[..., k, k] = c
-    R[..., j, k] = -s
-    R[..., k, j] = s
-    return R
-
-
 def euler_to_matrix(angles_deg, axes: str):
-    """Compose rotations in BVH channel order.
+    """Compose rotations in BVH channel order: ``R = R_axes[0](a0) @ R_axes[1](a1) @ ...``.
 
-    ``angles_deg``: ``(..., n)`` degrees, ``axes``: ``n`` letters from ``XYZ``
-    (e.g. ``"ZXY"``).  Returns ``R = R_axes[0](a0) @ R_axes[1](a1) @ ...``,
-    ``(..., 3, 3)``.  ``n = 0`` gives identity.
+    ``angles_deg``: ``(..., n)`` degrees, ``axes``: ``n`` letters from ``XYZ`` (e.g. ``"ZXY"``).
+    Returns ``(..., 3, 3)``.  (:func:`.rotations.euler_to_matrix`, in degrees.)
     """
-    ang = np.radians(np.asarray(angles_deg, dtype=np.float64))
-    axes = axes.upper()
-    if ang.shape[-1] != len(axes):
-        raise ValueError(f"{len(axes)} axes but {ang.shape[-1]} angles")
-    R = np.broadcast_to(np.eye(3), ang.shape[:-1] + (3, 3)).copy()
-    for n, ax in enumerate(axes):
-        R = R @ _elementary(ax, ang[..., n]) if n else _elementary(ax, ang[..., n])
-    return R
-
-
-def _tait_bryan(R, axes: str):
-    """Angles (radians) ``(..., 3)`` with ``R = Ri(a) Rj(b) Rk(c)``, axes distinct."""
-    i, j, k = (_AXIS[a] for a in axes)
-    # parity of the permutation (i, j, k): +1 for XYZ, YZX, ZXY
-    s = 1.0 if (j - i) % 3 == 1 else -1.0
-    sb = np.clip(s * R[..., i, k], -1.0, 1.0)
-    b = np.arcsin(sb)
-    cb = np.sqrt(np.maximum(1.0 - sb * sb, 0.0))
-    a = np.arctan2(-s * R[..., j, k], R[..., k, k])
-    c = np.arctan2(-s * R[..., i, j], R[..., i, i])
-    # gimbal lock: b = +-90 deg, only a + c (or a - c) is defined; put it in a
-    lock = cb < 1e-7
-    if np.any(lock):
-        # with c = 0: R = Ri(a) Rj(b); column j of R is Ri(a) e_j
-        a_l = np.arctan2(s * R[..., k, j], R[..., j, j])
-        a = np.where(lock, a_l, a)
-        c = np.where(lock, 0.0, c)
-    return np.stack([a, b, c], axis=-1)
+    return rot.euler_to_matrix(np.radians(np.asarray(angles_deg, dtype=np.float64)), axes)
 
 
 def matrix_to_euler(R, axes: str, tol: float = 1e-6):
-    """Inverse of :func:`euler_to_matrix`: degrees ``(..., n)`` for ``n = len(axes)``.
-
-    Three distinct axes decompose any rotation (at gimbal lock the last angle
-    is set to 0).  One or two axes can only represent rotations about those
-    axes; ``ValueError`` is raised when ``R`` is further than ``tol`` radians
-    from representable.
-    """
-    R = np.asarray(R, dtype=np.float64)
-    axes = axes.upper()
-    n = len(axes)
-    if n == 0:
-        ang = np.zeros(R.shape[:-2] + (0,))
-    else:
-        if len(set(axes)) != n or any(a not in _AXIS for a in axes):
-            raise ValueError(f"rotation axes must be distinct letters from XYZ, got {axes!r}")
-        full = axes + "".join(a for a in "XYZ" if a not in axes)
-        ang = _tait_bryan(R, full)[..., :n]
-    if n < 3:
-        back = euler_to_matrix(np.degrees(ang), axes)
-        err = np.abs(back - R).max() if R.size else 0.0
-        if err > tol:
-            raise ValueError(f"rotation is not representable with channels {axes!r} "
-                             f"(residual {err:.2e})")
-    return np.degrees(ang)
+    """Inverse of :func:`euler_to_matrix`: degrees ``(..., n)`` for ``n = len(axes)``
+    (:func:`.rotations.matrix_to_euler`; at gimbal lock the last angle is 0)."""
+    return np.degrees(rot.matrix_to_euler(R, axes, tol))
 
 
 # --------------------------------------------------------------------------

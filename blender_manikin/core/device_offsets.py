@@ -93,16 +93,15 @@ import os
 import numpy as np
 
 from .plain import shown
-from .pose_result import DEVICES, TrackerTargets
+from .devices import DEVICE_JOINT_NAMES, DEVICES
+from .pose_result import TrackerTargets
 from .rotations import (
+    euler_to_matrix,
     axis_angle_rotation, matrix_to_quat, normalize, quat_mul, quat_to_matrix, quat_conj,
 )
 
-#: body-model joint driven by each device
-JOINT_OF_DEVICE = {
-    "head": "head", "left_hand": "left_wrist", "right_hand": "right_wrist",
-    "pelvis": "pelvis", "left_foot": "left_ankle", "right_foot": "right_ankle",
-}
+#: body-model joint driven by each device (the vocabulary's map)
+JOINT_OF_DEVICE = DEVICE_JOINT_NAMES
 
 HEAD_BACK = 0.08
 HEAD_DOWN = 0.045
@@ -120,9 +119,7 @@ def _rx(deg):
 
 def _euler_xyz(ax, ay, az):
     """Intrinsic X-Y-Z rotation (glam ``EulerRot::XYZ``): ``Rx @ Ry @ Rz``, degrees."""
-    e = np.eye(3)
-    return (axis_angle_rotation(e[0], np.deg2rad(ax)) @ axis_angle_rotation(e[1], np.deg2rad(ay))
-            @ axis_angle_rotation(e[2], np.deg2rad(az)))
+    return euler_to_matrix(np.deg2rad([ax, ay, az]), "XYZ")
 
 
 def _grip_to_wrist(side):

@@ -29,6 +29,7 @@ import io
 
 import numpy as np
 
+from . import rotations as rot
 from . import skeleton as sk
 from .plain import shown
 
@@ -55,33 +56,6 @@ def end_site_offsets(body: sk.Body):
         out[w] = d * 0.10 * H
         out[sk.J[f"{side}_foot"]] = [0.0, -0.04 * H, 0.0]
     return out
-
-
-def euler_zxy(R):
-    """Angles ``(..., 3)`` = (z, x, y) radians with ``R = Rz(z) Rx(x) Ry(y)`` for ``(..., 3, 3)`` R.
-
-    x in [-pi/2, pi/2]; at gimbal lock (|x| = pi/2) y is set to 0.
-    """
-    R = np.asarray(R, dtype=np.float64)
-    sx = np.clip(R[..., 2, 1], -1.0, 1.0)
-    x = np.arcsin(sx)
-    cx = np.sqrt(np.maximum(1.0 - sx * sx, 0.0))
-    lock = cx < 1e-7
-    y = np.where(lock, 0.0, np.arctan2(-R[..., 2, 0], R[..., 2, 2]))
-    z = np.where(lock, np.arctan2(R[..., 1, 0], R[..., 0, 0]), np.arctan2(-R[..., 0, 1], R[..., 1, 1]))
-    return np.stack([z, x, y], axis=-1)
-
-
-def euler_zxy_to_matrix(e):
-    """Inverse of :func:`euler_zxy`: ``(..., 3)`` (z, x, y) radians → ``(..., 3, 3)``."""
-    e = np.asarray(e, dtype=np.float64)
-    z, x, y = e[..., 0], e[..., 1], e[..., 2]
-    cz, sz, cx, sx, cy, sy = np.cos(z), np.sin(z), np.cos(x), np.sin(x), np.cos(y), np.sin(y)
-    o, l = np.zeros_like(z), np.ones_like(z)
-    Rz = np.stack([np.stack([cz, -sz, o], -1), np.stack([sz, cz, o], -1), np.stack([o, o, l], -1)], -2)
-    Rx = np.stack([np.stack([l, o, o], -1), np.stack([o, cx, -sx], -1), np.stack([o, sx, cx], -1)], -2)
-    Ry = np.stack([np.stack([cy, o, sy], -1), np.stack([o, l, o], -1), np.stack([-sy, o, cy], -1)], -2)
-    return Rz @ Rx @ Ry
 
 
 def _fmt(v, decimals):
@@ -151,7 +125,7 @@ def bvh_string(local_rot, root_pos, body: sk.Body, fps: float, units: str = "cm"
 
     walk(0)
     Rb = np.einsum("ab,tjbc,dc->tjad", C, local_rot, C)       # C R Cᵀ
-    eul = np.degrees(np.unwrap(euler_zxy(Rb[:, order]), axis=0))   # (T, 22, 3)
+    eul = np.degrees(np.unwrap(rot.matrix_to_euler(Rb[:, order], "ZXY"), axis=0))   # (T, 22, 3)
     # ROOT OFFSET is 0 and the position channels are absolute, which reads the
     # same whether an importer adds OFFSET to them or not
     root = root_pos @ C.T * s

@@ -362,3 +362,98 @@ def orthonormalize(R):
     D = np.ones(U.shape[:-1])
     D[..., -1] = det
     return (U * D[..., None, :]) @ Vt
+
+
+# --------------------------------------------------------------------------
+# Euler angles: the one implementation every module uses (BVH channels, BVH export, Blender
+# objects' rotation modes, Acclaim axes, device-offset presets).
+_EULER_AXIS = {"X": 0, "Y": 1, "Z": 2}
+
+
+def _elementary(axis, angle):
+    """Rotation matrices ``(..., 3, 3)`` about one coordinate axis (``"X"``, ``"Y"``, ``"Z"``),
+    angles in radians."""
+    a = _f64(angle)
+    c, s = np.cos(a), np.sin(a)
+    R = np.zeros(a.shape + (3, 3))
+    i = _EULER_AXIS[axis]
+    j, k = (i + 1) % 3, (i + 2) % 3
+    R[..., i, i] = 1.0
+    R[..., j, j] = c
+    R[..., k, k] = c
+    R[..., j, k] = -s
+    R[..., k, j] = s
+    return R
+
+
+def euler_to_matrix(angles, axes):
+    """Rotations composed in ``axes`` order, as BVH channels are: ``axes = "ZXY"`` gives
+    ``R = Rz(a0) @ Rx(a1) @ Ry(a2)`` (each later rotation about the already rotated axes).
+
+    angles: ``(..., n)`` radians for ``n = len(axes)`` letters from ``XYZ``; ``n = 0`` gives
+    identity.  Returns ``(..., 3, 3)``."""
+    ang = _f64(angles)
+    axes = axes.upper()
+    if ang.shape[-1] != len(axes):
+        raise ValueError(f"{len(axes)} axes but {ang.shape[-1]} angles")
+    R = np.broadcast_to(np.eye(3), ang.shape[:-1] + (3, 3)).copy()
+    for n, ax in enumerate(axes):
+        R = R @ _elementary(ax, ang[..., n]) if n else _elementary(ax, ang[..., n])
+    return R
+
+
+def _tait_bryan(R, axes):
+    """Angles (radians) ``(..., 3)`` with ``R = Ri(a) Rj(b) Rk(c)``, axes distinct."""
+    i, j, k = (_EULER_AXIS[a] for a in axes)
+    # parity of the permutation (i, j, k): +1 for XYZ, YZX, ZXY
+    s = 1.0 if (j - i) % 3 == 1 else -1.0
+    sb = np.clip(s * R[..., i, k], -1.0, 1.0)
+    b = np.arcsin(sb)
+    cb = np.sqrt(np.maximum(1.0 - sb * sb, 0.0))
+    a = np.arctan2(-s * R[..., j, k], R[..., k, k])
+    c = np.arctan2(-s * R[..., i, j], R[..., i, i])
+    # gimbal lock: b = +-90 deg, only a + c (or a - c) is defined; put it in a
+    lock = cb < 1e-7
+    if np.any(lock):
+        # with c = 0: R = Ri(a) Rj(b); column j of R is Ri(a) e_j
+        a_l = np.arctan2(s * R[..., k, j], R[..., j, j])
+        a = np.where(lock, a_l, a)
+        c = np.where(lock, 0.0, c)
+    return np.stack([a, b, c], axis=-1)
+
+
+def matrix_to_euler(R, axes, tol=1e-6):
+    """Inverse of :func:`euler_to_matrix`: radians ``(..., n)`` for ``n = len(axes)``.
+
+    Three distinct axes decompose any rotation; the middle angle is in ``[-pi/2, pi/2]`` and at
+    gimbal lock the last angle is 0.  One or two axes can only represent rotations about those
+    axes; ``ValueError`` is raised when ``R`` is further than ``tol`` from representable."""
+    R = _f64(R)
+    axes = axes.upper()
+    n = len(axes)
+    if n == 0:
+        ang = np.zeros(R.shape[:-2] + (0,))
+    else:
+        if len(set(axes)) != n or any(a not in _EULER_AXIS for a in axes):
+            raise ValueError(f"rotation axes must be distinct letters from XYZ, got {axes!r}")
+        full = axes + "".join(a for a in "XYZ" if a not in axes)
+        ang = _tait_bryan(R, full)[..., :n]
+    if n < 3:
+        back = euler_to_matrix(ang, axes)
+        err = np.abs(back - R).max() if R.size else 0.0
+        if err > tol:
+            raise ValueError(f"rotation is not representable with channels {axes!r} (residual {err:.2e})")
+    return ang
+
+
+def fixed_axes_euler_to_matrix(angles_xyz, order):
+    """Rotations about the fixed world axes applied in ``order``, first letter first, as
+    Blender's rotation modes and Acclaim ASF axes are: ``order = "XYZ"`` gives
+    ``R = Rz(z) @ Ry(y) @ Rx(x)``.
+
+    angles_xyz: ``(..., 3)`` radians about x, y and z (in that order, whatever ``order``);
+    order: a permutation of ``XYZ``.  Returns ``(..., 3, 3)``."""
+    a = _f64(angles_xyz)
+    rev = order.upper()[::-1]
+    return euler_to_matrix(a[..., [_EULER_AXIS[c] for c in rev]], rev)
+
