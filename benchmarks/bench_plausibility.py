@@ -5,7 +5,7 @@
 Default recordings: the Beat Saber replay in ``../shared/data/vr`` (a real player, VIVE Pro 2 and
 Index controllers, 30 s; legs never observed) and the bundled ``examples/example_recording.csv``
 (it starts with a T-pose).  Each is solved exactly as the add-on and the CLI solve it
-(``blender/solve_job.SolveJob.compute``: read, resample to 30 fps, device offsets ``auto``,
+(``core.solve.solve_recording``: read, resample to 30 fps, device offsets ``auto``,
 calibration ``AUTO``) once per model, and the table prints, per recording and model:
 
 * knee flexion (degrees; both knees pooled): median, 10th and 90th percentiles.  A player who
@@ -73,15 +73,13 @@ def plausibility(result, targets):
 
 
 def solve_file(path, model):
-    """Solve ``path`` as the add-on does, with ``model``; returns the finished SolveJob."""
-    from blender_manikin.blender.solve_job import SolveConfig, SolveJob
-    from blender_manikin.core import model_runner
-    os.environ["BLENDER_MANIKIN_MODEL"] = os.path.abspath(model)
-    model_runner._CACHE.clear()
-    job = SolveJob(SolveConfig(source="FILE", filepath=path, fps=30.0, offsets="auto", calibration="AUTO",
-                               live_rig=False))
-    job.compute()
-    return job
+    """Solve ``path`` as the add-on does (:func:`core.solve.solve_recording`), with ``model``."""
+    from blender_manikin.core import pipeline
+    from blender_manikin.core.model_runner import ModelRunner
+    from blender_manikin.core.solve import SolveSettings, solve_recording
+    runner = ModelRunner(model)
+    return solve_recording(path, SolveSettings(fps=30.0, offsets="auto", calibration="AUTO"),
+                           solver=lambda tg, body, progress=None: pipeline.solve(tg, body, runner, progress=progress))
 
 
 def main(argv=None):

@@ -6,8 +6,8 @@ command line (synchronous).  The stages are
 1. :meth:`SolveJob.gather` (main thread): for scene sources, sample the mapped
    objects into a :class:`~blender_manikin.core.recording.Recording`;
 2. :meth:`SolveJob.compute` (any thread, numpy/onnxruntime only, never
-   touches Blender data): load the file, resample to the frame rate, apply
-   device offsets, calibrate the body, run :func:`pipeline.solve`;
+   touches Blender data): :func:`blender_manikin.core.solve.solve_recording`
+   (read, resample, device offsets, calibration, network and limbs);
 3. :meth:`SolveJob.write` (main thread): create the armature / action /
    empties in one all-or-nothing step (:func:`.writer.write_result`).
 
@@ -25,26 +25,17 @@ import threading
 import time as _time
 from dataclasses import dataclass, field
 
-import numpy as np
-
-from ..core import skeleton as sk
-from ..core.pose_result import TrackerTargets
 
 UNDO_MESSAGE = "MANIKIN: Solve Full Body"
 
 #: stage boundaries of the overall progress fraction
-_P_LOAD, _P_RESAMPLE, _P_BODY, _P_SOLVE, _P_WRITE = 0.08, 0.15, 0.2, 0.92, 1.0
+_P_LOAD, _P_SOLVE = 0.08, 0.92
 
 
-class SolveError(RuntimeError):
-    """A problem the user can fix (bad settings, bad recording); the message says what."""
-
-
-try:   # the pipeline's own cancellation exception when it exists
-    from ..core.pipeline import SolveCancelled   # noqa: F401
-except Exception:                                # pragma: no cover - pipeline not importable
-    class SolveCancelled(Exception):
-        """The user cancelled the solve."""
+from ..core.pipeline import SolveCancelled  # noqa: E402,F401  (raised through the job on cancel)
+from ..core import solve as core_solve  # noqa: E402
+from ..core.solve import (SolveError, SolveSettings, make_targets, resample_recording,  # noqa: E402,F401
+                          resolve_offsets)
 
 
 @dataclass
@@ -89,6 +80,10 @@ class SolveConfig:
     scene_sources: dict = field(default_factory=dict)
     scene_frames: tuple | None = None
 
+    def settings(self) -> SolveSettings:
+        """The solve options of this configuration (:class:`core.solve.SolveSettings`)."""
+        return SolveSettings(**{k: getattr(self, k) for k in SolveSettings.__dataclass_fields__})
+
 
 # --------------------------------------------------------------------------
 # numpy stages (no bpy)
@@ -99,114 +94,12 @@ def _check_cancel(flag):
 
 def load_source(config: SolveConfig):
     """Read ``config.filepath`` into a Recording (Blender axes, metres)."""
-    from ..core.recording import load_recording
-    if not config.filepath:
-        raise SolveError("no recording file chosen")
-    return load_recording(config.filepath, axes=config.axes, units=config.units)
-
-
-def resample_recording(recording, fps):
-    """``(times, pos, quat, valid, report)`` on a grid at ``fps`` (see :func:`core.resample.resample`)."""
-    from ..core.resample import resample
-    return resample(recording, fps)
-
-
-def resolve_offsets(offsets, recording):
-    """``"auto"`` → the preset the recording implies, else ``offsets`` unchanged.
-
-    auto: the file's ``# offsets: PRESET`` metadata when it names a preset;
-    ``beat_saber`` for a ``.bsor`` replay (its hand poses are saber poses);
-    otherwise ``none`` (the device poses are taken as joint poses).
-    """
-    if not (isinstance(offsets, str) and offsets.lower() == "auto"):
-        return offsets
-    from ..core import device_offsets
-    meta = (getattr(recording, "metadata", None) or {}).get("offsets")
-    if isinstance(meta, str) and meta.strip() in device_offsets.PRESET_NAMES:
-        return meta.strip()
-    if str(getattr(recording, "source", "")).lower().endswith(".bsor"):
-        return "beat_saber"
-    return "none"
-
-
-def make_targets(times, pos, quat, valid, fps, offsets="none"):
-    """Joint targets from resampled device poses after device ``offsets``.
-
-    offsets: a preset name (:data:`core.device_offsets.PRESET_NAMES`;
-    ``"none"``: the device poses are the joint poses) or an offsets dict
-    (see :mod:`blender_manikin.core.device_offsets`).
-    """
-    from ..core import device_offsets
-    try:
-        off = device_offsets.validate_offsets(offsets if offsets not in ("", None) else "none")
-    except ValueError as exc:
-        raise SolveError(f"device offsets: {exc}") from exc
-    return device_offsets.to_targets(times, pos, quat, valid, off, fps=fps), off
-
-
-def body_from_head_height(targets: TrackerTargets, height=None, arm_span=None) -> sk.Body:
-    """A body when no calibration pose is available.
-
-    stature = ``height`` (metres) if given, else the 90th percentile of the
-    head joint height / 0.910 (standing; :data:`skeleton.PROPORTIONS`),
-    clipped to 1.0-2.3 m.
-    """
-    if height is None:
-        head_z = np.asarray(targets.pos["head"])[:, 2]
-        height = float(np.clip(np.nanpercentile(head_z, 90) / sk.PROPORTIONS["head_height"], 1.0, 2.3))
-    try:
-        return sk.make_body(sk.BodyMeasurements(stature=float(height), arm_span=arm_span or None))
-    except ValueError as exc:
-        raise SolveError(f"body measurements: {exc}") from exc
-
-
-def calibrate(config: SolveConfig, targets: TrackerTargets, times, offsets):
-    """The performer's body for ``config.calibration`` (see :class:`SolveConfig`).
-
-    Returns ``(body, offsets, info)``: the offsets refined by a T/A-pose
-    calibration (else unchanged), and ``info``, a list of human-readable
-    notes (the calibration moment, implausibility warnings).
-    """
-    from ..core import calibration as cal
-    mode = (config.calibration or "AUTO").upper()
-    info = []
-    if mode == "MEASURE":
-        if not config.height or config.height <= 0:
-            raise SolveError("calibration by measurements needs a height (metres)")
-        return body_from_head_height(targets, config.height, config.arm_span), offsets, info
-    t0 = float(times[0])
-    meas = {"stature": float(config.height)} if config.height else None
-    if config.arm_span and meas is not None:
-        meas["arm_span"] = float(config.arm_span)
-    if mode == "TPOSE":
-        if config.tpose_time is None:
-            raise SolveError("T-pose calibration needs the time of the T-pose")
-        dur = float(times[-1] - times[0])
-        if not (-1e-6 <= float(config.tpose_time) <= dur + 1e-6):
-            raise SolveError(f"T-pose time {config.tpose_time:.3f} s is outside the recording "
-                             f"(0-{dur:.3f} s after the first sample)")
-        t = t0 + float(config.tpose_time)
-    else:   # AUTO: the most T-pose-like moment, if it is plausible
-        cand = cal.find_tpose(targets, t0=t0)
-        if not cand.plausible:
-            info.append("no T-pose found: stature from the standing head height")
-            return body_from_head_height(targets, config.height, config.arm_span), offsets, info
-        t = cand.time
-    try:
-        res = cal.calibrate(targets, time=t, offsets=offsets, t0=t0, measurements=meas)
-        body = cal.body_for(res.measurements)
-    except ValueError as exc:
-        raise SolveError(f"calibration at {t - t0:.2f} s: {exc}") from exc
-    info.append(f"calibrated on a {res.pose}-pose at {t - t0:.2f} s: stature "
-                f"{res.measurements.stature:.2f} m, arm span {res.measurements.arm_span or 0:.2f} m")
-    info += [f"calibration: {p}" for p in res.problems]
-    return body, res.offsets, info
+    return core_solve.read_recording(config.filepath, config.settings())
 
 
 def run_solver(targets, body, progress=None):
-    """:func:`blender_manikin.core.pipeline.solve` (separate so tests can replace it)."""
-    from ..core import pipeline
-    return pipeline.solve(targets, body, progress=progress)
+    """:func:`blender_manikin.core.solve.default_solver` (separate so tests can replace it)."""
+    return core_solve.default_solver(targets, body, progress=progress)
 
 
 # --------------------------------------------------------------------------
@@ -234,6 +127,7 @@ class SolveJob:
         self.progress = 0.0
         self.stage = "starting"
         self.timings = {}
+        self.outcome = None
         self._cancel = threading.Event()
         self._thread = None
 
@@ -276,93 +170,27 @@ class SolveJob:
 
     # -- stage 2 (any thread)
     def compute(self):
-        """Load, resample, offsets, calibration, solve.  Sets ``self.result``."""
+        """:func:`core.solve.solve_recording` on the file or the gathered scene recording.
+        Sets ``self.result`` (and ``recording``, ``report``, ``targets``, ``body``, ``offsets``,
+        ``info``, ``timings``)."""
         cfg = self.config
-        if cfg.fps is None or not cfg.fps > 0:
-            raise SolveError("no frame rate: set fps")
-        t = _time.perf_counter()
-        if self.recording is None:
-            self._set(0.0, "reading recording")
-            self.recording = load_source(cfg)
-            self.timings["read"] = _time.perf_counter() - t
-        self._set(_P_LOAD, "resampling")
-        t = _time.perf_counter()
-        times, pos, quat, valid, report = resample_recording(self.recording, cfg.fps)
-        self.report = report
-        if cfg.max_frames is not None and cfg.max_frames > 0 and len(times) > cfg.max_frames:
-            n = int(cfg.max_frames)
-            times = times[:n]
-            pos = {d: v[:n] for d, v in pos.items()}
-            quat = {d: v[:n] for d, v in quat.items()}
-            valid = {d: v[:n] for d, v in valid.items()}
-        self.targets, offsets = make_targets(times, pos, quat, valid, cfg.fps,
-                                             resolve_offsets(cfg.offsets, self.recording))
-        self.timings["resample"] = _time.perf_counter() - t
-        self._set(_P_RESAMPLE, "calibrating")
-        t = _time.perf_counter()
-        self.body, self.offsets, self.info = calibrate(cfg, self.targets, times, offsets)
-        self._check_stature()
-        if self.offsets is not offsets:     # calibration refined the device rotations
-            self.targets, _ = make_targets(times, pos, quat, valid, cfg.fps, self.offsets)
-        self.timings["calibrate"] = _time.perf_counter() - t
-        self._set(_P_BODY, "solving")
-        t = _time.perf_counter()
-        span = _P_SOLVE - _P_BODY
-        result = run_solver(self.targets, self.body,
-                            progress=lambda f: self._set(_P_BODY + span * float(f)))
-        result = self._adapt_arms(result, progress_width=span)
-        result.t0 = float(times[0])
-        if result.targets is None:
-            result.targets = self.targets
-        self.result = result
-        self.timings["solve"] = _time.perf_counter() - t
-        for k, v in getattr(result, "timings", {}).items():     # network / solver split
-            self.timings[f"solve.{k}"] = v
+        source = self.recording if self.recording is not None else cfg.filepath
+        if source is None or source == "":
+            raise SolveError("no recording file chosen")
+        timings = dict(self.timings)
+        lo = _P_LOAD if self.recording is not None else 0.0      # scene sources were gathered already
+
+        def progress(fraction, stage=None):
+            self._set(lo + (_P_SOLVE - lo) * float(fraction), stage)
+
+        out = core_solve.solve_recording(source, cfg.settings(), solver=run_solver, progress=progress)
+        self.outcome = out
+        self.recording, self.report, self.targets = out.recording, out.report, out.targets
+        self.body, self.offsets, self.info = out.body, out.offsets, out.info
+        self.timings = dict(timings, **out.timings)
+        self.result = out.result
         self._set(_P_SOLVE, "writing")
-        return result
-
-    def _check_stature(self):
-        """Warn (``self.info``, the summary) when the body's stature is implausible."""
-        from ..core import calibration as cal
-        cfg = self.config
-        if cfg.height:                      # a typed height always wins
-            sized_by = "height setting"
-        elif any(n.startswith("calibrated") for n in self.info):
-            sized_by = "T-pose"
-        else:
-            sized_by = "head height"
-        head = np.asarray(self.targets.pos["head"])[:, 2]
-        units = (getattr(self.recording, "metadata", None) or {}).get("units", "m") if cfg.units is None else cfg.units
-        note = cal.stature_warning(self.body.stature, float(np.nanpercentile(head, 90)), sized_by, units)
-        if note:
-            self.info.append(note)
-
-    def _adapt_arms(self, result, progress_width):
-        """Lengthen arms built from proportions when the hands cannot reach their trackers.
-
-        Only when no arm span was measured (no T/A-pose calibration) or given:
-        the span comes from :func:`core.calibration.arm_span_for_reach` and the
-        recording is solved again with it.  Notes it in ``self.info``.
-        """
-        from ..core import calibration as cal
-        if self.config.arm_span or any(n.startswith("calibrated") for n in self.info):
-            return result
-        if result.reach_error is None or not (result.reach_error[:, :2] > 0.005).any():
-            return result
-        before = int((result.reach_error[:, :2] > 0.005).any(1).sum())
-        self._set(_P_BODY + 0.5 * progress_width, "solving again with arms for the reach")
-        def progress(f):
-            self._set(_P_BODY + progress_width * (0.5 + 0.5 * float(f)))
-
-        body, again, new_span = cal.adapt_arms_to_reach(
-            result, lambda b: run_solver(self.targets, b, progress=progress))
-        if new_span is None:
-            return result
-        after = int((again.reach_error[:, :2] > 0.005).any(1).sum())
-        self.info.append(f"arm span {new_span:.2f} m from the recording's reach (no T-pose; hands off their "
-                         f"trackers on {before} frame(s) with proportional arms, {after} now)")
-        self.body = body
-        return again
+        return self.result
 
     # -- stage 3 (main thread)
     def write(self, context):
@@ -425,22 +253,9 @@ class SolveJob:
 
     def summary(self) -> str:
         """One line: frames, fps, stature, devices, gaps, where the solve gave way, timings."""
-        parts = []
-        if self.result is not None:
-            parts.append(f"{self.result.num_frames} frames at {self.result.fps:g} fps")
-            parts.extend(self.result.quality_notes())
-        if self.body is not None:
-            parts.append(f"stature {self.body.stature:.2f} m")
-        for note in self.info:
-            if note.startswith(("calibrated", "arm span", "estimated stature")):
-                parts.append(note)
-        if self.report is not None:
-            gaps = getattr(self.report, "gaps", [])
-            if gaps:
-                parts.append(f"{len(gaps)} gap(s) bridged")
-        if self.timings:
-            parts.append(", ".join(f"{k} {v:.2f}s" for k, v in self.timings.items()))
-        return "; ".join(parts)
+        if self.outcome is None:
+            return ""
+        return self.outcome.summary({k: v for k, v in self.timings.items() if k not in self.outcome.timings})
 
 
 def error_message(exc) -> str:

@@ -1,0 +1,296 @@
+"""The whole solve of a recording, without Blender: read → resample → offsets → calibrate →
+solve (network, then torso, feet and limbs) → arm adaptation → quality notes.
+
+    from blender_manikin.core.solve import SolveSettings, solve_recording
+    outcome = solve_recording("take.csv", SolveSettings(fps=30.0))
+    outcome.result          # PoseResult: (T, 22) local rotations, root, swivel, contacts, ...
+    outcome.summary()       # the one-line summary the panel and the CLI show
+
+The add-on's job (``blender/solve_job.py``) runs exactly this in its worker thread and adds
+only what needs Blender: sampling scene objects into a recording before, writing the armature
+and action after.  Every stage is also a function of its own, for tests and benchmarks.
+Times are on the recording clock in seconds; ``SolveSettings.tpose_time`` is seconds after the
+first tracker sample (what the timeline shows).  No bpy.
+"""
+from __future__ import annotations
+
+import time as _time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from . import skeleton as sk
+from .pose_result import PoseResult, TrackerTargets
+
+
+class SolveError(RuntimeError):
+    """A problem the user can fix (bad settings, bad recording); the message says what."""
+
+
+@dataclass
+class SolveSettings:
+    """How to solve a recording (the panel's and the command line's options, plain values).
+
+    axes / units: override the file's metadata (None = file / format default).  fps: the solve
+    frame rate.  calibration: ``"AUTO"`` (calibrate on the most T-pose-like moment when one is
+    plausible, else stature from the standing head height), ``"TPOSE"`` (calibrate on the
+    T-pose at ``tpose_time`` seconds after the first sample) or ``"MEASURE"`` (``height`` and
+    optional ``arm_span``, metres); with TPOSE/AUTO a given ``height`` overrides the measured
+    stature.  offsets: a device-offsets preset name, ``"none"``, ``"auto"`` (see
+    :func:`resolve_offsets`) or an offsets dict (:mod:`.device_offsets`).  max_frames: crop.
+    """
+    axes: str | None = None
+    units: str | None = None
+    fps: float | None = 30.0
+    calibration: str = "AUTO"
+    tpose_time: float | None = None
+    height: float | None = None
+    arm_span: float | None = None
+    offsets: object = "auto"
+    max_frames: int | None = None
+
+
+@dataclass
+class SolveOutcome:
+    """What a solve produced: ``recording`` (:class:`.recording.Recording`), ``report``
+    (resampling gaps), ``targets`` (:class:`TrackerTargets`), ``body``, ``offsets`` (the device
+    offsets used, refined by calibration), ``info`` (notes for the user: the calibration moment,
+    arm adaptation, implausible stature), ``result`` (:class:`PoseResult`) and ``timings``
+    (seconds per stage)."""
+    recording: object = None
+    report: object = None
+    targets: TrackerTargets | None = None
+    body: sk.Body | None = None
+    offsets: object = None
+    info: list = field(default_factory=list)
+    result: PoseResult | None = None
+    timings: dict = field(default_factory=dict)
+
+    def summary(self, extra_timings=None) -> str:
+        """One line: frames, fps, where the solve gave way, stature, calibration, gaps, timings."""
+        parts = []
+        if self.result is not None:
+            parts.append(f"{self.result.num_frames} frames at {self.result.fps:g} fps")
+            parts.extend(self.result.quality_notes())
+        if self.body is not None:
+            parts.append(f"stature {self.body.stature:.2f} m")
+        for note in self.info:
+            if note.startswith(("calibrated", "arm span", "estimated stature")):
+                parts.append(note)
+        if self.report is not None:
+            gaps = getattr(self.report, "gaps", [])
+            if gaps:
+                parts.append(f"{len(gaps)} gap(s) bridged")
+        timings = dict(self.timings, **(extra_timings or {}))
+        if timings:
+            parts.append(", ".join(f"{k} {v:.2f}s" for k, v in timings.items()))
+        return "; ".join(parts)
+
+
+# --------------------------------------------------------------------------
+# the stages
+def read_recording(path, settings: SolveSettings):
+    """Read the recording file at ``path`` (Blender axes, metres)."""
+    from .recording import load_recording
+    if not path:
+        raise SolveError("no recording file chosen")
+    return load_recording(path, axes=settings.axes, units=settings.units)
+
+
+def resample_recording(recording, fps):
+    """``(times, pos, quat, valid, report)`` on a grid at ``fps`` (see :func:`.resample.resample`)."""
+    from .resample import resample
+    return resample(recording, fps)
+
+
+def resolve_offsets(offsets, recording):
+    """``"auto"`` → the preset the recording implies, else ``offsets`` unchanged.
+
+    auto: the file's ``# offsets: PRESET`` metadata when it names a preset; ``beat_saber`` for a
+    ``.bsor`` replay (its hand poses are saber poses); otherwise ``none`` (the device poses are
+    taken as joint poses).
+    """
+    if not (isinstance(offsets, str) and offsets.lower() == "auto"):
+        return offsets
+    from . import device_offsets
+    meta = (getattr(recording, "metadata", None) or {}).get("offsets")
+    if isinstance(meta, str) and meta.strip() in device_offsets.PRESET_NAMES:
+        return meta.strip()
+    if str(getattr(recording, "source", "")).lower().endswith(".bsor"):
+        return "beat_saber"
+    return "none"
+
+
+def make_targets(times, pos, quat, valid, fps, offsets="none"):
+    """Joint targets from resampled device poses after device ``offsets`` (a preset name,
+    ``"none"``, or an offsets dict of :mod:`.device_offsets`).  Returns ``(targets, offsets)``."""
+    from . import device_offsets
+    try:
+        off = device_offsets.validate_offsets(offsets if offsets not in ("", None) else "none")
+    except ValueError as exc:
+        raise SolveError(f"device offsets: {exc}") from exc
+    return device_offsets.to_targets(times, pos, quat, valid, off, fps=fps), off
+
+
+def body_from_head_height(targets: TrackerTargets, height=None, arm_span=None) -> sk.Body:
+    """A body when no calibration pose is available: stature = ``height`` (metres) if given,
+    else the 90th percentile of the head joint height / 0.910 (standing), clipped to 1.0-2.3 m."""
+    if height is None:
+        head_z = np.asarray(targets.pos["head"])[:, 2]
+        height = float(np.clip(np.nanpercentile(head_z, 90) / sk.PROPORTIONS["head_height"], 1.0, 2.3))
+    try:
+        return sk.make_body(sk.BodyMeasurements(stature=float(height), arm_span=arm_span or None))
+    except ValueError as exc:
+        raise SolveError(f"body measurements: {exc}") from exc
+
+
+def calibrate(settings: SolveSettings, targets: TrackerTargets, times, offsets):
+    """The performer's body for ``settings.calibration``.
+
+    Returns ``(body, offsets, info)``: the offsets refined by a T/A-pose calibration (else
+    unchanged) and ``info``, notes for the user (the calibration moment, its problems)."""
+    from . import calibration as cal
+    mode = (settings.calibration or "AUTO").upper()
+    info = []
+    if mode == "MEASURE":
+        if not settings.height or settings.height <= 0:
+            raise SolveError("calibration by measurements needs a height (metres)")
+        return body_from_head_height(targets, settings.height, settings.arm_span), offsets, info
+    t0 = float(times[0])
+    meas = {"stature": float(settings.height)} if settings.height else None
+    if settings.arm_span and meas is not None:
+        meas["arm_span"] = float(settings.arm_span)
+    if mode == "TPOSE":
+        if settings.tpose_time is None:
+            raise SolveError("T-pose calibration needs the time of the T-pose")
+        dur = float(times[-1] - times[0])
+        if not (-1e-6 <= float(settings.tpose_time) <= dur + 1e-6):
+            raise SolveError(f"T-pose time {settings.tpose_time:.3f} s is outside the recording "
+                             f"(0-{dur:.3f} s after the first sample)")
+        t = t0 + float(settings.tpose_time)
+    else:   # AUTO: the most T-pose-like moment, if it is plausible
+        cand = cal.find_tpose(targets, t0=t0)
+        if not cand.plausible:
+            info.append("no T-pose found: stature from the standing head height")
+            return body_from_head_height(targets, settings.height, settings.arm_span), offsets, info
+        t = cand.time
+    try:
+        res = cal.calibrate(targets, time=t, offsets=offsets, t0=t0, measurements=meas)
+        body = cal.body_for(res.measurements)
+    except ValueError as exc:
+        raise SolveError(f"calibration at {t - t0:.2f} s: {exc}") from exc
+    info.append(f"calibrated on a {res.pose}-pose at {t - t0:.2f} s: stature "
+                f"{res.measurements.stature:.2f} m, arm span {res.measurements.arm_span or 0:.2f} m")
+    info += [f"calibration: {p}" for p in res.problems]
+    return body, res.offsets, info
+
+
+def stature_note(settings: SolveSettings, outcome: SolveOutcome):
+    """A note when the body's stature is implausible (:func:`.calibration.stature_warning`), else None."""
+    from . import calibration as cal
+    if settings.height:                          # a typed height always wins
+        sized_by = "height setting"
+    elif any(n.startswith("calibrated") for n in outcome.info):
+        sized_by = "T-pose"
+    else:
+        sized_by = "head height"
+    head = np.asarray(outcome.targets.pos["head"])[:, 2]
+    units = settings.units or (getattr(outcome.recording, "metadata", None) or {}).get("units", "m")
+    return cal.stature_warning(outcome.body.stature, float(np.nanpercentile(head, 90)), sized_by, units)
+
+
+def default_solver(targets, body, progress=None):
+    """:func:`.pipeline.solve` with the default model (network, torso, feet, limbs)."""
+    from . import pipeline
+    return pipeline.solve(targets, body, progress=progress)
+
+
+def adapt_arms(settings: SolveSettings, outcome: SolveOutcome, result, solver, progress=None):
+    """Lengthen arms built from proportions when the hands cannot reach their trackers.
+
+    Only when no arm span was measured (no T/A-pose calibration) or given: the span comes from
+    :func:`.calibration.arm_span_for_reach` and the recording is solved again with it.  Notes it
+    in ``outcome.info`` and sets ``outcome.body``.  Returns the result to keep."""
+    from . import calibration as cal
+    if settings.arm_span or any(n.startswith("calibrated") for n in outcome.info):
+        return result
+    if result.reach_error is None or not (result.reach_error[:, :2] > 0.005).any():
+        return result
+    before = int((result.reach_error[:, :2] > 0.005).any(1).sum())
+    body, again, new_span = cal.adapt_arms_to_reach(result, lambda b: solver(outcome.targets, b, progress=progress))
+    if new_span is None:
+        return result
+    after = int((again.reach_error[:, :2] > 0.005).any(1).sum())
+    outcome.info.append(f"arm span {new_span:.2f} m from the recording's reach (no T-pose; hands off their "
+                        f"trackers on {before} frame(s) with proportional arms, {after} now)")
+    outcome.body = body
+    return again
+
+
+# --------------------------------------------------------------------------
+#: progress fractions at the stage boundaries
+STAGES = {"reading recording": 0.0, "resampling": 0.09, "calibrating": 0.16, "solving": 0.22, "done": 1.0}
+
+
+def solve_recording(source, settings: SolveSettings | None = None, solver=None, progress=None) -> SolveOutcome:
+    """Solve a recording: ``source`` is a file path or a :class:`.recording.Recording`
+    (e.g. sampled from scene objects).
+
+    solver: ``(targets, body, progress) -> PoseResult`` (default :func:`default_solver`).
+    progress: optional ``(fraction 0-1, stage text)`` callback; an exception raised from it
+    (a cancel) stops the solve.  Returns the :class:`SolveOutcome`; raises :class:`SolveError`
+    for what the user can fix."""
+    settings = settings or SolveSettings()
+    solver = solver or default_solver
+    report = progress or (lambda f, stage=None: None)
+    if settings.fps is None or not settings.fps > 0:
+        raise SolveError("no frame rate: set fps")
+    out = SolveOutcome()
+    t = _time.perf_counter()
+    if isinstance(source, (str, bytes)) or hasattr(source, "__fspath__"):
+        report(STAGES["reading recording"], "reading recording")
+        out.recording = read_recording(source, settings)
+        out.timings["read"] = _time.perf_counter() - t
+    else:
+        out.recording = source
+    report(STAGES["resampling"], "resampling")
+    t = _time.perf_counter()
+    times, pos, quat, valid, out.report = resample_recording(out.recording, settings.fps)
+    if settings.max_frames is not None and settings.max_frames > 0 and len(times) > settings.max_frames:
+        n = int(settings.max_frames)
+        times = times[:n]
+        pos = {d: v[:n] for d, v in pos.items()}
+        quat = {d: v[:n] for d, v in quat.items()}
+        valid = {d: v[:n] for d, v in valid.items()}
+    out.targets, offsets = make_targets(times, pos, quat, valid, settings.fps,
+                                        resolve_offsets(settings.offsets, out.recording))
+    out.timings["resample"] = _time.perf_counter() - t
+    report(STAGES["calibrating"], "calibrating")
+    t = _time.perf_counter()
+    out.body, out.offsets, out.info = calibrate(settings, out.targets, times, offsets)
+    if out.offsets is not offsets:     # calibration refined the device rotations
+        out.targets, _ = make_targets(times, pos, quat, valid, settings.fps, out.offsets)
+    note = stature_note(settings, out)
+    if note:
+        out.info.append(note)
+    out.timings["calibrate"] = _time.perf_counter() - t
+    report(STAGES["solving"], "solving")
+    t = _time.perf_counter()
+    lo, hi = STAGES["solving"], STAGES["done"]
+
+    def solve_progress(f):
+        report(lo + (hi - lo) * 0.5 * float(f))
+
+    result = solver(out.targets, out.body, progress=solve_progress)
+    result = adapt_arms(settings, out, result, solver,
+                        progress=lambda f: report(lo + (hi - lo) * (0.5 + 0.5 * float(f)),
+                                                  "solving again with arms for the reach"))
+    result.t0 = float(times[0])
+    if result.targets is None:
+        result.targets = out.targets
+    out.result = result
+    out.timings["solve"] = _time.perf_counter() - t
+    for k, v in getattr(result, "timings", {}).items():     # network / solver split
+        out.timings[f"solve.{k}"] = v
+    report(STAGES["done"], "done")
+    return out

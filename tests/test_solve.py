@@ -1,0 +1,69 @@
+"""The staged solve without Blender (core/solve.py): what the add-on's job and the CLI run."""
+import os
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from blender_manikin.core import solve as cs
+from blender_manikin.core.recording import load_recording
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+EXAMPLE = os.path.join(ROOT, "examples", "example_recording.csv")
+
+
+def test_solve_recording_runs_every_stage_on_the_example():
+    stages = []
+    out = cs.solve_recording(EXAMPLE, cs.SolveSettings(fps=30.0), progress=lambda f, s=None: stages.append((f, s)))
+    res = out.result
+    assert res.num_frames == out.targets.num_frames > 100 and res.fps == 30.0
+    assert out.recording.source.endswith("example_recording.csv")
+    assert out.info[0].startswith("calibrated on a T-pose")
+    assert abs(out.body.stature - 1.75) < 0.05
+    hands = np.linalg.norm(res.positions[:, 20] - out.targets.pos["left_hand"], axis=-1)
+    assert hands.max() < 1e-4
+    fr = [f for f, _ in stages]
+    assert fr == sorted(fr) and fr[0] == 0.0 and fr[-1] == 1.0
+    assert [s for _, s in stages if s][:4] == ["reading recording", "resampling", "calibrating", "solving"]
+    assert set(out.timings) >= {"read", "resample", "calibrate", "solve"}
+    line = out.summary()
+    assert line.startswith(f"{res.num_frames} frames at 30 fps") and "calibrated on a T-pose" in line
+
+
+def test_a_recording_object_is_solved_the_same_as_its_file():
+    a = cs.solve_recording(EXAMPLE, cs.SolveSettings(fps=30.0))
+    b = cs.solve_recording(load_recording(EXAMPLE), cs.SolveSettings(fps=30.0))
+    assert np.array_equal(a.result.local_rot, b.result.local_rot)
+
+
+def test_settings_errors_are_solve_errors():
+    with pytest.raises(cs.SolveError, match="no frame rate"):
+        cs.solve_recording(EXAMPLE, cs.SolveSettings(fps=None))
+    with pytest.raises(cs.SolveError, match="outside the recording"):
+        cs.solve_recording(EXAMPLE, cs.SolveSettings(calibration="TPOSE", tpose_time=99.0))
+    with pytest.raises(cs.SolveError, match="needs a height"):
+        cs.solve_recording(EXAMPLE, cs.SolveSettings(calibration="MEASURE"))
+    with pytest.raises(cs.SolveError, match="no recording file"):
+        cs.solve_recording("", cs.SolveSettings())
+
+
+def test_a_cancel_raised_from_progress_stops_the_solve():
+    class Stop(Exception):
+        pass
+
+    def progress(f, stage=None):
+        if stage == "calibrating":
+            raise Stop()
+    with pytest.raises(Stop):
+        cs.solve_recording(EXAMPLE, cs.SolveSettings(), progress=progress)
+
+
+def test_core_solve_never_imports_bpy():
+    code = ("import sys; from blender_manikin.core.solve import solve_recording, SolveSettings; "
+            f"solve_recording({EXAMPLE!r}, SolveSettings(fps=30.0)); "
+            "print('bpy' in sys.modules, 'blender_manikin.blender' in sys.modules)")
+    env = dict(os.environ, PYTHONPATH=ROOT)
+    p = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env, cwd=ROOT, timeout=300)
+    assert p.returncode == 0, p.stderr
+    assert p.stdout.split() == ["False", "False"]
