@@ -8,9 +8,11 @@
 Each ``dist/blender_manikin-<version>-<platform>.zip`` holds
 
 * ``blender_manifest.toml`` (schema 1.0.0), generated here: the version comes from
-  ``__version__`` in ``blender_manikin/__init__.py`` (read with ``ast``, bpy is never imported);
-* the add-on package (no ``__pycache__``, tests, ``training/`` or ``*.pt`` checkpoints), with the
-  ONNX model(s) and their README under ``models/``;
+  ``__version__`` in ``blender_manikin/core/version.py`` (read with ``ast``, bpy is never
+  imported), and ``bl_info["version"]`` must agree;
+* the add-on package (no ``__pycache__``, tests, ``training/`` or ``*.pt`` checkpoints, and no
+  ``core/`` module the add-on never imports: mocap preparation and evaluation code stays out),
+  with the ONNX model(s) and their README under ``models/``;
 * ``wheels/``: the unmodified PyPI onnxruntime wheels for that platform, one per CPython version
   the supported Blender range runs (3.11 for Blender 4.2-5.0, 3.13 for 5.1-5.2; Blender installs
   only the one matching its Python), plus the dependencies onnxruntime imports at run time (numpy
@@ -54,7 +56,8 @@ PYTHON_VERSIONS = tuple(sorted(set(BLENDER_PYTHON.values())))
 # The onnxruntime pins, one per Python version, live in ONE place: requirements-onnxruntime.txt
 # (see docs/PACKAGING.md for why 1.20.1).  Other requirements files include it with ``-r``.
 PIN_FILE = ROOT / "requirements-onnxruntime.txt"
-LOADER_FILE = PKG_DIR / "onnx_runtime_loader.py"
+LOADER_FILE = PKG_DIR / "core" / "onnx_runtime_loader.py"
+VERSION_FILE = Path("core") / "version.py"
 # Never shipped: Blender bundles numpy and an add-on must use that one.
 PROVIDED_BY_BLENDER = {"numpy"}
 
@@ -104,17 +107,27 @@ class BuildError(RuntimeError):
 
 # ----------------------------------------------------------------------------- metadata
 
-def read_version(init_py: Path | None = None) -> str:
-    """``__version__`` from the package, parsed (not imported: that would need bpy)."""
-    init_py = init_py or PKG_DIR / "__init__.py"
-    tree = ast.parse(init_py.read_text(encoding="utf-8"), str(init_py))
+def read_version(pkg_dir: Path | None = None) -> str:
+    """``__version__`` of the package, parsed from ``core/version.py`` (not imported), checked
+    against ``bl_info["version"]`` of its ``__init__.py``."""
+    pkg_dir = Path(pkg_dir or PKG_DIR)
+    if pkg_dir.name == "__init__.py":          # older callers passed the __init__ file
+        pkg_dir = pkg_dir.parent
+    path = pkg_dir / VERSION_FILE
+    if not path.is_file():
+        raise BuildError(f"{path}: missing (the package version is written there)")
+    tree = ast.parse(path.read_text(encoding="utf-8"), str(path))
     for node in tree.body:
         if isinstance(node, ast.Assign) and any(isinstance(t, ast.Name) and t.id == "__version__" for t in node.targets):
             value = ast.literal_eval(node.value)
             if not isinstance(value, str) or not re.fullmatch(r"\d+\.\d+\.\d+", value):
-                raise BuildError(f"{init_py}: __version__ must be 'MAJOR.MINOR.PATCH', found {value!r}")
+                raise BuildError(f"{path}: __version__ must be 'MAJOR.MINOR.PATCH', found {value!r}")
+            info = read_bl_info(pkg_dir / "__init__.py")
+            if info and tuple(info.get("version", ())) != tuple(int(x) for x in value.split(".")):
+                raise BuildError(f"{pkg_dir / '__init__.py'}: bl_info version {info.get('version')} disagrees with "
+                                 f"__version__ {value!r} of {path}")
             return value
-    raise BuildError(f"{init_py}: no top-level __version__ = '...'")
+    raise BuildError(f"{path}: no top-level __version__ = '...'")
 
 
 def read_bl_info(init_py: Path | None = None) -> dict:
@@ -251,6 +264,9 @@ def package_files(pkg_dir: Path | None = None) -> tuple[list[tuple[Path, str]], 
             files.append((src, rel))
     if not any(rel == "__init__.py" for _, rel in files):
         raise BuildError(f"{pkg_dir}/__init__.py missing")
+    unused = unused_core_modules(files)
+    files = [(src, rel) for src, rel in files if rel not in unused]
+    skipped += [f"{rel} (not used by the add-on)" for rel in sorted(unused)]
     # The repository's licence text travels with the code.
     licence = ROOT / "LICENSE"
     if licence.is_file() and not any(rel == "LICENSE" for _, rel in files):
@@ -258,27 +274,77 @@ def package_files(pkg_dir: Path | None = None) -> tuple[list[tuple[Path, str]], 
     return files, skipped
 
 
+def _relative_targets(node, package):
+    """Package-relative module paths (lists of names) a relative ``from`` import reaches."""
+    base = package[: len(package) - (node.level - 1)] if node.level - 1 <= len(package) else None
+    if base is None:
+        return []
+    return [base + node.module.split(".")] if node.module else [base + [a.name] for a in node.names]
+
+
+def unused_core_modules(files: list[tuple[Path, str]]) -> set[str]:
+    """Archive names of the ``core/`` modules that nothing outside ``core/`` reaches through
+    imports (mocap preparation and evaluation code: the BVH and ASF readers, HybrIK, metrics,
+    baselines), so they stay out of the zip."""
+    py = {rel: src for src, rel in files if rel.endswith(".py")}
+
+    def module_file(stem):
+        for cand in ("/".join(stem) + ".py", "/".join(stem) + "/__init__.py"):
+            if cand in py:
+                return cand
+        return None
+
+    graph = {}
+    for rel, src in py.items():
+        package = list(Path(rel).parent.parts)
+        targets = set()
+        for node in ast.walk(ast.parse(src.read_text(encoding="utf-8"), str(src))):
+            if isinstance(node, ast.ImportFrom) and node.level:
+                for stem in _relative_targets(node, package):
+                    targets.add(module_file(stem))
+                    if node.module:            # from .pkg import module
+                        targets.update(module_file(stem + [a.name]) for a in node.names)
+        graph[rel] = targets - {None}
+    seen, todo = set(), [rel for rel in py if not rel.startswith("core/")]
+    while todo:
+        rel = todo.pop()
+        if rel not in seen:
+            seen.add(rel)
+            todo.extend(graph.get(rel, ()))
+    return {rel for rel in py if rel.startswith("core/") and rel not in seen and rel != "core/__init__.py"}
+
+
 def check_imports(files: list[tuple[Path, str]]) -> None:
     """An extension is imported as ``bl_ext.<repo>.blender_manikin``: absolute imports of
-    ``blender_manikin`` would not find it (or would find some other copy).  And nothing shipped
-    may import the training code, which is not shipped."""
+    ``blender_manikin`` would not find it (or would find some other copy).  Nothing shipped may
+    import the training code, which is not shipped.  And ``core/`` stays the Blender-free core:
+    none of its modules imports bpy or anything of the package outside ``core/``."""
     bad = []
     for src, rel in files:
         if src.suffix != ".py":
             continue
         tree = ast.parse(src.read_text(encoding="utf-8"), str(src))
         package = list(Path(rel).parent.parts)          # package path inside the add-on
+        in_core = package[:1] == ["core"]
         for node in ast.walk(tree):
+            if in_core:
+                if isinstance(node, ast.Import) and any(a.name.split(".")[0] in ("bpy", "bmesh", "mathutils")
+                                                        for a in node.names):
+                    bad.append(f"{rel}:{node.lineno}: core/ imports Blender's modules")
+                elif isinstance(node, ast.ImportFrom) and node.level == 0 and \
+                        (node.module or "").split(".")[0] in ("bpy", "bmesh", "mathutils"):
+                    bad.append(f"{rel}:{node.lineno}: core/ imports Blender's modules")
+                elif isinstance(node, ast.ImportFrom) and node.level:
+                    for stem in _relative_targets(node, package):
+                        if stem[:1] != ["core"]:
+                            bad.append(f"{rel}:{node.lineno}: core/ imports {'.'.join(stem) or 'the package root'}, "
+                                       "outside core/")
             if isinstance(node, ast.Import):
                 names = [a.name for a in node.names]
             elif isinstance(node, ast.ImportFrom) and node.level == 0:
                 names = [node.module or ""]
             elif isinstance(node, ast.ImportFrom):
-                base = package[: len(package) - (node.level - 1)] if node.level - 1 <= len(package) else None
-                if base is None:
-                    continue
-                stems = [base + node.module.split(".")] if node.module else [base + [a.name] for a in node.names]
-                for stem in stems:
+                for stem in _relative_targets(node, package):
                     if stem[:1] and stem[0] in EXCLUDED_TOP_DIRS:
                         bad.append(f"{rel}:{node.lineno}: imports {'.'.join(stem)}, which is not shipped")
                 continue
@@ -665,7 +731,7 @@ def build(platforms: list[str], out_dir: Path, cache: Path, offline: bool = Fals
     repository's blender_manikin/) lets tests package a modified copy."""
     log = (lambda *a: None) if quiet else (lambda *a: print(*a, flush=True))
     pkg_dir = pkg_dir or PKG_DIR
-    version = read_version(pkg_dir / "__init__.py")
+    version = read_version(pkg_dir)
     ort_versions = read_onnxruntime_pins()
     files, skipped = package_files(pkg_dir)
     check_imports(files)

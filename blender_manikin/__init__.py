@@ -4,7 +4,7 @@ The numpy core (``blender_manikin.core``) never imports bpy; everything that
 touches Blender lives in ``operators/``, ``panels/`` and ``blender/`` and is
 imported only by :func:`register`.
 """
-__version__ = "0.1.0"
+from .core.version import __version__  # noqa: F401  (written in core/version.py)
 
 bl_info = {
     "name": "MANIKIN full-body solver",

@@ -119,7 +119,7 @@ CHILD = textwrap.dedent(r'''
 
         @step("loader")
         def _():
-            loader = importlib.import_module("''' + EXT_MODULE + r'''.onnx_runtime_loader")
+            loader = importlib.import_module("''' + EXT_MODULE + r'''.core.onnx_runtime_loader")
             return {"kind": loader.install_kind(), "file": loader.load_onnxruntime().__file__}
 
         @step("registered")
@@ -258,7 +258,11 @@ def test_zip_layout_and_manifest(build_dir):
         assert sum(w.startswith(f"wheels/onnxruntime-{version}-{tag}-{tag}-") for w in wheels) == 1, (py, wheels)
     assert build_addon.PYTHON_VERSIONS == ((3, 11), (3, 13))
     assert not any("numpy" in w for w in wheels), "Blender ships numpy; bundling one breaks it"
-    assert "__init__.py" in names and "onnx_runtime_loader.py" in names
+    assert "__init__.py" in names and "core/onnx_runtime_loader.py" in names and "core/pipeline.py" in names
+    # mocap preparation and evaluation code is not shipped: the add-on never imports it
+    for unused in ("core/bvh.py", "core/asf_amc.py", "core/joint_maps.py", "core/hybrik.py", "core/metrics.py",
+                   "core/baselines.py"):
+        assert unused not in names, unused
     for n in names:
         assert "__pycache__" not in n and not n.endswith((".pyc", ".pt"))
         assert not n.startswith(("tests/", "training/"))
@@ -266,9 +270,17 @@ def test_zip_layout_and_manifest(build_dir):
         assert f"models/{model.name}" in names
 
 
-def test_version_comes_from_the_package():
-    text = (PKG / "__init__.py").read_text()
-    assert f'__version__ = "{build_addon.read_version()}"' in text
+def test_version_comes_from_one_place(tmp_path):
+    assert f'__version__ = "{build_addon.read_version()}"' in (PKG / "core" / "version.py").read_text()
+    import blender_manikin
+    assert blender_manikin.__version__ == build_addon.read_version()
+    assert tuple(blender_manikin.bl_info["version"]) == tuple(int(x) for x in build_addon.read_version().split("."))
+    pkg = tmp_path / "blender_manikin"
+    (pkg / "core").mkdir(parents=True)
+    (pkg / "core" / "version.py").write_text('__version__ = "1.2.3"\n')
+    (pkg / "__init__.py").write_text('bl_info = {"name": "x", "version": (1, 2, 4)}\n')
+    with pytest.raises(build_addon.BuildError, match="disagrees"):
+        build_addon.read_version(pkg)
 
 
 def test_validator_rejects_a_bad_manifest(build_dir, tmp_path):
@@ -293,14 +305,25 @@ def test_build_refuses_imports_that_break_inside_blender(tmp_path):
     (pkg / "__init__.py").write_text('__version__ = "0.0.1"\nfrom . import core\n')
     (pkg / "core" / "__init__.py").write_text("")
     (pkg / "core" / "ok.py").write_text("from . import other\nfrom ..core import ok\nimport numpy\n")
-    (pkg / "core" / "bad.py").write_text("from blender_manikin.core import ok\nfrom ..training import export\n")
-    files, _ = build_addon.package_files(pkg)
+    (pkg / "core" / "bad.py").write_text("from blender_manikin.core import ok\nfrom ..training import export\n"
+                                         "import bpy\nfrom .. import panels\n")
+    (pkg / "panels.py").write_text("from .core import bad, ok\n")
+    files, skipped = build_addon.package_files(pkg)
     with pytest.raises(build_addon.BuildError) as info:
         build_addon.check_imports(files)
     text = str(info.value)
     assert "core/bad.py:1: import blender_manikin.core (absolute" in text
     assert "core/bad.py:2: imports training, which is not shipped" in text
+    assert "core/bad.py:2: core/ imports training, outside core/" in text
+    assert "core/bad.py:3: core/ imports Blender's modules" in text
+    assert "core/bad.py:4: core/ imports panels, outside core/" in text
     assert "ok.py" not in text
+    # a core module nothing outside core/ imports is left out
+    (pkg / "core" / "lonely.py").write_text("import numpy\n")
+    files, skipped = build_addon.package_files(pkg)
+    names = [rel for _, rel in files]
+    assert "core/lonely.py" not in names and "core/ok.py" in names and "core/bad.py" in names
+    assert "core/lonely.py (not used by the add-on)" in skipped
 
 
 def test_onnxruntime_pins_live_in_one_place(tmp_path):
@@ -308,17 +331,17 @@ def test_onnxruntime_pins_live_in_one_place(tmp_path):
     onnxruntime itself, a missing Python, or a loader that quotes another version stops the build."""
     pins = build_addon.read_onnxruntime_pins()
     assert set(pins) == set(build_addon.PYTHON_VERSIONS)
-    from blender_manikin import onnx_runtime_loader as loader
+    from blender_manikin.core import onnx_runtime_loader as loader
     assert loader.BUNDLED_ONNXRUNTIME == {"{}.{}".format(*k): v for k, v in pins.items()}
     for name in ("requirements-test.txt", "requirements-bpy42.txt", "requirements-bpy52.txt"):
         assert "-r requirements-onnxruntime.txt" in (ROOT / name).read_text().splitlines(), name
 
     def tree(pin_text, other_text="", loader_text=None):
         d = tmp_path / f"t{len(list(tmp_path.iterdir()))}"
-        (d / "blender_manikin").mkdir(parents=True)
+        (d / "blender_manikin" / "core").mkdir(parents=True)
         (d / "requirements-onnxruntime.txt").write_text(pin_text)
         (d / "requirements-x.txt").write_text(other_text)
-        (d / "blender_manikin" / "onnx_runtime_loader.py").write_text(
+        (d / "blender_manikin" / "core" / "onnx_runtime_loader.py").write_text(
             loader_text or 'BUNDLED_ONNXRUNTIME = {"3.11": "1.20.1", "3.13": "1.20.1"}\n')
         return d / "requirements-onnxruntime.txt"
 
@@ -409,7 +432,7 @@ def test_solve_bundled_example_end_to_end(installed):
 # ----------------------------------------------------------------------------- the loader's message
 
 def test_loader_message_for_windows_dll_failure(monkeypatch):
-    from blender_manikin import onnx_runtime_loader as loader
+    from blender_manikin.core import onnx_runtime_loader as loader
 
     class Blocker:
         def find_spec(self, name, path=None, target=None):
@@ -437,7 +460,7 @@ def test_loader_message_for_windows_dll_failure(monkeypatch):
 
 def _extension_without_onnxruntime(monkeypatch, tmp_path):
     """The loader as in an installed extension whose onnxruntime wheel is not installed."""
-    from blender_manikin import onnx_runtime_loader as loader
+    from blender_manikin.core import onnx_runtime_loader as loader
 
     ext_dir = tmp_path / "extensions" / "user_default" / "blender_manikin"
     ext_dir.mkdir(parents=True)
@@ -515,7 +538,7 @@ def test_blender_binary_installs_the_zip_and_solves_with_its_onnxruntime(build_d
     probe.write_text(textwrap.dedent(f'''
         import importlib, json, sys
         import numpy
-        loader = importlib.import_module("{EXT_MODULE}.onnx_runtime_loader")
+        loader = importlib.import_module("{EXT_MODULE}.core.onnx_runtime_loader")
         ort = loader.load_onnxruntime()
         json.dump({{"kind": loader.install_kind(), "file": ort.__file__, "version": ort.__version__,
                    "numpy": numpy.__version__, "python": "{{}}.{{}}".format(*sys.version_info[:2])}},

@@ -140,7 +140,7 @@ def _header(result, source, decimals, generator):
     """Every field except positions / rotations / swivel, in document order (those as None)."""
     T = result.num_frames
     if generator is None:
-        from .. import __version__
+        from .version import __version__
         generator = f"blender_manikin {__version__}"
     doc = {
         "version": FORMAT_VERSION,

@@ -27,14 +27,9 @@ class ModelError(RuntimeError):
 
 
 def _import_onnxruntime():
-    try:
-        from .. import onnx_runtime_loader  # clear, platform-specific message inside Blender
-        return onnx_runtime_loader.import_onnxruntime()
-    except ImportError as exc:  # loader absent (core used stand-alone)
-        if "onnx_runtime_loader" not in str(exc):
-            raise
-    import onnxruntime
-    return onnxruntime
+    """onnxruntime, or :class:`.onnx_runtime_loader.OnnxRuntimeUnavailable` with a message for the user."""
+    from . import onnx_runtime_loader
+    return onnx_runtime_loader.import_onnxruntime()
 
 
 @dataclass

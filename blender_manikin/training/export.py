@@ -44,7 +44,7 @@ CANONICAL_FRAME = (
 
 
 def build_contract(ckpt, num_parameters):
-    from .. import __version__
+    from ..core.version import __version__
     from .model import ModelConfig
     cfg = ModelConfig.from_dict(ckpt["config"])
     data = dict(ckpt.get("data", {}))

@@ -208,7 +208,7 @@ def main(argv=None):
     from . import dataset, losses
     from .backbones import build_model
     from .model import ModelConfig, count_parameters
-    from .. import __version__
+    from ..core.version import __version__
 
     torch.set_num_threads(max(1, args.threads))
     try:

@@ -2,7 +2,7 @@
 
 Operators should not ``import onnxruntime`` themselves but do::
 
-    from ..onnx_runtime_loader import OnnxRuntimeUnavailable, load_onnxruntime
+    from ..core.onnx_runtime_loader import OnnxRuntimeUnavailable, load_onnxruntime
     try:
         ort = load_onnxruntime()
     except OnnxRuntimeUnavailable as ex:
@@ -37,7 +37,7 @@ BUNDLED_ONNXRUNTIME = {"3.11": "1.20.1", "3.13": "1.20.1"}
 # The Blender releases each bundled Python version serves (for the messages).
 BLENDER_FOR_PYTHON = {"3.11": "Blender 4.2 LTS to 5.0", "3.13": "Blender 5.1 and 5.2 LTS"}
 
-_PACKAGE_DIR = Path(__file__).resolve().parent
+_PACKAGE_DIR = Path(__file__).resolve().parent.parent     # blender_manikin/ (this file is in core/)
 _MANIFEST = "blender_manifest.toml"
 
 
@@ -62,7 +62,7 @@ def blender_platform() -> str:
 def install_kind(package_dir: Path | None = None, package_name: str | None = None) -> str:
     """'extension', 'legacy' or 'module' (imported outside Blender's add-on machinery)."""
     package_dir = package_dir or _PACKAGE_DIR
-    package_name = package_name if package_name is not None else (__package__ or "")
+    package_name = package_name if package_name is not None else (__package__ or "").rpartition(".core")[0]
     if (package_dir / _MANIFEST).is_file() or package_name.startswith("bl_ext."):
         return "extension"
     if "bpy" in sys.modules and any(
@@ -220,7 +220,7 @@ def load_onnxruntime():
 import_onnxruntime = load_onnxruntime
 
 
-if __name__ == "__main__":  # python -m blender_manikin.onnx_runtime_loader: quick self-check
+if __name__ == "__main__":  # python -m blender_manikin.core.onnx_runtime_loader: quick self-check
     try:
         ort = load_onnxruntime()
         print("onnxruntime", ort.__version__, "from", os.path.dirname(ort.__file__))
