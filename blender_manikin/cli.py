@@ -3,7 +3,8 @@
 Two ways to run it (the same code)::
 
     blender -b --python <add-on dir>/cli.py -- solve INPUT... --out DIR [options]
-    python -m blender_manikin solve INPUT... --out DIR [options]     # with the bpy module
+    python -m blender_manikin solve INPUT... --out DIR [options]     # with the bpy module, or
+                                                                     # without it for json/bvh
 
 INPUT is a recording (``.csv`` native format, ``.bsor`` Beat Saber replay) or
 a folder (its ``*.csv`` and ``*.bsor`` files, sorted).  For every input the
@@ -24,7 +25,8 @@ Options mirror the panel:
                               body measurement)
 --arm-span METRES             wrist-to-wrist span (with --height)
 --offsets none|PRESET|FILE    device offsets preset name or a JSON file
---format blend,fbx,bvh,json   one or several (default blend,fbx,json)
+--format blend,fbx,bvh,json   one or several (default blend,fbx,json); json and bvh alone
+                              are written by the numpy core, without Blender
 --bvh-units cm|m              BVH length unit (default cm)
 --trackers                    also create (and export) keyed tracker empties
 
@@ -41,6 +43,8 @@ import sys
 
 FORMATS = ("blend", "fbx", "bvh", "json")
 DEFAULT_FORMATS = ("blend", "fbx", "json")
+#: formats written by Blender (need bpy); json and bvh are written by the numpy core
+BLENDER_FORMATS = ("blend", "fbx")
 INPUT_EXTENSIONS = (".csv", ".bsor")
 
 
@@ -98,28 +102,31 @@ def expand_inputs(inputs):
     return out
 
 
-def _config(path, args):
-    from .blender.solve_job import SolveConfig
+def solve_settings(args):
+    """The :class:`core.solve.SolveSettings` of the command-line options."""
     from .core import device_offsets
+    from .core.solve import SolveSettings
     offsets = args.offsets
     if offsets and offsets.lower().endswith(".json"):
         offsets = device_offsets.load_offsets(offsets)
-    cfg = SolveConfig(source="FILE", filepath=path, axes=args.axes, units=args.units, fps=float(args.fps),
-                      offsets=offsets, frame_start=1, create_trackers=bool(args.trackers),
-                      live_rig=bool(args.live_rig),
-                      set_scene_range=True, armature_name="MANIKIN_body")
+    st = SolveSettings(axes=args.axes, units=args.units, fps=float(args.fps), offsets=offsets)
     if args.calibration_time is not None:
-        cfg.calibration = "TPOSE"
-        cfg.tpose_time = float(args.calibration_time)
-        cfg.height = args.height
-        cfg.arm_span = args.arm_span
+        st.calibration, st.tpose_time = "TPOSE", float(args.calibration_time)
+        st.height, st.arm_span = args.height, args.arm_span
     elif args.height is not None:
-        cfg.calibration = "MEASURE"
-        cfg.height = float(args.height)
-        cfg.arm_span = args.arm_span
+        st.calibration, st.height, st.arm_span = "MEASURE", float(args.height), args.arm_span
     else:
-        cfg.calibration = "AUTO"
-    return cfg
+        st.calibration = "AUTO"
+    return st
+
+
+def _config(path, args):
+    from .blender.solve_job import SolveConfig
+    from .core.solve import SolveSettings
+    st = solve_settings(args)
+    return SolveConfig(source="FILE", filepath=path, frame_start=1, create_trackers=bool(args.trackers),
+                       live_rig=bool(args.live_rig), set_scene_range=True, armature_name="MANIKIN_body",
+                       **{k: getattr(st, k) for k in SolveSettings.__dataclass_fields__})
 
 
 def reset_scene(fps):
@@ -155,8 +162,26 @@ def export_fbx(path, output):
         raise RuntimeError(f"FBX export failed ({res})")
 
 
+def convert_one_core(path, out_dir, args, formats):
+    """Solve one recording with the numpy core and write JSON / BVH (no Blender needed);
+    returns ``(written paths, outcome)``."""
+    from .core import export_bvh, export_json
+    from .core.solve import solve_recording
+    out = solve_recording(path, solve_settings(args))
+    stem = os.path.splitext(os.path.basename(path))[0]
+    written = []
+    for fmt in formats:
+        dst = os.path.join(out_dir, f"{stem}.{fmt}")
+        if fmt == "json":
+            export_json.write_json(dst, out.result, source=os.path.basename(path))
+        elif fmt == "bvh":
+            export_bvh.write_bvh(dst, out.result, units=args.bvh_units)
+        written.append(dst)
+    return written, out
+
+
 def convert_one(path, out_dir, args, formats):
-    """Solve one recording and write its outputs; returns ``(written paths, job)``."""
+    """Solve one recording and write its outputs in Blender; returns ``(written paths, job)``."""
     import bpy
     from .blender.solve_job import SolveJob
     from .core import export_bvh, export_json
@@ -236,14 +261,18 @@ def main(argv=None):
     if not (args.fps > 0):
         print("blender_manikin: error: --fps must be positive", file=sys.stderr)
         return 2
-    try:
-        with quiet_stdout(to_stderr=True):   # Blender may print warnings as it starts
-            import bpy  # noqa: F401  (availability check)
-    except ImportError:
-        print("blender_manikin: error: the bpy module is not available: run with Blender "
-              "(blender -b --python cli.py -- ...) or install bpy", file=sys.stderr)
-        return 2
-    from .blender.solve_job import error_message
+    needs_blender = any(f in BLENDER_FORMATS for f in formats) or args.trackers
+    if needs_blender:
+        try:
+            with quiet_stdout(to_stderr=True):   # Blender may print warnings as it starts
+                import bpy  # noqa: F401  (availability check)
+        except ImportError:
+            print(f"blender_manikin: error: {', '.join(f for f in formats if f in BLENDER_FORMATS) or '--trackers'} "
+                  "needs Blender: run with Blender (blender -b --python cli.py -- ...) or install bpy "
+                  "(json and bvh are written without it)", file=sys.stderr)
+            return 2
+    from .core.solve import error_message
+    convert = convert_one if needs_blender else convert_one_core
 
     os.makedirs(args.out, exist_ok=True)
     inputs = expand_inputs(args.inputs)
@@ -256,7 +285,7 @@ def main(argv=None):
             if not os.path.isfile(path):
                 raise FileNotFoundError("no such file")
             with quiet_stdout():
-                written, job = convert_one(path, args.out, args, formats)
+                written, job = convert(path, args.out, args, formats)
         except Exception as exc:      # one bad input does not stop the others
             failed += 1
             print(f"ERROR {path}: {error_message(exc)}", file=sys.stderr, flush=True)

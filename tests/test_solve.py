@@ -67,3 +67,19 @@ def test_core_solve_never_imports_bpy():
     p = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env, cwd=ROOT, timeout=300)
     assert p.returncode == 0, p.stderr
     assert p.stdout.split() == ["False", "False"]
+
+
+def test_cli_writes_json_and_bvh_without_blender(tmp_path):
+    """With bpy unavailable, json and bvh still convert (the core writes them); blend asks for Blender."""
+    out = tmp_path / "o"
+    code = ("import sys; sys.modules['bpy'] = None; from blender_manikin import cli; "
+            f"sys.exit(cli.main(['solve', {EXAMPLE!r}, '--out', {str(out)!r}, '--format', 'json,bvh']))")
+    env = dict(os.environ, PYTHONPATH=ROOT)
+    p = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env, cwd=ROOT, timeout=300)
+    assert p.returncode == 0, p.stderr
+    lines = p.stdout.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith(f"OK {EXAMPLE}") and "calibrated on a T-pose" in lines[0]
+    assert (out / "example_recording.json").stat().st_size > 0 and (out / "example_recording.bvh").stat().st_size > 0
+    code = code.replace("'json,bvh'", "'json,blend'")
+    p = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env, cwd=ROOT, timeout=300)
+    assert p.returncode == 2 and "blend needs Blender" in p.stderr and p.stdout == ""

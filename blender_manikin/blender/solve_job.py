@@ -34,8 +34,8 @@ _P_LOAD, _P_SOLVE = 0.08, 0.92
 
 from ..core.pipeline import SolveCancelled  # noqa: E402,F401  (raised through the job on cancel)
 from ..core import solve as core_solve  # noqa: E402
-from ..core.solve import (SolveError, SolveSettings, make_targets, resample_recording,  # noqa: E402,F401
-                          resolve_offsets)
+from ..core.solve import (SolveError, SolveSettings, error_message, make_targets,  # noqa: E402,F401
+                          resample_recording, resolve_offsets)
 
 
 @dataclass
@@ -256,15 +256,6 @@ class SolveJob:
         if self.outcome is None:
             return ""
         return self.outcome.summary({k: v for k, v in self.timings.items() if k not in self.outcome.timings})
-
-
-def error_message(exc) -> str:
-    """A one-line, user-readable message for ``exc`` (no traceback)."""
-    msg = str(exc).strip() or exc.__class__.__name__
-    if isinstance(exc, (SolveError, ValueError, OSError, RuntimeError)) or \
-            exc.__class__.__name__ in ("RecordingError", "ModelError"):
-        return msg
-    return f"{exc.__class__.__name__}: {msg}"
 
 
 def find_tpose_time(config: SolveConfig, context=None):

@@ -27,6 +27,15 @@ class SolveError(RuntimeError):
     """A problem the user can fix (bad settings, bad recording); the message says what."""
 
 
+def error_message(exc) -> str:
+    """A one-line, user-readable message for ``exc`` (no traceback)."""
+    msg = str(exc).strip() or exc.__class__.__name__
+    if isinstance(exc, (SolveError, ValueError, OSError, RuntimeError)) or \
+            exc.__class__.__name__ in ("RecordingError", "ModelError"):
+        return msg
+    return f"{exc.__class__.__name__}: {msg}"
+
+
 @dataclass
 class SolveSettings:
     """How to solve a recording (the panel's and the command line's options, plain values).
