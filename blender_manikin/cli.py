@@ -6,8 +6,8 @@ Two ways to run it (the same code)::
     python -m blender_manikin solve INPUT... --out DIR [options]     # with the bpy module, or
                                                                      # without it for json/bvh
 
-INPUT is a recording (``.csv`` native format, ``.bsor`` Beat Saber replay) or
-a folder (its ``*.csv`` and ``*.bsor`` files, sorted).  For every input the
+INPUT is a recording (any format of :mod:`blender_manikin.core.formats`: ``.csv``
+native format, ``.bsor`` Beat Saber replay) or a folder (its recordings, sorted).  For every input the
 scene is reset to an empty factory scene, the recording is solved and
 ``DIR/STEM.<ext>`` is written for each format.  One line per converted input
 on stdout (``OK INPUT -> outputs (summary)``); problems on stderr as
@@ -25,8 +25,8 @@ Options mirror the panel:
                               body measurement)
 --arm-span METRES             wrist-to-wrist span (with --height)
 --offsets none|PRESET|FILE    device offsets preset name or a JSON file
---format blend,fbx,bvh,json   one or several (default blend,fbx,json); json and bvh alone
-                              are written by the numpy core, without Blender
+--format blend,fbx,bvh,json,npz  one or several (default blend,fbx,json); without blend
+                              and fbx, the numpy core writes them without Blender
 --bvh-units cm|m              BVH length unit (default cm)
 --trackers                    also create (and export) keyed tracker empties
 
@@ -41,11 +41,14 @@ import contextlib
 import os
 import sys
 
-FORMATS = ("blend", "fbx", "bvh", "json")
 DEFAULT_FORMATS = ("blend", "fbx", "json")
-#: formats written by Blender (need bpy); json and bvh are written by the numpy core
-BLENDER_FORMATS = ("blend", "fbx")
-INPUT_EXTENSIONS = (".csv", ".bsor")
+if __package__:   # run as a plain script (blender --python cli.py), _script_main imports the package
+    from .core import formats as _formats  # the format registry (no bpy)
+
+    FORMATS = _formats.writer_names()
+    #: formats written by Blender (need bpy); the others are written by the numpy core
+    BLENDER_FORMATS = tuple(n for n, f in _formats.WRITERS.items() if f.needs_blender)
+    INPUT_EXTENSIONS = _formats.input_extensions()
 
 
 def build_parser():
@@ -165,43 +168,45 @@ def export_fbx(path, output):
 def convert_one_core(path, out_dir, args, formats):
     """Solve one recording with the numpy core and write JSON / BVH (no Blender needed);
     returns ``(written paths, outcome)``."""
-    from .core import export_bvh, export_json
     from .core.solve import solve_recording
     out = solve_recording(path, solve_settings(args))
+    return write_core_formats(path, out_dir, out.result, args, formats), out
+
+
+def write_core_formats(path, out_dir, result, args, formats):
+    """Write ``result`` in each of ``formats`` the numpy core writes; returns the paths."""
     stem = os.path.splitext(os.path.basename(path))[0]
     written = []
     for fmt in formats:
-        dst = os.path.join(out_dir, f"{stem}.{fmt}")
-        if fmt == "json":
-            export_json.write_json(dst, out.result, source=os.path.basename(path))
-        elif fmt == "bvh":
-            export_bvh.write_bvh(dst, out.result, units=args.bvh_units)
+        writer = _formats.WRITERS[fmt]
+        if writer.needs_blender:
+            continue
+        dst = os.path.join(out_dir, f"{stem}{writer.extension}")
+        writer.write(dst, result, source=os.path.basename(path), options=args)
         written.append(dst)
-    return written, out
+    return written
 
 
 def convert_one(path, out_dir, args, formats):
     """Solve one recording and write its outputs in Blender; returns ``(written paths, job)``."""
     import bpy
     from .blender.solve_job import SolveJob
-    from .core import export_bvh, export_json
 
     reset_scene(args.fps)
     job = SolveJob(_config(path, args))
     job.run(bpy.context)
     stem = os.path.splitext(os.path.basename(path))[0]
+    blender_writers = {"fbx": lambda dst: export_fbx(dst, job.output),
+                       "blend": lambda dst: bpy.ops.wm.save_as_mainfile(filepath=dst, copy=True, compress=True)}
     written = []
     for fmt in formats:
-        dst = os.path.join(out_dir, f"{stem}.{fmt}")
-        if fmt == "json":
-            export_json.write_json(dst, job.result, source=os.path.basename(path))
-        elif fmt == "bvh":
-            export_bvh.write_bvh(dst, job.result, units=args.bvh_units)
-        elif fmt == "fbx":
-            export_fbx(dst, job.output)
-        elif fmt == "blend":
-            bpy.ops.wm.save_as_mainfile(filepath=dst, copy=True, compress=True)
-        written.append(dst)
+        writer = _formats.WRITERS[fmt]
+        dst = os.path.join(out_dir, f"{stem}{writer.extension}")
+        if writer.needs_blender:
+            blender_writers[fmt](dst)
+            written.append(dst)
+        else:
+            written += write_core_formats(path, out_dir, job.result, args, [fmt])
     return written, job
 
 

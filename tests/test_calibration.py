@@ -13,7 +13,8 @@ from blender_manikin.core.device_offsets import (
     to_targets, validate_offsets,
 )
 from blender_manikin.core.pose_result import TrackerTargets
-from blender_manikin.core.recording import from_blender, load_recording
+from blender_manikin.core.formats import load_recording
+from blender_manikin.core.recording import from_blender
 from blender_manikin.core.resample import resample
 from blender_manikin.core.rotations import (
     axis_angle_rotation, geodesic_angle, matrix_to_quat, quat_to_matrix,

@@ -2,12 +2,14 @@
 import os
 
 import numpy as np
+
+from blender_manikin.core.formats import load_recording  # noqa: E402
 import pytest
 
 from blender_manikin.core.io_bsor import parse_bsor, read_bsor
 from blender_manikin.core.io_csv import read_csv, write_csv
 from blender_manikin.core.recording import (
-    RecordingError, TrackerStream, axes_matrix, from_blender, load_recording, to_blender,
+    RecordingError, TrackerStream, axes_matrix, from_blender, to_blender,
 )
 from blender_manikin.core.resample import resample
 from blender_manikin.core.rotations import axis_angle_to_quat, geodesic_angle, quat_to_matrix

@@ -5,7 +5,8 @@ import time
 import numpy as np
 import pytest
 
-from blender_manikin.core.recording import Recording, RecordingError, TrackerStream, load_recording
+from blender_manikin.core.formats import load_recording
+from blender_manikin.core.recording import Recording, RecordingError, TrackerStream
 from blender_manikin.core.resample import check_head_height, resample
 from blender_manikin.core.rotations import axis_angle_to_quat, geodesic_angle, quat_to_matrix
 

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from blender_manikin.core import solve as cs
-from blender_manikin.core.recording import load_recording
+from blender_manikin.core.formats import load_recording
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 EXAMPLE = os.path.join(ROOT, "examples", "example_recording.csv")

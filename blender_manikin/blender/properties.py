@@ -7,6 +7,7 @@ from bpy.props import (BoolProperty, EnumProperty, FloatProperty, IntProperty, P
                        StringProperty)
 from bpy.types import PropertyGroup
 
+from ..core import formats
 from ..core.devices import DEVICES, LABELS as DEVICE_LABELS  # noqa: F401  (labels: the panel)
 
 _AXES_ITEMS = [
@@ -34,8 +35,10 @@ def _preset_items(self, context):
             desc = {n: device_offsets.get_preset(n).get("description", "") for n in names}
         except Exception:          # pragma: no cover - module missing
             names, desc = ("none",), {"none": "Device poses are the joint poses"}
+        implied = ", ".join(f"{f.default_offsets.replace('_', ' ').title()} for {'/'.join(f.extensions)}"
+                            for f in formats.READERS.values() if f.default_offsets != "none")
         _preset_items_cache = [("auto", "Auto", "From the recording: its '# offsets:' metadata, "
-                                                "Beat Saber for .bsor replays, else None")] + \
+                                                f"{implied}, else None")] + \
             [(n, n.replace("_", " ").title() if n != "none" else "None", desc[n]) for n in names]
     return _preset_items_cache
 
@@ -56,10 +59,10 @@ class MANIKIN_Settings(PropertyGroup):
     """Settings of the "Solve full body" panel (``scene.manikin``)."""
     source: EnumProperty(
         name="Source", default='FILE',
-        items=[('FILE', "Recording File", "A tracker recording (.csv native format, .bsor Beat Saber replay)"),
+        items=[('FILE', "Recording File", "A tracker recording: " + formats.describe_inputs()),
                ('SCENE', "Scene Objects", "Animated objects or bones in this scene, mapped to devices")])
     filepath: StringProperty(name="Recording", subtype='FILE_PATH', default="",
-                             description="Tracker recording (.csv or .bsor)")
+                             description="Tracker recording (" + ", ".join(formats.input_extensions()) + ")")
     axes: EnumProperty(name="Axes", items=_AXES_ITEMS, default='AUTO')
     units: EnumProperty(name="Units", items=_UNITS_ITEMS, default='AUTO')
     use_scene_fps: BoolProperty(name="Scene Frame Rate", default=True,

@@ -261,29 +261,3 @@ class Recording:
 
     def __getitem__(self, device):
         return self.streams[device]
-
-
-def load_recording(path, axes=None, units=None) -> Recording:
-    """Read a tracker recording, dispatching on the file extension.
-
-    * ``.csv``: the native CSV format (:mod:`.io_csv`); ``axes``/``units``
-      override the file's ``# axes:``/``# units:`` metadata (default
-      ``openxr``, metres).
-    * ``.bsor``: a BeatLeader Beat Saber replay (:mod:`.io_bsor`); Unity axes
-      and metres unless overridden.
-
-    Returns a :class:`Recording` in Blender axes and metres.  Raises
-    :class:`RecordingError` naming the file, line/byte offset and problem.
-    """
-    path = os.fspath(path)
-    ext = os.path.splitext(path)[1].lower()
-    if not os.path.isfile(path):
-        raise RecordingError("no such file", path=path)
-    if ext == ".csv":
-        from .io_csv import read_csv
-        return read_csv(path, axes=axes, units=units)
-    if ext == ".bsor":
-        from .io_bsor import read_bsor
-        return read_bsor(path, axes=axes, units=units)
-    raise RecordingError(f"unsupported file type {ext or '(none)'!r}: expected .csv or .bsor", path=path)
-

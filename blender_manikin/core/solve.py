@@ -100,7 +100,7 @@ class SolveOutcome:
 # the stages
 def read_recording(path, settings: SolveSettings):
     """Read the recording file at ``path`` (Blender axes, metres)."""
-    from .recording import load_recording
+    from .formats import load_recording
     if not path:
         raise SolveError("no recording file chosen")
     return load_recording(path, axes=settings.axes, units=settings.units)
@@ -115,19 +115,17 @@ def resample_recording(recording, fps):
 def resolve_offsets(offsets, recording):
     """``"auto"`` → the preset the recording implies, else ``offsets`` unchanged.
 
-    auto: the file's ``# offsets: PRESET`` metadata when it names a preset; ``beat_saber`` for a
-    ``.bsor`` replay (its hand poses are saber poses); otherwise ``none`` (the device poses are
-    taken as joint poses).
+    auto: the file's ``# offsets: PRESET`` metadata when it names a preset; else the default of
+    the file's format (:mod:`.formats`: ``beat_saber`` for a ``.bsor`` replay, whose hand poses
+    are saber poses; ``none`` otherwise: the device poses are taken as joint poses).
     """
     if not (isinstance(offsets, str) and offsets.lower() == "auto"):
         return offsets
-    from . import device_offsets
+    from . import device_offsets, formats
     meta = (getattr(recording, "metadata", None) or {}).get("offsets")
     if isinstance(meta, str) and meta.strip() in device_offsets.PRESET_NAMES:
         return meta.strip()
-    if str(getattr(recording, "source", "")).lower().endswith(".bsor"):
-        return "beat_saber"
-    return "none"
+    return formats.default_offsets(str(getattr(recording, "source", "")))
 
 
 def make_targets(times, pos, quat, valid, fps, offsets="none"):

@@ -1,0 +1,176 @@
+"""Every file format the add-on reads and writes, registered in one place.
+
+Readers turn a file into a :class:`~.recording.Recording` (Blender axes, metres); writers turn a
+solved :class:`~.pose_result.PoseResult` into a file.  The command line's accepted inputs and
+``--format`` choices, the panel's texts and the per-format device-offset defaults all come from
+here, so adding a format is one registration (see ``docs/FORMATS.md``).  No bpy: the formats
+Blender writes (``blend``, ``fbx``) are registered here by name with ``needs_blender`` and
+written by the Blender side.
+"""
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass
+from typing import Callable, Optional
+
+import numpy as np
+
+from .recording import Recording, RecordingError
+
+
+@dataclass(frozen=True)
+class ReaderFormat:
+    """A recording format: ``extensions`` (lower case, with the dot), ``read(path, axes, units)``
+    → :class:`Recording`, an optional ``sniff(head_bytes) -> bool`` that recognises the format
+    from the first bytes of a file whatever its name, and the device offsets ``auto`` means for
+    it (``"none"``: its poses are the joints' poses)."""
+    name: str
+    description: str
+    extensions: tuple
+    read: Callable
+    sniff: Optional[Callable] = None
+    default_offsets: str = "none"
+
+
+@dataclass(frozen=True)
+class WriterFormat:
+    """An output format: ``extension`` (with the dot) and ``write(path, result, source, options)``
+    (``options``: the command line's namespace or ``None``), or ``needs_blender`` when Blender
+    writes it (the scene, not the result, is saved)."""
+    name: str
+    description: str
+    extension: str
+    write: Optional[Callable] = None
+    needs_blender: bool = False
+
+
+READERS: dict = {}
+WRITERS: dict = {}
+SNIFF_BYTES = 4096
+
+
+def register_reader(fmt: ReaderFormat) -> ReaderFormat:
+    READERS[fmt.name] = fmt
+    return fmt
+
+
+def register_writer(fmt: WriterFormat) -> WriterFormat:
+    WRITERS[fmt.name] = fmt
+    return fmt
+
+
+def input_extensions() -> tuple:
+    """Every extension a reader claims, e.g. ``(".csv", ".bsor")``."""
+    return tuple(e for f in READERS.values() for e in f.extensions)
+
+
+def describe_inputs() -> str:
+    """``".csv (native CSV), .bsor (Beat Saber replay)"``: for help texts and the panel."""
+    return ", ".join(f"{'/'.join(f.extensions)} ({f.description})" for f in READERS.values())
+
+
+def reader_for(path) -> ReaderFormat:
+    """The reader of ``path``: by extension, else by the file's first bytes.  Raises
+    :class:`RecordingError` naming the file when no reader knows it."""
+    path = os.fspath(path)
+    ext = os.path.splitext(path)[1].lower()
+    for fmt in READERS.values():
+        if ext in fmt.extensions:
+            return fmt
+    try:
+        with open(path, "rb") as f:
+            head = f.read(SNIFF_BYTES)
+    except OSError as exc:
+        raise RecordingError(f"cannot read the file ({exc.strerror or exc})", path=path) from None
+    for fmt in READERS.values():
+        if fmt.sniff is not None and fmt.sniff(head):
+            return fmt
+    raise RecordingError(f"unsupported file type {ext or '(none)'!r}: expected {describe_inputs()}", path=path)
+
+
+def load_recording(path, axes=None, units=None) -> Recording:
+    """Read a tracker recording with the reader of its format (:func:`reader_for`); ``axes`` /
+    ``units`` override the file's metadata.  Returns a :class:`Recording` in Blender axes and
+    metres; raises :class:`RecordingError` naming the file, line / byte offset and problem."""
+    path = os.fspath(path)
+    if not os.path.isfile(path):
+        raise RecordingError("no such file", path=path)
+    return reader_for(path).read(path, axes=axes, units=units)
+
+
+def default_offsets(path) -> str:
+    """The device offsets ``auto`` stands for with this file's format (``"none"`` if unknown)."""
+    ext = os.path.splitext(os.fspath(path))[1].lower()
+    for fmt in READERS.values():
+        if ext in fmt.extensions:
+            return fmt.default_offsets
+    return "none"
+
+
+def writer_names() -> tuple:
+    return tuple(WRITERS)
+
+
+# --------------------------------------------------------------------------
+# the built-in formats
+def _read_csv(path, axes=None, units=None):
+    from .io_csv import read_csv
+    return read_csv(path, axes=axes, units=units)
+
+
+def _read_bsor(path, axes=None, units=None):
+    from .io_bsor import read_bsor
+    return read_bsor(path, axes=axes, units=units)
+
+
+def _sniff_bsor(head: bytes) -> bool:
+    from .io_bsor import MAGIC
+    return len(head) >= 4 and int.from_bytes(head[:4], "little") == MAGIC
+
+
+def _sniff_csv(head: bytes) -> bool:
+    text = head.decode("utf-8", "replace").lower()
+    lines = [ln for ln in text.splitlines() if ln.strip() and not ln.lstrip().startswith("#")]
+    return bool(lines) and all(c in lines[0] for c in ("time", "device"))
+
+
+register_reader(ReaderFormat("csv", "native CSV", (".csv",), _read_csv, _sniff_csv))
+register_reader(ReaderFormat("bsor", "Beat Saber replay", (".bsor",), _read_bsor, _sniff_bsor,
+                             default_offsets="beat_saber"))
+
+
+def _write_json(path, result, source="", options=None):
+    from .export_json import write_json
+    return write_json(path, result, source=source)
+
+
+def _write_bvh(path, result, source="", options=None):
+    from .export_bvh import write_bvh
+    return write_bvh(path, result, units=getattr(options, "bvh_units", "cm") or "cm")
+
+
+def _write_npz(path, result, source="", options=None):
+    """Arrays for analysis pipelines: positions (T, 22, 3) metres, local rotations (T, 22, 3, 3),
+    world orientations as wxyz quaternions (T, 22, 4), swivel (T, 4) radians, contacts (T, 2),
+    fps, joint names, parents; Blender axes (+Z up, body faces -Y)."""
+    from . import rotations as rot
+    from .skeleton import JOINT_NAMES, PARENTS
+    world = result.world_rot
+    tmp = os.fspath(path) + ".tmp.npz"
+    np.savez_compressed(tmp, positions=result.positions.astype(np.float32),
+                        local_rot=result.local_rot.astype(np.float32),
+                        rotations=rot.matrix_to_quat(world).astype(np.float32),
+                        swivel=result.swivel.astype(np.float32),
+                        contacts=(result.contacts if result.contacts is not None
+                                  else np.zeros((result.num_frames, 2), bool)),
+                        fps=np.float64(result.fps), joints=np.array(JOINT_NAMES), parents=PARENTS,
+                        source=np.array(str(source)))
+    os.replace(tmp, path)
+    return path
+
+
+register_writer(WriterFormat("blend", "Blender file with the armature and its action", ".blend", needs_blender=True))
+register_writer(WriterFormat("fbx", "FBX of the armature, animation baked", ".fbx", needs_blender=True))
+register_writer(WriterFormat("bvh", "BVH motion (the 22-joint skeleton)", ".bvh", _write_bvh))
+register_writer(WriterFormat("json", "JSON document (export_json.JSON_SCHEMA)", ".json", _write_json))
+register_writer(WriterFormat("npz", "numpy arrays (positions, rotations, swivel, contacts)", ".npz", _write_npz))

@@ -1,0 +1,60 @@
+"""The format registry (core/formats.py): readers by extension or content, writers, and what
+the command line derives from it."""
+import os
+import shutil
+
+import numpy as np
+import pytest
+
+from blender_manikin.core import formats
+from blender_manikin.core.recording import RecordingError
+
+from fixtures_recordings import synthetic_bsor
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+EXAMPLE = os.path.join(ROOT, "examples", "example_recording.csv")
+
+
+def test_readers_by_extension_and_by_content(tmp_path):
+    assert formats.input_extensions() == (".csv", ".bsor")
+    assert formats.reader_for("x.CSV").name == "csv" and formats.reader_for("y.bsor").name == "bsor"
+    # a replay saved under another name is still recognised by its magic number
+    path = tmp_path / "replay.dat"
+    path.write_bytes(synthetic_bsor()[0])
+    assert formats.reader_for(path).name == "bsor"
+    rec = formats.load_recording(path)
+    assert set(rec.devices) == {"head", "left_hand", "right_hand"}
+    txt = tmp_path / "take.txt"
+    shutil.copy(EXAMPLE, txt)
+    assert formats.reader_for(txt).name == "csv"
+    assert formats.load_recording(txt).devices == formats.load_recording(EXAMPLE).devices
+    other = tmp_path / "notes.txt"
+    other.write_text("hello\n")
+    with pytest.raises(RecordingError, match=r"notes.txt.*unsupported file type '.txt': expected .csv \(native CSV\)"):
+        formats.load_recording(other)
+    with pytest.raises(RecordingError, match="no such file"):
+        formats.load_recording(tmp_path / "missing.csv")
+
+
+def test_offsets_default_per_format():
+    assert formats.default_offsets("a.bsor") == "beat_saber" and formats.default_offsets("a.csv") == "none"
+    assert formats.default_offsets("a.unknown") == "none"
+
+
+def test_npz_writer(tmp_path):
+    from blender_manikin.core.solve import SolveSettings, solve_recording
+    res = solve_recording(EXAMPLE, SolveSettings(fps=30.0)).result
+    path = formats.WRITERS["npz"].write(tmp_path / "a.npz", res, source="example_recording.csv")
+    with np.load(path) as z:
+        assert z["positions"].shape == (res.num_frames, 22, 3) and z["rotations"].shape == (res.num_frames, 22, 4)
+        assert np.allclose(z["positions"], res.positions, atol=1e-5)
+        assert list(z["joints"])[0] == "pelvis" and float(z["fps"]) == 30.0
+        assert z["contacts"].shape == (res.num_frames, 2) and str(z["source"]) == "example_recording.csv"
+    assert not os.path.exists(str(path) + ".tmp.npz")
+
+
+def test_cli_choices_come_from_the_registry():
+    from blender_manikin import cli
+    assert cli.FORMATS == tuple(formats.WRITERS) and set(cli.BLENDER_FORMATS) == {"blend", "fbx"}
+    assert cli.INPUT_EXTENSIONS == formats.input_extensions()
+    assert cli.parse_formats("npz,json") == ("npz", "json")
