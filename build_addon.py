@@ -87,7 +87,8 @@ PLATFORMS: dict[str, dict] = {
     },
     "macos-x64": {
         "pip": _mac_tags("x86_64"),
-        "env": {"sys_platform": "darwin", "platform_system": "Darwin", "platform_machine": "x86_64", "os_name": "posix"},
+        "env": {"sys_platform": "darwin", "platform_system": "Darwin", "platform_machine": "x86_64",
+                "os_name": "posix"},
     },
 }
 
@@ -118,7 +119,9 @@ def read_version(pkg_dir: Path | None = None) -> str:
         raise BuildError(f"{path}: missing (the package version is written there)")
     tree = ast.parse(path.read_text(encoding="utf-8"), str(path))
     for node in tree.body:
-        if isinstance(node, ast.Assign) and any(isinstance(t, ast.Name) and t.id == "__version__" for t in node.targets):
+        is_version = isinstance(node, ast.Assign) and any(
+            isinstance(t, ast.Name) and t.id == "__version__" for t in node.targets)
+        if is_version:
             value = ast.literal_eval(node.value)
             if not isinstance(value, str) or not re.fullmatch(r"\d+\.\d+\.\d+", value):
                 raise BuildError(f"{path}: __version__ must be 'MAJOR.MINOR.PATCH', found {value!r}")
@@ -456,12 +459,14 @@ def _requirement_tools():
     return Requirement
 
 
-def declared_requirements(wheel: Path, platform: str, python_version: tuple[int, int] = (3, 11)) -> list[tuple[str, str]]:
+def declared_requirements(wheel: Path, platform: str,
+                          python_version: tuple[int, int] = (3, 11)) -> list[tuple[str, str]]:
     """(distribution, specifier) of the wheel's Requires-Dist that apply on ``platform`` and
     CPython ``python_version``."""
     Requirement = _requirement_tools()
     env = dict(PLATFORMS[platform]["env"])
-    env.update({"python_version": "{}.{}".format(*python_version), "python_full_version": "{}.{}.0".format(*python_version),
+    env.update({"python_version": "{}.{}".format(*python_version),
+                "python_full_version": "{}.{}.0".format(*python_version),
                 "implementation_name": "cpython", "platform_python_implementation": "CPython", "extra": ""})
     out = []
     for line in wheel_metadata(wheel).splitlines():
@@ -634,7 +639,8 @@ def write_zip(out: Path, manifest: str, files: list[tuple[Path, str]], wheels: l
     with zipfile.ZipFile(tmp, "w") as zf:
         _zip_add(zf, "blender_manifest.toml", manifest.encode("utf-8"))
         for src, rel in files:
-            _zip_add(zf, rel, src.read_bytes(), store=src.suffix in {".onnx", ".data"} and src.stat().st_size > 50_000_000)
+            big = src.suffix in {".onnx", ".data"} and src.stat().st_size > 50_000_000
+            _zip_add(zf, rel, src.read_bytes(), store=big)
         for w in wheels:
             _zip_add(zf, "wheels/" + w.name, w.read_bytes(), store=True)
     os.replace(tmp, out)

@@ -84,7 +84,8 @@ def solve_file(path, model):
 
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("recordings", nargs="*", help="recordings to solve (default: the Beat Saber replay and the example)")
+    ap.add_argument("recordings", nargs="*",
+                    help="recordings to solve (default: the Beat Saber replay and the example)")
     ap.add_argument("--model", default=os.path.join(MODELS_DIR, "manikin_s.onnx"))
     ap.add_argument("--previous-model", default=PREVIOUS)
     args = ap.parse_args(argv)
@@ -104,7 +105,8 @@ def main(argv=None):
             row = plausibility(job.result, job.targets)
             rows.append((f"{os.path.basename(path)} / {label}", row))
             if label == "shipped":
-                notes.append(f"{os.path.basename(path)}: {job.result.positions.shape[0]} frames; " + "; ".join(job.info))
+                frames = job.result.positions.shape[0]
+                notes.append(f"{os.path.basename(path)}: {frames} frames; " + "; ".join(job.info))
     fmt = {f"{k} [{u}]": ".1f" for k, u in UNITS.items()}
     fmt["stature [m]"] = ".2f"
     rows = [(name, {f"{k} [{UNITS[k]}]": v for k, v in row.items()}) for name, row in rows]

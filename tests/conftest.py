@@ -1,8 +1,31 @@
-"""Shared test setup: make the repository importable and provide pose samplers."""
+"""Shared test setup: where ../shared is, and the markers of each test module.
+
+The repository root is on ``sys.path`` through ``pythonpath`` in pyproject.toml's pytest
+settings, so tests import ``blender_manikin`` (and this folder's helpers) as installed.
+
+Markers (``pytest -m ...``): ``blender`` (needs the bpy module), ``training`` (needs torch and
+onnx), ``slow`` (builds zips or wheels, starts Blender processes, or solves many recordings).
+The fast subset is ``pytest -m "not slow" tests``.
+"""
 import os
-import sys
+
+import pytest
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-if ROOT not in sys.path:
-    sys.path.insert(0, ROOT)
 SHARED = os.path.join(os.path.dirname(ROOT), "shared")
+
+_BLENDER = ("test_blender_", "test_extension_install")
+_TRAINING = ("test_training", "test_model_dap")
+_SLOW = ("test_extension_install", "test_packaging", "test_standing", "test_training.py", "test_model_dap",
+         "test_blender_cli", "test_blender_swivel_rig")
+
+
+def pytest_collection_modifyitems(config, items):
+    for item in items:
+        name = os.path.basename(str(item.fspath))
+        if name.startswith(_BLENDER):
+            item.add_marker(pytest.mark.blender)
+        if name.startswith(_TRAINING):
+            item.add_marker(pytest.mark.training)
+        if name.startswith(_SLOW):
+            item.add_marker(pytest.mark.slow)

@@ -1,7 +1,6 @@
 """The headless batch converter (cli.py / python -m blender_manikin)."""
 import json
 import os
-import shutil
 import subprocess
 import sys
 

@@ -352,7 +352,8 @@ def test_onnxruntime_pins_live_in_one_place(tmp_path):
     with pytest.raises(build_addon.BuildError, match="no onnxruntime pin for Python 3.13"):
         build_addon.read_onnxruntime_pins(tree('onnxruntime==1.20.1; python_version == "3.11"\n'))
     with pytest.raises(build_addon.BuildError, match="disagrees"):
-        build_addon.read_onnxruntime_pins(tree(good, loader_text='BUNDLED_ONNXRUNTIME = {"3.11": "1.20.1", "3.13": "1.22.0"}\n'))
+        newer = 'BUNDLED_ONNXRUNTIME = {"3.11": "1.20.1", "3.13": "1.22.0"}\n'
+        build_addon.read_onnxruntime_pins(tree(good, loader_text=newer))
     with pytest.raises(build_addon.BuildError, match="cannot read"):
         build_addon.read_onnxruntime_pins(tree("onnxruntime>=1.20\n"))
 
@@ -376,7 +377,8 @@ def test_windows_binaries_needing_msvcp140_14_40_are_refused(tmp_path):
             zf.writestr("onnxruntime/capi/onnxruntime.dll", b"MZ\x00MSVCP140.dll\x00" + dll_imports)
         return path
 
-    old_style = fake_wheel("onnxruntime-1.20.1-cp311-cp311-win_amd64.whl", b"\x00\x00_Mtx_init_in_situ\x00\x00\x00_Mtx_lock\x00")
+    old_style = fake_wheel("onnxruntime-1.20.1-cp311-cp311-win_amd64.whl",
+                           b"\x00\x00_Mtx_init_in_situ\x00\x00\x00_Mtx_lock\x00")
     assert "fine" in build_addon.check_windows_msvc_runtime(old_style)
     new_style = fake_wheel("onnxruntime-1.21.0-cp311-cp311-win_amd64.whl", b"\x00\x00_Mtx_lock\x00")
     with pytest.raises(build_addon.BuildError, match="14.40"):
@@ -548,7 +550,8 @@ def test_blender_binary_installs_the_zip_and_solves_with_its_onnxruntime(build_d
     assert p.returncode == 0 and report.exists(), p.stdout + p.stderr
     info = json.loads(report.read_text())
     assert info["kind"] == "extension"
-    assert "/extensions/.local/lib/python" in info["file"] and Path(info["file"]).resolve().is_relative_to(home.resolve())
+    assert "/extensions/.local/lib/python" in info["file"]
+    assert Path(info["file"]).resolve().is_relative_to(home.resolve())
     py = tuple(int(x) for x in info["python"].split("."))
     assert info["version"] == build_addon.read_onnxruntime_pin(py)
 

@@ -2,7 +2,6 @@
 import numpy as np
 
 from blender_manikin.core import features
-from blender_manikin.core import rotations as rot
 from blender_manikin.core import skeleton as sk
 from pose_sampling import random_pose
 

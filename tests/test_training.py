@@ -176,7 +176,8 @@ def test_sampler_ground_truth_is_consistent(cache):
     for kind in ("manikin", "fk"):
         s = ds.WindowSampler(files, window=16, kind=kind, augment=ds.Augment.off(), seed=0)
         b = s.sample(6)
-        assert b["x"].shape == (6, 16, features.input_dim(body=True)) and b["y"].shape == (6, 16, features.output_dim(kind))
+        assert b["x"].shape == (6, 16, features.input_dim(body=True))
+        assert b["y"].shape == (6, 16, features.output_dim(kind))
         bt = losses.to_torch(b)
         _, terms, _ = losses.compute_loss(bt["y"], bt, kind)
         assert terms["fk"] < 1e-5 and terms.get("mid", 0.0) < 1e-4 and terms.get("swivel", 0.0) < 1e-4

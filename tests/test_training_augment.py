@@ -6,7 +6,7 @@ numpy only (no torch): the sampler runs on synthetic clips made here.
 import numpy as np
 import pytest
 
-from blender_manikin.core import features, limb_solver as ls, rotations as rot, skeleton as sk
+from blender_manikin.core import features, rotations as rot, skeleton as sk
 from blender_manikin.training import dataset as ds
 
 J = sk.J

@@ -43,7 +43,7 @@ import numpy as np
 
 from . import rotations as rot
 from .devices import DEVICE_JOINT, REQUIRED_DEVICES  # noqa: F401  (DEVICE_JOINT: used by training)
-from .skeleton import J, NUM_JOINTS, PARENTS, make_body
+from .skeleton import J, NUM_JOINTS, make_body
 
 INPUT_DEVICES = REQUIRED_DEVICES
 PER_DEVICE = 12

@@ -10,7 +10,6 @@ Register with :func:`register` / :func:`unregister` or the ``CLASSES`` tuple.
 """
 from __future__ import annotations
 
-import bpy
 from bpy.props import EnumProperty, FloatProperty, IntProperty, BoolProperty
 from bpy.types import Operator
 

@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import math
 
-import bpy
 from bpy.types import Panel
 
 from ..blender.class_registry import register_classes, unregister_classes

@@ -52,7 +52,8 @@ def main(argv=None):
     from . import losses
     from .model import ModelConfig, PoseNet, count_parameters
     torch.set_num_threads(a.threads)
-    print(f"threads {a.threads}, data workers {a.data_workers}, window {a.window}, kind {a.kind}, load average {os.getloadavg()}")
+    print(f"threads {a.threads}, data workers {a.data_workers}, window {a.window}, kind {a.kind}, "
+          f"load average {os.getloadavg()}")
     print(f"{'d_model':>7} {'layers':>6} {'heads':>5} {'batch':>5} {'params':>9} {'step ms':>8} "
           f"{'batch ms':>8} {'steps/s':>8} {'e2e steps/s':>11}")
     rows = []

@@ -311,7 +311,7 @@ def main(argv=None):
                      contact_rule=dict(speed_mps=dataset.CONTACT_SPEED, height_m=dataset.CONTACT_HEIGHT),
                      augmentation=dataclasses.asdict(sampler.aug),
                      validation=f"{args.val_windows} fixed windows of the held-out takes, no augmentation"
-                                + (f"; checkpoints chosen on {os.path.basename(args.select_on)}" if args.select_on else ""))
+                     + (f"; checkpoints chosen on {os.path.basename(args.select_on)}" if args.select_on else ""))
     split = data_info["split"]
     say(f"data: {data_info['clips']} clips, {data_info['frames']} frames from {data_info['source']}; "
         f"train {len(train_files)} clips / {split['train_frames']} frames, "
