@@ -51,14 +51,8 @@ if __package__:   # run as a plain script (blender --python cli.py), _script_mai
     INPUT_EXTENSIONS = _formats.input_extensions()
 
 
-def build_parser():
-    p = argparse.ArgumentParser(
-        prog="blender_manikin",
-        description="Convert VR tracker recordings to full-body animation (MANIKIN).")
-    sub = p.add_subparsers(dest="command", required=True)
-    s = sub.add_parser("solve", help="solve recordings and write animation files")
-    s.add_argument("inputs", nargs="+", metavar="INPUT", help="recording files or folders")
-    s.add_argument("--out", required=True, metavar="DIR", help="output folder (created if missing)")
+def _add_solve_options(s):
+    """The options every solve takes (the panel's settings)."""
     s.add_argument("--axes", choices=("openxr", "unity", "blender"), default=None,
                    help="axes of the input (default: the file's metadata; OpenXR for CSV, Unity for .bsor)")
     s.add_argument("--units", choices=("m", "cm", "mm"), default=None,
@@ -73,13 +67,35 @@ def build_parser():
     s.add_argument("--offsets", default="auto", metavar="auto|none|PRESET|FILE",
                    help="device-to-joint offsets: a preset name, a JSON file, or auto (default: the "
                         "recording's '# offsets:' metadata, beat_saber for .bsor, else none)")
+    s.add_argument("--bvh-units", choices=("cm", "m"), default="cm")
+
+
+def build_parser():
+    p = argparse.ArgumentParser(
+        prog="blender_manikin",
+        description="Convert VR tracker recordings to full-body animation (MANIKIN).")
+    sub = p.add_subparsers(dest="command", required=True)
+    s = sub.add_parser("solve", help="solve recordings and write animation files")
+    s.add_argument("inputs", nargs="+", metavar="INPUT", help="recording files or folders")
+    s.add_argument("--out", required=True, metavar="DIR", help="output folder (created if missing)")
+    _add_solve_options(s)
     s.add_argument("--format", default=",".join(DEFAULT_FORMATS), metavar="LIST",
                    help="comma-separated: " + ",".join(FORMATS))
-    s.add_argument("--bvh-units", choices=("cm", "m"), default="cm")
     s.add_argument("--trackers", action="store_true", help="create keyed tracker empties")
     s.add_argument("--no-live-rig", dest="live_rig", action="store_false",
                    help="write plain FK keys only (default: the live swivel rig, whose elbows and knees "
                         "follow the swivel properties)")
+    c = sub.add_parser("convert", help="convert many recordings in parallel on Dask, without Blender")
+    c.add_argument("inputs", nargs="+", metavar="INPUT",
+                   help="recording files, folders (recursive), globs, or manifest files (.txt/.lst/.jsonl)")
+    c.add_argument("--out", required=True, metavar="DIR", help="output folder; DIR/manifest.jsonl records each input")
+    _add_solve_options(c)
+    c.add_argument("--format", default="json", metavar="LIST",
+                   help="comma-separated: " + ",".join(n for n in FORMATS if n not in BLENDER_FORMATS))
+    c.add_argument("--scheduler", default="local", metavar="local|ADDRESS",
+                   help="a Dask scheduler address (tcp://host:8786), or local (default: a LocalCluster)")
+    c.add_argument("--workers", type=int, default=None, help="LocalCluster workers (default: one per core)")
+    c.add_argument("--no-progress", dest="progress", action="store_false", help="no progress bar on stderr")
     return p
 
 
@@ -266,6 +282,8 @@ def main(argv=None):
     if not (args.fps > 0):
         print("blender_manikin: error: --fps must be positive", file=sys.stderr)
         return 2
+    if args.command == "convert":
+        return convert_main(args, formats)
     needs_blender = any(f in BLENDER_FORMATS for f in formats) or args.trackers
     if needs_blender:
         try:
@@ -297,6 +315,36 @@ def main(argv=None):
             continue
         print(f"OK {path} -> {', '.join(written)} ({job.summary()})", flush=True)
     return 1 if failed else 0
+
+
+def convert_main(args, fmts):
+    """``convert``: Dask, no Blender (see :mod:`blender_manikin.core.convert`)."""
+    try:
+        from .core import convert
+        import distributed  # noqa: F401
+    except ImportError:
+        print("blender_manikin: error: convert needs Dask: pip install 'blender-manikin[dask]' "
+              "(or dask[distributed])", file=sys.stderr)
+        return 2
+    try:
+        inputs = convert.collect_inputs(args.inputs)
+        settings = solve_settings(args)
+    except (ValueError, OSError) as exc:
+        print(f"blender_manikin: error: {exc}", file=sys.stderr)
+        return 2
+    if not inputs:
+        print("blender_manikin: error: no recordings found in the inputs", file=sys.stderr)
+        return 1
+    try:
+        code, records = convert.run(inputs, args.out, fmts, settings, scheduler=args.scheduler,
+                                    workers=args.workers, options=args, progress=args.progress)
+    except ValueError as exc:
+        print(f"blender_manikin: error: {exc}", file=sys.stderr)
+        return 2
+    for rec in records:
+        if rec["status"] == "ok":
+            print(f"OK {rec['input']} -> {', '.join(rec['outputs'])} ({rec['frames']} frames, {rec['seconds']:.2f} s)")
+    return code
 
 
 def _script_main():

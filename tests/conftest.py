@@ -17,7 +17,7 @@ SHARED = os.path.join(os.path.dirname(ROOT), "shared")
 _BLENDER = ("test_blender_", "test_extension_install")
 _TRAINING = ("test_training", "test_model_dap")
 _SLOW = ("test_extension_install", "test_packaging", "test_standing", "test_training.py", "test_model_dap",
-         "test_blender_cli", "test_blender_swivel_rig")
+         "test_convert", "test_blender_cli", "test_blender_swivel_rig")
 
 
 def pytest_collection_modifyitems(config, items):

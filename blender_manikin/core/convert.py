@@ -1,0 +1,210 @@
+"""Dataset-scale conversion without Blender, on Dask: one task per recording, on a laptop's
+``LocalCluster`` or on a cluster (SLURM/PBS through dask-jobqueue, Kubernetes through
+dask-kubernetes: any ``distributed`` scheduler address).
+
+    blender-manikin convert INPUTS... --out DIR --format json,npz,bvh [--scheduler local|ADDRESS]
+        [--workers N] [solve options: --fps, --height, --offsets, --axes, --units, ...]
+
+* Inputs: files, folders (their recordings, recursively), globs, or manifest files (``.txt`` /
+  ``.lst``: one path a line, ``#`` comments; ``.jsonl``: objects with a ``path``).
+* Each worker loads the model once; each input is one task that reads one recording, solves it
+  (:func:`.solve.solve_recording`) and writes ``DIR/STEM.<ext>`` per format under a temporary
+  name, renamed when complete, so memory per worker is bounded by one recording.
+* ``DIR/manifest.jsonl`` gets one line per finished input: status (``ok``/``error``), frames,
+  seconds, stature, quality notes, outputs, and the error.  A rerun skips the inputs already
+  converted (every output present), so a crashed or killed job resumes where it stopped; a bad
+  file never stops the others.  The exit code is 0 only when every input converted.
+
+Needs the ``[dask]`` extra (``dask[distributed]``); no bpy.
+"""
+from __future__ import annotations
+
+import glob
+import hashlib
+import json
+import os
+import sys
+import time
+
+from . import formats
+from .solve import SolveSettings, error_message, solve_recording
+
+MANIFEST = "manifest.jsonl"
+_MANIFEST_SUFFIXES = (".txt", ".lst", ".jsonl")
+
+
+# --------------------------------------------------------------------------
+# inputs and outputs
+def _is_recording(path):
+    return path.lower().endswith(formats.input_extensions())
+
+
+def collect_inputs(items):
+    """Absolute paths of the recordings named by ``items`` (files, folders, globs, manifests),
+    in order, without duplicates.  Raises ``ValueError`` naming an item that gives nothing."""
+    out = []
+    for item in items:
+        item = os.path.expanduser(str(item))
+        if os.path.isdir(item):
+            found = sorted(os.path.join(d, f) for d, _, fs in os.walk(item) for f in fs if _is_recording(f))
+        elif os.path.isfile(item) and item.lower().endswith(_MANIFEST_SUFFIXES) and not _is_recording(item):
+            found = _read_manifest_file(item)
+        elif os.path.isfile(item):
+            found = [item]
+        else:
+            found = sorted(glob.glob(item, recursive=True))
+            if not found:
+                raise ValueError(f"{item}: no such file, folder or matching files")
+        out.extend(os.path.abspath(p) for p in found)
+    return list(dict.fromkeys(out))
+
+
+def _read_manifest_file(path):
+    base = os.path.dirname(os.path.abspath(path))
+    paths = []
+    with open(path, encoding="utf-8") as f:
+        for n, line in enumerate(f, 1):
+            line = line.strip()
+            if not line or line.startswith("#"):
+                continue
+            if path.lower().endswith(".jsonl"):
+                try:
+                    line = json.loads(line)["path"]
+                except (json.JSONDecodeError, KeyError, TypeError):
+                    raise ValueError(f"{path}, line {n}: expected a JSON object with a 'path'") from None
+            p = os.path.expanduser(line)
+            paths.append(p if os.path.isabs(p) else os.path.join(base, p))
+    return paths
+
+
+def output_stems(paths):
+    """``{input: output stem}``: the file name without extension, made unique with a short hash
+    of the folder when two inputs share a name."""
+    stems = {p: os.path.splitext(os.path.basename(p))[0] for p in paths}
+    counts = {}
+    for s in stems.values():
+        counts[s] = counts.get(s, 0) + 1
+    return {p: (s if counts[s] == 1 else f"{s}-{hashlib.sha1(os.path.dirname(p).encode()).hexdigest()[:8]}")
+            for p, s in stems.items()}
+
+
+def read_manifest(out_dir):
+    """The records of ``DIR/manifest.jsonl`` (last record per input wins); ``{}`` when absent.
+    A line cut off by a crash is ignored."""
+    path = os.path.join(out_dir, MANIFEST)
+    records = {}
+    if os.path.isfile(path):
+        with open(path, encoding="utf-8") as f:
+            for line in f:
+                try:
+                    rec = json.loads(line)
+                except json.JSONDecodeError:
+                    continue
+                if isinstance(rec, dict) and "input" in rec:
+                    records[rec["input"]] = rec
+    return records
+
+
+def is_done(record):
+    return bool(record) and record.get("status") == "ok" and all(os.path.isfile(p) for p in record.get("outputs", []))
+
+
+# --------------------------------------------------------------------------
+# one task (runs on a worker)
+_RUNNERS = {}
+
+
+def _runner(model):
+    """The worker's model, loaded once per process."""
+    from .model_runner import ModelRunner
+    key = os.path.abspath(model) if model else None
+    if key not in _RUNNERS:
+        _RUNNERS[key] = ModelRunner(key, threads=1)
+    return _RUNNERS[key]
+
+
+def convert_task(path, out_dir, stem, fmts, settings, model=None, options=None):
+    """Convert one recording; returns its manifest record (never raises for a bad file)."""
+    from . import pipeline
+    t0 = time.perf_counter()
+    rec = {"input": path, "status": "error", "outputs": [], "frames": 0, "seconds": 0.0, "stature": None,
+           "notes": [], "error": None}
+    try:
+        runner = _runner(model)
+        def solver(targets, body, progress=None):
+            return pipeline.solve(targets, body, runner, progress=progress)
+
+        out = solve_recording(path, SolveSettings(**settings), solver=solver)
+        for fmt in fmts:
+            writer = formats.WRITERS[fmt]
+            dst = os.path.join(out_dir, stem + writer.extension)
+            tmp = os.path.join(out_dir, f".{stem}.part{os.getpid()}{writer.extension}")
+            writer.write(tmp, out.result, source=os.path.basename(path), options=options)
+            os.replace(tmp, dst)
+            rec["outputs"].append(dst)
+        rec.update(status="ok", frames=int(out.result.num_frames), stature=round(float(out.body.stature), 4),
+                   notes=list(out.result.quality_notes()) + [n for n in out.info if not n.startswith("calibrated")])
+    except Exception as exc:          # one bad file never stops the others
+        rec["error"] = error_message(exc)
+    rec["seconds"] = round(time.perf_counter() - t0, 3)
+    return rec
+
+
+# --------------------------------------------------------------------------
+def _client(scheduler, workers):
+    from distributed import Client, LocalCluster
+    if scheduler in (None, "", "local"):
+        n = int(workers or os.cpu_count() or 1)
+        cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=":0")
+        return Client(cluster), cluster
+    return Client(scheduler), None
+
+
+def run(inputs, out_dir, fmts, settings: SolveSettings, scheduler=None, workers=None, model=None, options=None,
+        progress=True, log=None):
+    """Convert ``inputs`` (paths) into ``out_dir``; returns ``(exit code, records of this run)``."""
+    import dataclasses
+    from distributed import as_completed
+    log = log or (lambda msg: print(msg, file=sys.stderr, flush=True))
+    bad = [f for f in fmts if f not in formats.WRITERS or formats.WRITERS[f].needs_blender]
+    if bad:
+        raise ValueError(f"convert writes {', '.join(n for n, w in formats.WRITERS.items() if not w.needs_blender)}"
+                         f" (without Blender); not {', '.join(bad)}")
+    os.makedirs(out_dir, exist_ok=True)
+    stems = output_stems(inputs)
+    done = read_manifest(out_dir)
+    todo = [p for p in inputs if not is_done(done.get(p))]
+    skipped = len(inputs) - len(todo)
+    if skipped:
+        log(f"{skipped} of {len(inputs)} input(s) already converted (manifest): skipped")
+    if not todo:
+        return 0 if all(is_done(done.get(p)) for p in inputs) else 1, []
+    client, cluster = _client(scheduler, workers)
+    try:
+        log(f"dask dashboard: {client.dashboard_link}")
+        st = dataclasses.asdict(settings)
+        futures = client.map(convert_task, todo, [out_dir] * len(todo), [stems[p] for p in todo],
+                             [list(fmts)] * len(todo), [st] * len(todo), [model] * len(todo),
+                             [options] * len(todo), pure=False)
+        records, failed = [], 0
+        with open(os.path.join(out_dir, MANIFEST), "a", encoding="utf-8") as man:
+            for i, fut in enumerate(as_completed(futures), 1):
+                rec = fut.result()
+                man.write(json.dumps(rec) + "\n")
+                man.flush()
+                os.fsync(man.fileno())
+                records.append(rec)
+                failed += rec["status"] != "ok"
+                if progress:
+                    bar = "#" * int(30 * i / len(todo))
+                    sys.stderr.write(f"\r[{bar:<30}] {i}/{len(todo)} converted, {failed} failed")
+                    sys.stderr.flush()
+                if rec["status"] != "ok":
+                    log(("\n" if progress else "") + f"ERROR {rec['input']}: {rec['error']}")
+        if progress:
+            sys.stderr.write("\n")
+    finally:
+        client.close()
+        if cluster is not None:
+            cluster.close()
+    return (0 if failed == 0 else 1), records

@@ -1,0 +1,123 @@
+"""Dataset-scale conversion on Dask (core/convert.py, `blender-manikin convert`), without Blender."""
+import json
+import os
+import shutil
+import signal
+import subprocess
+import sys
+import time
+
+import numpy as np
+import pytest
+
+pytest.importorskip("distributed")
+
+from blender_manikin.core import convert  # noqa: E402
+from blender_manikin.core.export_json import validate_document  # noqa: E402
+from blender_manikin.core.solve import SolveSettings  # noqa: E402
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+EXAMPLE = os.path.join(ROOT, "examples", "example_recording.csv")
+
+
+def _folder(tmp_path, good=4, broken=True):
+    d = tmp_path / "in"
+    (d / "sub").mkdir(parents=True)
+    for i in range(good):
+        shutil.copy(EXAMPLE, (d if i % 2 else d / "sub") / f"take{i}.csv")
+    if broken:
+        (d / "broken.csv").write_text("time,device,px,py,pz,qw,qx,qy,qz\n0.0,head,1,2\n")
+        (d / "sub" / "empty.bsor").write_bytes(b"")
+    (d / "notes.md").write_text("not a recording")
+    return d
+
+
+def _manifest_lines(out):
+    with open(os.path.join(out, convert.MANIFEST)) as f:
+        return [json.loads(ln) for ln in f if ln.strip()]
+
+
+def test_local_cluster_converts_a_folder_with_broken_files(tmp_path):
+    d = _folder(tmp_path)
+    inputs = convert.collect_inputs([str(d)])
+    assert len(inputs) == 6 and all(os.path.isabs(p) for p in inputs)
+    out = str(tmp_path / "out")
+    code, records = convert.run(inputs, out, ["json", "npz"], SolveSettings(fps=30.0), workers=2, progress=False,
+                                log=lambda m: None)
+    assert code == 1 and len(records) == 6
+    lines = _manifest_lines(out)
+    assert sorted(r["input"] for r in lines) == sorted(inputs)               # one line per input
+    ok = [r for r in lines if r["status"] == "ok"]
+    bad = {os.path.basename(r["input"]): r["error"] for r in lines if r["status"] != "ok"}
+    assert len(ok) == 4 and set(bad) == {"broken.csv", "empty.bsor"}
+    assert "broken.csv, line 2" in bad["broken.csv"] and "empty.bsor" in bad["empty.bsor"]
+    for r in ok:
+        assert r["frames"] == 210 and abs(r["stature"] - 1.75) < 0.05 and r["seconds"] > 0
+        js, npz = r["outputs"]
+        doc = json.load(open(js))
+        assert validate_document(doc) == [] and len(doc["positions"]) == 210
+        with np.load(npz) as z:
+            assert z["positions"].shape == (210, 22, 3)
+    assert not [f for f in os.listdir(out) if ".part" in f]                 # written atomically
+    # a rerun converts nothing new and keeps the verdict
+    code2, again = convert.run(inputs, out, ["json", "npz"], SolveSettings(fps=30.0), workers=2, progress=False,
+                               log=lambda m: None)
+    assert code2 == 1 and sorted(os.path.basename(r["input"]) for r in again) == ["broken.csv", "empty.bsor"]
+
+
+def test_a_killed_run_resumes_without_missing_or_duplicated_outputs(tmp_path):
+    d = tmp_path / "in"
+    d.mkdir()
+    for i in range(10):
+        shutil.copy(EXAMPLE, d / f"t{i:02d}.csv")
+    out = tmp_path / "out"
+    cmd = [sys.executable, "-m", "blender_manikin", "convert", str(d), "--out", str(out), "--format", "json",
+           "--workers", "2", "--no-progress"]
+    env = dict(os.environ, PYTHONPATH=ROOT)
+    proc = subprocess.Popen(cmd, cwd=ROOT, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+                            start_new_session=True)
+    man = out / convert.MANIFEST
+    deadline = time.time() + 120
+    while time.time() < deadline and proc.poll() is None:
+        if man.exists() and len(man.read_text().splitlines()) >= 2:
+            break
+        time.sleep(0.05)
+    os.killpg(proc.pid, signal.SIGKILL)                                     # the job and its workers
+    proc.wait()
+    first = [r["input"] for r in _manifest_lines(out)]
+    assert len(first) >= 2
+    p = subprocess.run(cmd, cwd=ROOT, env=env, capture_output=True, text=True, timeout=300)
+    assert p.returncode == 0, p.stderr
+    lines = _manifest_lines(out)
+    ok = [r["input"] for r in lines if r["status"] == "ok"]
+    assert sorted(ok) == sorted(str(d / f"t{i:02d}.csv") for i in range(10))     # each exactly once
+    assert sorted(os.listdir(out)) == sorted([f"t{i:02d}.json" for i in range(10)] + [convert.MANIFEST])
+    # the rerun's OK lines on stdout name only what it converted
+    redone = [ln.split()[1] for ln in p.stdout.splitlines() if ln.startswith("OK ")]
+    assert sorted(redone + first) == sorted(ok)
+
+
+def test_inputs_from_globs_and_manifests_and_unique_stems(tmp_path):
+    d = _folder(tmp_path, broken=False)
+    globbed = convert.collect_inputs([str(d / "**" / "take*.csv")])
+    assert len(globbed) == 4
+    lst = tmp_path / "list.txt"
+    lst.write_text(f"# takes\n{d / 'take1.csv'}\nin/sub/take0.csv\n")
+    jl = tmp_path / "list.jsonl"
+    jl.write_text(json.dumps({"path": str(d / "take3.csv")}) + "\n")
+    got = convert.collect_inputs([str(lst), str(jl), str(d / "take1.csv")])
+    assert got == [str(d / "take1.csv"), str(d / "sub" / "take0.csv"), str(d / "take3.csv")]
+    with pytest.raises(ValueError, match="nothing_here"):
+        convert.collect_inputs([str(tmp_path / "nothing_here*.csv")])
+    bad = tmp_path / "bad.jsonl"
+    bad.write_text("{}\n")
+    with pytest.raises(ValueError, match="bad.jsonl, line 1"):
+        convert.collect_inputs([str(bad)])
+    stems = convert.output_stems(["/a/x.csv", "/b/x.csv", "/a/y.csv"])
+    assert stems["/a/y.csv"] == "y" and stems["/a/x.csv"] != stems["/b/x.csv"]
+    assert all(s.startswith("x-") for k, s in stems.items() if k.endswith("x.csv"))
+
+
+def test_convert_refuses_blender_formats(tmp_path):
+    with pytest.raises(ValueError, match="not blend"):
+        convert.run([EXAMPLE], str(tmp_path), ["blend"], SolveSettings(), progress=False, log=lambda m: None)
