@@ -16,7 +16,7 @@ EXAMPLE = os.path.join(ROOT, "examples", "example_recording.csv")
 
 
 def test_readers_by_extension_and_by_content(tmp_path):
-    assert formats.input_extensions() == (".csv", ".bsor")
+    assert formats.input_extensions() == (".csv", ".bsor", ".xror")
     assert formats.reader_for("x.CSV").name == "csv" and formats.reader_for("y.bsor").name == "bsor"
     # a replay saved under another name is still recognised by its magic number
     path = tmp_path / "replay.dat"
@@ -30,7 +30,7 @@ def test_readers_by_extension_and_by_content(tmp_path):
     assert formats.load_recording(txt).devices == formats.load_recording(EXAMPLE).devices
     other = tmp_path / "notes.txt"
     other.write_text("hello\n")
-    with pytest.raises(RecordingError, match=r"notes.txt.*unsupported file type '.txt': expected .csv \(native CSV\)"):
+    with pytest.raises(RecordingError, match=r"notes.txt.*unsupported file type .\.txt.: expected .csv \(native CSV\)"):
         formats.load_recording(other)
     with pytest.raises(RecordingError, match="no such file"):
         formats.load_recording(tmp_path / "missing.csv")

@@ -134,9 +134,16 @@ def _sniff_csv(head: bytes) -> bool:
     return bool(lines) and all(c in lines[0] for c in ("time", "device"))
 
 
+def _read_xror(path, axes=None, units=None):
+    from .io_xror import read_xror
+    return read_xror(path, axes=axes, units=units)
+
+
 register_reader(ReaderFormat("csv", "native CSV", (".csv",), _read_csv, _sniff_csv))
 register_reader(ReaderFormat("bsor", "Beat Saber replay", (".bsor",), _read_bsor, _sniff_bsor,
                              default_offsets="beat_saber"))
+# XROR: the file names its app; the reader sets the offsets metadata (beat_saber for Beat Saber)
+register_reader(ReaderFormat("xror", "XROR / BOXRR-23", (".xror",), _read_xror))
 
 
 def _write_json(path, result, source="", options=None):

@@ -125,6 +125,50 @@ def _parse_header(r):
     return version, info
 
 
+def pose_frame_masks(t, pose, warnings, devices=FRAME_DEVICES, time_name="song time"):
+    """Which samples of pose frames are usable.
+
+    t: ``(N,)`` seconds; pose: ``(N, D, 7)`` position x, y, z then quaternion x, y, z, w per
+    device (Unity's order, as BSOR and XROR store them).  Returns ``(ok (N, D), keep (N,))``:
+    ``ok`` marks finite, unit-quaternion, non-zero poses; ``keep`` the frames with any valid pose
+    whose time increases (placeholders, pauses, rewinds and repeated times are dropped).  What was
+    dropped is appended to ``warnings``."""
+    quat = pose[..., 3:7]
+    finite = np.all(np.isfinite(pose), -1)
+    unit = np.abs(np.linalg.norm(quat, axis=-1) - 1.0) < 0.05
+    zero = np.all(pose == 0.0, -1)
+    ok = finite & unit & ~zero
+    any_ok = ok.any(-1)
+    keep = any_ok & increasing_mask(np.where(any_ok, t, np.nan))
+    n_placeholder = int((~any_ok).sum())
+    if n_placeholder:
+        first = np.nonzero(~any_ok)[0][:3]
+        warnings.append(f"dropped {n_placeholder} frame(s) with no valid pose (placeholder/lost; "
+                        f"frame index {', '.join(str(int(i)) for i in first)}{' ...' if n_placeholder > 3 else ''})")
+    dropped = any_ok & ~keep
+    if dropped.any():
+        idx = np.nonzero(dropped)[0]
+        times = ", ".join(f"{t[i]:.3f}" for i in idx[:5])
+        warnings.append(f"dropped {idx.size} frame(s) whose {time_name} did not increase "
+                        f"(pause, rewind or repeated time; at t = {times}{' ...' if idx.size > 5 else ''} s)")
+    lost = ok[keep] == False  # noqa: E712
+    if lost.any():
+        for j, dev in enumerate(devices):
+            c = int(lost[:, j].sum())
+            if c:
+                warnings.append(f"{dev}: {c} sample(s) with an invalid pose marked invalid")
+    return ok, keep
+
+
+def pose_frames_to_streams(t, pose, ok, devices, axes, units):
+    """``{device: TrackerStream}`` (Blender axes, metres) from pose frames ``(N, D, 7)``
+    (position, quaternion x, y, z, w) in ``axes`` and ``units``, times ``t`` ``(N,)`` seconds."""
+    upos = pose[..., 0:3]
+    uquat = np.concatenate([pose[..., 6:7], pose[..., 3:6]], -1)   # xyzw -> wxyz
+    pos_b, quat_b = to_blender(upos * UNITS[units], normalize(uquat), axes)
+    return {dev: TrackerStream(dev, t.copy(), pos_b[:, j], quat_b[:, j], ok[:, j]) for j, dev in enumerate(devices)}
+
+
 def read_bsor(path, axes=None, units=None) -> Recording:
     """Read the head and hand motion of a BeatLeader replay.
 
@@ -171,35 +215,7 @@ def parse_bsor(data: bytes, path="<bytes>", axes=None, units=None) -> Recording:
     t = frames["time"].astype(np.float64)
     fps = frames["fps"].astype(np.int64)
     pose = frames["pose"].astype(np.float64)              # (N, 3 devices, 7)
-    upos = pose[..., 0:3]
-    uquat = np.concatenate([pose[..., 6:7], pose[..., 3:6]], -1)   # xyzw → wxyz
-
-    finite = np.all(np.isfinite(pose), -1)
-    qn = np.linalg.norm(uquat, axis=-1)
-    unit = np.abs(qn - 1.0) < 0.05
-    zero = np.all(pose == 0.0, -1)
-    ok = finite & unit & ~zero                           # (N, 3)
-
-    any_ok = ok.any(-1)
-    keep = any_ok & increasing_mask(np.where(any_ok, t, np.nan))
-    n_placeholder = int((~any_ok).sum())
-    if n_placeholder:
-        first = np.nonzero(~any_ok)[0][:3]
-        warnings.append(f"dropped {n_placeholder} frame(s) with no valid pose (placeholder/lost; "
-                        f"frame index {', '.join(str(int(i)) for i in first)}{' ...' if n_placeholder > 3 else ''})")
-    dropped = any_ok & ~keep
-    if dropped.any():
-        idx = np.nonzero(dropped)[0]
-        times = ", ".join(f"{t[i]:.3f}" for i in idx[:5])
-        warnings.append(f"dropped {idx.size} frame(s) whose song time did not increase "
-                        f"(pause, rewind or repeated time; at t = {times}{' ...' if idx.size > 5 else ''} s)")
-    lost = ok[keep] == False  # noqa: E712
-    if lost.any():
-        for j, dev in enumerate(FRAME_DEVICES):
-            c = int(lost[:, j].sum())
-            if c:
-                warnings.append(f"{dev}: {c} sample(s) with an invalid pose marked invalid")
-
+    ok, keep = pose_frame_masks(t, pose, warnings)
     speed = 1.0
     mods = [m.strip().upper() for m in info.get("modifiers", "").split(",") if m.strip()]
     for m in mods:
@@ -212,12 +228,7 @@ def parse_bsor(data: bytes, path="<bytes>", axes=None, units=None) -> Recording:
         warnings.append(f"song speed x{speed:g} (modifiers {info.get('modifiers')!r}, practice speed "
                         f"{practice:g}): frame times divided by {speed:g} to get real time")
 
-    tk = t[keep] / speed
-    scale = UNITS[units]
-    pos_b, quat_b = to_blender(upos[keep] * scale, normalize(uquat[keep]), axes)
-    streams = {}
-    for j, dev in enumerate(FRAME_DEVICES):
-        streams[dev] = TrackerStream(dev, tk.copy(), pos_b[:, j], quat_b[:, j], ok[keep][:, j])
+    streams = pose_frames_to_streams(t[keep] / speed, pose[keep], ok[keep], FRAME_DEVICES, axes, units)
 
     meta = {k: v for k, v in info.items() if k not in _PRIVATE}
     meta.update(format="bsor", bsor_version=int(version), axes=axes, units=units,

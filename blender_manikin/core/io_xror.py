@@ -1,0 +1,138 @@
+"""XROR (Extended Reality Open Recording, MetaGuard/xror, BSD-3): the format BOXRR-23 ships
+its 4.7 million VR recordings in.
+
+Schema this reader relies on (checked on ``../shared/data/vr/xror-beatsaber-sample.xror``):
+
+* the file is one BSON document with ``$schema``, ``info``, ``frames`` and ``events``;
+* ``info.hardware.devices``: a list, one entry per tracked device, with ``joint`` (``HEAD``,
+  ``HAND_LEFT``, ``HAND_RIGHT``; also read: ``WAIST``/``HIPS``, ``FOOT_LEFT``, ``FOOT_RIGHT``),
+  ``name``, ``type`` and ``axes``, the per-frame numbers of the device:
+  ``["x", "y", "z", "i", "j", "k", "1"]`` = position then quaternion x, y, z, w;
+* ``frames``: bytes, an fpzip-compressed float32 array of shape ``(1, 1, N, 1 + 7 D)``: per
+  frame the time in seconds, then 7 numbers per device in ``info.hardware.devices`` order;
+* Unity axes (left-handed, +Y up, +Z forward) and metres, by the format's convention;
+* ``info.software.app.name`` names the application (``Beat Saber``: the hand poses are saber
+  poses, so the ``beat_saber`` device offsets apply, as for ``.bsor``);
+* as in BSOR, frame 0 is all zeros and the first frames may share time 0.
+
+``events`` (note cuts and the like) are not read.  Needs the ``bson`` codec of ``pymongo`` and
+the ``fpzip`` package (``pip install 'blender-manikin[xror]'``).
+"""
+from __future__ import annotations
+
+import os
+
+import numpy as np
+
+from .io_bsor import pose_frame_masks, pose_frames_to_streams
+from .recording import Recording, RecordingError, canonical_axes, canonical_units, read_file_bytes
+
+#: XROR joint names -> devices
+JOINTS = {"HEAD": "head", "HAND_LEFT": "left_hand", "HAND_RIGHT": "right_hand", "WAIST": "pelvis",
+          "HIPS": "pelvis", "PELVIS": "pelvis", "FOOT_LEFT": "left_foot", "FOOT_RIGHT": "right_foot"}
+POSE_AXES = ["x", "y", "z", "i", "j", "k", "1"]
+#: apps whose hand poses are not the controllers' (device offsets the reader asks for)
+APP_OFFSETS = {"beat saber": "beat_saber"}
+#: the decompressed frames may be at most this many times the file's size (fpzip compresses
+#: float motion 2-4x; a larger claim is a corrupt or hostile file)
+MAX_EXPANSION = 64
+
+
+def _codecs(path):
+    try:
+        import bson
+        import fpzip
+    except ImportError:
+        raise RecordingError("reading .xror needs the bson (pymongo) and fpzip packages: "
+                             "pip install 'blender-manikin[xror]' (or pymongo fpzip)", path=path) from None
+    return bson, fpzip
+
+
+def read_xror(path, axes=None, units=None) -> Recording:
+    """Read the device motion of an XROR file: a :class:`Recording` (Blender axes, metres) with a
+    stream per device of ``info.hardware.devices`` and the app, hardware and user-free session
+    fields in ``metadata``.  Raises :class:`RecordingError` naming the file and the problem."""
+    path = os.fspath(path)
+    data = read_file_bytes(path)
+    if not data:
+        raise RecordingError("file is empty", path=path, offset=0)
+    return parse_xror(data, path=path, axes=axes, units=units)
+
+
+def parse_xror(data: bytes, path="<bytes>", axes=None, units=None) -> Recording:
+    """:func:`read_xror` on bytes already in memory."""
+    bson, fpzip = _codecs(path)
+    axes = canonical_axes(axes or "unity")
+    units = canonical_units(units or "m")
+    if len(data) < 5 or int.from_bytes(data[:4], "little") != len(data):
+        raise RecordingError(f"not an XROR (BSON) document: it declares {int.from_bytes(data[:4], 'little')} "
+                             f"bytes, the file has {len(data)}", path=path, offset=0)
+    try:
+        doc = bson.decode(data)
+    except Exception as exc:                       # bson.errors.InvalidBSON and friends
+        raise RecordingError(f"not a valid BSON document ({exc})", path=path, offset=0) from None
+
+    def field(obj, *keys):
+        cur = obj
+        for k in keys:
+            if not isinstance(cur, dict) or k not in cur:
+                raise RecordingError(f"missing field {'.'.join(keys)}", path=path)
+            cur = cur[k]
+        return cur
+
+    devices = field(doc, "info", "hardware", "devices")
+    if not isinstance(devices, list) or not devices:
+        raise RecordingError("info.hardware.devices lists no device", path=path)
+    names = []
+    for i, d in enumerate(devices):
+        if not isinstance(d, dict):
+            raise RecordingError(f"info.hardware.devices[{i}] is not an object", path=path)
+        joint = str(d.get("joint", ""))
+        if joint.upper() not in JOINTS:
+            raise RecordingError(f"info.hardware.devices[{i}]: joint {joint!r} is not one of "
+                                 f"{', '.join(JOINTS)}", path=path)
+        if list(d.get("axes", [])) != POSE_AXES:
+            raise RecordingError(f"info.hardware.devices[{i}] ({joint}): axes {d.get('axes')!r}, expected "
+                                 f"{POSE_AXES} (position, quaternion x y z w)", path=path)
+        names.append(JOINTS[joint.upper()])
+    if len(set(names)) != len(names):
+        raise RecordingError(f"info.hardware.devices names a device twice: {names}", path=path)
+
+    blob = field(doc, "frames")
+    if not isinstance(blob, (bytes, bytearray)) or not blob:
+        raise RecordingError("frames is not a compressed float array", path=path)
+    try:
+        arr = fpzip.decompress(bytes(blob))
+    except Exception as exc:
+        raise RecordingError(f"frames: fpzip could not decompress them ({exc})", path=path) from None
+    if arr.nbytes > MAX_EXPANSION * max(len(data), 1) or arr.ndim != 4:
+        raise RecordingError(f"frames: an array of shape {arr.shape} is not plausible for this file", path=path)
+    frames = np.asarray(arr, dtype=np.float64).reshape(-1, arr.shape[-1])
+    width = 1 + 7 * len(names)
+    if frames.shape[1] != width:
+        raise RecordingError(f"frames have {frames.shape[1]} numbers each; {len(names)} device(s) need {width} "
+                             "(time, then 7 per device)", path=path)
+    if frames.shape[0] == 0:
+        raise RecordingError("the recording has no frames", path=path)
+    t = frames[:, 0]
+    pose = frames[:, 1:].reshape(-1, len(names), 7)
+    warnings = []
+    ok, keep = pose_frame_masks(t, pose, warnings, devices=names, time_name="time")
+    if not keep.any():
+        raise RecordingError("no frame has a valid pose", path=path)
+    streams = pose_frames_to_streams(t[keep], pose[keep], ok[keep], names, axes, units)
+    info = doc.get("info", {}) if isinstance(doc.get("info"), dict) else {}
+    software = info.get("software", {}) if isinstance(info.get("software"), dict) else {}
+    app = software.get("app", {}) if isinstance(software.get("app"), dict) else {}
+    meta = {"format": "xror", "schema": str(doc.get("$schema", "")), "axes": axes, "units": units,
+            "app": str(app.get("name", "")), "app_version": str(app.get("version", "")),
+            "api": str(software.get("api", "")), "runtime": str(software.get("runtime", "")),
+            "hardware": [str(d.get("name", "")) for d in devices],
+            "frames_in_file": int(frames.shape[0]), "frames_kept": int(keep.sum())}
+    activity = software.get("activity", {}) if isinstance(software.get("activity"), dict) else {}
+    if "height" in activity:
+        meta["height"] = float(activity["height"])
+    offsets = APP_OFFSETS.get(meta["app"].strip().lower())
+    if offsets:
+        meta["offsets"] = offsets
+    return Recording(streams=streams, source=path, metadata=meta, warnings=warnings)
