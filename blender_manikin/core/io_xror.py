@@ -38,6 +38,49 @@ APP_OFFSETS = {"beat saber": "beat_saber"}
 MAX_EXPANSION = 64
 
 
+_DECOMPRESS = ("import sys, fpzip, numpy as np\n"
+               "a = fpzip.decompress(sys.stdin.buffer.read())\n"
+               "np.save(sys.stdout.buffer, np.ascontiguousarray(a, dtype=np.float32), allow_pickle=False)\n")
+
+
+def decompress_isolated(blob: bytes, path, limit: int):
+    """fpzip-decompress ``blob`` in a child Python process and return the float32 array.
+
+    fpzip's decoder is C code that crashes the whole process (segmentation fault) on corrupt
+    input (found by the fuzz tests: about one in five streams with a few flipped bytes), which
+    would take Blender down with it.  So the decoding runs in a child process, with its memory
+    capped near ``limit`` bytes where the platform allows; a crash or an oversized claim there
+    becomes a :class:`RecordingError` here."""
+    import io
+    import subprocess
+    import sys
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join(p for p in sys.path if p))
+
+    def cap():                           # POSIX: no more memory than the frames can need
+        try:
+            import resource
+            soft = int(limit) + 1024 * 2**20
+            resource.setrlimit(resource.RLIMIT_AS, (soft, soft))
+        except (ImportError, ValueError, OSError):
+            pass
+
+    try:
+        p = subprocess.run([sys.executable, "-c", _DECOMPRESS], input=blob, capture_output=True, env=env,
+                           timeout=300, preexec_fn=cap if os.name == "posix" else None)
+    except (OSError, subprocess.TimeoutExpired) as exc:
+        raise RecordingError(f"frames: could not run the fpzip decoder ({exc})", path=path) from None
+    if p.returncode != 0:
+        if p.returncode < 0:
+            why = f"the decoder crashed with signal {-p.returncode}"
+        else:
+            why = (p.stderr.decode("utf-8", "replace").strip().splitlines() or [f"exit status {p.returncode}"])[-1]
+        raise RecordingError(f"frames: fpzip could not decompress them (corrupt data: {why})", path=path)
+    try:
+        return np.load(io.BytesIO(p.stdout), allow_pickle=False)
+    except ValueError as exc:
+        raise RecordingError(f"frames: the fpzip decoder returned no array ({exc})", path=path) from None
+
+
 def _codecs(path):
     try:
         import bson
@@ -101,10 +144,7 @@ def parse_xror(data: bytes, path="<bytes>", axes=None, units=None) -> Recording:
     blob = field(doc, "frames")
     if not isinstance(blob, (bytes, bytearray)) or not blob:
         raise RecordingError("frames is not a compressed float array", path=path)
-    try:
-        arr = fpzip.decompress(bytes(blob))
-    except Exception as exc:
-        raise RecordingError(f"frames: fpzip could not decompress them ({exc})", path=path) from None
+    arr = decompress_isolated(bytes(blob), path, limit=MAX_EXPANSION * max(len(data), 1))
     if arr.nbytes > MAX_EXPANSION * max(len(data), 1) or arr.ndim != 4:
         raise RecordingError(f"frames: an array of shape {arr.shape} is not plausible for this file", path=path)
     frames = np.asarray(arr, dtype=np.float64).reshape(-1, arr.shape[-1])
