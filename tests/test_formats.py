@@ -30,7 +30,8 @@ def test_readers_by_extension_and_by_content(tmp_path):
     assert formats.load_recording(txt).devices == formats.load_recording(EXAMPLE).devices
     other = tmp_path / "notes.txt"
     other.write_text("hello\n")
-    with pytest.raises(RecordingError, match=r"notes.txt.*unsupported file type .\.txt.: expected .csv \(native CSV\)"):
+    expected = r"notes.txt.*unsupported file type .\.txt.: expected .csv \(native or wide-layout CSV\)"
+    with pytest.raises(RecordingError, match=expected):
         formats.load_recording(other)
     with pytest.raises(RecordingError, match="no such file"):
         formats.load_recording(tmp_path / "missing.csv")

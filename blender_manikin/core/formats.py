@@ -113,7 +113,20 @@ def writer_names() -> tuple:
 
 # --------------------------------------------------------------------------
 # the built-in formats
+def _csv_header(path):
+    with open(path, "rb") as f:
+        text = f.read(SNIFF_BYTES).decode("utf-8-sig", "replace")
+    lines = [ln for ln in text.splitlines() if ln.strip() and not ln.lstrip().startswith("#")]
+    return (lines[0].lower() if lines else ""), text
+
+
 def _read_csv(path, axes=None, units=None):
+    """The native (long) CSV when the header has a ``device`` column, else a wide layout."""
+    header, text = _csv_header(path)
+    if "device" not in [c.strip().strip('"') for c in header.split(",")]:
+        from .io_wide_csv import looks_wide, read_wide_csv
+        if looks_wide(text):
+            return read_wide_csv(path, axes=axes, units=units)
     from .io_csv import read_csv
     return read_csv(path, axes=axes, units=units)
 
@@ -129,9 +142,12 @@ def _sniff_bsor(head: bytes) -> bool:
 
 
 def _sniff_csv(head: bytes) -> bool:
-    text = head.decode("utf-8", "replace").lower()
-    lines = [ln for ln in text.splitlines() if ln.strip() and not ln.lstrip().startswith("#")]
-    return bool(lines) and all(c in lines[0] for c in ("time", "device"))
+    text = head.decode("utf-8", "replace")
+    lines = [ln for ln in text.lower().splitlines() if ln.strip() and not ln.lstrip().startswith("#")]
+    if bool(lines) and all(c in lines[0] for c in ("time", "device")):
+        return True
+    from .io_wide_csv import looks_wide
+    return looks_wide(text)
 
 
 def _read_xror(path, axes=None, units=None):
@@ -139,7 +155,7 @@ def _read_xror(path, axes=None, units=None):
     return read_xror(path, axes=axes, units=units)
 
 
-register_reader(ReaderFormat("csv", "native CSV", (".csv",), _read_csv, _sniff_csv))
+register_reader(ReaderFormat("csv", "native or wide-layout CSV", (".csv",), _read_csv, _sniff_csv))
 register_reader(ReaderFormat("bsor", "Beat Saber replay", (".bsor",), _read_bsor, _sniff_bsor,
                              default_offsets="beat_saber"))
 # XROR: the file names its app; the reader sets the offsets metadata (beat_saber for Beat Saber)

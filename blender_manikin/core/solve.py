@@ -78,6 +78,9 @@ class SolveOutcome:
     def summary(self, extra_timings=None) -> str:
         """One line: frames, fps, where the solve gave way, stature, calibration, gaps, timings."""
         parts = []
+        detected = (getattr(self.recording, "metadata", None) or {}).get("detected")
+        if detected:
+            parts.append(detected)
         if self.result is not None:
             parts.append(f"{self.result.num_frames} frames at {self.result.fps:g} fps")
             parts.extend(self.result.quality_notes())

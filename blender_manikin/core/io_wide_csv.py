@@ -1,0 +1,248 @@
+"""Wide CSV layouts: one row per time step, one group of columns per device, as research datasets
+and recorder tools write them (Unity / Unreal loggers, SteamVR and OpenXR dumps, BOXRR-style
+exports).  The layout is detected from the header and the data, and said in one line
+(``Recording.metadata["detected"]``), e.g.::
+
+    wide layout: head=hmd_*, hands=left_controller_*/right_controller_*; quaternions x,y,z,w;
+    time=timestamp in ms; units cm (head at 1.62 m); axes unity (left-handed), from the head's
+    forward axis
+
+Detected:
+
+* devices from column prefixes, with the aliases of :data:`.devices.ALIASES` (``hmd``, ``head``,
+  ``headset``; ``left_controller``, ``controller_left``, ``LeftHand``, ``l_hand``, ...; ``waist``,
+  ``pelvis``, ``hip``; ``left_foot``, ``foot_l``, ``tracker_left_foot``, ...);
+* components: ``<dev>_pos_x``, ``<dev>_position_x``, ``<dev>.position.x``, ``<dev>_x`` for
+  positions, ``<dev>_rot_{w,x,y,z}``, ``<dev>_quat_*``, ``<dev>.rotation.*`` for quaternions, in
+  any column order (the letters name the components);
+* time: a ``time``/``t``/``seconds`` column (seconds), ``timestamp``/``time_ms`` (milliseconds
+  when the steps say so), or ``delta_time_ms``/``dt`` (per-row deltas); an unnamed first column
+  (a pandas index) is ignored;
+* units from the head's height (a head at 161.9 means centimetres);
+* axes: Y-up or Z-up from the head's height; between Unity (left-handed, +Z forward) and
+  OpenXR/OpenVR (right-handed, -Z forward), the convention in which the head's forward axis
+  points towards the hands (datasets' READMEs are not always right about their axes).
+
+``axes`` / ``units`` given by the user override the detection.  Ambiguity (two column groups
+for one device, a quaternion without all four components) is a :class:`RecordingError` that
+names the candidates.
+"""
+from __future__ import annotations
+
+import os
+import re
+
+import numpy as np
+
+from .devices import DEVICES, canonical_device
+from .recording import (Recording, RecordingError, TrackerStream, UNITS, canonical_axes, canonical_units,
+                        read_file_bytes, to_blender)
+from .rotations import normalize, quat_rotate
+
+_POS_WORDS = ("pos", "position", "p", "loc", "location", "")
+_ROT_WORDS = ("rot", "rotation", "quat", "quaternion", "q", "orientation")
+_TIME_S = ("time", "t", "seconds", "time_s", "secs")
+_TIME_MS = ("timestamp", "time_ms", "timestamp_ms", "ms")
+_DELTA_MS = ("delta_time_ms", "dt_ms", "delta_ms", "frame_time_ms")
+_DELTA_S = ("delta_time", "dt", "delta_time_s")
+_EXTRA_ALIASES = {
+    "controller_left": "left_hand", "hand_left": "left_hand", "l_hand": "left_hand", "hand_l": "left_hand",
+    "l_controller": "left_hand", "leftcontroller": "left_hand", "left_hand_controller": "left_hand",
+    "controller_right": "right_hand", "hand_right": "right_hand", "r_hand": "right_hand", "hand_r": "right_hand",
+    "r_controller": "right_hand", "rightcontroller": "right_hand", "right_hand_controller": "right_hand",
+    "foot_l": "left_foot", "foot_left": "left_foot", "l_foot": "left_foot", "tracker_left_foot": "left_foot",
+    "left_foot_tracker": "left_foot", "foot_r": "right_foot", "foot_right": "right_foot", "r_foot": "right_foot",
+    "tracker_right_foot": "right_foot", "right_foot_tracker": "right_foot", "tracker_waist": "pelvis",
+    "waist_tracker": "pelvis", "tracker_hip": "pelvis", "camera": "head", "main_camera": "head",
+}
+
+
+def _norm(name):
+    """``LeftHand.Position.X`` -> ``left_hand_position_x`` (camel case split, separators _)."""
+    s = re.sub(r"(?<=[a-z0-9])(?=[A-Z])", "_", name.strip())
+    return re.sub(r"[^a-z0-9]+", "_", s.lower()).strip("_")
+
+
+def device_of(prefix):
+    """The device a column prefix names, or None."""
+    key = _norm(prefix)
+    return canonical_device(key) or _EXTRA_ALIASES.get(key) or canonical_device(key.replace("_", ""))
+
+
+_COMPONENT = re.compile(r"^(?P<dev>.+?)_(?:(?P<word>[a-z]+)_)?(?P<axis>[xyzw])$")
+
+
+def parse_columns(header):
+    """``({device: {"pos": {axis: col}, "rot": {axis: col}, "prefix": str}}, time_column, skipped)``."""
+    groups, time_col, skipped = {}, None, []
+    for i, raw in enumerate(header):
+        name = _norm(raw)
+        if i == 0 and (name == "" or name.startswith("unnamed")):
+            continue
+        if name in _TIME_S + _TIME_MS + _DELTA_MS + _DELTA_S and time_col is None:
+            time_col = (i, name)
+            continue
+        m = _COMPONENT.match(name)
+        if not m:
+            skipped.append(raw)
+            continue
+        prefix, word, axis = m.group("dev"), m.group("word") or "", m.group("axis")
+        # "<dev>_q_x" style: the word may have been swallowed into the prefix
+        dev = device_of(prefix)
+        if dev is None and word and device_of(f"{prefix}_{word}"):     # "<dev with _>_x": no component word
+            prefix, word = f"{prefix}_{word}", ""
+            dev = device_of(prefix)
+        if dev is None and "_" in prefix:
+            head, _, tail = prefix.rpartition("_")
+            if tail in _POS_WORDS + _ROT_WORDS:
+                prefix, word, dev = head, tail, device_of(head)
+        if dev is None:
+            skipped.append(raw)
+            continue
+        kind = "rot" if word in _ROT_WORDS or axis == "w" else "pos" if word in _POS_WORDS else None
+        if kind is None:
+            skipped.append(raw)
+            continue
+        g = groups.setdefault(dev, {"pos": {}, "rot": {}, "prefix": raw[: len(prefix)] if raw else prefix})
+        if axis in g[kind]:
+            raise RecordingError(f"two columns for {dev} {kind} {axis}: {header[g[kind][axis]]!r} and {raw!r}")
+        g[kind][axis] = i
+    return groups, time_col, skipped
+
+
+def looks_wide(head_text):
+    """Whether a CSV header looks like a wide layout (a device's x, y, z position columns)."""
+    lines = [ln for ln in head_text.splitlines() if ln.strip() and not ln.lstrip().startswith("#")]
+    if not lines:
+        return False
+    header = [c.strip().strip('"') for c in lines[0].split(",")]
+    try:
+        groups, _, _ = parse_columns(header)
+    except RecordingError:
+        return True
+    return any(len(g["pos"]) == 3 for g in groups.values())
+
+
+def _time(col, values, path):
+    i, name = col
+    v = values[:, i]
+    if name in _DELTA_MS + _DELTA_S:
+        v = np.cumsum(np.nan_to_num(v)) * (1e-3 if name in _DELTA_MS else 1.0)
+        return v - v[0], f"time=cumulative {name}" + (" in ms" if name in _DELTA_MS else " in s")
+    steps = np.diff(v[np.isfinite(v)])
+    med = float(np.median(steps)) if steps.size else 0.0
+    if name in _TIME_MS or med > 0.5:                  # no tracker samples slower than 2 Hz
+        scale, unit = (1e-3, "ms") if med < 500 else (1e-6, "µs") if med < 5e5 else (1e-9, "ns")
+        return (v - v[0]) * scale, f"time={name} in {unit}"
+    return v - v[0], f"time={name} in s"
+
+
+#: each convention's up axis (index) and the head's local forward axis, in its own coordinates
+_CONVENTIONS = {"unity": (1, (0.0, 0.0, 1.0)), "openxr": (1, (0.0, 0.0, -1.0)), "blender": (2, (0.0, -1.0, 0.0))}
+
+
+def _axes_by_forward(pos, quat, candidates):
+    """The convention among ``candidates`` in which the head's forward axis points most towards
+    the hands (horizontally), judged in the file's own coordinates (dot products do not depend on
+    the axes change); ``(axes, median cosine)``."""
+    best = None
+    hands = [pos[d] for d in ("left_hand", "right_hand") if d in pos]
+    to_hands = np.mean(hands, 0) - pos["head"]
+    for axes in candidates:
+        up, local = _CONVENTIONS[axes]
+        fwd = quat_rotate(normalize(quat["head"]), np.array(local))
+        f, h = fwd.copy(), to_hands.copy()
+        f[:, up] = 0.0
+        h[:, up] = 0.0
+        score = float(np.nanmedian(np.sum(normalize(f) * normalize(h), -1)))
+        if best is None or score > best[1]:
+            best = (axes, score)
+    return best
+
+
+def read_wide_csv(path, axes=None, units=None) -> Recording:
+    """Read a wide-layout CSV (see module doc) into a :class:`Recording` (Blender axes, metres)."""
+    path = os.fspath(path)
+    text = read_file_bytes(path).decode("utf-8-sig", "replace")
+    lines = text.splitlines()
+    rows = [(n, ln) for n, ln in enumerate(lines, 1) if ln.strip() and not ln.lstrip().startswith("#")]
+    if not rows:
+        raise RecordingError("file is empty", path=path)
+    hline, header_text = rows[0]
+    header = [c.strip().strip('"') for c in header_text.split(",")]
+    try:
+        groups, time_col, skipped = parse_columns(header)
+    except RecordingError as exc:
+        raise RecordingError(str(exc), path=path, line=hline) from None
+    if time_col is None:
+        raise RecordingError("no time column (expected one of time, timestamp, delta_time_ms, ...)",
+                             path=path, line=hline)
+    for dev, g in groups.items():
+        if len(g["pos"]) != 3:
+            raise RecordingError(f"{dev}: position columns {sorted(g['pos'])} (need x, y, z)", path=path, line=hline)
+        if g["rot"] and len(g["rot"]) != 4:
+            raise RecordingError(f"{dev}: rotation columns {sorted(g['rot'])}: a quaternion needs w, x, y, z "
+                                 "(Euler-angle columns are not read yet)", path=path, line=hline)
+    missing = [d for d in ("head", "left_hand", "right_hand") if d not in groups]
+    if missing:
+        raise RecordingError(f"no columns for {', '.join(missing)} (found devices: {', '.join(groups) or 'none'}; "
+                             f"unrecognised columns: {', '.join(skipped[:8])})", path=path, line=hline)
+    data = []
+    for n, ln in rows[1:]:
+        cells = ln.split(",")
+        if len(cells) != len(header):
+            raise RecordingError(f"{len(cells)} fields, the header has {len(header)}", path=path, line=n)
+        try:
+            data.append([float(c) if c.strip() else np.nan for c in cells])
+        except ValueError:
+            bad = next(c for c in cells if c.strip() and not _is_float(c))
+            raise RecordingError(f"{bad.strip()!r} is not a number", path=path, line=n) from None
+    if len(data) < 2:
+        raise RecordingError("fewer than two rows of samples", path=path)
+    values = np.asarray(data, dtype=np.float64)
+    t, time_note = _time(time_col, values, path)
+    pos = {d: values[:, [g["pos"][a] for a in "xyz"]] for d, g in groups.items()}
+    quat = {d: (values[:, [g["rot"][a] for a in "wxyz"]] if g["rot"] else np.tile([1.0, 0, 0, 0], (len(t), 1)))
+            for d, g in groups.items()}
+    # units from the head height (the largest coordinate of a standing head)
+    head_h = float(np.nanmedian(np.nanmax(np.abs(pos["head"]), axis=1)))
+    if units is None:
+        units = "m" if head_h < 5 else "cm" if head_h < 500 else "mm"
+        units_note = f"units {units} (head at {head_h * UNITS[units]:.2f} m)"
+    else:
+        units = canonical_units(units)
+        units_note = f"units {units} (given)"
+    scale = UNITS[units]
+    if axes is None:
+        up = int(np.argmax(np.nanmedian(pos["head"], axis=0)))
+        cands = ("blender",) if up == 2 else ("unity", "openxr")
+        axes, score = _axes_by_forward(pos, quat, cands)
+        axes_note = (f"axes {axes} ({'left-handed' if axes == 'unity' else 'right-handed'}), from the head's "
+                     f"forward axis" + ("" if len(cands) > 1 else ", Z up"))
+    else:
+        axes = canonical_axes(axes)
+        axes_note = f"axes {axes} (given)"
+    streams = {}
+    for d in DEVICES:
+        if d not in groups:
+            continue
+        p, q = to_blender(pos[d] * scale, normalize(quat[d]), axes)
+        ok = np.all(np.isfinite(p), -1) & np.all(np.isfinite(q), -1)
+        streams[d] = TrackerStream(d, t.copy(), p, q, ok)
+    has_w_first = all(header[g["rot"]["w"]] and g["rot"]["w"] < g["rot"]["x"] for g in groups.values() if g["rot"])
+    qnote = "quaternions w,x,y,z" if has_w_first else "quaternions x,y,z,w"
+    hands = "/".join(f"{groups[d]['prefix']}_*" for d in ("left_hand", "right_hand"))
+    extra = "".join(f", {d}={groups[d]['prefix']}_*" for d in ("pelvis", "left_foot", "right_foot") if d in groups)
+    detected = (f"wide layout: head={groups['head']['prefix']}_*, hands={hands}{extra}; {qnote}; {time_note}; "
+                f"{units_note}; {axes_note}")
+    meta = {"format": "wide_csv", "axes": axes, "units": units, "detected": detected,
+            "ignored_columns": skipped}
+    return Recording(streams=streams, source=path, metadata=meta, warnings=[])
+
+
+def _is_float(s):
+    try:
+        float(s)
+        return True
+    except ValueError:
+        return False
