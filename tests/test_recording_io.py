@@ -348,3 +348,14 @@ def test_example_recording_matches_its_generator(tmp_path):
         np.testing.assert_allclose(a.streams[d].time, b.streams[d].time, atol=2e-6)
         np.testing.assert_allclose(a.streams[d].pos, b.streams[d].pos, atol=2e-6)
         np.testing.assert_allclose(a.streams[d].quat, b.streams[d].quat, atol=2e-6)
+
+
+def test_native_csv_takes_the_same_device_aliases(tmp_path):
+    from blender_manikin.core.formats import load_recording as load
+    p = tmp_path / "aliases.csv"
+    rows = ["time,device,px,py,pz,qw,qx,qy,qz"]
+    for k in range(5):
+        for dev in ("HMD", "controller_left", "hand_r", "tracker_left_foot"):
+            rows.append(f"{k / 90:.6f},{dev},0,1.6,0,1,0,0,0")
+    p.write_text("\n".join(rows) + "\n")
+    assert load(p).devices == ("head", "left_hand", "right_hand", "left_foot")

@@ -35,6 +35,14 @@ ALIASES = {
     "right": "right_hand", "righthand": "right_hand", "right_controller": "right_hand",
     "waist": "pelvis", "hips": "pelvis", "hip": "pelvis",
     "leftfoot": "left_foot", "rightfoot": "right_foot",
+    "controller_left": "left_hand", "hand_left": "left_hand", "l_hand": "left_hand", "hand_l": "left_hand",
+    "l_controller": "left_hand", "leftcontroller": "left_hand", "left_hand_controller": "left_hand",
+    "controller_right": "right_hand", "hand_right": "right_hand", "r_hand": "right_hand", "hand_r": "right_hand",
+    "r_controller": "right_hand", "rightcontroller": "right_hand", "right_hand_controller": "right_hand",
+    "foot_l": "left_foot", "foot_left": "left_foot", "l_foot": "left_foot", "tracker_left_foot": "left_foot",
+    "left_foot_tracker": "left_foot", "foot_r": "right_foot", "foot_right": "right_foot", "r_foot": "right_foot",
+    "tracker_right_foot": "right_foot", "right_foot_tracker": "right_foot", "tracker_waist": "pelvis",
+    "waist_tracker": "pelvis", "tracker_hip": "pelvis", "camera": "head", "main_camera": "head",
 }
 
 

@@ -45,16 +45,6 @@ _TIME_S = ("time", "t", "seconds", "time_s", "secs")
 _TIME_MS = ("timestamp", "time_ms", "timestamp_ms", "ms")
 _DELTA_MS = ("delta_time_ms", "dt_ms", "delta_ms", "frame_time_ms")
 _DELTA_S = ("delta_time", "dt", "delta_time_s")
-_EXTRA_ALIASES = {
-    "controller_left": "left_hand", "hand_left": "left_hand", "l_hand": "left_hand", "hand_l": "left_hand",
-    "l_controller": "left_hand", "leftcontroller": "left_hand", "left_hand_controller": "left_hand",
-    "controller_right": "right_hand", "hand_right": "right_hand", "r_hand": "right_hand", "hand_r": "right_hand",
-    "r_controller": "right_hand", "rightcontroller": "right_hand", "right_hand_controller": "right_hand",
-    "foot_l": "left_foot", "foot_left": "left_foot", "l_foot": "left_foot", "tracker_left_foot": "left_foot",
-    "left_foot_tracker": "left_foot", "foot_r": "right_foot", "foot_right": "right_foot", "r_foot": "right_foot",
-    "tracker_right_foot": "right_foot", "right_foot_tracker": "right_foot", "tracker_waist": "pelvis",
-    "waist_tracker": "pelvis", "tracker_hip": "pelvis", "camera": "head", "main_camera": "head",
-}
 
 
 def _norm(name):
@@ -66,7 +56,7 @@ def _norm(name):
 def device_of(prefix):
     """The device a column prefix names, or None."""
     key = _norm(prefix)
-    return canonical_device(key) or _EXTRA_ALIASES.get(key) or canonical_device(key.replace("_", ""))
+    return canonical_device(key) or canonical_device(key.replace("_", ""))
 
 
 _COMPONENT = re.compile(r"^(?P<dev>.+?)_(?:(?P<word>[a-z]+)_)?(?P<axis>[xyzw])$")
