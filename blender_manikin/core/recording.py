@@ -78,7 +78,7 @@ class RecordingError(ValueError):
 
     The message names the file, the line (text formats) or byte offset
     (binary formats) where there is one, and the problem, e.g.
-    ``"take1.csv, line 12: unknown device 'hand_l' (expected one of head, ...)"``.
+    ``"take1.csv, line 12: unknown device 'elbow_l' (expected one of head, ...)"``.
     The parts are also available as attributes.
     """
 
