@@ -18,6 +18,10 @@ calibration ``AUTO``) once per model, and the table prints, per recording and mo
   largest miss (cm);
 * the estimated stature (metres) and how the body was sized.
 
+A second table solves standing T- and A-poses made by FK (``benchmarks/standing.py``: bodies of
+1.50, 1.75 and 2.00 m and one with the Bandai skeleton's proportions) and gives the largest knee
+flexion and ankle-height error after the first half second.
+
 The previous model is the one shipped before the current one
 (``benchmarks/models/manikin_s_previous.onnx``); it is skipped with a note when absent.
 """
@@ -107,12 +111,26 @@ def main(argv=None):
             if label == "shipped":
                 frames = job.result.positions.shape[0]
                 notes.append(f"{os.path.basename(path)}: {frames} frames; " + "; ".join(job.info))
+    standing = []
+    for label, model in models:
+        from blender_manikin.core.model_runner import ModelRunner
+        from standing import CASES, solve_standing
+        runner = ModelRunner(model)
+        for who, pose in CASES:
+            knees, ankle_err, _ = solve_standing(who, pose, runner)
+            k = 15
+            name = f"{who if who == 'bandai' else f'{who:.2f} m'} {pose}-pose / {label}"
+            standing.append((name, {"knee max [deg]": float(knees[k:-k].max()),
+                                    "ankle error max [cm]": float(100 * ankle_err[k:-k].max())}))
     fmt = {f"{k} [{u}]": ".1f" for k, u in UNITS.items()}
     fmt["stature [m]"] = ".2f"
     rows = [(name, {f"{k} [{UNITS[k]}]": v for k, v in row.items()}) for name, row in rows]
     print(metrics.format_table(rows, list(fmt), name_header="recording / model", formats=fmt))
     for n in notes:
         print(n)
+    print("\nStanding calibration poses made by FK (benchmarks/standing.py), after the first half second:")
+    print(metrics.format_table(standing, ["knee max [deg]", "ankle error max [cm]"], name_header="performer / model",
+                               formats={"knee max [deg]": ".1f", "ankle error max [cm]": ".1f"}))
     return rows
 
 

@@ -1,0 +1,74 @@
+"""Recordings of a performer standing still in a T-pose or an A-pose, made by FK: the standing
+calibration check of ``tests/test_standing.py`` and ``benchmarks/bench_plausibility.py``.
+
+Bodies: the solver's own proportions at any stature (``skeleton.make_body``) and one with the
+Bandai Namco training skeleton's proportions (long shanks, narrow shoulders, a short neck).
+"""
+import numpy as np
+
+from blender_manikin.core import calibration as cal
+from blender_manikin.core import metrics, pipeline, rotations as rot, skeleton as sk
+from blender_manikin.core.pose_result import TrackerTargets
+
+J = sk.J
+DEVICE_JOINTS = {"head": J["head"], "left_hand": J["left_wrist"], "right_hand": J["right_wrist"]}
+CASES = [(1.50, "T"), (1.75, "T"), (2.00, "T"), (1.50, "A"), (1.75, "A"), (2.00, "A"),
+         ("bandai", "T"), ("bandai", "A")]
+
+
+def bandai_like_body(stature=1.70):
+    """A body with the Bandai Namco skeleton's proportions (measured on its cache: thigh 0.262,
+    shank 0.275, shoulder joints 0.138, hips 0.087, upper arm 0.163, forearm 0.150 statures;
+    ankle 0.050 above the ball; neck to head 0.043)."""
+    H = stature
+    body = sk.make_body(sk.BodyMeasurements(stature=H, thigh=0.262 * H, shank=0.275 * H,
+                                            shoulder_width=0.138 * H, hip_width=0.087 * H,
+                                            upper_arm=0.163 * H, forearm=0.150 * H))
+    off = body.offsets.copy()
+    off[J["head"], 2] = 0.043 * H
+    for side in ("left", "right"):
+        off[J[f"{side}_foot"], 2] = -0.050 * H
+    rest = sk.Body(off, body.root_rest, body.measurements).rest_positions()
+    lowest = rest[[J["left_foot"], J["right_foot"]], 2].min()
+    root = body.root_rest.copy()
+    root[2] += sk.PROPORTIONS["foot_height"] * H - lowest
+    return sk.Body(off, root, body.measurements)
+
+
+def standing_targets(body, pose="T", seconds=4.0, fps=30.0, seed=0):
+    """Head and wrist joint targets of ``body`` standing still in a T- or A-pose, swaying 1 cm."""
+    rng = np.random.default_rng(seed)
+    T = int(seconds * fps)
+    t = np.arange(T) / fps
+    local = np.tile(np.eye(3), (T, sk.NUM_JOINTS, 1, 1))
+    if pose == "A":
+        down = np.radians(40.0)
+        local[:, J["left_shoulder"]] = rot.axis_angle_rotation(np.array([0.0, 1.0, 0.0]), np.full(T, down))
+        local[:, J["right_shoulder"]] = rot.axis_angle_rotation(np.array([0.0, 1.0, 0.0]), np.full(T, -down))
+    sway = np.radians(0.4) * np.sin(2 * np.pi * 0.3 * t + rng.uniform(0, 6))
+    local[:, 0] = rot.axis_angle_rotation(np.array([1.0, 0.0, 0.0]), sway)
+    root = np.tile(body.root_rest, (T, 1))
+    P, R = sk.forward_kinematics(local, root, body)
+    return TrackerTargets(fps=fps, pos={d: P[:, j].copy() for d, j in DEVICE_JOINTS.items()},
+                          rot={d: R[:, j].copy() for d, j in DEVICE_JOINTS.items()})
+
+
+def solve_standing(who, pose, runner):
+    """Calibrate (a T-pose found automatically, an A-pose at a given time) and solve.
+    Returns ``(knee flexion (T, 2) degrees, ankle height error (T, 2) metres, calibration)``."""
+    performer = bandai_like_body() if who == "bandai" else sk.make_body(float(who))
+    targets = standing_targets(performer, pose)
+    if pose == "T":
+        cand = cal.find_tpose(targets)
+        if not cand.plausible:
+            raise ValueError(f"no plausible T-pose found: {cand}")
+        frame = cand.frame
+    else:
+        frame = targets.num_frames // 2
+    res = cal.calibrate(targets, frame=frame)
+    body = cal.body_for(res.measurements)
+    solved = pipeline.solve(targets, body, runner)
+    knees = metrics.knee_flexion(solved.positions)
+    rest_ankle = body.rest_positions()[[J["left_ankle"], J["right_ankle"]], 2]
+    ankle_err = np.abs(solved.positions[:, [J["left_ankle"], J["right_ankle"]], 2] - rest_ankle)
+    return knees, ankle_err, res
