@@ -1,6 +1,7 @@
 """`pip install .`: the core package and the `blender-manikin` command (pyproject.toml)."""
 import configparser
 import os
+import shutil
 import subprocess
 import sys
 import tomllib
@@ -10,7 +11,14 @@ ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
 
 def test_wheel_holds_the_core_the_model_and_the_command(tmp_path):
-    p = subprocess.run([sys.executable, "-m", "pip", "wheel", "--no-deps", "-q", "-w", str(tmp_path), ROOT],
+    # build from a copy: setuptools writes build/ and *.egg-info into the source tree
+    src = tmp_path / "src"
+    src.mkdir()
+    for name in ("pyproject.toml", "README.md", "LICENSE"):
+        shutil.copy(os.path.join(ROOT, name), src / name)
+    shutil.copytree(os.path.join(ROOT, "blender_manikin"), src / "blender_manikin",
+                    ignore=shutil.ignore_patterns("__pycache__", "*.pyc"))
+    p = subprocess.run([sys.executable, "-m", "pip", "wheel", "--no-deps", "-q", "-w", str(tmp_path), str(src)],
                        capture_output=True, text=True, timeout=600)
     assert p.returncode == 0, p.stdout + p.stderr
     (whl,) = [f for f in os.listdir(tmp_path) if f.endswith(".whl")]
