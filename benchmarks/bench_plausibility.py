@@ -19,8 +19,9 @@ calibration ``AUTO``) once per model, and the table prints, per recording and mo
 * the estimated stature (metres) and how the body was sized.
 
 A second table solves standing T- and A-poses made by FK (``benchmarks/standing.py``: bodies of
-1.50, 1.75 and 2.00 m and one with the Bandai skeleton's proportions) and gives the largest knee
-flexion and ankle-height error after the first half second.
+1.50, 1.75 and 2.00 m and one with the Bandai skeleton's proportions), and a 1.75 m performer
+standing still with the arms hanging down or held forward (as holding controllers), and gives
+the largest knee flexion and ankle-height error after the first half second.
 
 The previous model is the one shipped before the current one
 (``benchmarks/models/manikin_s_previous.onnx``); it is skipped with a note when absent.
@@ -114,12 +115,13 @@ def main(argv=None):
     standing = []
     for label, model in models:
         from blender_manikin.core.model_runner import ModelRunner
-        from standing import CASES, solve_standing
+        from standing import CASES, HOLDS, solve_standing
         runner = ModelRunner(model)
-        for who, pose in CASES:
+        for who, pose in CASES + [(1.75, h) for h in HOLDS]:
             knees, ankle_err, _ = solve_standing(who, pose, runner)
             k = 15
-            name = f"{who if who == 'bandai' else f'{who:.2f} m'} {pose}-pose / {label}"
+            kind = f"{pose}-pose" if len(pose) == 1 else f"arms {pose}"
+            name = f"{who if who == 'bandai' else f'{who:.2f} m'} {kind} / {label}"
             standing.append((name, {"knee max [deg]": float(knees[k:-k].max()),
                                     "ankle error max [cm]": float(100 * ankle_err[k:-k].max())}))
     fmt = {f"{k} [{u}]": ".1f" for k, u in UNITS.items()}

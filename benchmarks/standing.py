@@ -35,16 +35,29 @@ def bandai_like_body(stature=1.70):
     return sk.Body(off, root, body.measurements)
 
 
+#: standing still with the arms held otherwise (not calibration poses: the legs must stay
+#: straight all the same): arms hanging 85 degrees down; arms forward, elbows bent 60 degrees
+#: (holding controllers or sabers in front of the chest)
+HOLDS = ("down", "forward")
+
+
 def standing_targets(body, pose="T", seconds=4.0, fps=30.0, seed=0):
-    """Head and wrist joint targets of ``body`` standing still in a T- or A-pose, swaying 1 cm."""
+    """Head and wrist joint targets of ``body`` standing still, swaying 1 cm, in a T-pose, an
+    A-pose (arms 40 degrees down) or one of :data:`HOLDS`."""
     rng = np.random.default_rng(seed)
     T = int(seconds * fps)
     t = np.arange(T) / fps
     local = np.tile(np.eye(3), (T, sk.NUM_JOINTS, 1, 1))
-    if pose == "A":
-        down = np.radians(40.0)
-        local[:, J["left_shoulder"]] = rot.axis_angle_rotation(np.array([0.0, 1.0, 0.0]), np.full(T, down))
-        local[:, J["right_shoulder"]] = rot.axis_angle_rotation(np.array([0.0, 1.0, 0.0]), np.full(T, -down))
+    y, z = np.array([0.0, 1.0, 0.0]), np.array([0.0, 0.0, 1.0])
+    if pose in ("A", "down"):
+        down = np.radians(40.0 if pose == "A" else 85.0)
+        local[:, J["left_shoulder"]] = rot.axis_angle_rotation(y, np.full(T, down))
+        local[:, J["right_shoulder"]] = rot.axis_angle_rotation(y, np.full(T, -down))
+    elif pose == "forward":
+        local[:, J["left_shoulder"]] = rot.axis_angle_rotation(z, np.full(T, -np.pi / 2))
+        local[:, J["right_shoulder"]] = rot.axis_angle_rotation(z, np.full(T, np.pi / 2))
+        local[:, J["left_elbow"]] = rot.axis_angle_rotation(-z, np.full(T, np.radians(60)))
+        local[:, J["right_elbow"]] = rot.axis_angle_rotation(z, np.full(T, np.radians(60)))
     sway = np.radians(0.4) * np.sin(2 * np.pi * 0.3 * t + rng.uniform(0, 6))
     local[:, 0] = rot.axis_angle_rotation(np.array([1.0, 0.0, 0.0]), sway)
     root = np.tile(body.root_rest, (T, 1))
@@ -54,10 +67,17 @@ def standing_targets(body, pose="T", seconds=4.0, fps=30.0, seed=0):
 
 
 def solve_standing(who, pose, runner):
-    """Calibrate (a T-pose found automatically, an A-pose at a given time) and solve.
-    Returns ``(knee flexion (T, 2) degrees, ankle height error (T, 2) metres, calibration)``."""
+    """Calibrate (a T-pose found automatically, an A-pose at a given time) and solve; a hold of
+    :data:`HOLDS` is solved with the performer's stature, as typed.  Returns ``(knee flexion
+    (T, 2) degrees, ankle height error (T, 2) metres, calibration or None)``."""
     performer = bandai_like_body() if who == "bandai" else sk.make_body(float(who))
     targets = standing_targets(performer, pose)
+    if pose in HOLDS:
+        body = sk.make_body(performer.stature)
+        solved = pipeline.solve(targets, body, runner)
+        rest_ankle = body.rest_positions()[[J["left_ankle"], J["right_ankle"]], 2]
+        return (metrics.knee_flexion(solved.positions),
+                np.abs(solved.positions[:, [J["left_ankle"], J["right_ankle"]], 2] - rest_ankle), None)
     if pose == "T":
         cand = cal.find_tpose(targets)
         if not cand.plausible:
