@@ -68,6 +68,10 @@ def _add_solve_options(s):
                    help="device-to-joint offsets: a preset name, a JSON file, or auto (default: the "
                         "recording's '# offsets:' metadata, beat_saber for .bsor, else none)")
     s.add_argument("--bvh-units", choices=("cm", "m"), default="cm")
+    s.add_argument("--layout", default=None, metavar="FILE.json",
+                   help="the columns, time, units and axes of wide-layout CSV inputs (default: detected)")
+    s.add_argument("--save-layout", default=None, metavar="FILE.json",
+                   help="write the layout detected in the first wide-layout CSV input, for --layout")
 
 
 def build_parser():
@@ -128,7 +132,8 @@ def solve_settings(args):
     offsets = args.offsets
     if offsets and offsets.lower().endswith(".json"):
         offsets = device_offsets.load_offsets(offsets)
-    st = SolveSettings(axes=args.axes, units=args.units, fps=float(args.fps), offsets=offsets)
+    st = SolveSettings(axes=args.axes, units=args.units, fps=float(args.fps), offsets=offsets,
+                       layout=getattr(args, "layout", None))
     if args.calibration_time is not None:
         st.calibration, st.tpose_time = "TPOSE", float(args.calibration_time)
         st.height, st.arm_span = args.height, args.arm_span
@@ -314,7 +319,18 @@ def main(argv=None):
             print(f"ERROR {path}: {error_message(exc)}", file=sys.stderr, flush=True)
             continue
         print(f"OK {path} -> {', '.join(written)} ({job.summary()})", flush=True)
+        save_layout_once(args, job.recording)
     return 1 if failed else 0
+
+
+def save_layout_once(args, recording):
+    """``--save-layout``: write the first wide-layout input's layout (once)."""
+    layout = (getattr(recording, "metadata", None) or {}).get("layout")
+    if args.save_layout and layout and not getattr(args, "_layout_saved", False):
+        from .core.io_wide_csv import save_layout
+        save_layout(args.save_layout, layout)
+        args._layout_saved = True
+        print(f"layout of {recording.source} written to {args.save_layout}", file=sys.stderr)
 
 
 def convert_main(args, fmts):
@@ -329,6 +345,12 @@ def convert_main(args, fmts):
     try:
         inputs = convert.collect_inputs(args.inputs)
         settings = solve_settings(args)
+        if args.save_layout:
+            from .core.formats import load_recording
+            for path in inputs:
+                if path.lower().endswith(".csv"):
+                    save_layout_once(args, load_recording(path, args.axes, args.units, settings.layout))
+                    break
     except (ValueError, OSError) as exc:
         print(f"blender_manikin: error: {exc}", file=sys.stderr)
         return 2

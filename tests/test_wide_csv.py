@@ -131,3 +131,59 @@ def test_a_wide_csv_solves(tmp_path):
     out = solve_recording(path, SolveSettings(fps=30.0, height=1.78))
     assert out.result.num_frames > 30 and np.isfinite(out.result.positions).all()
     assert out.summary().startswith("wide layout: head=hmd_*")
+
+
+def test_layout_files_fix_what_detection_would_guess(tmp_path):
+    from blender_manikin.core.io_wide_csv import load_layout, save_layout
+    path = tmp_path / "take.csv"
+    truth = write_wide(path, **FAMILIES["unity_logger_ms_cm"])
+    detected = formats.load_recording(path).metadata["layout"]
+    assert detected["devices"]["head"]["pos"] == ["hmd_pos_x", "hmd_pos_y", "hmd_pos_z"]
+    assert detected["devices"]["head"]["rot"] == ["hmd_rot_w", "hmd_rot_x", "hmd_rot_y", "hmd_rot_z"]
+    assert detected["time"] == {"column": "timestamp", "unit": "ms"} and detected["axes"] == "unity"
+    lf = save_layout(tmp_path / "layout.json", detected)
+    again = formats.load_recording(path, layout=str(lf))
+    assert again.metadata["detected"].startswith("layout file: head=hmd_*")
+    assert np.abs(again.streams["head"].pos - truth["head"]).max() < 2e-4
+    # the layout wins over a wrong guess: say the file is OpenXR in metres
+    wrong = dict(detected, axes="openxr", units="m")
+    lf2 = save_layout(tmp_path / "wrong.json", wrong)
+    odd = formats.load_recording(path, layout=str(lf2))
+    assert odd.metadata["axes"] == "openxr" and odd.metadata["units"] == "m"
+    # bad layout files are named with their problem
+    bad = tmp_path / "bad.json"
+    bad.write_text('{"format": "wide_csv", "devices": {"elbow": {"pos": ["a", "b", "c"]}}, "time": {}}')
+    with pytest.raises(RecordingError, match=r"bad.json.*unknown device 'elbow'.*\"time\" must be"):
+        load_layout(bad)
+    missing = dict(detected, devices={"head": {"pos": ["nope_x", "nope_y", "nope_z"], "rot": None}})
+    lf3 = save_layout(tmp_path / "missing.json", missing)
+    with pytest.raises(RecordingError, match="take.csv, line 1: the layout names column 'nope_x'"):
+        formats.load_recording(path, layout=str(lf3))
+    with pytest.raises(RecordingError, match="applies to wide-layout CSV"):
+        formats.load_recording(_bsor(tmp_path), layout=str(lf))
+
+
+def _bsor(tmp_path):
+    from fixtures_recordings import synthetic_bsor
+    p = tmp_path / "r.bsor"
+    p.write_bytes(synthetic_bsor()[0])
+    return p
+
+
+def test_cli_save_layout_then_layout(tmp_path, capsys):
+    from blender_manikin import cli
+    path = tmp_path / "take.csv"
+    write_wide(path, **FAMILIES["openxr_dotted_m"])
+    lf = tmp_path / "layout.json"
+    assert cli.main(["solve", str(path), "--out", str(tmp_path / "o"), "--format", "json", "--height", "1.75",
+                     "--save-layout", str(lf)]) == 0
+    assert load_json(lf)["devices"]["left_hand"]["pos"][0] == "LeftHand.position.x"
+    assert cli.main(["solve", str(path), "--out", str(tmp_path / "o2"), "--format", "json", "--height", "1.75",
+                     "--layout", str(lf)]) == 0
+    out = capsys.readouterr().out
+    assert "layout file: head=head_*" in out and "axes openxr (layout file)" in out
+
+
+def load_json(p):
+    import json
+    return json.loads(open(p).read())

@@ -63,6 +63,10 @@ class MANIKIN_Settings(PropertyGroup):
                ('SCENE', "Scene Objects", "Animated objects or bones in this scene, mapped to devices")])
     filepath: StringProperty(name="Recording", subtype='FILE_PATH', default="",
                              description="Tracker recording (" + ", ".join(formats.input_extensions()) + ")")
+    layout_file: StringProperty(name="Layout", subtype='FILE_PATH', default="",
+                                description="Layout file (JSON) fixing the columns, time, units and axes of a "
+                                            "wide-layout CSV (blender-manikin solve --save-layout writes one); "
+                                            "empty: detected")
     axes: EnumProperty(name="Axes", items=_AXES_ITEMS, default='AUTO')
     units: EnumProperty(name="Units", items=_UNITS_ITEMS, default='AUTO')
     use_scene_fps: BoolProperty(name="Scene Frame Rate", default=True,
@@ -135,6 +139,7 @@ def config_from_settings(context):
     cfg = SolveConfig()
     cfg.source = s.source
     cfg.filepath = bpy.path.abspath(s.filepath) if s.filepath else ""
+    cfg.layout = bpy.path.abspath(s.layout_file) if s.layout_file else None
     cfg.axes = None if s.axes == 'AUTO' else s.axes.lower()
     cfg.units = None if s.units == 'AUTO' else s.units.lower()
     cfg.fps = scene_fps(scene) if s.use_scene_fps else float(s.fps)

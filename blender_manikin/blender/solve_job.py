@@ -79,6 +79,7 @@ class SolveConfig:
     reuse_armature: object = None
     scene_sources: dict = field(default_factory=dict)
     scene_frames: tuple | None = None
+    layout: object = None
 
     def settings(self) -> SolveSettings:
         """The solve options of this configuration (:class:`core.solve.SolveSettings`)."""

@@ -88,14 +88,22 @@ def reader_for(path) -> ReaderFormat:
     raise RecordingError(f"unsupported file type {ext or '(none)'!r}: expected {describe_inputs()}", path=path)
 
 
-def load_recording(path, axes=None, units=None) -> Recording:
+def load_recording(path, axes=None, units=None, layout=None) -> Recording:
     """Read a tracker recording with the reader of its format (:func:`reader_for`); ``axes`` /
-    ``units`` override the file's metadata.  Returns a :class:`Recording` in Blender axes and
-    metres; raises :class:`RecordingError` naming the file, line / byte offset and problem."""
+    ``units`` override the file's metadata; ``layout`` (a layout file's path or dict) fixes the
+    columns of a wide-layout CSV.  Returns a :class:`Recording` in Blender axes and metres;
+    raises :class:`RecordingError` naming the file, line / byte offset and problem."""
     path = os.fspath(path)
     if not os.path.isfile(path):
         raise RecordingError("no such file", path=path)
-    return reader_for(path).read(path, axes=axes, units=units)
+    fmt = reader_for(path)
+    if layout is not None:
+        if fmt.name != "csv":
+            raise RecordingError(f"a layout file applies to wide-layout CSV files, not to {fmt.description}",
+                                 path=path)
+        from .io_wide_csv import read_wide_csv
+        return read_wide_csv(path, axes=axes, units=units, layout=layout)
+    return fmt.read(path, axes=axes, units=units)
 
 
 def default_offsets(path) -> str:

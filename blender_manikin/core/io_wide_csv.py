@@ -113,18 +113,23 @@ def looks_wide(head_text):
     return any(len(g["pos"]) == 3 for g in groups.values())
 
 
-def _time(col, values, path):
+def _time(col, values, path, header=None):
     i, name = col
+    col_name = header[i] if header is not None else name
     v = values[:, i]
     if name in _DELTA_MS + _DELTA_S:
         v = np.cumsum(np.nan_to_num(v)) * (1e-3 if name in _DELTA_MS else 1.0)
-        return v - v[0], f"time=cumulative {name}" + (" in ms" if name in _DELTA_MS else " in s")
+        return v - v[0], f"time=cumulative {col_name}" + (" in ms" if name in _DELTA_MS else " in s")
     steps = np.diff(v[np.isfinite(v)])
     med = float(np.median(steps)) if steps.size else 0.0
+    if name in ("time_us", "time_ns"):
+        return (v - v[0]) * (1e-6 if name == "time_us" else 1e-9), f"time={col_name} in {name[5:]}"
+    if name == "time":
+        return v - v[0], f"time={col_name} in s"
     if name in _TIME_MS or med > 0.5:                  # no tracker samples slower than 2 Hz
         scale, unit = (1e-3, "ms") if med < 500 else (1e-6, "µs") if med < 5e5 else (1e-9, "ns")
-        return (v - v[0]) * scale, f"time={name} in {unit}"
-    return v - v[0], f"time={name} in s"
+        return (v - v[0]) * scale, f"time={col_name} in {unit}"
+    return v - v[0], f"time={col_name} in s"
 
 
 #: each convention's up axis (index) and the head's local forward axis, in its own coordinates
@@ -150,8 +155,90 @@ def _axes_by_forward(pos, quat, candidates):
     return best
 
 
-def read_wide_csv(path, axes=None, units=None) -> Recording:
-    """Read a wide-layout CSV (see module doc) into a :class:`Recording` (Blender axes, metres)."""
+LAYOUT_VERSION = 1
+
+
+def load_layout(path):
+    """A layout file (JSON, as :func:`save_layout` writes it) as a dict; errors name the file."""
+    import json
+    try:
+        with open(path, encoding="utf-8") as f:
+            layout = json.load(f)
+    except OSError as exc:
+        raise RecordingError(f"cannot read the layout file ({exc.strerror or exc})", path=path) from None
+    except json.JSONDecodeError as exc:
+        raise RecordingError(f"not valid JSON ({exc.msg})", path=path, line=exc.lineno) from None
+    problems = []
+    if not isinstance(layout, dict) or layout.get("format") != "wide_csv":
+        problems.append('expected an object with "format": "wide_csv"')
+    else:
+        devs = layout.get("devices")
+        if not isinstance(devs, dict) or not devs:
+            problems.append('"devices" must map device names to their columns')
+        else:
+            for d, cols in devs.items():
+                if canonical_device(d) is None:
+                    problems.append(f"unknown device {d!r}")
+                elif not isinstance(cols, dict) or not isinstance(cols.get("pos"), list) or len(cols["pos"]) != 3:
+                    problems.append(f"{d}: \"pos\" must list the x, y, z columns")
+                elif cols.get("rot") is not None and (not isinstance(cols["rot"], list) or len(cols["rot"]) != 4):
+                    problems.append(f"{d}: \"rot\" must list the w, x, y, z columns (or be null)")
+        tm = layout.get("time")
+        if not isinstance(tm, dict) or not isinstance(tm.get("column"), str) or \
+                tm.get("unit") not in ("s", "ms", "us", "ns", "delta_ms", "delta_s"):
+            problems.append('"time" must be {"column": NAME, "unit": "s"|"ms"|"us"|"ns"|"delta_ms"|"delta_s"}')
+        for key, allowed in (("units", tuple(UNITS)), ("axes", ("unity", "openxr", "blender"))):
+            if layout.get(key) is not None and layout[key] not in allowed:
+                problems.append(f'"{key}" must be one of {", ".join(allowed)} or null')
+    if problems:
+        raise RecordingError("layout file: " + "; ".join(problems), path=path)
+    return layout
+
+
+def save_layout(path, layout):
+    """Write a layout dict (``Recording.metadata["layout"]``) as a JSON layout file."""
+    import json
+    tmp = os.fspath(path) + ".tmp"
+    with open(tmp, "w", encoding="utf-8") as f:
+        json.dump(layout, f, indent=2)
+        f.write("\n")
+    os.replace(tmp, path)
+    return path
+
+
+def _prefix_of(columns):
+    """``["hmd_pos_x", "hmd_pos_y", "hmd_pos_z"]`` -> ``"hmd"``: the device part of column names."""
+    common = os.path.commonprefix(list(columns)).rstrip("_. ")
+    return re.sub(r"[_. ]?(pos|position|p|loc|location)$", "", common, flags=re.IGNORECASE)
+
+
+def _layout_groups(layout, header, path, hline):
+    """Column groups and the time column of ``header`` as a layout dict names them."""
+    index = {name.strip(): i for i, name in enumerate(header)}
+
+    def col(name):
+        if name not in index:
+            raise RecordingError(f"the layout names column {name!r}, which the header does not have",
+                                 path=path, line=hline)
+        return index[name]
+    groups = {}
+    for d, cols in layout["devices"].items():
+        dev = canonical_device(d)
+        groups[dev] = {"pos": {a: col(c) for a, c in zip("xyz", cols["pos"])},
+                       "rot": {a: col(c) for a, c in zip("wxyz", cols["rot"])} if cols.get("rot") else {},
+                       "prefix": _prefix_of(cols["pos"]) or d}
+    unit = layout["time"]["unit"]
+    name = {"s": "time", "ms": "time_ms", "us": "time_us", "ns": "time_ns", "delta_ms": "delta_time_ms",
+            "delta_s": "delta_time"}[unit]
+    return groups, (col(layout["time"]["column"]), name), []
+
+
+def read_wide_csv(path, axes=None, units=None, layout=None) -> Recording:
+    """Read a wide-layout CSV (see module doc) into a :class:`Recording` (Blender axes, metres).
+
+    layout: a layout dict (:func:`load_layout`) or a layout file's path: the columns, time,
+    units and axes it states replace the detection (``axes`` / ``units`` still win).  The
+    layout that was used, detected or given, is ``metadata["layout"]`` (:func:`save_layout`)."""
     path = os.fspath(path)
     text = read_file_bytes(path).decode("utf-8-sig", "replace")
     lines = text.splitlines()
@@ -160,10 +247,22 @@ def read_wide_csv(path, axes=None, units=None) -> Recording:
         raise RecordingError("file is empty", path=path)
     hline, header_text = rows[0]
     header = [c.strip().strip('"') for c in header_text.split(",")]
+    if isinstance(layout, (str, os.PathLike)):
+        layout = load_layout(layout)
     try:
-        groups, time_col, skipped = parse_columns(header)
+        if layout is not None:
+            groups, time_col, skipped = _layout_groups(layout, header, path, hline)
+        else:
+            groups, time_col, skipped = parse_columns(header)
     except RecordingError as exc:
+        if exc.path:
+            raise
         raise RecordingError(str(exc), path=path, line=hline) from None
+    given = {"axes": "given" if axes else None, "units": "given" if units else None}
+    if layout is not None:
+        given = {k: given[k] or ("layout file" if layout.get(k) else None) for k in given}
+        axes = axes or layout.get("axes")
+        units = units or layout.get("units")
     if time_col is None:
         raise RecordingError("no time column (expected one of time, timestamp, delta_time_ms, ...)",
                              path=path, line=hline)
@@ -190,7 +289,10 @@ def read_wide_csv(path, axes=None, units=None) -> Recording:
     if len(data) < 2:
         raise RecordingError("fewer than two rows of samples", path=path)
     values = np.asarray(data, dtype=np.float64)
-    t, time_note = _time(time_col, values, path)
+    t, time_note = _time(time_col, values, path, header)
+    time_unit = time_note.rsplit(" in ", 1)[-1] if " in " in time_note else "s"
+    if time_note.startswith("time=cumulative"):
+        time_unit = "delta_ms" if time_note.endswith("ms") else "delta_s"
     pos = {d: values[:, [g["pos"][a] for a in "xyz"]] for d, g in groups.items()}
     quat = {d: (values[:, [g["rot"][a] for a in "wxyz"]] if g["rot"] else np.tile([1.0, 0, 0, 0], (len(t), 1)))
             for d, g in groups.items()}
@@ -201,7 +303,7 @@ def read_wide_csv(path, axes=None, units=None) -> Recording:
         units_note = f"units {units} (head at {head_h * UNITS[units]:.2f} m)"
     else:
         units = canonical_units(units)
-        units_note = f"units {units} (given)"
+        units_note = f"units {units} ({given['units']})"
     scale = UNITS[units]
     if axes is None:
         up = int(np.argmax(np.nanmedian(pos["head"], axis=0)))
@@ -211,7 +313,7 @@ def read_wide_csv(path, axes=None, units=None) -> Recording:
                      f"forward axis" + ("" if len(cands) > 1 else ", Z up"))
     else:
         axes = canonical_axes(axes)
-        axes_note = f"axes {axes} (given)"
+        axes_note = f"axes {axes} ({given['axes']})"
     streams = {}
     for d in DEVICES:
         if d not in groups:
@@ -225,8 +327,16 @@ def read_wide_csv(path, axes=None, units=None) -> Recording:
     extra = "".join(f", {d}={groups[d]['prefix']}_*" for d in ("pelvis", "left_foot", "right_foot") if d in groups)
     detected = (f"wide layout: head={groups['head']['prefix']}_*, hands={hands}{extra}; {qnote}; {time_note}; "
                 f"{units_note}; {axes_note}")
+    used = {"format": "wide_csv", "version": LAYOUT_VERSION,
+            "devices": {d: {"pos": [header[g["pos"][a]] for a in "xyz"],
+                            "rot": [header[g["rot"][a]] for a in "wxyz"] if g["rot"] else None}
+                        for d, g in groups.items()},
+            "time": {"column": header[time_col[0]], "unit": {"µs": "us"}.get(time_unit, time_unit)},
+            "units": units, "axes": axes}
+    if layout is not None:
+        detected = "layout file: " + detected.split(": ", 1)[1]
     meta = {"format": "wide_csv", "axes": axes, "units": units, "detected": detected,
-            "ignored_columns": skipped}
+            "ignored_columns": skipped, "layout": used}
     return Recording(streams=streams, source=path, metadata=meta, warnings=[])
 
 

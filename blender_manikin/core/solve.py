@@ -47,6 +47,7 @@ class SolveSettings:
     optional ``arm_span``, metres); with TPOSE/AUTO a given ``height`` overrides the measured
     stature.  offsets: a device-offsets preset name, ``"none"``, ``"auto"`` (see
     :func:`resolve_offsets`) or an offsets dict (:mod:`.device_offsets`).  max_frames: crop.
+    layout: a layout file (path or dict) fixing the columns of a wide-layout CSV.
     """
     axes: str | None = None
     units: str | None = None
@@ -57,6 +58,7 @@ class SolveSettings:
     arm_span: float | None = None
     offsets: object = "auto"
     max_frames: int | None = None
+    layout: object = None
 
 
 @dataclass
@@ -106,7 +108,7 @@ def read_recording(path, settings: SolveSettings):
     from .formats import load_recording
     if not path:
         raise SolveError("no recording file chosen")
-    return load_recording(path, axes=settings.axes, units=settings.units)
+    return load_recording(path, axes=settings.axes, units=settings.units, layout=settings.layout)
 
 
 def resample_recording(recording, fps):

@@ -32,6 +32,7 @@ class MANIKIN_PT_solve(_Base, Panel):
             col.prop(s, "filepath")
             col.prop(s, "axes")
             col.prop(s, "units")
+            col.prop(s, "layout_file")
         else:
             for d in DEVICES:
                 src = getattr(s, d)
