@@ -209,3 +209,26 @@ def test_resample_is_fast_for_ten_minutes():
     elapsed = time.perf_counter() - t0
     assert len(times) >= 35_900
     assert elapsed < 1.0, f"resampling took {elapsed:.2f} s"
+
+
+def test_controller_dropping_to_the_origin_and_jumps_are_bridged_and_reported():
+    """Real devices losing tracking: a controller reports (0, 0, 0), or one sample jumps away
+    when tracking returns.  Both are bridged like any gap and named in the report."""
+    from blender_manikin.core.resample import resample as rs
+    n, rate = 200, 90.0
+    t = np.arange(n) / rate
+    q = np.tile([1.0, 0, 0, 0], (n, 1))
+    head = np.stack([0.02 * np.sin(t), np.zeros(n), np.full(n, 1.6)], -1)
+    left = np.stack([0.3 + 0.1 * np.sin(2 * t), -0.3 * np.ones(n), 1.2 + 0.05 * np.cos(t)], -1)
+    right = left * np.array([-1.0, 1.0, 1.0])
+    truth_left = left.copy()
+    left[60:70] = 0.0                                  # lost: the runtime reports the origin
+    right[120] += [0.0, 0.0, 1.5]                      # one sample jumps 1.5 m when tracking returns
+    rec = Recording({"head": TrackerStream("head", t, head, q), "left_hand": TrackerStream("left_hand", t, left, q),
+                     "right_hand": TrackerStream("right_hand", t, right, q)}, source="lost.csv")
+    times, pos, quat, valid, report = rs(rec, 90.0)
+    reasons = {(g.device, g.reason) for g in report.gaps}
+    assert ("left_hand", "origin") in reasons and ("right_hand", "jump") in reasons
+    assert np.abs(pos["left_hand"][60:70] - truth_left[60:70]).max() < 0.01       # bridged, not at 0
+    assert not valid["left_hand"][62] and valid["left_hand"][40]
+    assert abs(pos["right_hand"][120, 2] - 1.2 - 0.05 * np.cos(t[120])) < 0.01

@@ -11,7 +11,12 @@ A sample is *usable* when its ``valid`` flag is set, its position and
 quaternion are finite and the quaternion is not zero, and it is not a
 *frozen* repeat: when a device repeats exactly the same pose for longer
 than ``freeze_s`` while another device moves, the repeats after the first
-are stale (tracking froze) and are not used.
+are stale (tracking froze) and are not used.  Two more ways real devices
+lose tracking are caught: a position that drops to the tracking origin
+(``|p| < 1 mm`` while the device's median distance from it is over 30 cm;
+reason ``'origin'``), and a *jump*: a sample that is more than ``jump_m``
+away from both its usable neighbours while they are close to each other
+(a spike when tracking returns; reason ``'jump'``).
 
 A *gap* is an interval between two consecutive usable samples of a device
 that either had unusable samples in it or is longer than ``gap_factor``
@@ -46,7 +51,8 @@ class Gap:
     (for ``reason='start'``: the grid start and the first usable sample; for
     ``'end'``: the last usable sample and the grid end).
     reason: ``'missing'`` (no rows), ``'invalid'`` (valid=0), ``'nan'``
-    (non-finite values), ``'frozen'`` (repeated pose), ``'start'``/``'end'``
+    (non-finite values), ``'frozen'`` (repeated pose), ``'origin'`` (dropped to
+    the tracking origin), ``'jump'`` (a spike away from its neighbours), ``'start'``/``'end'``
     (device not tracked at the start/end of the grid).
     samples: number of unusable samples inside the gap.
     """
@@ -166,8 +172,19 @@ def _frozen(t, pos, quat, others, freeze_s, move_tol):
     return np.concatenate(out) if out else np.zeros(0, dtype=np.int64)
 
 
+def _jumps(pos, jump_m):
+    """Indices of single-sample spikes: further than ``jump_m`` from both neighbours while the
+    neighbours are within ``jump_m / 2`` of each other."""
+    if pos.shape[0] < 3:
+        return np.zeros(0, dtype=np.int64)
+    prev = np.linalg.norm(pos[1:-1] - pos[:-2], axis=-1)
+    nxt = np.linalg.norm(pos[1:-1] - pos[2:], axis=-1)
+    across = np.linalg.norm(pos[2:] - pos[:-2], axis=-1)
+    return np.nonzero((prev > jump_m) & (nxt > jump_m) & (across < 0.5 * jump_m))[0] + 1
+
+
 def resample(recording: Recording, fps, t_start=None, t_end=None, required=REQUIRED_DEVICES,
-             gap_factor=3.0, freeze_s=0.1, move_tol=0.002, check_units=True):
+             gap_factor=3.0, freeze_s=0.1, move_tol=0.002, check_units=True, jump_m=0.25):
     """Resample every device of ``recording`` onto one frame grid.
 
     recording: a :class:`Recording` (Blender axes, metres).
@@ -180,6 +197,7 @@ def resample(recording: Recording, fps, t_start=None, t_end=None, required=REQUI
     intervals (median step of the device) is a gap.
     freeze_s, move_tol: a pose repeated exactly for more than ``freeze_s``
     seconds while another device moves more than ``move_tol`` metres is frozen.
+    jump_m: metres a sample may stand off both neighbours before it is a jump.
     check_units: raise when the median head height is outside 0.5-3 m (see
     :func:`check_head_height`).
 
@@ -212,6 +230,15 @@ def resample(recording: Recording, fps, t_start=None, t_end=None, required=REQUI
         reason[~s.valid] = "invalid"
         reason[s.valid & ~(finite & nonzero)] = "nan"
         ok = s.valid & finite & nonzero
+        if ok.any():
+            dist = np.linalg.norm(np.where(finite[:, None], s.pos, 0.0), axis=-1)
+            at_origin = ok & (dist < 1e-3) & (np.median(dist[ok]) > 0.3)
+            reason[at_origin] = "origin"
+            ok &= ~at_origin
+            idx = np.nonzero(ok)[0]
+            spikes = idx[_jumps(s.pos[idx], jump_m)]
+            reason[spikes] = "jump"
+            ok[spikes] = False
         if ok.sum() == 0:
             if d in required:
                 raise RecordingError(f"{d} has no usable samples (all invalid or NaN)", path=path)
