@@ -41,12 +41,16 @@ def test_model_file_and_contract_match_the_code(runner):
     c = runner.contract
     assert os.path.getsize(DEFAULT_MODEL) <= 10 * 1024 * 1024
     assert c.kind == "manikin" and c.devices == features.INPUT_DEVICES
-    assert c.input_dim == features.input_dim() and c.output_dim == features.output_dim("manikin")
+    # conditioned on the performer's proportions
+    assert c.body and tuple(c.raw["body_features"]) == features.BODY_FEATURES
+    assert c.input_dim == features.input_dim(body=True) and c.output_dim == features.output_dim("manikin")
+    sources = c.raw["training_data"]["sources"]
+    assert sources and all(src.get("licence") for src in sources)
     assert [tuple(b) for b in c.raw["output_blocks"]] == [tuple(b) for b in features.OUTPUT_BLOCKS["manikin"]]
     assert tuple(c.raw["joint_names"]) == sk.JOINT_NAMES
     assert c.raw["opset"] >= 17
     assert 0 < runner.num_parameters <= 2_000_000
-    assert "CC BY-NC" in c.raw["licence"]
+    assert "CC BY-NC-ND" in c.raw["licence"]
     x = np.zeros((2, c.window, c.input_dim), np.float32)
     y = runner.predict(x)
     assert y.shape == (2, c.window, c.output_dim) and np.isfinite(y).all()

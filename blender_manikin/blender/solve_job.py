@@ -39,39 +39,23 @@ from ..core.solve import (SolveError, SolveSettings, error_message, make_targets
 
 
 @dataclass
-class SolveConfig:
-    """Everything a solve needs, as plain values (from the panel or the command line).
+class SolveConfig(SolveSettings):
+    """Everything a solve needs, as plain values (from the panel or the command line): the solve
+    options of :class:`core.solve.SolveSettings` (axes, units, fps, calibration, tpose_time,
+    height, arm_span, offsets, max_frames, layout; here ``fps`` None means the scene's), and
+    what Blender adds.
 
-    source: ``"FILE"`` (``filepath``) or ``"SCENE"`` (``scene_sources``:
-    device → ``(object name, bone name or "")``, sampled over
-    ``scene_frames`` = (first, last) scene frame).
-    axes / units: override the file's metadata (None = file / format default).
-    fps: solve frame rate (None = the scene's).
-    calibration: ``"AUTO"`` (calibrate on the most T-pose-like moment when
-    one is plausible, else stature from the standing head height), ``"TPOSE"``
-    (calibrate on the T-pose at ``tpose_time`` seconds after the first
-    sample) or ``"MEASURE"`` (``height`` and optional ``arm_span``, metres).
-    With TPOSE/AUTO a given ``height`` overrides the measured stature.
-    offsets: device offsets preset name (``"none"`` when the devices already
-    give joint poses; ``"auto"``: see :func:`resolve_offsets`) or an offsets
-    dict (:mod:`core.device_offsets`).  frame_start: scene frame of the first solved frame;
-    max_frames: crop (None = whole recording).
-    live_rig: convert the solved armature to the live swivel rig
-    (:mod:`.live_rig`): elbows/knees follow the swivel properties and the
-    hand/foot controls.  False keeps plain FK keys only.
+    source: ``"FILE"`` (``filepath``) or ``"SCENE"`` (``scene_sources``: device → ``(object
+    name, bone name or "")``, sampled over ``scene_frames`` = (first, last) scene frame).
+    frame_start: scene frame of the first solved frame.  create_trackers: also key tracker
+    empties.  live_rig: convert the solved armature to the live swivel rig (:mod:`.live_rig`):
+    elbows/knees follow the swivel properties and the hand/foot controls; False keeps plain FK
+    keys only.  set_scene_range, armature_name, reuse_armature: how the result is written.
     """
+    fps: float | None = None
     source: str = "FILE"
     filepath: str = ""
-    axes: str | None = None
-    units: str | None = None
-    fps: float | None = None
-    calibration: str = "AUTO"
-    tpose_time: float | None = None
-    height: float | None = None
-    arm_span: float | None = None
-    offsets: str = "auto"
     frame_start: int = 1
-    max_frames: int | None = None
     create_trackers: bool = False
     live_rig: bool = True
     set_scene_range: bool = False
@@ -79,7 +63,6 @@ class SolveConfig:
     reuse_armature: object = None
     scene_sources: dict = field(default_factory=dict)
     scene_frames: tuple | None = None
-    layout: object = None
 
     def settings(self) -> SolveSettings:
         """The solve options of this configuration (:class:`core.solve.SolveSettings`)."""
