@@ -187,3 +187,25 @@ def test_cli_save_layout_then_layout(tmp_path, capsys):
 def load_json(p):
     import json
     return json.loads(open(p).read())
+
+
+def test_bad_cells_name_their_line(tmp_path):
+    p = tmp_path / "b.csv"
+    write_wide(p, **FAMILIES["unity_logger_ms_cm"])
+    lines = p.read_text().splitlines()
+    cells = lines[5].split(",")
+    cells[3] = "oops"
+    lines[5] = ",".join(cells)
+    lines[8] = lines[8] + ",1"
+    p.write_text("\n".join(lines) + "\n")
+    with pytest.raises(RecordingError, match="b.csv, line 9: .*fields, the header has"):
+        formats.load_recording(p)
+    lines[8] = lines[8][:-2]
+    p.write_text("\n".join(lines) + "\n")
+    with pytest.raises(RecordingError, match="b.csv, line 6: 'oops' is not a number"):
+        formats.load_recording(p)
+    cells[3] = ""                                            # an empty cell is a lost sample
+    lines[5] = ",".join(cells)
+    p.write_text("\n".join(lines) + "\n")
+    rec = formats.load_recording(p)
+    assert not rec.streams["head"].valid[4] and rec.streams["head"].valid[5]

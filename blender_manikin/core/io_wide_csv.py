@@ -113,7 +113,7 @@ def looks_wide(head_text):
     return any(len(g["pos"]) == 3 for g in groups.values())
 
 
-def _time(col, values, path, header=None):
+def _time(col, values, header=None):
     i, name = col
     col_name = header[i] if header is not None else name
     v = values[:, i]
@@ -276,20 +276,28 @@ def read_wide_csv(path, axes=None, units=None, layout=None) -> Recording:
     if missing:
         raise RecordingError(f"no columns for {', '.join(missing)} (found devices: {', '.join(groups) or 'none'}; "
                              f"unrecognised columns: {', '.join(skipped[:8])})", path=path, line=hline)
-    data = []
-    for n, ln in rows[1:]:
-        cells = ln.split(",")
-        if len(cells) != len(header):
-            raise RecordingError(f"{len(cells)} fields, the header has {len(header)}", path=path, line=n)
-        try:
-            data.append([float(c) if c.strip() else np.nan for c in cells])
-        except ValueError:
-            bad = next(c for c in cells if c.strip() and not _is_float(c))
-            raise RecordingError(f"{bad.strip()!r} is not a number", path=path, line=n) from None
-    if len(data) < 2:
+    body = rows[1:]
+    if len(body) < 2:
         raise RecordingError("fewer than two rows of samples", path=path)
-    values = np.asarray(data, dtype=np.float64)
-    t, time_note = _time(time_col, values, path, header)
+    cells = [ln.split(",") for _, ln in body]
+    counts = np.fromiter((len(c) for c in cells), dtype=np.int64, count=len(cells))
+    wrong = np.nonzero(counts != len(header))[0]
+    if wrong.size:
+        k = int(wrong[0])
+        raise RecordingError(f"{counts[k]} fields, the header has {len(header)}", path=path, line=body[k][0])
+    text_cells = np.char.strip(np.array(cells, dtype=str))
+    text_cells[text_cells == ""] = "nan"                 # an empty cell is a lost sample
+    try:
+        values = text_cells.astype(np.float64)           # one vectorised conversion
+    except ValueError:
+        for k, row in enumerate(text_cells):             # only to name the bad cell's line
+            for c in row:
+                try:
+                    float(c)
+                except ValueError:
+                    raise RecordingError(f"{c!r} is not a number", path=path, line=body[k][0]) from None
+        raise
+    t, time_note = _time(time_col, values, header)
     time_unit = time_note.rsplit(" in ", 1)[-1] if " in " in time_note else "s"
     if time_note.startswith("time=cumulative"):
         time_unit = "delta_ms" if time_note.endswith("ms") else "delta_s"
@@ -321,7 +329,7 @@ def read_wide_csv(path, axes=None, units=None, layout=None) -> Recording:
         p, q = to_blender(pos[d] * scale, normalize(quat[d]), axes)
         ok = np.all(np.isfinite(p), -1) & np.all(np.isfinite(q), -1)
         streams[d] = TrackerStream(d, t.copy(), p, q, ok)
-    has_w_first = all(header[g["rot"]["w"]] and g["rot"]["w"] < g["rot"]["x"] for g in groups.values() if g["rot"])
+    has_w_first = all(g["rot"]["w"] < g["rot"]["x"] for g in groups.values() if g["rot"])
     qnote = "quaternions w,x,y,z" if has_w_first else "quaternions x,y,z,w"
     hands = "/".join(f"{groups[d]['prefix']}_*" for d in ("left_hand", "right_hand"))
     extra = "".join(f", {d}={groups[d]['prefix']}_*" for d in ("pelvis", "left_foot", "right_foot") if d in groups)
@@ -339,10 +347,3 @@ def read_wide_csv(path, axes=None, units=None, layout=None) -> Recording:
             "ignored_columns": skipped, "layout": used}
     return Recording(streams=streams, source=path, metadata=meta, warnings=[])
 
-
-def _is_float(s):
-    try:
-        float(s)
-        return True
-    except ValueError:
-        return False
