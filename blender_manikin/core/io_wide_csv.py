@@ -35,6 +35,7 @@ import re
 import numpy as np
 
 from .devices import DEVICES, canonical_device
+from .plain import shown
 from .recording import (Recording, RecordingError, TrackerStream, UNITS, canonical_axes, canonical_units,
                         read_file_bytes, to_blender)
 from .rotations import normalize, quat_rotate
@@ -295,7 +296,7 @@ def read_wide_csv(path, axes=None, units=None, layout=None) -> Recording:
                 try:
                     float(c)
                 except ValueError:
-                    raise RecordingError(f"{c!r} is not a number", path=path, line=body[k][0]) from None
+                    raise RecordingError(f"{shown(c)} is not a number", path=path, line=body[k][0]) from None
         raise
     t, time_note = _time(time_col, values, header)
     time_unit = time_note.rsplit(" in ", 1)[-1] if " in " in time_note else "s"
