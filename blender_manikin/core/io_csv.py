@@ -45,7 +45,7 @@ from .plain import shown
 from .pose_result import DEVICES
 from .recording import (
     Recording, RecordingError, TrackerStream, UNITS, canonical_axes, canonical_device,
-    canonical_units, from_blender, read_file_bytes, to_blender,
+    canonical_units, from_blender, to_blender,
 )
 from .rotations import normalize
 
@@ -54,6 +54,11 @@ _NUMERIC = ("time", "px", "py", "pz", "qw", "qx", "qy", "qz")
 _META_RE = re.compile(r"^#\s*([A-Za-z_][\w\-]*)\s*:\s*(.*?)\s*$")
 _TRUE = {"1", "true", "yes", "1.0"}
 _FALSE = {"0", "false", "no", "0.0"}
+
+
+#: bytes read and parsed at a time: bounds the reader's working memory on big files
+#: (the recording itself takes about 70 bytes per sample)
+BLOCK_BYTES = 8 << 20
 
 
 def _split(line):
@@ -77,70 +82,202 @@ def _to_float(values, name, lines, path):
         raise
 
 
-def read_csv(path, axes=None, units=None) -> Recording:
+def _text_blocks(path, block_bytes):
+    """Successive blocks of whole lines of the file at ``path``, as text.
+
+    UTF-8 (a BOM is dropped); a byte that is not UTF-8 raises :class:`RecordingError` with its
+    line (counting ``\n``)."""
+    try:
+        fh = open(path, "rb")
+    except OSError as exc:
+        raise RecordingError(f"cannot read file ({exc.strerror or exc})", path=path) from None
+    with fh:
+        line, rest, first = 1, b"", True     # line: of the block's start, for decoding errors
+        while True:
+            try:
+                chunk = fh.read(block_bytes)
+            except OSError as exc:
+                raise RecordingError(f"cannot read file ({exc.strerror or exc})", path=path) from None
+            buf = rest + chunk
+            cut = len(buf) if not chunk else buf.rfind(b"\n") + 1
+            if cut == 0 and chunk:         # no line end yet: read on
+                rest = buf
+                continue
+            block, rest = buf[:cut], buf[cut:]
+            if block:
+                try:
+                    text = block.decode("utf-8-sig" if first else "utf-8")
+                except UnicodeDecodeError as exc:
+                    raise RecordingError(f"not UTF-8 text (byte 0x{block[exc.start]:02x})", path=path,
+                                         line=line + block[:exc.start].count(b"\n")) from None
+                yield text
+                line += block.count(b"\n")
+                first = False
+            if not chunk:
+                return
+
+
+class _Block:
+    """Parsed data rows of one block: ``t (n,)`` seconds, ``pq (n, 7)`` px..qz in file units and
+    axes, ``valid (n,)`` bool, ``names`` device names as written, ``lines (n,)`` line numbers."""
+    __slots__ = ("t", "pq", "valid", "names", "lines")
+
+
+def _parse_exact(rows, lines, header, path):
+    """Parse data lines one field at a time (quoted fields, odd cells): the reference path whose
+    errors name the exact line and cell.  rows: stripped data lines; lines: their numbers."""
+    fields = [_split(r) for r in rows]
+    ncol = len(header)
+    counts = np.fromiter((len(r) for r in fields), dtype=np.int64, count=len(fields))
+    bad = np.nonzero(counts != ncol)[0]
+    if bad.size:
+        k = int(bad[0])
+        raise RecordingError(f"expected {ncol} comma-separated fields (as in the header), found {counts[k]}",
+                             path=path, line=int(lines[k]))
+    cols = list(zip(*fields))
+    b = _Block()
+    num = [_to_float(cols[header.index(n)], n, lines, path) for n in _NUMERIC]
+    b.t, b.pq = num[0], np.stack(num[1:], -1)
+    if "valid" in header:
+        raw = cols[header.index("valid")]
+        vs = np.char.lower(np.asarray(raw, dtype=str))
+        is_true, is_false = np.isin(vs, list(_TRUE)), np.isin(vs, list(_FALSE))
+        badv = np.nonzero(~(is_true | is_false))[0]
+        if badv.size:
+            k = int(badv[0])
+            raise RecordingError(f"column 'valid': {shown(raw[k])} is not 0 or 1", path=path, line=int(lines[k]))
+        b.valid = is_true
+    else:
+        b.valid = np.ones(len(rows), dtype=bool)
+    b.names = list(cols[header.index("device")])
+    b.lines = np.asarray(lines, dtype=np.int64)
+    return b
+
+
+#: longest device name the fast path reads (a longer one goes through the exact path)
+_NAME_CHARS = 24
+
+
+def _parse_fast(rows, lines, header, text=None):
+    """The same as :func:`_parse_exact` through numpy's C CSV parser; None where that path
+    cannot be sure (quotes, a cell it does not parse, a field count off), so the caller falls
+    back to the exact path for the block.  text: the block's whole text when ``rows`` are all
+    its lines (lets the checks run on it in one pass)."""
+    ncol = len(header)
+    if ('"' in text) if text is not None else any('"' in r for r in rows):
+        return None
+    cols = [header.index(n) for n in _NUMERIC] + ([header.index("valid")] if "valid" in header else [])
+    # Field counts: numpy rejects a row that lacks a column it reads; the comma total then
+    # catches rows with too many fields, unless unread columns follow the last one it reads.
+    commas = text.count(",") if text is not None else sum(r.count(",") for r in rows)
+    if commas != (ncol - 1) * len(rows) or (
+            max(cols) < ncol - 1 and any(r.count(",") != ncol - 1 for r in rows)):
+        return None
+    dcol = header.index("device")
+    use = sorted(cols + [dcol])
+    dtype = np.dtype([(f"c{c}", f"S{_NAME_CHARS}" if c == dcol else np.float64) for c in use])
+    try:           # one pass of numpy's C parser over the block
+        rec = np.loadtxt(rows, delimiter=",", usecols=use, dtype=dtype, ndmin=1, comments=None)
+    except (ValueError, UnicodeEncodeError):
+        return None
+    names = np.ascontiguousarray(rec[f"c{dcol}"])
+    if names.size and np.any(names.view(np.uint8).reshape(len(names), _NAME_CHARS)[:, -1]):
+        return None                     # a name may have been cut short
+    b = _Block()
+    b.t = rec[f"c{cols[0]}"].copy()
+    b.pq = np.stack([rec[f"c{c}"] for c in cols[1:8]], -1)
+    if "valid" in header:
+        v = rec[f"c{cols[8]}"]
+        if not np.all((v == 0) | (v == 1)):
+            return None
+        b.valid = v == 1
+    else:
+        b.valid = np.ones(len(rows), dtype=bool)
+    b.names = names
+    b.lines = lines
+    return b
+
+
+def _device_codes(block, path):
+    """``(n,)`` int8 index into :data:`DEVICES` of each row's device name; an unknown name raises
+    :class:`RecordingError` with its line.  One vectorised comparison per distinct name."""
+    names = np.asarray(block.names)
+    codes = np.empty(len(names), dtype=np.int8)
+    todo = np.ones(len(names), dtype=bool)
+    while todo.any():
+        k = int(np.argmax(todo))
+        name = names[k].decode("utf-8", "replace") if isinstance(names[k], bytes) else str(names[k])
+        d = canonical_device(name)
+        if d is None:
+            raise RecordingError(f"unknown device {shown(name.strip())} (expected one of "
+                                 f"{', '.join(DEVICES)})", path=path, line=int(block.lines[k]))
+        same = names == names[k]
+        codes[same] = DEVICES.index(d)
+        todo &= ~same
+    return codes
+
+
+def read_csv(path, axes=None, units=None, block_bytes=None) -> Recording:
     """Read a native CSV recording (see module docstring).
 
     path: file path.  axes: ``openxr``/``unity``/``blender`` overriding the
     file's ``# axes:`` metadata (default ``openxr``).  units: ``m``/``cm``/``mm``
-    overriding ``# units:`` (default ``m``).
+    overriding ``# units:`` (default ``m``).  block_bytes: how much of the file is
+    parsed at a time (default :data:`BLOCK_BYTES`; the result does not depend on it).
+    The common rows (no quotes, nothing odd) go through numpy's C parser; a block with
+    anything else is parsed field by field, so errors name the exact line either way.
 
     Returns a :class:`Recording` in Blender axes and metres with
     ``metadata['axes']``/``['units']`` set to what was applied.
     """
     path = os.fspath(path)
-    raw = read_file_bytes(path)
-    try:
-        text = raw.decode("utf-8-sig")
-    except UnicodeDecodeError as exc:
-        line = raw[:exc.start].count(b"\n") + 1
-        raise RecordingError(f"not UTF-8 text (byte 0x{raw[exc.start]:02x})", path=path, line=line) from None
-    if not text.strip():
+    metadata, meta_line = {}, {}
+    header = header_line = None
+    blocks = []
+    any_text = False
+    first = 1                                # line number of the block's first line
+    for text in _text_blocks(path, max(int(block_bytes or BLOCK_BYTES), 1)):
+        block_lines = text.splitlines()
+        j = 0
+        if header is None:                  # comments, metadata and the header, line by line
+            while j < len(block_lines) and header is None:
+                s = block_lines[j].strip()
+                if s and not s.startswith("#"):
+                    header = [f.lower() for f in _split(s)]
+                    header_line = first + j
+                    _check_header(header, header_line, path)
+                elif s:
+                    _metadata_line(s, first + j, metadata, meta_line)
+                any_text = any_text or bool(s)
+                j += 1
+        rest = block_lines[j:]
+        if not rest:
+            first += len(block_lines)
+            continue
+        rows = [s for s in rest if s and s[0] != "#"]
+        block = None
+        if len(rows) == len(rest):          # the usual block: data lines only
+            block = _parse_fast(rows, np.arange(first + j, first + j + len(rest), dtype=np.int64), header,
+                                text=text if j == 0 else None)
+        if block is None:                   # comments, blank or padded lines, odd cells: line by line
+            rest = [ln.strip() for ln in rest]
+            for i, s in enumerate(rest):
+                if s.startswith("#"):
+                    _metadata_line(s, first + j + i, metadata, meta_line)
+            rows = [s for s in rest if s and s[0] != "#"]
+            lines = np.asarray([first + j + i for i, s in enumerate(rest) if s and s[0] != "#"], dtype=np.int64)
+            if rows:
+                block = _parse_fast(rows, lines, header) or _parse_exact(rows, lines, header, path)
+        if block is not None:
+            blocks.append(block)
+            any_text = True
+        first += len(block_lines)
+
+    if not any_text:
         raise RecordingError("file is empty", path=path)
-
-    metadata = {}
-    meta_line = {}
-    header = None
-    header_line = None
-    data_lines = []
-    line_numbers = []
-    for i, line in enumerate(text.splitlines(), 1):
-        s = line.strip()
-        if not s:
-            continue
-        if s.startswith("#"):
-            m = _META_RE.match(s)
-            if m:
-                key = m.group(1).lower()
-                metadata[key] = m.group(2)
-                meta_line[key] = i
-            continue
-        if header is None:
-            header = [f.lower() for f in _split(s)]
-            header_line = i
-            continue
-        data_lines.append(s)
-        line_numbers.append(i)
-
     if header is None:
         raise RecordingError("no column header and no data (only comments)", path=path)
-    missing = [c for c in REQUIRED_COLUMNS if c not in header]
-    if missing:
-        looks_like_data = False
-        try:
-            float(header[0])
-            looks_like_data = True
-        except ValueError:
-            pass
-        expected = ",".join(REQUIRED_COLUMNS)
-        if looks_like_data or len(missing) == len(REQUIRED_COLUMNS):
-            raise RecordingError(f"wrong header: expected the column names {expected!r} "
-                                 f"(any order), found {','.join(header)!r}", path=path, line=header_line)
-        raise RecordingError(f"header is missing column(s) {', '.join(missing)} (expected {expected!r})",
-                             path=path, line=header_line)
-    dup = sorted({c for c in header if header.count(c) > 1 and c in REQUIRED_COLUMNS + ("valid",)})
-    if dup:
-        raise RecordingError(f"header repeats column(s) {', '.join(dup)}", path=path, line=header_line)
-    if not data_lines:
+    if not blocks:
         raise RecordingError("no data rows after the header", path=path, line=header_line)
 
     # --- axes and units: option wins over metadata
@@ -148,54 +285,22 @@ def read_csv(path, axes=None, units=None) -> Recording:
     axes_used = _resolve("axes", axes, metadata, meta_line, canonical_axes, "openxr", path, warnings)
     units_used = _resolve("units", units, metadata, meta_line, canonical_units, "m", path, warnings)
 
-    # --- split rows
-    rows = [_split(s) for s in data_lines]
-    lines = np.asarray(line_numbers)
-    ncol = len(header)
-    counts = np.fromiter((len(r) for r in rows), dtype=np.int64, count=len(rows))
-    bad = np.nonzero(counts != ncol)[0]
-    if bad.size:
-        k = int(bad[0])
-        raise RecordingError(f"expected {ncol} comma-separated fields (as in the header), found {counts[k]}",
-                             path=path, line=int(lines[k]))
-    cols = list(zip(*rows))
-    col = {name: cols[header.index(name)] for name in REQUIRED_COLUMNS + (("valid",) if "valid" in header else ())}
-
-    values = {name: _to_float(col[name], name, lines, path) for name in _NUMERIC}
-    t = values["time"]
+    lines = np.concatenate([b.lines for b in blocks])
+    t = np.concatenate([b.t for b in blocks])
     nonfinite = np.nonzero(~np.isfinite(t))[0]
     if nonfinite.size:
         k = int(nonfinite[0])
-        raise RecordingError(f"time {shown(col['time'][k])} is not a finite number", path=path, line=int(lines[k]))
+        raise RecordingError(f"time {shown(t[k])} is not a finite number", path=path, line=int(lines[k]))
 
-    # devices: map unique names
-    names, inverse = np.unique(np.asarray(col["device"], dtype=object).astype(str), return_inverse=True)
-    dev_of_name = []
-    for j, name in enumerate(names):
-        d = canonical_device(name)
-        if d is None:
-            k = int(np.nonzero(inverse == j)[0][0])
-            raise RecordingError(f"unknown device {shown(name)} (expected one of {', '.join(DEVICES)})",
-                                 path=path, line=int(lines[k]))
-        dev_of_name.append(d)
-    dev = np.asarray(dev_of_name, dtype=object)[inverse]
-
-    if "valid" in col:
-        vs = np.char.lower(np.asarray(col["valid"], dtype=str))
-        is_true = np.isin(vs, list(_TRUE))
-        is_false = np.isin(vs, list(_FALSE))
-        badv = np.nonzero(~(is_true | is_false))[0]
-        if badv.size:
-            k = int(badv[0])
-            raise RecordingError(f"column 'valid': {shown(col['valid'][k])} is not 0 or 1", path=path,
-                                 line=int(lines[k]))
-        valid = is_true
-    else:
-        valid = np.ones(len(rows), dtype=bool)
+    dev = np.concatenate([_device_codes(b, path) for b in blocks])
+    valid = np.concatenate([b.valid for b in blocks])
+    pq = np.concatenate([b.pq for b in blocks])
+    del blocks
 
     scale = UNITS[units_used]
-    pos = np.stack([values["px"], values["py"], values["pz"]], -1) * scale
-    quat = np.stack([values["qw"], values["qx"], values["qy"], values["qz"]], -1)
+    pos = pq[:, :3] * scale
+    quat = pq[:, 3:]
+    del pq
     qn = np.linalg.norm(quat, axis=-1)
     finite_q = np.isfinite(qn)
     zero_q = finite_q & (qn < 1e-6)
@@ -213,8 +318,8 @@ def read_csv(path, axes=None, units=None) -> Recording:
     pos, quat = to_blender(pos, quat, axes_used)
 
     streams = {}
-    for d in DEVICES:
-        idx = np.nonzero(dev == d)[0]
+    for code, d in enumerate(DEVICES):
+        idx = np.nonzero(dev == code)[0]
         if idx.size == 0:
             continue
         td = t[idx]
@@ -230,6 +335,36 @@ def read_csv(path, axes=None, units=None) -> Recording:
     metadata["axes"] = axes_used
     metadata["units"] = units_used
     return Recording(streams=streams, source=path, metadata=metadata, warnings=warnings)
+
+
+def _metadata_line(s, line, metadata, meta_line):
+    """Keep a ``# key: value`` comment line's pair in ``metadata`` (other comments are ignored)."""
+    m = _META_RE.match(s)
+    if m:
+        key = m.group(1).lower()
+        metadata[key] = m.group(2)
+        meta_line[key] = line
+
+
+def _check_header(header, header_line, path):
+    """Raise :class:`RecordingError` when the header lacks or repeats a required column."""
+    missing = [c for c in REQUIRED_COLUMNS if c not in header]
+    if missing:
+        looks_like_data = False
+        try:
+            float(header[0])
+            looks_like_data = True
+        except ValueError:
+            pass
+        expected = ",".join(REQUIRED_COLUMNS)
+        if looks_like_data or len(missing) == len(REQUIRED_COLUMNS):
+            raise RecordingError(f"wrong header: expected the column names {expected!r} "
+                                 f"(any order), found {','.join(header)!r}", path=path, line=header_line)
+        raise RecordingError(f"header is missing column(s) {', '.join(missing)} (expected {expected!r})",
+                             path=path, line=header_line)
+    dup = sorted({c for c in header if header.count(c) > 1 and c in REQUIRED_COLUMNS + ("valid",)})
+    if dup:
+        raise RecordingError(f"header repeats column(s) {', '.join(dup)}", path=path, line=header_line)
 
 
 def _resolve(key, option, metadata, meta_line, canon, default, path, warnings):

@@ -57,6 +57,11 @@ LOCK_AXES = (0, 1)
 #: drifting further is split into successive plants (see :func:`lock_planted_feet`)
 LOCK_MAX_DRIFT = 0.05
 COLLAR_MAX_SWING = np.radians(25.0)
+#: network windows built, run and decoded at a time (bounds the network's memory on long takes)
+NETWORK_WINDOWS_PER_BATCH = 1024
+#: scene frames posed at a time by the torso FK, collar and limb stages (bounds their memory);
+#: every frame is posed on its own, so the result does not depend on it
+ASSEMBLY_CHUNK_FRAMES = 8192
 
 
 class SolveCancelled(Exception):
@@ -109,12 +114,15 @@ def resample_pose_targets(pos, rotm, fps_in, fps_out):
     return p, rot.quat_to_matrix(qo), t_in, t_out
 
 
-def run_network(targets: TrackerTargets, body: Body, runner, progress=None, stride=None):
+def run_network(targets: TrackerTargets, body: Body, runner, progress=None, stride=None, windows_per_batch=None):
     """Windows → onnxruntime → blended per-frame :class:`NetworkOutput` at the scene fps.
 
     stride: frames between window starts at the model's rate (default
     :data:`WINDOW_STRIDE` × window); smaller strides average more windows per
-    frame (smoother, slower).
+    frame (smoother, slower).  windows_per_batch: windows built, run and
+    decoded at a time (default :data:`NETWORK_WINDOWS_PER_BATCH`), which bounds
+    the memory on long takes; the windows and the order they are blended in do
+    not depend on it, so neither does the result.
     """
     c = runner.contract
     W = c.window
@@ -128,61 +136,49 @@ def run_network(targets: TrackerTargets, body: Body, runner, progress=None, stri
     stride = max(int(stride or round(WINDOW_STRIDE * W)), 1)
     pad = W // 2
     starts = np.arange(-pad, max(N - pad, 1), stride)
-    idx = np.clip(starts[:, None] + np.arange(W)[None], 0, N - 1)          # (B, W) edge padding
-    wpos = {d: pos_m[d][idx] for d in c.devices}
-    wrot = {d: rot_m[d][idx] for d in c.devices}
     # Body-conditioned models were trained with the stature defined from the skeleton (head joint
     # 0.871 statures above the ankles, as make_body builds); older ones with the body's own.
     s_net = float(features.stature_from_offsets(body.offsets)) if c.body else body.stature
-    stature = np.full(len(starts), s_net)
     body_in = features.body_features(body.offsets, s_net)[None] if c.body else None
-    x, C, o = features.make_inputs(wpos, wrot, stature, c.fps, devices=c.devices, body=body_in)
-    if progress is not None:
-        progress(0.1)
-    y = runner.predict(x)
-    if progress is not None:
-        progress(0.5)
-    dec = features.decode_outputs(y, C, o, stature, wpos["head"], kind=c.kind)
-
-    # blend overlapping windows with triangular weights
-    tri = 1.0 - np.abs((np.arange(W) + 0.5) / W * 2.0 - 1.0) + 1e-3
-    flat_idx = idx.reshape(-1)
-    valid = ((starts[:, None] + np.arange(W)[None]) >= 0) & ((starts[:, None] + np.arange(W)[None]) < N)
-    wts = (tri[None] * valid).reshape(-1)
-    wsum = np.bincount(flat_idx, wts, minlength=N)
-
-    def blend(a):
-        a = a.reshape((flat_idx.shape[0], -1))
-        out = np.zeros((N, a.shape[1]))
-        np.add.at(out, flat_idx, a * wts[:, None])
-        return out / wsum[:, None]
-
-    def blend_rot(R):
-        sixd = rot.matrix_to_6d(R)
-        shape = R.shape[2:-2]
-        b = blend(sixd).reshape((N,) + shape + (6,))
-        return b
-
-    six = {"root_rot": blend_rot(dec["root_rot"])}
-    contact = blend(dec["contact"])
-    if c.kind == "manikin":
-        six["torso_rot"] = blend_rot(dec["torso_rot"])
-        six["ankle_rot"] = blend_rot(dec["ankle_rot"])
-        ankle_pos = blend(dec["ankle_pos"]).reshape(N, 2, 3)
-        swivel_cs = blend(dec["swivel_cs"]).reshape(N, 4, 2)
-    else:
-        six["local_rot"] = blend_rot(dec["local_rot"])
+    tri = 1.0 - np.abs((np.arange(W) + 0.5) / W * 2.0 - 1.0) + 1e-3       # triangular blend weights
+    # a multiple of the runner's batch, so onnxruntime sees the same batches whatever the chunking
+    per = max(int(windows_per_batch or NETWORK_WINDOWS_PER_BATCH), 1)
+    rb = max(int(getattr(runner, "batch", 1) or 1), 1)
+    per = max(rb, per // rb * rb)
+    acc, wsum = {}, np.zeros(N)
+    for b0 in range(0, len(starts), per):
+        frames = starts[b0:b0 + per, None] + np.arange(W)[None]                  # (B, W)
+        idx = np.clip(frames, 0, N - 1)                                           # edge padding
+        wpos = {d: pos_m[d][idx] for d in c.devices}
+        wrot = {d: rot_m[d][idx] for d in c.devices}
+        stature = np.full(idx.shape[0], s_net)
+        x, C, o = features.make_inputs(wpos, wrot, stature, c.fps, devices=c.devices, body=body_in)
+        y = runner.predict(x)
+        dec = features.decode_outputs(y, C, o, stature, wpos["head"], kind=c.kind)
+        flat_idx = idx.reshape(-1)
+        wts = (tri[None] * ((frames >= 0) & (frames < N))).reshape(-1)
+        wsum += np.bincount(flat_idx, wts, minlength=N)
+        blocks = {k: (rot.matrix_to_6d(v) if k.endswith("_rot") else v) for k, v in dec.items()}
+        for k, v in blocks.items():
+            v = v.reshape((flat_idx.shape[0], -1))
+            if k not in acc:
+                acc[k] = (np.zeros((N, v.shape[1])), dec[k].shape[2:])
+            np.add.at(acc[k][0], flat_idx, v * wts[:, None])
+        if progress is not None:
+            progress(min(b0 + per, len(starts)) / len(starts))
+    blended = {k: (a / wsum[:, None]).reshape((N,) + shape[:-2] + (6,) if k.endswith("_rot") else (N,) + shape)
+               for k, (a, shape) in acc.items()}
 
     # back to the scene frame rate
     t_scene = t_in
-    up = {k: rot.sixd_to_matrix(_interp_rows(t_scene, t_out, v)) for k, v in six.items()}
+    up = {k: rot.sixd_to_matrix(_interp_rows(t_scene, t_out, v)) for k, v in blended.items() if k.endswith("_rot")}
     out = NetworkOutput(root_rot=up["root_rot"],
-                        contact=np.clip(_interp_rows(t_scene, t_out, contact), 0.0, 1.0))
+                        contact=np.clip(_interp_rows(t_scene, t_out, blended["contact"]), 0.0, 1.0))
     if c.kind == "manikin":
         out.torso_rot = up["torso_rot"]
         out.ankle_rot = up["ankle_rot"]
-        out.ankle_pos = _interp_rows(t_scene, t_out, ankle_pos)
-        cs = _interp_rows(t_scene, t_out, swivel_cs)
+        out.ankle_pos = _interp_rows(t_scene, t_out, blended["ankle_pos"])
+        cs = _interp_rows(t_scene, t_out, blended["swivel_cs"])
         out.swivel = np.arctan2(cs[..., 1], cs[..., 0])
     else:
         out.local_rot = up["local_rot"]
@@ -347,23 +343,12 @@ def _reach_collars(local, pos, world, targets_pos, body: Body, max_swing=COLLAR_
     return local
 
 
-def solve(targets: TrackerTargets, body: Body, runner=None, progress=None, lock_feet=True,
-          fk_runner=None, lower_body="ik", stride=None):
-    """Full-body pose for every frame of ``targets``.
-
-    runner: a :class:`~.model_runner.ModelRunner` (default: the shipped model).
-    progress: optional ``callable(fraction)``; raise :class:`SolveCancelled`
-    (or anything) from it to stop.  lower_body: ``"ik"`` (MANIKIN) or
-    ``"fk"`` (ablation: legs from ``fk_runner``'s predicted rotations).
-    """
-    if runner is None:
-        from .model_runner import load_model
-        runner = load_model()
+def check_targets(targets: TrackerTargets):
+    """Raise ``ValueError`` unless ``targets`` has the required devices, frames and no NaN."""
     for d in REQUIRED_DEVICES:
         if d not in targets.pos:
             raise ValueError(f"a '{d}' tracker is required; the recording has {list(targets.pos)}")
-    T = targets.num_frames
-    if T < 1:
+    if targets.num_frames < 1:
         raise ValueError("the recording has no frames to solve")
     for d in targets.pos:
         for name, a in (("position", targets.pos[d]), ("orientation", targets.rot[d])):
@@ -371,27 +356,25 @@ def solve(targets: TrackerTargets, body: Body, runner=None, progress=None, lock_
                 bad = np.unique(np.nonzero(~np.isfinite(a))[0])
                 raise ValueError(f"{d} {name} has NaN at frames {bad[:10].tolist()}: bridge gaps first")
 
-    def report(x):
-        if progress is not None:
-            progress(x)
 
-    t_start = time.perf_counter()
-    net = run_network(targets, body, runner, progress=lambda x: report(0.6 * x), stride=stride)
-    t_net = time.perf_counter()
+def predict(targets: TrackerTargets, body: Body, runner=None, progress=None, stride=None) -> NetworkOutput:
+    """The network stage of :func:`solve`: checked targets → :class:`NetworkOutput`.
+
+    runner: a MANIKIN :class:`~.model_runner.ModelRunner` (default: the shipped model)."""
+    if runner is None:
+        from .model_runner import load_model
+        runner = load_model()
+    check_targets(targets)
     if runner.contract.kind != "manikin":
         raise ValueError(f"{runner.path}: solve() needs a MANIKIN model, got kind {shown(runner.contract.kind)}")
-    head_pos, head_rot = targets.pos["head"], targets.rot["head"]
-    if "pelvis" in targets.pos:   # six-tracker setting: the pelvis tracker wins
-        local, root_pos, pos, world = _torso_fk(targets.rot["pelvis"], net.torso_rot, head_rot, head_pos,
-                                                body, root_pos=targets.pos["pelvis"])
-    else:
-        local, root_pos, pos, world = _torso_fk(net.root_rot, net.torso_rot, head_rot, head_pos, body)
-    report(0.65)
+    return run_network(targets, body, runner, progress=progress, stride=stride)
 
-    wrist_pos = np.stack([targets.pos["left_hand"], targets.pos["right_hand"]], 0)
-    local = _reach_collars(local, pos, world, wrist_pos, body)
 
-    # feet
+def plan_feet(targets: TrackerTargets, body: Body, net: NetworkOutput, lock_feet=True):
+    """Ankle targets for the legs: the network's, or the foot trackers', planted and above the floor.
+
+    Returns ``(ankle_pos (T, 2, 3) metres, ankle_rot (T, 2, 3, 3) world, contacts (T, 2) bool)``.
+    Works on the whole take at once (a plant can last the whole take); its arrays are small."""
     ankle_pos, ankle_rot = net.ankle_pos.copy(), net.ankle_rot.copy()
     foot_tracked = [d in targets.pos for d in ("left_foot", "right_foot")]
     for k, d in enumerate(("left_foot", "right_foot")):
@@ -413,31 +396,87 @@ def solve(targets: TrackerTargets, body: Body, runner=None, progress=None, lock_
             if not foot_tracked[k]:
                 ankle_pos[:, k] = locked[:, k]
                 contacts[:, k] &= still_next[:, k]
-    ankle_pos = keep_feet_above_floor(ankle_pos, ankle_rot, body)
-    report(0.75)
+    return keep_feet_above_floor(ankle_pos, ankle_rot, body), ankle_rot, contacts
 
-    # limbs (bases and their parents from the torso FK above)
-    base = pos[:, ls.LIMB_BASE]
-    par = world[:, ls.LIMB_PARENT]
-    ends = np.stack([targets.pos["left_hand"], targets.pos["right_hand"], ankle_pos[:, 0], ankle_pos[:, 1]], 1)
-    end_rot = np.stack([targets.rot["left_hand"], targets.rot["right_hand"], ankle_rot[:, 0], ankle_rot[:, 1]], 1)
-    sol, swivel = ls.solve_limbs_within_limits(base, ends, net.swivel, body.limb_lengths(), par,
-                                               end_rot=end_rot)
-    local[:, ls.LIMB_BASE] = sol.base_local
-    local[:, ls.LIMB_MID] = sol.mid_local
-    local[:, ls.LIMB_END] = sol.end_local
+
+def assemble(targets: TrackerTargets, body: Body, net: NetworkOutput, progress=None, lock_feet=True,
+             chunk_frames=None) -> PoseResult:
+    """The analytic stages of :func:`solve`: torso FK, feet, collars and limbs from ``net``.
+
+    Runs without the network, so a body with other limb lengths (see
+    :func:`.calibration.adapt_arms_to_reach`) re-solves in a fraction of the time.
+    chunk_frames: frames posed at a time (default :data:`ASSEMBLY_CHUNK_FRAMES`); each frame
+    is posed on its own, so the result does not depend on it, only the peak memory does.
+    """
+    check_targets(targets)
+    T = targets.num_frames
+    t_start = time.perf_counter()
+    ankle_pos, ankle_rot, contacts = plan_feet(targets, body, net, lock_feet=lock_feet)
+    local = np.empty((T, NUM_JOINTS, 3, 3))
+    root_pos = np.empty((T, 3))
+    swivel = np.empty((T, 4))
+    reach_error = np.empty((T, 4))
+    lengths = body.limb_lengths()
+    step = max(int(chunk_frames or ASSEMBLY_CHUNK_FRAMES), 1)
+    for a in range(0, T, step):
+        f = slice(a, min(a + step, T))
+        tp, tr = ({d: v[f] for d, v in targets.pos.items()}, {d: v[f] for d, v in targets.rot.items()})
+        if "pelvis" in tp:   # six-tracker setting: the pelvis tracker wins
+            loc, root, pos, world = _torso_fk(tr["pelvis"], net.torso_rot[f], tr["head"], tp["head"],
+                                              body, root_pos=tp["pelvis"])
+        else:
+            loc, root, pos, world = _torso_fk(net.root_rot[f], net.torso_rot[f], tr["head"], tp["head"], body)
+        loc = _reach_collars(loc, pos, world, np.stack([tp["left_hand"], tp["right_hand"]], 0), body)
+        # limbs (bases and their parents from the torso FK above)
+        ends = np.stack([tp["left_hand"], tp["right_hand"], ankle_pos[f, 0], ankle_pos[f, 1]], 1)
+        end_rot = np.stack([tr["left_hand"], tr["right_hand"], ankle_rot[f, 0], ankle_rot[f, 1]], 1)
+        sol, swivel[f] = ls.solve_limbs_within_limits(pos[:, ls.LIMB_BASE], ends, net.swivel[f], lengths,
+                                                      world[:, ls.LIMB_PARENT], end_rot=end_rot)
+        loc[:, ls.LIMB_BASE] = sol.base_local
+        loc[:, ls.LIMB_MID] = sol.mid_local
+        loc[:, ls.LIMB_END] = sol.end_local
+        local[f], root_pos[f], reach_error[f] = loc, root, sol.reach_error
+        del loc, pos, world, sol
+        if progress is not None:
+            progress(f.stop / T)
+    return PoseResult(fps=float(targets.fps), body=body, local_rot=local, root_pos=root_pos,
+                      swivel=swivel, contacts=contacts, reach_error=reach_error, targets=targets,
+                      at_limit=np.abs(np.angle(np.exp(1j * (swivel - net.swivel)))) > 1e-9,
+                      timings={"solver": time.perf_counter() - t_start})
+
+
+def solve(targets: TrackerTargets, body: Body, runner=None, progress=None, lock_feet=True,
+          fk_runner=None, lower_body="ik", stride=None, chunk_frames=None):
+    """Full-body pose for every frame of ``targets``: :func:`predict`, then :func:`assemble`.
+
+    runner: a :class:`~.model_runner.ModelRunner` (default: the shipped model).
+    progress: optional ``callable(fraction)``; raise :class:`SolveCancelled`
+    (or anything) from it to stop.  lower_body: ``"ik"`` (MANIKIN) or
+    ``"fk"`` (ablation: legs from ``fk_runner``'s predicted rotations).
+    chunk_frames: see :func:`assemble`.  The result's ``with_body(body)`` re-assembles the
+    same network output with another body (MANIKIN only; None for the ablation).
+    """
+    def report(x):
+        if progress is not None:
+            progress(x)
+
+    t_start = time.perf_counter()
+    net = predict(targets, body, runner, progress=lambda x: report(0.6 * x), stride=stride)
+    t_net = time.perf_counter()
+    result = assemble(targets, body, net, progress=lambda x: report(0.6 + 0.35 * x), lock_feet=lock_feet,
+                      chunk_frames=chunk_frames)
     if lower_body == "fk":
         if fk_runner is None:
             raise ValueError("lower_body='fk' needs fk_runner (the network-only model)")
         fk_net = run_network(targets, body, fk_runner)
         legs = [J[n] for n in ("left_hip", "right_hip", "left_knee", "right_knee",
                                "left_ankle", "right_ankle")]
-        local[:, legs] = fk_net.local_rot[:, [j - 1 for j in legs]]
-    report(0.95)
-    result = PoseResult(fps=float(targets.fps), body=body, local_rot=local, root_pos=root_pos,
-                        swivel=swivel, contacts=contacts,
-                        reach_error=sol.reach_error, targets=targets,
-                        at_limit=np.abs(np.angle(np.exp(1j * (swivel - net.swivel)))) > 1e-9,
-                        timings={"network": t_net - t_start, "solver": time.perf_counter() - t_net})
+        result.local_rot[:, legs] = fk_net.local_rot[:, [j - 1 for j in legs]]
+    else:
+        def with_body(new_body, progress=None):
+            return assemble(targets, new_body, net, progress=progress, lock_feet=lock_feet,
+                            chunk_frames=chunk_frames)
+        result.with_body = with_body
+    result.timings = {"network": t_net - t_start, "solver": time.perf_counter() - t_net}
     report(1.0)
     return result

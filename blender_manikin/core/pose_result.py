@@ -62,6 +62,9 @@ class PoseResult:
     targets: TrackerTargets | None = None
     t0: float = 0.0
     timings: dict = field(default_factory=dict)      # seconds per stage, e.g. network / solver
+    #: ``(body, progress=None) -> PoseResult``: the same network output assembled with another
+    #: body (:func:`.pipeline.solve` sets it; None where a re-solve must run the solver again)
+    with_body: object = field(default=None, repr=False, compare=False)
     _fk: tuple | None = field(default=None, repr=False)
 
     @property
@@ -97,7 +100,6 @@ class PoseResult:
         """
         notes = []
         if self.reach_error is not None:
-            pos = self.positions if self.targets is not None else None
             for i, (name, base_j, _, end_j) in enumerate(LIMBS):
                 bad = self.reach_error[:, i] > reach_tolerance
                 if not bad.any():
@@ -105,9 +107,13 @@ class PoseResult:
                 end, base, mid = _LIMB_WORDS[name]
                 dev = end.replace(" ", "_")
                 far = bad
-                if pos is not None and dev in self.targets.pos:
-                    far = bad & (np.linalg.norm(self.targets.pos[dev] - pos[:, base_j], axis=-1)
-                                 > np.linalg.norm(pos[:, end_j] - pos[:, base_j], axis=-1))
+                if self.targets is not None and dev in self.targets.pos:
+                    f = np.nonzero(bad)[0]          # FK on the frames that missed only (long takes)
+                    pos = self.fk()[0][f] if self._fk is not None else \
+                        forward_kinematics(self.local_rot[f], self.root_pos[f], self.body)[0]
+                    far = bad.copy()
+                    far[f] = (np.linalg.norm(self.targets.pos[dev][f] - pos[:, base_j], axis=-1)
+                              > np.linalg.norm(pos[:, end_j] - pos[:, base_j], axis=-1))
                 close = bad & ~far
                 if far.any():
                     notes.append(f"{end} out of reach on {int(far.sum())} frame(s), by up to "

@@ -221,15 +221,23 @@ def adapt_arms(settings: SolveSettings, outcome: SolveOutcome, result, solver, p
     """Lengthen arms built from proportions when the hands cannot reach their trackers.
 
     Only when no arm span was measured (no T/A-pose calibration) or given: the span comes from
-    :func:`.calibration.arm_span_for_reach` and the recording is solved again with it.  Notes it
-    in ``outcome.info`` and sets ``outcome.body``.  Returns the result to keep."""
+    :func:`.calibration.arm_span_for_reach` and the recording is solved again with it: only the
+    analytic stages when the solver's result offers ``with_body`` (the network's inputs barely
+    change with the arm span), else the whole ``solver``.  Notes it in ``outcome.info`` and sets
+    ``outcome.body``.  Returns the result to keep."""
     from . import calibration as cal
     if settings.arm_span or any(n.startswith("calibrated") for n in outcome.info):
         return result
     if result.reach_error is None or not (result.reach_error[:, :2] > 0.005).any():
         return result
     before = int((result.reach_error[:, :2] > 0.005).any(1).sum())
-    body, again, new_span = cal.adapt_arms_to_reach(result, lambda b: solver(outcome.targets, b, progress=progress))
+    if result.with_body is not None:     # the same network output, assembled with longer arms
+        def resolve(b):
+            return result.with_body(b, progress=progress)
+    else:
+        def resolve(b):
+            return solver(outcome.targets, b, progress=progress)
+    body, again, new_span = cal.adapt_arms_to_reach(result, resolve)
     if new_span is None:
         return result
     after = int((again.reach_error[:, :2] > 0.005).any(1).sum())
@@ -294,15 +302,21 @@ def solve_recording(source, settings: SolveSettings | None = None, solver=None, 
         report(lo + (hi - lo) * 0.5 * float(f))
 
     result = solver(out.targets, out.body, progress=solve_progress)
+    first = result
     result = adapt_arms(settings, out, result, solver,
                         progress=lambda f: report(lo + (hi - lo) * (0.5 + 0.5 * float(f)),
                                                   "solving again with arms for the reach"))
+    result.with_body = None      # frees the network output (long takes)
     result.t0 = float(times[0])
     if result.targets is None:
         result.targets = out.targets
     out.result = result
     out.timings["solve"] = _time.perf_counter() - t
-    for k, v in getattr(result, "timings", {}).items():     # network / solver split
+    stage_times = dict(getattr(first, "timings", None) or {})      # network / solver split
+    if result is not first:       # arm adaptation re-solved: its time counts to its stages
+        for k, v in (getattr(result, "timings", None) or {}).items():
+            stage_times[k] = stage_times.get(k, 0.0) + v
+    for k, v in stage_times.items():
         out.timings[f"solve.{k}"] = v
     report(STAGES["done"], "done")
     return out
