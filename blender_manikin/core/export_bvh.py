@@ -26,6 +26,7 @@ OFFSET is added to them; with a zero OFFSET both readings agree).
 from __future__ import annotations
 
 import io
+import os
 
 import numpy as np
 
@@ -36,6 +37,8 @@ from .plain import shown
 #: change of basis Blender (Z-up, -Y forward) → BVH (Y-up, +Z forward)
 C_BLENDER_TO_BVH = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, 1.0], [0.0, -1.0, 0.0]])
 UNIT_SCALE = {"m": 1.0, "cm": 100.0}
+#: frames converted and formatted at a time (bounds the writer's memory on long takes)
+CHUNK_FRAMES = 8192
 
 
 def end_site_offsets(body: sk.Body):
@@ -62,12 +65,15 @@ def _fmt(v, decimals):
     return " ".join(f"{x:.{decimals}f}" for x in v)
 
 
-def bvh_string(local_rot, root_pos, body: sk.Body, fps: float, units: str = "cm", decimals: int = 6) -> str:
-    """The BVH file text for an animation.
+def bvh_string(local_rot, root_pos, body: sk.Body, fps: float, units: str = "cm", decimals: int = 6,
+               out=None, chunk_frames=None):
+    """The BVH file text for an animation (``out`` None), or written to the text file ``out``.
 
     local_rot: ``(T, 22, 3, 3)`` body-model local rotations; root_pos:
     ``(T, 3)`` pelvis world positions (metres, Blender axes); ``fps`` frames
-    per second; ``units`` ``"cm"`` or ``"m"``.
+    per second; ``units`` ``"cm"`` or ``"m"``.  The motion is converted and formatted
+    ``chunk_frames`` (default :data:`CHUNK_FRAMES`) frames at a time, so writing a long take
+    to ``out`` needs no more memory than a short one; the text does not depend on it.
     """
     if units not in UNIT_SCALE:
         raise ValueError(f"units must be one of {sorted(UNIT_SCALE)}, got {shown(units)}")
@@ -114,7 +120,6 @@ def bvh_string(local_rot, root_pos, body: sk.Body, fps: float, units: str = "cm"
     lines.append("MOTION")
     lines.append(f"Frames: {T}")
     lines.append(f"Frame Time: {1.0 / fps:.8f}")
-
     # channel data, joints in hierarchy (depth-first) order
     order = []
 
@@ -122,24 +127,55 @@ def bvh_string(local_rot, root_pos, body: sk.Body, fps: float, units: str = "cm"
         order.append(j)
         for c in sk.CHILDREN[j]:
             walk(c)
-
     walk(0)
-    Rb = np.einsum("ab,tjbc,dc->tjad", C, local_rot, C)       # C R Cᵀ
-    eul = np.degrees(np.unwrap(rot.matrix_to_euler(Rb[:, order], "ZXY"), axis=0))   # (T, 22, 3)
-    # ROOT OFFSET is 0 and the position channels are absolute, which reads the
-    # same whether an importer adds OFFSET to them or not
-    root = root_pos @ C.T * s
-    data = np.concatenate([root, eul.reshape(T, -1)], axis=1)
-    buf = io.StringIO()
-    buf.write("\n".join(lines) + "\n")
-    if T:
-        np.savetxt(buf, data, fmt=f"%.{decimals}f", delimiter=" ")
-    return buf.getvalue()
+    buf = io.StringIO() if out is None else None
+    f = buf if out is None else out
+    f.write("\n".join(lines) + "\n")
+    unwrap = _Unwrap()
+    step = max(int(chunk_frames or CHUNK_FRAMES), 1)
+    for a in range(0, T, step):
+        fr = slice(a, min(a + step, T))
+        Rb = np.einsum("ab,tjbc,dc->tjad", C, local_rot[fr][:, order], C)       # C R Cᵀ
+        eul = np.degrees(unwrap(rot.matrix_to_euler(Rb, "ZXY")))                # (n, 22, 3)
+        # ROOT OFFSET is 0 and the position channels are absolute, which reads the
+        # same whether an importer adds OFFSET to them or not
+        root = root_pos[fr] @ C.T * s
+        np.savetxt(f, np.concatenate([root, eul.reshape(len(eul), -1)], axis=1), fmt=f"%.{decimals}f",
+                   delimiter=" ")
+    return buf.getvalue() if buf is not None else None
+
+
+class _Unwrap:
+    """``numpy.unwrap`` along axis 0 (radians), fed the take in successive chunks: the same
+    numbers as one call over the whole take (the running correction carries over)."""
+
+    def __init__(self):
+        self.last = self.carry = None
+
+    def __call__(self, p):
+        p = np.asarray(p, dtype=np.float64)
+        if len(p) == 0:
+            return p.copy()
+        if self.last is None:
+            head, rest, carry = p[:1], p, np.zeros_like(p[0])
+        else:
+            head, rest, carry = None, np.concatenate([self.last[None], p], 0), self.carry
+        dd = np.diff(rest, axis=0)
+        ddmod = np.mod(dd + np.pi, 2 * np.pi) - np.pi
+        np.copyto(ddmod, np.pi, where=(ddmod == -np.pi) & (dd > 0))
+        correct = ddmod - dd
+        np.copyto(correct, 0, where=np.abs(dd) < np.pi)
+        cum = np.cumsum(np.concatenate([carry[None], correct], 0), axis=0)[1:]
+        self.last, self.carry = p[-1].copy(), (cum[-1] if len(cum) else carry)
+        body = rest[1:] + cum
+        return body if head is None else np.concatenate([head, body], 0)
 
 
 def write_bvh(path, result, units: str = "cm", decimals: int = 6):
-    """Write a :class:`~blender_manikin.core.pose_result.PoseResult` as BVH to ``path``; returns ``path``."""
-    text = bvh_string(result.local_rot, result.root_pos, result.body, result.fps, units, decimals)
-    with open(path, "w", encoding="utf-8", newline="\n") as f:
-        f.write(text)
+    """Write a :class:`~blender_manikin.core.pose_result.PoseResult` as BVH to ``path`` (under a
+    temporary name, then renamed); returns ``path``."""
+    tmp = os.fspath(path) + ".tmp"
+    with open(tmp, "w", encoding="utf-8", newline="\n") as f:
+        bvh_string(result.local_rot, result.root_pos, result.body, result.fps, units, decimals, out=f)
+    os.replace(tmp, path)
     return path

@@ -37,6 +37,7 @@ Numbers are rounded to ``decimals`` (default 6: micrometres, microradians).
 from __future__ import annotations
 
 import json
+import os
 import math
 
 import numpy as np
@@ -127,13 +128,39 @@ def _wrap(a):
     return np.where(w <= -np.pi, w + 2 * np.pi, w)
 
 
+#: frames formatted at a time by :func:`write_json` (bounds its memory on long takes)
+CHUNK_FRAMES = 8192
+
+
+def _pose_chunks(result, chunk=None):
+    """``(positions (n,22,3), rotations (n,22,4), swivel (n,4))`` for successive frame chunks:
+    world positions, world quaternions sign-continuous over the whole take, swivel wrapped.
+    The same numbers as one pass over the take (FK is per frame; the sign carries over)."""
+    T = result.num_frames
+    sw_all = np.asarray(result.swivel, dtype=np.float64).reshape(T, len(SWIVEL_KEYS))
+    step = max(int(chunk or CHUNK_FRAMES), 1)
+    last = None
+    for a in range(0, T, step):
+        f = slice(a, min(a + step, T))
+        if result._fk is not None:
+            pos, wrot = result._fk[0][f], result._fk[1][f]
+        else:
+            pos, wrot = sk.forward_kinematics(result.local_rot[f], result.root_pos[f], result.body)
+        q = rot.matrix_to_quat(wrot)
+        if last is not None:          # continue the sign from the previous chunk's last frame
+            q = rot.quat_continuous(np.concatenate([last[None], q], 0), axis=0)[1:]
+        else:
+            q = rot.quat_continuous(q, axis=0)
+        last = q[-1]
+        yield pos, q, _wrap(sw_all[f])
+
+
 def _pose_arrays(result):
     """``(positions (T,22,3), rotations (T,22,4) sign-continuous, swivel (T,4) wrapped)``."""
-    pos, wrot = result.fk()
-    T = result.num_frames
-    q = rot.quat_continuous(rot.matrix_to_quat(wrot), axis=0)
-    sw = _wrap(np.asarray(result.swivel, dtype=np.float64).reshape(T, len(SWIVEL_KEYS)))
-    return pos, q, sw
+    parts = list(_pose_chunks(result))
+    if not parts:
+        return np.zeros((0, sk.NUM_JOINTS, 3)), np.zeros((0, sk.NUM_JOINTS, 4)), np.zeros((0, len(SWIVEL_KEYS)))
+    return tuple(np.concatenate(x, 0) for x in zip(*parts))
 
 
 def _header(result, source, decimals, generator):
@@ -182,25 +209,31 @@ def result_to_dict(result, source: str = "", decimals: int = 6, generator: str |
     return doc
 
 
-def _fast_array(a, decimals):
-    """JSON text of a finite float array (any shape), numbers with ``decimals`` fixed decimals."""
+def _fast_rows(a, decimals):
+    """JSON text of the rows of a finite float array ``(n, ...)``, comma-separated, without the
+    enclosing brackets; numbers with ``decimals`` fixed decimals."""
     a = np.asarray(a, dtype=np.float64)
     if not np.all(np.isfinite(a)):
         raise ValueError("non-finite values in the solved animation")
     a = np.round(a, decimals) + 0.0          # + 0.0 turns -0.0 into 0.0
     num = f"%.{int(decimals)}f"
-    if a.ndim == 0:
-        return num % float(a)
-    if a.shape[0] == 0:
-        return "[]"
 
     def tpl(shape):
         if len(shape) == 0:
             return num
         return "[" + ",".join([tpl(shape[1:])] * shape[0]) + "]"
     row = tpl(a.shape[1:])
-    flat = a.reshape(a.shape[0], -1).tolist()
-    return "[" + ",".join(row % tuple(r) for r in flat) + "]"
+    return ",".join(row % tuple(r) for r in a.reshape(a.shape[0], -1).tolist())
+
+
+def _fast_array(a, decimals):
+    """JSON text of a finite float array (any shape), numbers with ``decimals`` fixed decimals."""
+    a = np.asarray(a, dtype=np.float64)
+    if a.ndim == 0:
+        if not np.isfinite(a):
+            raise ValueError("non-finite values in the solved animation")
+        return f"%.{int(decimals)}f" % float(np.round(a, decimals) + 0.0)
+    return "[" + _fast_rows(a, decimals) + "]"
 
 
 def write_json(path, result, source: str = "", decimals: int = 6, indent=None, generator=None):
@@ -208,22 +241,36 @@ def write_json(path, result, source: str = "", decimals: int = 6, indent=None, g
 
     The per-frame pose arrays are formatted straight from numpy with
     ``decimals`` fixed decimals (about 10x faster than ``json.dump`` of nested
-    lists); ``indent`` applies to the other fields.
+    lists), :data:`CHUNK_FRAMES` frames at a time straight into the file, so a
+    long take needs no more memory than a short one; ``indent`` applies to the
+    other fields.  Written under a temporary name, then renamed.
     """
     doc = _header(result, source, decimals, generator)
-    pos, q, sw = _pose_arrays(result)
-    big = {"positions": _fast_array(pos, decimals), "rotations": _fast_array(q, decimals),
-           "swivel": "{" + ",".join(f"{json.dumps(k)}:{_fast_array(sw[:, i], decimals)}"
-                                    for i, k in enumerate(SWIVEL_KEYS)) + "}"}
+    T = result.num_frames
+    sw = _wrap(np.asarray(result.swivel, dtype=np.float64).reshape(T, len(SWIVEL_KEYS)))
+    small = {"swivel": "{" + ",".join(f"{json.dumps(k)}:{_fast_array(sw[:, i], decimals)}"
+                                      for i, k in enumerate(SWIVEL_KEYS)) + "}"}
     targets = getattr(result, "targets", None)
     if targets is not None and all(np.all(np.isfinite(targets.pos[d])) for d in doc["trackers"]):
-        big["trackers"] = "{" + ",".join(f"{json.dumps(d)}:{_fast_array(targets.pos[d], decimals)}"
-                                         for d in doc["trackers"]) + "}"
+        small["trackers"] = "{" + ",".join(f"{json.dumps(d)}:{_fast_array(targets.pos[d], decimals)}"
+                                           for d in doc["trackers"]) + "}"
     sep = ",\n" if indent else ","
-    parts = [f"{json.dumps(k)}:{big[k] if k in big else json.dumps(v, indent=indent, allow_nan=False)}"
-             for k, v in doc.items()]
-    with open(path, "w", encoding="utf-8") as f:
-        f.write("{" + sep.join(parts) + "}\n")
+    tmp = os.fspath(path) + ".tmp"
+    with open(tmp, "w", encoding="utf-8") as f:
+        f.write("{")
+        for i, (k, v) in enumerate(doc.items()):
+            if i:
+                f.write(sep)
+            f.write(f"{json.dumps(k)}:")
+            if k in ("positions", "rotations"):
+                f.write("[")
+                for c, (pos, q, _) in enumerate(_pose_chunks(result)):
+                    f.write(("," if c else "") + _fast_rows(pos if k == "positions" else q, decimals))
+                f.write("]")
+            else:
+                f.write(small[k] if k in small else json.dumps(v, indent=indent, allow_nan=False))
+        f.write("}\n")
+    os.replace(tmp, path)
     return path
 
 
