@@ -183,6 +183,7 @@ class SolveJob:
         _check_cancel(self._cancel)
         cfg = self.config
         t = _time.perf_counter()
+        self.stage = "keying"
         opts = writer.WriteOptions(frame_start=cfg.frame_start, armature=cfg.reuse_armature,
                                    armature_name=cfg.armature_name,
                                    create_trackers=cfg.create_trackers,
@@ -192,6 +193,7 @@ class SolveJob:
         t = _time.perf_counter()
         if cfg.live_rig:
             from . import live_rig
+            self.stage = "live rig"
             try:
                 out.live_action = live_rig.build_live_rig(out.armature, self.result, frames=out.frames,
                                                           context=context)
