@@ -70,6 +70,8 @@ def _add_solve_options(s):
     s.add_argument("--bvh-units", choices=("cm", "m"), default="cm")
     s.add_argument("--layout", default=None, metavar="FILE.json",
                    help="the columns, time, units and axes of wide-layout CSV inputs (default: detected)")
+    s.add_argument("--rate", type=float, default=None, metavar="HZ",
+                   help="samples per second of wide-layout CSV inputs whose only time is a frame counter")
     s.add_argument("--save-layout", default=None, metavar="FILE.json",
                    help="write the layout detected in the first wide-layout CSV input, for --layout")
 
@@ -133,7 +135,7 @@ def solve_settings(args):
     if offsets and offsets.lower().endswith(".json"):
         offsets = device_offsets.load_offsets(offsets)
     st = SolveSettings(axes=args.axes, units=args.units, fps=float(args.fps), offsets=offsets,
-                       layout=getattr(args, "layout", None))
+                       layout=getattr(args, "layout", None), rate=getattr(args, "rate", None))
     if args.calibration_time is not None:
         st.calibration, st.tpose_time = "TPOSE", float(args.calibration_time)
         st.height, st.arm_span = args.height, args.arm_span
@@ -349,7 +351,8 @@ def convert_main(args, fmts):
             from .core.formats import load_recording
             for path in inputs:
                 if path.lower().endswith(".csv"):
-                    save_layout_once(args, load_recording(path, args.axes, args.units, settings.layout))
+                    save_layout_once(args, load_recording(path, args.axes, args.units, settings.layout,
+                                                          settings.rate))
                     break
     except (ValueError, OSError) as exc:
         print(f"blender_manikin: error: {exc}", file=sys.stderr)

@@ -13,10 +13,13 @@ RATE = 90.0
 
 
 def motion():
-    """Blender-axes poses: the head turns slowly (facing -Y, then yawing), the hands in front."""
+    """Blender-axes poses: the head turns slowly (facing -Y, then yawing, nodding and tilting), the
+    hands in front."""
     t = np.arange(T) / RATE
     yaw = 0.8 * np.sin(2 * np.pi * 0.3 * t)
-    R = rot.axis_angle_rotation(np.array([0, 0, 1.0]), yaw)
+    R = rot.axis_angle_rotation(np.array([0, 0, 1.0]), yaw) @ \
+        rot.axis_angle_rotation(np.array([1.0, 0, 0]), 0.3 * np.sin(2 * np.pi * 0.5 * t)) @ \
+        rot.axis_angle_rotation(np.array([0, 1.0, 0]), 0.2 * np.cos(2 * np.pi * 0.4 * t))  # nods and tilts too
     head = np.stack([0.1 * np.sin(t), 0.05 * t, np.full(T, 1.62)], -1)
     pos = {"head": head}
     for d, sx in (("left_hand", 1.0), ("right_hand", -1.0)):
@@ -26,8 +29,21 @@ def motion():
     return t, pos, quat
 
 
-def write_wide(path, axes, units, names, comp, time_col, quat_order="xyzw", index_col=False, time_scale=1.0):
-    """Write the motion as a wide CSV: ``names`` device -> prefix, ``comp(prefix, kind, axis)`` -> column."""
+def euler_xyz(q, order):
+    """Angles about x, y, z (radians) of quaternions ``q`` (w, x, y, z) as rotations about the
+    fixed axes applied in ``order`` (first letter first), as a logger would write them."""
+    rev = order[::-1]
+    a = rot.matrix_to_euler(rot.quat_to_matrix(q), rev)
+    out = np.empty_like(a)
+    for n, c in enumerate(rev):
+        out[:, "XYZ".index(c)] = a[:, n]
+    return out
+
+
+def write_wide(path, axes, units, names, comp, time_col, quat_order="xyzw", index_col=False, time_scale=1.0,
+               euler=None):
+    """Write the motion as a wide CSV: ``names`` device -> prefix, ``comp(prefix, kind, axis)`` -> column.
+    euler: ``(order, "deg"|"rad")`` writes Euler angles x, y, z instead of quaternions."""
     t, pos, quat = motion()
     scale = {"m": 1.0, "cm": 100.0, "mm": 1000.0}[units]
     cols, data = [], []
@@ -37,6 +53,8 @@ def write_wide(path, axes, units, names, comp, time_col, quat_order="xyzw", inde
     cols.append(time_col)
     if time_col == "delta_time_ms":
         data.append(np.r_[0.0, np.diff(t)] * 1000.0)
+    elif time_col == "frame":
+        data.append(np.arange(T, dtype=float))
     else:
         data.append(t * time_scale)
     for dev, prefix in names.items():
@@ -44,6 +62,13 @@ def write_wide(path, axes, units, names, comp, time_col, quat_order="xyzw", inde
         for k, a in enumerate("xyz"):
             cols.append(comp(prefix, "pos", a))
             data.append(p[:, k] * scale)
+        if euler:
+            ang = euler_xyz(q, euler[0])
+            ang = np.degrees(ang) if euler[1] == "deg" else ang
+            for k, a in enumerate("xyz"):
+                cols.append(comp(prefix, "rot", a))
+                data.append(ang[:, k])
+            continue
         qd = dict(zip("wxyz", q.T))
         for a in quat_order:
             cols.append(comp(prefix, "rot", a))
@@ -70,6 +95,13 @@ FAMILIES = {
     "unity_l_hand_m": dict(axes="unity", units="m", time_col="time",
                            names={"head": "HMD", "left_hand": "l_hand", "right_hand": "r_hand"},
                            comp=lambda p, k, a: f"{p}_{'position' if k == 'pos' else 'quat'}_{a}"),
+    "unity_euler_degrees": dict(axes="unity", units="m", time_col="time", euler=("ZXY", "deg"),
+                                names={"head": "hmd", "left_hand": "left_hand", "right_hand": "right_hand"},
+                                comp=lambda p, k, a: f"{p}_{'position' if k == 'pos' else 'euler'}_{a}"),
+    "openxr_euler_radians_frames": dict(axes="openxr", units="cm", time_col="frame", euler=("XYZ", "rad"),
+                                        names={"head": "head", "left_hand": "controller_left",
+                                               "right_hand": "controller_right"},
+                                        comp=lambda p, k, a: f"{p}_{'pos' if k == 'pos' else 'rot'}_{a}"),
     "zup_blender": dict(axes="blender", units="m", time_col="t",
                         names={"head": "head", "left_hand": "hand_l", "right_hand": "hand_r"},
                         comp=lambda p, k, a: f"{p}_{'pos' if k == 'pos' else 'rot'}_{a}"),
@@ -81,15 +113,56 @@ def test_each_family_is_detected_and_reads_back(tmp_path, family):
     spec = FAMILIES[family]
     path = tmp_path / f"{family}.csv"
     truth = write_wide(path, **spec)
-    rec = formats.load_recording(path)
+    rec = formats.load_recording(path, rate=RATE if spec["time_col"] == "frame" else None)
     line = rec.metadata["detected"]
     assert line.startswith("wide layout: head=") and f"units {spec['units']}" in line, line
     assert rec.metadata["axes"] == spec["axes"], line
     assert "head at 1.6" in line
+    _, _, quat = motion()
     for dev in ("head", "left_hand", "right_hand"):
         s = rec.streams[dev]
         assert len(s.time) == T and abs(s.time[1] - 1 / RATE) < 1e-4, line
         assert np.abs(s.pos - truth[dev]).max() < 2e-4, (family, dev)
+        err = np.degrees(rot.geodesic_angle(rot.quat_to_matrix(s.quat), rot.quat_to_matrix(quat[dev])))
+        assert err.max() < 0.01, (family, dev, err.max())
+    if spec.get("euler"):
+        order, unit = spec["euler"]
+        assert f"Euler angles in {'degrees' if unit == 'deg' else 'radians'}, fixed axes {order}" in line, line
+        assert rec.metadata["layout"]["euler"] == {"order": order, "unit": unit}
+
+
+def test_euler_order_and_frame_rate_are_stated_or_asked_for(tmp_path):
+    from blender_manikin.core.io_wide_csv import save_layout
+    path = tmp_path / "take.csv"
+    write_wide(path, **FAMILIES["openxr_euler_radians_frames"])
+    with pytest.raises(RecordingError, match=r"take.csv: the only time is the frame counter 'frame': give the "
+                                             r"tracker rate \(--rate HZ"):
+        formats.load_recording(path)
+    rec = formats.load_recording(path, rate=RATE)
+    assert "time=frame (frames) at 90 Hz" in rec.metadata["detected"]
+    used = rec.metadata["layout"]
+    assert used["time"] == {"column": "frame", "unit": "frames", "rate": RATE}
+    # the layout file carries the rate and the order; a wrong order there gives other rotations
+    lf = save_layout(tmp_path / "l.json", used)
+    again = formats.load_recording(path, layout=str(lf))
+    np.testing.assert_allclose(again.streams["head"].quat, rec.streams["head"].quat, atol=1e-12)
+    assert "(stated order)" in again.metadata["detected"]
+    lf2 = save_layout(tmp_path / "zyx.json", dict(used, euler={"order": "ZYX", "unit": "rad"}))
+    other = formats.load_recording(path, layout=str(lf2))
+    assert np.abs(other.streams["left_hand"].quat - rec.streams["left_hand"].quat).max() > 1e-3
+    # a Unity logger's default is Unity's own order (Z, X, Y)
+    p2 = tmp_path / "unity.csv"
+    write_wide(p2, **FAMILIES["unity_euler_degrees"])
+    assert "fixed axes ZXY (Unity's order)" in formats.load_recording(p2).metadata["detected"]
+
+
+def test_a_frame_counted_wide_csv_solves_from_the_command_line(tmp_path, capsys):
+    from blender_manikin import cli
+    path = tmp_path / "take.csv"
+    write_wide(path, **FAMILIES["openxr_euler_radians_frames"])
+    assert cli.main(["solve", str(path), "--out", str(tmp_path / "o"), "--format", "json", "--height", "1.75",
+                     "--rate", "90"]) == 0
+    assert "time=frame (frames) at 90 Hz" in capsys.readouterr().out
 
 
 def test_the_detection_line_reads_like_a_sentence(tmp_path):
@@ -114,7 +187,7 @@ def test_ambiguous_or_incomplete_layouts_are_errors_naming_the_problem(tmp_path)
     with pytest.raises(RecordingError, match="a.csv, line 1: two columns for head pos x"):
         formats.load_recording(p)
     p.write_text("time,hmd_pos_x,hmd_pos_y,hmd_pos_z,hmd_rot_x,hmd_rot_y\n0,0,1.6,0,0,0\n")
-    with pytest.raises(RecordingError, match="a quaternion needs w, x, y, z"):
+    with pytest.raises(RecordingError, match="a quaternion needs w, x, y, z, Euler angles x, y, z"):
         formats.load_recording(p)
     p.write_text("time,hmd_pos_x,hmd_pos_y,hmd_pos_z\n0,0,1.6,0\n1,0,1.6,0\n")
     with pytest.raises(RecordingError, match="no columns for left_hand, right_hand"):

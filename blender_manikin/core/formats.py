@@ -88,21 +88,24 @@ def reader_for(path) -> ReaderFormat:
     raise RecordingError(f"unsupported file type {ext or '(none)'!r}: expected {describe_inputs()}", path=path)
 
 
-def load_recording(path, axes=None, units=None, layout=None) -> Recording:
+def load_recording(path, axes=None, units=None, layout=None, rate=None) -> Recording:
     """Read a tracker recording with the reader of its format (:func:`reader_for`); ``axes`` /
     ``units`` override the file's metadata; ``layout`` (a layout file's path or dict) fixes the
-    columns of a wide-layout CSV.  Returns a :class:`Recording` in Blender axes and metres;
-    raises :class:`RecordingError` naming the file, line / byte offset and problem."""
+    columns of a wide-layout CSV; ``rate`` (Hz) times a wide-layout CSV whose only time is a
+    frame counter.  Returns a :class:`Recording` in Blender axes and metres; raises
+    :class:`RecordingError` naming the file, line / byte offset and problem."""
     path = os.fspath(path)
     if not os.path.isfile(path):
         raise RecordingError("no such file", path=path)
     fmt = reader_for(path)
+    if (layout is not None or rate) and fmt.name != "csv":
+        what = "a layout file" if layout is not None else "a sample rate"
+        raise RecordingError(f"{what} applies to wide-layout CSV files, not to {fmt.description}", path=path)
     if layout is not None:
-        if fmt.name != "csv":
-            raise RecordingError(f"a layout file applies to wide-layout CSV files, not to {fmt.description}",
-                                 path=path)
         from .io_wide_csv import read_wide_csv
-        return read_wide_csv(path, axes=axes, units=units, layout=layout)
+        return read_wide_csv(path, axes=axes, units=units, layout=layout, rate=rate)
+    if rate:
+        return _read_csv(path, axes=axes, units=units, rate=rate)
     return fmt.read(path, axes=axes, units=units)
 
 
@@ -128,13 +131,14 @@ def _csv_header(path):
     return (lines[0].lower() if lines else ""), text
 
 
-def _read_csv(path, axes=None, units=None):
-    """The native (long) CSV when the header has a ``device`` column, else a wide layout."""
+def _read_csv(path, axes=None, units=None, rate=None):
+    """The native (long) CSV when the header has a ``device`` column, else a wide layout
+    (``rate``: samples per second of a wide layout timed by a frame counter only)."""
     header, text = _csv_header(path)
     if "device" not in [c.strip().strip('"') for c in header.split(",")]:
         from .io_wide_csv import looks_wide, read_wide_csv
         if looks_wide(text):
-            return read_wide_csv(path, axes=axes, units=units)
+            return read_wide_csv(path, axes=axes, units=units, rate=rate)
     from .io_csv import read_csv
     return read_csv(path, axes=axes, units=units)
 

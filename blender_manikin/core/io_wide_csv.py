@@ -15,8 +15,13 @@ Detected:
 * components: ``<dev>_pos_x``, ``<dev>_position_x``, ``<dev>.position.x``, ``<dev>_x`` for
   positions, ``<dev>_rot_{w,x,y,z}``, ``<dev>_quat_*``, ``<dev>.rotation.*`` for quaternions, in
   any column order (the letters name the components);
+* Euler angles: three columns ``<dev>_rot_{x,y,z}``, ``<dev>_euler_*``, ``<dev>_angles_*``,
+  degrees when any exceeds 2π + 0.5, else radians; rotations about the fixed axes applied in
+  :data:`EULER_ORDERS` order (Unity's Z, X, Y for a Unity file), unless a layout file's
+  ``"euler"`` states the order and unit;
 * time: a ``time``/``t``/``seconds`` column (seconds), ``timestamp``/``time_ms`` (milliseconds
-  when the steps say so), or ``delta_time_ms``/``dt`` (per-row deltas); an unnamed first column
+  when the steps say so), ``delta_time_ms``/``dt`` (per-row deltas), or only a frame counter
+  (``frame``, ``frame_index``, ...) with the rate given (``rate``); an unnamed first column
   (a pandas index) is ignored;
 * units from the head's height (a head at 161.9 means centimetres);
 * axes: Y-up or Z-up from the head's height; between Unity (left-handed, +Z forward) and
@@ -38,10 +43,12 @@ from .devices import DEVICES, canonical_device
 from .plain import shown
 from .recording import (Recording, RecordingError, TrackerStream, UNITS, canonical_axes, canonical_units,
                         read_file_bytes, to_blender)
+from . import rotations as rot
 from .rotations import normalize, quat_rotate
 
 _POS_WORDS = ("pos", "position", "p", "loc", "location", "")
-_ROT_WORDS = ("rot", "rotation", "quat", "quaternion", "q", "orientation")
+_ROT_WORDS = ("rot", "rotation", "quat", "quaternion", "q", "orientation", "euler", "eul", "angles", "ang")
+_FRAMES = ("frame", "frame_index", "frame_number", "frame_no", "frame_id", "frames")
 _TIME_S = ("time", "t", "seconds", "time_s", "secs")
 _TIME_MS = ("timestamp", "time_ms", "timestamp_ms", "ms")
 _DELTA_MS = ("delta_time_ms", "dt_ms", "delta_ms", "frame_time_ms")
@@ -64,14 +71,21 @@ _COMPONENT = re.compile(r"^(?P<dev>.+?)_(?:(?P<word>[a-z]+)_)?(?P<axis>[xyzw])$"
 
 
 def parse_columns(header):
-    """``({device: {"pos": {axis: col}, "rot": {axis: col}, "prefix": str}}, time_column, skipped)``."""
-    groups, time_col, skipped = {}, None, []
+    """``({device: {"pos": {axis: col}, "rot": {axis: col}, "prefix": str}}, time_column, skipped)``.
+
+    ``rot`` holds a quaternion's w, x, y, z columns, or x, y, z Euler-angle columns.  The time
+    column is ``(index, kind)``; a frame counter (``frame``, ``frame_index``, ...) is the time
+    only when there is no time column (kind ``"frames"``, read with a rate)."""
+    groups, time_col, skipped, frame_col = {}, None, [], None
     for i, raw in enumerate(header):
         name = _norm(raw)
         if i == 0 and (name == "" or name.startswith("unnamed")):
             continue
         if name in _TIME_S + _TIME_MS + _DELTA_MS + _DELTA_S and time_col is None:
             time_col = (i, name)
+            continue
+        if name in _FRAMES:                   # a frame counter: the time when nothing better is there
+            frame_col = frame_col or (i, "frames")
             continue
         m = _COMPONENT.match(name)
         if not m:
@@ -98,7 +112,7 @@ def parse_columns(header):
         if axis in g[kind]:
             raise RecordingError(f"two columns for {dev} {kind} {axis}: {header[g[kind][axis]]!r} and {raw!r}")
         g[kind][axis] = i
-    return groups, time_col, skipped
+    return groups, time_col or frame_col, skipped
 
 
 def looks_wide(head_text):
@@ -114,10 +128,15 @@ def looks_wide(head_text):
     return any(len(g["pos"]) == 3 for g in groups.values())
 
 
-def _time(col, values, header=None):
+def _time(col, values, header=None, rate=None, path=None):
     i, name = col
     col_name = header[i] if header is not None else name
     v = values[:, i]
+    if name == "frames":
+        if not rate:
+            raise RecordingError(f"the only time is the frame counter {col_name!r}: give the tracker rate "
+                                 f"(--rate HZ, or \"rate\" in a layout file's \"time\")", path=path)
+        return (v - v[0]) / float(rate), f"time={col_name} (frames) at {float(rate):g} Hz"
     if name in _DELTA_MS + _DELTA_S:
         v = np.cumsum(np.nan_to_num(v)) * (1e-3 if name in _DELTA_MS else 1.0)
         return v - v[0], f"time=cumulative {col_name}" + (" in ms" if name in _DELTA_MS else " in s")
@@ -157,6 +176,10 @@ def _axes_by_forward(pos, quat, candidates):
 
 
 LAYOUT_VERSION = 1
+#: the Euler-angle order each convention's tools write, as rotations about the fixed axes applied
+#: first letter first (Unity's ``eulerAngles``: Z, then X, then Y); a layout file's "euler" wins
+EULER_ORDERS = {"unity": "ZXY", "openxr": "XYZ", "blender": "XYZ"}
+_ORDERS = ("XYZ", "XZY", "YXZ", "YZX", "ZXY", "ZYX")
 
 
 def load_layout(path):
@@ -184,10 +207,21 @@ def load_layout(path):
                     problems.append(f"{d}: \"pos\" must list the x, y, z columns")
                 elif cols.get("rot") is not None and (not isinstance(cols["rot"], list) or len(cols["rot"]) != 4):
                     problems.append(f"{d}: \"rot\" must list the w, x, y, z columns (or be null)")
+                elif cols.get("euler") is not None and (not isinstance(cols["euler"], list) or len(cols["euler"]) != 3
+                                                        or cols.get("rot")):
+                    problems.append(f"{d}: \"euler\" must list the x, y, z angle columns (and \"rot\" be null)")
         tm = layout.get("time")
         if not isinstance(tm, dict) or not isinstance(tm.get("column"), str) or \
-                tm.get("unit") not in ("s", "ms", "us", "ns", "delta_ms", "delta_s"):
-            problems.append('"time" must be {"column": NAME, "unit": "s"|"ms"|"us"|"ns"|"delta_ms"|"delta_s"}')
+                tm.get("unit") not in ("s", "ms", "us", "ns", "delta_ms", "delta_s", "frames"):
+            problems.append('"time" must be {"column": NAME, "unit": "s"|"ms"|"us"|"ns"|"delta_ms"|"delta_s"'
+                            '|"frames"} (with "rate": HZ for frames)')
+        elif tm.get("rate") is not None and not (isinstance(tm["rate"], (int, float)) and tm["rate"] > 0):
+            problems.append('"time": "rate" must be a positive number of samples per second')
+        eu = layout.get("euler")
+        if eu is not None and (not isinstance(eu, dict) or str(eu.get("order", "")).upper() not in _ORDERS
+                               or eu.get("unit") not in (None, "deg", "rad")):
+            problems.append('"euler" must be {"order": "XYZ"|"ZXY"|... (applied first to last, about the fixed '
+                            'axes), "unit": "deg"|"rad"}')
         for key, allowed in (("units", tuple(UNITS)), ("axes", ("unity", "openxr", "blender"))):
             if layout.get(key) is not None and layout[key] not in allowed:
                 problems.append(f'"{key}" must be one of {", ".join(allowed)} or null')
@@ -225,21 +259,24 @@ def _layout_groups(layout, header, path, hline):
     groups = {}
     for d, cols in layout["devices"].items():
         dev = canonical_device(d)
-        groups[dev] = {"pos": {a: col(c) for a, c in zip("xyz", cols["pos"])},
-                       "rot": {a: col(c) for a, c in zip("wxyz", cols["rot"])} if cols.get("rot") else {},
+        rot = {a: col(c) for a, c in zip("wxyz", cols["rot"])} if cols.get("rot") else \
+            {a: col(c) for a, c in zip("xyz", cols["euler"])} if cols.get("euler") else {}
+        groups[dev] = {"pos": {a: col(c) for a, c in zip("xyz", cols["pos"])}, "rot": rot,
                        "prefix": _prefix_of(cols["pos"]) or d}
     unit = layout["time"]["unit"]
     name = {"s": "time", "ms": "time_ms", "us": "time_us", "ns": "time_ns", "delta_ms": "delta_time_ms",
-            "delta_s": "delta_time"}[unit]
+            "delta_s": "delta_time", "frames": "frames"}[unit]
     return groups, (col(layout["time"]["column"]), name), []
 
 
-def read_wide_csv(path, axes=None, units=None, layout=None) -> Recording:
+def read_wide_csv(path, axes=None, units=None, layout=None, rate=None) -> Recording:
     """Read a wide-layout CSV (see module doc) into a :class:`Recording` (Blender axes, metres).
 
     layout: a layout dict (:func:`load_layout`) or a layout file's path: the columns, time,
-    units and axes it states replace the detection (``axes`` / ``units`` still win).  The
-    layout that was used, detected or given, is ``metadata["layout"]`` (:func:`save_layout`)."""
+    units, axes and Euler-angle convention it states replace the detection (``axes`` /
+    ``units`` still win).  rate: samples per second of a file whose only time is a frame
+    counter (else the layout's ``"rate"``).  The layout that was used, detected or given, is
+    ``metadata["layout"]`` (:func:`save_layout`)."""
     path = os.fspath(path)
     text = read_file_bytes(path).decode("utf-8-sig", "replace")
     lines = text.splitlines()
@@ -270,9 +307,15 @@ def read_wide_csv(path, axes=None, units=None, layout=None) -> Recording:
     for dev, g in groups.items():
         if len(g["pos"]) != 3:
             raise RecordingError(f"{dev}: position columns {sorted(g['pos'])} (need x, y, z)", path=path, line=hline)
-        if g["rot"] and len(g["rot"]) != 4:
-            raise RecordingError(f"{dev}: rotation columns {sorted(g['rot'])}: a quaternion needs w, x, y, z "
-                                 "(Euler-angle columns are not read yet)", path=path, line=hline)
+        if g["rot"] and len(g["rot"]) != 4 and set(g["rot"]) != set("xyz"):
+            raise RecordingError(f"{dev}: rotation columns {sorted(g['rot'])}: a quaternion needs w, x, y, z, "
+                                 "Euler angles x, y, z", path=path, line=hline)
+    kinds = {"euler" if len(g["rot"]) == 3 else "quat" for g in groups.values() if g["rot"]}
+    if len(kinds) > 1:
+        raise RecordingError("some devices have quaternion and others Euler-angle columns: "
+                             + ", ".join(f"{d} {'Euler' if len(g['rot']) == 3 else 'quaternion'}"
+                                         for d, g in groups.items() if g["rot"]), path=path, line=hline)
+    euler = kinds == {"euler"}
     missing = [d for d in ("head", "left_hand", "right_hand") if d not in groups]
     if missing:
         raise RecordingError(f"no columns for {', '.join(missing)} (found devices: {', '.join(groups) or 'none'}; "
@@ -298,13 +341,29 @@ def read_wide_csv(path, axes=None, units=None, layout=None) -> Recording:
                 except ValueError:
                     raise RecordingError(f"{shown(c)} is not a number", path=path, line=body[k][0]) from None
         raise
-    t, time_note = _time(time_col, values, header)
+    if rate is None and layout is not None:
+        rate = layout["time"].get("rate")
+    t, time_note = _time(time_col, values, header, rate=rate, path=path)
     time_unit = time_note.rsplit(" in ", 1)[-1] if " in " in time_note else "s"
+    if time_col[1] == "frames":
+        time_unit = "frames"
     if time_note.startswith("time=cumulative"):
         time_unit = "delta_ms" if time_note.endswith("ms") else "delta_s"
     pos = {d: values[:, [g["pos"][a] for a in "xyz"]] for d, g in groups.items()}
-    quat = {d: (values[:, [g["rot"][a] for a in "wxyz"]] if g["rot"] else np.tile([1.0, 0, 0, 0], (len(t), 1)))
-            for d, g in groups.items()}
+    if euler:
+        eu = (layout or {}).get("euler") or {}
+        angles = {d: values[:, [g["rot"][a] for a in "xyz"]] for d, g in groups.items() if g["rot"]}
+        finite = np.concatenate([np.abs(a[np.isfinite(a)]) for a in angles.values()])
+        big = float(finite.max()) if finite.size else 0.0
+        eu_unit = eu.get("unit") or ("deg" if big > 2 * np.pi + 0.5 else "rad")
+        angles = {d: np.radians(a) if eu_unit == "deg" else a for d, a in angles.items()}
+
+        def quats_for(order):
+            return {d: (rot.matrix_to_quat(rot.fixed_axes_euler_to_matrix(angles[d], order)) if g["rot"]
+                        else np.tile([1.0, 0, 0, 0], (len(t), 1))) for d, g in groups.items()}
+    else:
+        quat = {d: (values[:, [g["rot"][a] for a in "wxyz"]] if g["rot"] else np.tile([1.0, 0, 0, 0], (len(t), 1)))
+                for d, g in groups.items()}
     # units from the head height (the largest coordinate of a standing head)
     head_h = float(np.nanmedian(np.nanmax(np.abs(pos["head"]), axis=1)))
     if units is None:
@@ -314,15 +373,24 @@ def read_wide_csv(path, axes=None, units=None, layout=None) -> Recording:
         units = canonical_units(units)
         units_note = f"units {units} ({given['units']})"
     scale = UNITS[units]
+    if euler:      # the order a convention's tools write (Unity: Z, X, Y), unless stated
+        def order_for(ax):
+            return str(eu.get("order") or EULER_ORDERS.get(ax, "XYZ")).upper()
     if axes is None:
         up = int(np.argmax(np.nanmedian(pos["head"], axis=0)))
         cands = ("blender",) if up == 2 else ("unity", "openxr")
-        axes, score = _axes_by_forward(pos, quat, cands)
+        if euler:
+            scores = [(_axes_by_forward(pos, quats_for(order_for(c)), (c,))[1], c) for c in cands]
+            axes = max(scores)[1]
+        else:
+            axes, score = _axes_by_forward(pos, quat, cands)
         axes_note = (f"axes {axes} ({'left-handed' if axes == 'unity' else 'right-handed'}), from the head's "
                      f"forward axis" + ("" if len(cands) > 1 else ", Z up"))
     else:
         axes = canonical_axes(axes)
         axes_note = f"axes {axes} ({given['axes']})"
+    if euler:
+        quat = quats_for(order_for(axes))
     streams = {}
     for d in DEVICES:
         if d not in groups:
@@ -330,18 +398,28 @@ def read_wide_csv(path, axes=None, units=None, layout=None) -> Recording:
         p, q = to_blender(pos[d] * scale, normalize(quat[d]), axes)
         ok = np.all(np.isfinite(p), -1) & np.all(np.isfinite(q), -1)
         streams[d] = TrackerStream(d, t.copy(), p, q, ok)
-    has_w_first = all(g["rot"]["w"] < g["rot"]["x"] for g in groups.values() if g["rot"])
-    qnote = "quaternions w,x,y,z" if has_w_first else "quaternions x,y,z,w"
+    if euler:
+        stated = "stated" if eu.get("order") else ("Unity's" if axes == "unity" else "chosen")
+        qnote = (f"Euler angles in {'degrees' if eu_unit == 'deg' else 'radians'}, fixed axes {order_for(axes)} "
+                 f"({stated} order)")
+    else:
+        has_w_first = all(g["rot"]["w"] < g["rot"]["x"] for g in groups.values() if g["rot"])
+        qnote = "quaternions w,x,y,z" if has_w_first else "quaternions x,y,z,w"
     hands = "/".join(f"{groups[d]['prefix']}_*" for d in ("left_hand", "right_hand"))
     extra = "".join(f", {d}={groups[d]['prefix']}_*" for d in ("pelvis", "left_foot", "right_foot") if d in groups)
     detected = (f"wide layout: head={groups['head']['prefix']}_*, hands={hands}{extra}; {qnote}; {time_note}; "
                 f"{units_note}; {axes_note}")
     used = {"format": "wide_csv", "version": LAYOUT_VERSION,
             "devices": {d: {"pos": [header[g["pos"][a]] for a in "xyz"],
-                            "rot": [header[g["rot"][a]] for a in "wxyz"] if g["rot"] else None}
+                            "rot": [header[g["rot"][a]] for a in "wxyz"] if g["rot"] and not euler else None,
+                            **({"euler": [header[g["rot"][a]] for a in "xyz"] if g["rot"] else None}
+                               if euler else {})}
                         for d, g in groups.items()},
-            "time": {"column": header[time_col[0]], "unit": {"µs": "us"}.get(time_unit, time_unit)},
+            "time": {"column": header[time_col[0]], "unit": {"µs": "us"}.get(time_unit, time_unit),
+                     **({"rate": float(rate)} if time_col[1] == "frames" else {})},
             "units": units, "axes": axes}
+    if euler:
+        used["euler"] = {"order": order_for(axes), "unit": eu_unit}
     if layout is not None:
         detected = "layout file: " + detected.split(": ", 1)[1]
     meta = {"format": "wide_csv", "axes": axes, "units": units, "detected": detected,

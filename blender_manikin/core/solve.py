@@ -47,7 +47,8 @@ class SolveSettings:
     optional ``arm_span``, metres); with TPOSE/AUTO a given ``height`` overrides the measured
     stature.  offsets: a device-offsets preset name, ``"none"``, ``"auto"`` (see
     :func:`resolve_offsets`) or an offsets dict (:mod:`.device_offsets`).  max_frames: crop.
-    layout: a layout file (path or dict) fixing the columns of a wide-layout CSV.
+    layout: a layout file (path or dict) fixing the columns of a wide-layout CSV.  rate: samples
+    per second of a wide-layout CSV timed by a frame counter only.
     """
     axes: str | None = None
     units: str | None = None
@@ -59,6 +60,7 @@ class SolveSettings:
     offsets: object = "auto"
     max_frames: int | None = None
     layout: object = None
+    rate: float | None = None
 
 
 @dataclass
@@ -108,7 +110,8 @@ def read_recording(path, settings: SolveSettings):
     from .formats import load_recording
     if not path:
         raise SolveError("no recording file chosen")
-    return load_recording(path, axes=settings.axes, units=settings.units, layout=settings.layout)
+    return load_recording(path, axes=settings.axes, units=settings.units, layout=settings.layout,
+                          rate=settings.rate)
 
 
 def resample_recording(recording, fps):
