@@ -56,6 +56,9 @@ PYTHON_VERSIONS = tuple(sorted(set(BLENDER_PYTHON.values())))
 # The onnxruntime pins, one per Python version, live in ONE place: requirements-onnxruntime.txt
 # (see docs/PACKAGING.md for why 1.20.1).  Other requirements files include it with ``-r``.
 PIN_FILE = ROOT / "requirements-onnxruntime.txt"
+# The .xror reader's packages (pins in requirements-xror.txt) and the module each provides.
+XROR_PIN_FILE = ROOT / "requirements-xror.txt"
+XROR_MODULES = {"pymongo": "bson", "fpzip": "fpzip"}
 LOADER_FILE = PKG_DIR / "core" / "onnx_runtime_loader.py"
 VERSION_FILE = Path("core") / "version.py"
 # Never shipped: Blender bundles numpy and an add-on must use that one.
@@ -68,7 +71,10 @@ TAGS = ["Animation"]
 
 
 def _mac_tags(arch: str) -> list[str]:
-    return [f"macosx_{major}_0_{a}" for major in range(15, 10, -1) for a in (arch, "universal2")]
+    tags = [f"macosx_{major}_0_{a}" for major in range(15, 10, -1) for a in (arch, "universal2")]
+    if arch == "x86_64":     # Intel wheels are often tagged for macOS 10.x (fpzip, pymongo)
+        tags += [f"macosx_10_{minor}_{a}" for minor in range(15, 8, -1) for a in (arch, "universal2")]
+    return tags
 
 
 # Blender platform -> pip --platform tags (most specific first) and PEP 508 marker environment.
@@ -196,6 +202,25 @@ def read_onnxruntime_pins(pin_file: Path | None = None, loader: Path | None = No
         raise BuildError(f"onnx_runtime_loader.BUNDLED_ONNXRUNTIME {loader_pins} disagrees with "
                          f"{pin_file.name} {pins}")
     return {v: pins[v] for v in PYTHON_VERSIONS}
+
+
+def read_xror_pins(pin_file: Path | None = None) -> dict[str, str]:
+    """``{distribution: version}`` of requirements-xror.txt (one ``name==X.Y.Z`` per line), for
+    the distributions of :data:`XROR_MODULES`."""
+    pin_file = pin_file or XROR_PIN_FILE
+    pins = {}
+    for line in pin_file.read_text(encoding="utf-8").splitlines():
+        line = line.split("#", 1)[0].strip()
+        if not line:
+            continue
+        m = re.fullmatch(r"([A-Za-z0-9_.\-]+)\s*==\s*([0-9][0-9A-Za-z.]*)", line)
+        if not m or _normalize(m.group(1)) not in XROR_MODULES:
+            raise BuildError(f"{pin_file.name}: expected 'NAME==X.Y.Z' for one of {sorted(XROR_MODULES)}, "
+                             f"found {line!r}")
+        pins[_normalize(m.group(1))] = m.group(2)
+    if set(pins) != set(XROR_MODULES):
+        raise BuildError(f"{pin_file.name}: pins {sorted(pins)}, expected {sorted(XROR_MODULES)}")
+    return pins
 
 
 def read_onnxruntime_pin(python_version: tuple[int, int] = (3, 11)) -> str:
@@ -606,6 +631,15 @@ def resolve_wheels_for_python(platform: str, python_version: tuple[int, int], or
     missing = needed - provided
     if missing:
         raise BuildError(f"{py}: onnxruntime imports {sorted(missing)} at run time but no shipped wheel provides it")
+    # The .xror reader's codecs: each wheel must bring all its module imports (beyond numpy).
+    for dist, version in sorted(read_xror_pins().items()):
+        w = fetch_wheel(dist, "==" + version, platform, cache, offline, python_version)
+        top = XROR_MODULES[dist]
+        needs = runtime_imports(w, top) - PROVIDED_BY_BLENDER - top_level_names(w)
+        if needs:
+            raise BuildError(f"{py}: {w.name}: `import {top}` needs {sorted(needs)}, which are not bundled")
+        ship.append(w)
+        notes.append(f"{py}: .xror reader: {dist} {version} (`import {top}` needs nothing else)")
     return ship, notes
 
 
@@ -722,6 +756,10 @@ def validate_zip(zip_path: Path, platform: str, blender_ext_path: Path) -> str:
             ort = [n for n in names if _wheel_tags(n)[0] == "onnxruntime" and _wheel_fits_python(n, pyver)]
             if len(ort) != 1:
                 raise BuildError(f"{zip_path.name}: {label} would install {len(ort)} onnxruntime wheels: {ort}")
+            for dist in XROR_MODULES:      # and the .xror reader's codecs, once each
+                got = [n for n in names if _normalize(_wheel_tags(n)[0]) == dist and _wheel_fits_python(n, pyver)]
+                if len(got) != 1:
+                    raise BuildError(f"{zip_path.name}: {label} would install {len(got)} {dist} wheels: {got}")
     return output
 
 

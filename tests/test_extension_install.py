@@ -70,10 +70,11 @@ def _tiny_onnx_model() -> bytes:
     return field(1, 7) + field(8, field(1, "") + field(2, 13)) + field(7, graph)
 
 
-# The script that runs inside the isolated interpreter.  argv: report.json zip tiny.onnx solve(0/1) example out_dir
+# The script that runs inside the isolated interpreter.
+# argv: report.json zip tiny.onnx solve(0/1) example out_dir take.xror
 CHILD = textwrap.dedent(r'''
     import importlib, importlib.util, json, os, sys, traceback
-    report_path, zip_path, tiny_model, solve, example, out_dir = sys.argv[1:7]
+    report_path, zip_path, tiny_model, solve, example, out_dir, xror = sys.argv[1:8]
     report = {"errors": {}}
 
     def step(name):
@@ -87,6 +88,8 @@ CHILD = textwrap.dedent(r'''
 
     try:
         report["ort_visible_before_install"] = importlib.util.find_spec("onnxruntime") is not None
+        report["xror_codecs_visible_before_install"] = [importlib.util.find_spec(m) is not None
+                                                        for m in ("bson", "fpzip")]
         report["sys_path"] = list(sys.path)
         import bpy, addon_utils
         report["blender"] = bpy.app.version_string
@@ -127,6 +130,14 @@ CHILD = textwrap.dedent(r'''
             return {"ops": sorted(dir(bpy.ops.manikin)),
                     "scene_props": sorted(p.identifier for p in bpy.types.Scene.bl_rna.properties
                                           if "manikin" in p.identifier)}
+
+        @step("xror")
+        def _():       # the .xror reader, with the bson and fpzip the zip bundles
+            formats = importlib.import_module("''' + EXT_MODULE + r'''.core.formats")
+            rec = formats.load_recording(xror)
+            import bson, fpzip
+            return {"devices": sorted(rec.streams), "samples": len(rec.streams["head"].time),
+                    "bson": bson.__file__, "fpzip": fpzip.__file__}
 
         @step("unshipped_modules_loaded")
         def _():
@@ -173,6 +184,23 @@ CHILD = textwrap.dedent(r'''
 ''')
 
 
+def _xror_bytes(n=90) -> bytes:
+    """A small XROR document (head and hands standing still for a second), made with the test
+    environment's bson and fpzip (requirements-xror.txt)."""
+    import bson
+    import fpzip
+    import numpy as np
+    t = np.arange(n) / 90.0
+    pose = np.tile(np.array([[0, 1.6, 0, 0, 0, 0, 1], [-0.3, 1.2, 0.3, 0, 0, 0, 1], [0.3, 1.2, 0.3, 0, 0, 0, 1]],
+                            np.float64), (n, 1, 1))
+    rows = np.concatenate([t[:, None], pose.reshape(n, -1)], 1).astype(np.float32)
+    devices = [{"name": j, "type": "x", "joint": j, "axes": ["x", "y", "z", "i", "j", "k", "1"]}
+               for j in ("HEAD", "HAND_LEFT", "HAND_RIGHT")]
+    return bson.encode({"$schema": "https://metaguard.github.io/xror/schema/v1.0.0/schema.json",
+                        "info": {"hardware": {"devices": devices}, "software": {"app": {"name": "test"}}},
+                        "frames": fpzip.compress(np.ascontiguousarray(rows[None, None])), "events": []})
+
+
 def _isolated_site(dest: Path) -> Path:
     """A directory holding only bpy and numpy (symlinks) from this environment."""
     dest.mkdir(parents=True, exist_ok=True)
@@ -208,6 +236,8 @@ def installed(build_dir) -> dict:
     script = base / "child.py"
     script.write_text(CHILD)
     report_path = base / "report.json"
+    xror = base / "take.xror"
+    xror.write_bytes(_xror_bytes())
     env = {
         "PATH": os.environ.get("PATH", "/usr/bin:/bin"),
         "HOME": str(home),
@@ -221,7 +251,7 @@ def installed(build_dir) -> dict:
                  f"sys.argv = [{str(script)!r}] + sys.argv[1:]; "
                  f"exec(compile(open({str(script)!r}).read(), {str(script)!r}, 'exec'))")
     cmd = [sys.executable, "-I", "-S", "-c", bootstrap, str(report_path), str(build_dir["zip"]), str(tiny),
-           solve, str(EXAMPLE), str(base / "out")]
+           solve, str(EXAMPLE), str(base / "out"), str(xror)]
     proc = subprocess.run(cmd, env=env, cwd=base, capture_output=True, text=True, timeout=600)
     assert report_path.exists(), f"child crashed (exit {proc.returncode}):\n{proc.stdout}\n{proc.stderr}"
     report = json.loads(report_path.read_text())
@@ -413,6 +443,15 @@ def test_onnxruntime_comes_from_the_extension_wheels(installed):
     assert _step(installed, "unshipped_modules_loaded") == []
 
 
+def test_xror_reads_inside_blender_with_the_bundled_codecs(installed):
+    assert installed["xror_codecs_visible_before_install"] == [False, False], installed["sys_path"]
+    got = _step(installed, "xror")
+    site_packages = Path(installed["site_packages"]).resolve()
+    assert Path(got["bson"]).resolve().is_relative_to(site_packages), got
+    assert Path(got["fpzip"]).resolve().is_relative_to(site_packages), got
+    assert got["devices"] == ["head", "left_hand", "right_hand"] and got["samples"] == 90, got
+
+
 def test_addon_registered(installed):
     reg = _step(installed, "registered")
     assert reg["ops"] or reg["scene_props"], "the add-on registered no bpy.ops.manikin operator and no scene property"
@@ -564,3 +603,12 @@ def test_blender_binary_installs_the_zip_and_solves_with_its_onnxruntime(build_d
     doc = json.loads((out / f"{EXAMPLE.stem}.json").read_text())
     assert len(doc["positions"]) > 30
     assert (out / f"{EXAMPLE.stem}.bvh").stat().st_size > 0 and (out / f"{EXAMPLE.stem}.blend").stat().st_size > 0
+
+    # An .xror take through the same Blender: bson and fpzip come from the zip's wheels (the fpzip
+    # decoder runs in a child of Blender's own Python, see core/io_xror.decompress_isolated).
+    take = tmp_path / "take.xror"
+    take.write_bytes(_xror_bytes(180))
+    p = blender_run("-b", "--python", str(ext / "cli.py"), "--", "solve", str(take), "--out", str(out),
+                    "--format", "json", "--height", "1.75")
+    assert p.returncode == 0, p.stdout + p.stderr
+    assert len(json.loads((out / "take.json").read_text())["positions"]) > 30

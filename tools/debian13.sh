@@ -79,7 +79,7 @@ setup() {
   fi
   mount_all
   local stamp="$ROOTFS/.manikin-stamp" want
-  want="$(printf '%s\n' "$PACKAGES"; cat "$REPO/requirements-bpy52.txt" "$REPO/requirements-onnxruntime.txt")"
+  want="$(printf '%s\n' "$PACKAGES"; cat "$REPO/requirements-bpy52.txt" "$REPO/requirements-onnxruntime.txt" "$REPO/requirements-xror.txt")"
   if [ -f "$stamp" ] && [ "$(cat "$stamp")" = "$want" ] && [ -x "$ROOTFS$VENV/bin/python" ]; then
     echo "Debian 13 root up to date: $ROOTFS"
   else

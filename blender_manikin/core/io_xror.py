@@ -38,9 +38,14 @@ APP_OFFSETS = {"beat saber": "beat_saber"}
 MAX_EXPANSION = 64
 
 
-_DECOMPRESS = ("import sys, fpzip, numpy as np\n"
+# np.save goes through a BytesIO: saving straight to a pipe uses ndarray.tofile, which needs a
+# file position a pipe does not have in some interpreters ("obtaining file position failed",
+# seen in an isolated Blender interpreter)
+_DECOMPRESS = ("import io, sys, fpzip, numpy as np\n"
                "a = fpzip.decompress(sys.stdin.buffer.read())\n"
-               "np.save(sys.stdout.buffer, np.ascontiguousarray(a, dtype=np.float32), allow_pickle=False)\n")
+               "b = io.BytesIO()\n"
+               "np.save(b, np.ascontiguousarray(a, dtype=np.float32), allow_pickle=False)\n"
+               "sys.stdout.buffer.write(b.getvalue())\n")
 
 
 def decompress_isolated(blob: bytes, path, limit: int):
