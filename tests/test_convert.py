@@ -121,3 +121,14 @@ def test_inputs_from_globs_and_manifests_and_unique_stems(tmp_path):
 def test_convert_refuses_blender_formats(tmp_path):
     with pytest.raises(ValueError, match="not blend"):
         convert.run([EXAMPLE], str(tmp_path), ["blend"], SolveSettings(), progress=False, log=lambda m: None)
+
+
+def test_partial_outputs_of_a_killed_run_are_removed_and_nothing_else(tmp_path):
+    out = tmp_path / "out"
+    out.mkdir()
+    partial = [".t00.part123.json", ".t01.part9.bvh", ".t02.part77.json.tmp", ".t03.part5.npz.tmp.npz"]
+    kept = ["t00.json", ".keep", "notes.txt", ".t04.json", "t05.part1.json"]
+    for name in partial + kept:
+        (out / name).write_text("x")
+    assert convert.remove_partial_outputs(out) == len(partial)
+    assert sorted(os.listdir(out)) == sorted(kept)

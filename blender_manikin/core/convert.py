@@ -23,6 +23,7 @@ import glob
 import hashlib
 import json
 import os
+import re
 import sys
 import time
 
@@ -160,6 +161,25 @@ def _client(scheduler, workers):
     return Client(scheduler), None
 
 
+#: the temporary names :func:`convert_task` writes under (then renames): ``.<stem>.part<pid><ext>``,
+#: and a writer's own temporary next to it (``...<ext>.tmp``, ``....tmp.npz``)
+_PARTIAL = re.compile(r"^\..+\.part\d+\.[A-Za-z0-9]+(\.tmp(\.npz)?)?$")
+
+
+def remove_partial_outputs(out_dir) -> int:
+    """Delete the half-written outputs a killed run left in ``out_dir`` (only this tool's own
+    temporary names, :data:`_PARTIAL`); returns how many."""
+    n = 0
+    for name in os.listdir(out_dir):
+        if _PARTIAL.match(name):
+            try:
+                os.remove(os.path.join(out_dir, name))
+                n += 1
+            except OSError:
+                pass
+    return n
+
+
 def run(inputs, out_dir, fmts, settings: SolveSettings, scheduler=None, workers=None, model=None, options=None,
         progress=True, log=None):
     """Convert ``inputs`` (paths) into ``out_dir``; returns ``(exit code, records of this run)``."""
@@ -171,6 +191,9 @@ def run(inputs, out_dir, fmts, settings: SolveSettings, scheduler=None, workers=
         raise ValueError(f"convert writes {', '.join(n for n, w in formats.WRITERS.items() if not w.needs_blender)}"
                          f" (without Blender); not {', '.join(bad)}")
     os.makedirs(out_dir, exist_ok=True)
+    removed = remove_partial_outputs(out_dir)
+    if removed:
+        log(f"removed {removed} partial output(s) a killed run left in {out_dir}")
     stems = output_stems(inputs)
     done = read_manifest(out_dir)
     todo = [p for p in inputs if not is_done(done.get(p))]
