@@ -421,7 +421,8 @@ def test_csv_error_deep_in_a_big_file_names_its_line(tmp_path):
     def unknown(row):
         row[1] = "elbow"
 
-    for change, problem in ((oops, "column 'py': 'oops' is not a number"), (list.pop, "expected 11 comma-separated fields"),
+    for change, problem in ((oops, "column 'py': 'oops' is not a number"),
+                            (list.pop, "expected 11 comma-separated fields"),
                             (unknown, "unknown device 'elbow'")):
         row = lines[1800].split(",")
         change(row)
