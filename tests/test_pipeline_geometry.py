@@ -115,3 +115,21 @@ def test_quality_notes_name_what_gave_way():
     clean = PoseResult(fps=30.0, body=body, local_rot=res.local_rot, root_pos=res.root_pos,
                        swivel=res.swivel, reach_error=np.zeros((T, 4)), at_limit=np.zeros((T, 4), bool))
     assert clean.quality_notes() == []
+
+
+def test_plant_pieces_match_the_plain_greedy_split():
+    """Plants are split where the predicted ankle drifts further than the tolerance; the search in
+    doubling windows (linear time on long plants) finds the same pieces as a scan of the rest."""
+    def plain(path, a, b, tol):
+        pieces, i = [], a
+        while i < b:
+            far = np.nonzero(np.linalg.norm(path[i:b] - path[i], axis=-1) > tol)[0]
+            j = i + (int(far[0]) if far.size else b - i)
+            pieces.append((i, j))
+            i = j
+        return pieces
+    rng = np.random.default_rng(0)
+    for n in (1, 5, 63, 64, 65, 500, 5000):
+        path = np.cumsum(rng.normal(scale=0.004, size=(n, 2)), 0)
+        for a, b in ((0, n), (n // 3, n)):
+            assert pl._plant_pieces(path, a, b, 0.05) == plain(path, a, b, 0.05), (n, a, b)

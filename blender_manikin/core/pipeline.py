@@ -197,9 +197,17 @@ def _plant_pieces(path, a, b, tol):
     within ``tol`` of their first frame (greedy).  Returns ``[(start, stop), ...]``."""
     pieces, i = [], a
     while i < b:
-        d = np.linalg.norm(path[i:b] - path[i], axis=-1)
-        far = np.nonzero(d > tol)[0]
-        j = i + (int(far[0]) if far.size else b - i)
+        # the first frame further than tol, searched in windows that double (linear in the run's
+        # length, where scanning the whole rest of the run for every piece was quadratic)
+        j, w = b, 64
+        lo = i
+        while lo < b:
+            hi = min(i + w, b)
+            far = np.nonzero(np.linalg.norm(path[lo:hi] - path[i], axis=-1) > tol)[0]
+            if far.size:
+                j = lo + int(far[0])
+                break
+            lo, w = hi, 2 * w
         pieces.append((i, j))
         i = j
     return pieces
