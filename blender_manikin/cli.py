@@ -6,15 +6,15 @@ Two ways to run it (the same code)::
     python -m blender_manikin solve INPUT... --out DIR [options]     # with the bpy module, or
                                                                      # without it for json/bvh
 
-INPUT is a recording (any format of :mod:`blender_manikin.core.formats`: ``.csv``
-native format, ``.bsor`` Beat Saber replay) or a folder (its recordings, sorted).  For every input the
-scene is reset to an empty factory scene, the recording is solved and
-``DIR/STEM.<ext>`` is written for each format.  One line per converted input
-on stdout (``OK INPUT -> outputs (summary)``); problems on stderr as
-``ERROR INPUT: message``; a bad file does not stop the others.  Exit status
-0 only when every input converted, 1 when any failed, 2 for usage errors.
+INPUT is a recording (any format of :mod:`blender_manikin.core.formats`: ``.csv`` native
+or wide layout, ``.bsor`` Beat Saber replay, ``.xror`` XROR) or a folder (its recordings,
+sorted).  For every input the scene is reset to an empty factory scene, the recording is
+solved and ``DIR/STEM.<ext>`` is written for each format.  One line per converted input on
+stdout (``OK INPUT -> outputs (summary)``); problems on stderr as ``ERROR INPUT: message``; a
+bad file does not stop the others.  Exit status 0 only when every input converted, 1 when any
+failed, 2 for usage errors.
 
-Options mirror the panel:
+Options of ``solve`` (they mirror the panel; ``--help`` has them all):
 
 --axes openxr|unity|blender   override the file's axes metadata
 --units m|cm|mm               override the file's units metadata
@@ -24,11 +24,21 @@ Options mirror the panel:
                               overrides the measured stature; alone it is the
                               body measurement)
 --arm-span METRES             wrist-to-wrist span (with --height)
---offsets none|PRESET|FILE    device offsets preset name or a JSON file
+--offsets auto|none|PRESET|FILE  device offsets: auto (the file's metadata or its
+                              format's default), a preset name or a JSON file
+--layout FILE.json            the columns, time, units, axes and Euler order of
+                              wide-layout CSV inputs (default: detected)
+--rate HZ                     samples per second of a wide-layout CSV timed by a
+                              frame counter only
+--save-layout FILE.json       write the layout detected in the first wide CSV
 --format blend,fbx,bvh,json,npz  one or several (default blend,fbx,json); without blend
                               and fbx, the numpy core writes them without Blender
 --bvh-units cm|m              BVH length unit (default cm)
 --trackers                    also create (and export) keyed tracker empties
+--no-live-rig                 plain FK keys only (no live swivel rig)
+
+``convert INPUT... --out DIR`` converts many recordings on Dask (the same solve options, plus
+``--scheduler`` and ``--workers``; :mod:`blender_manikin.core.convert`).
 
 When run by a Blender binary as a plain script, this file puts its parent
 directory on ``sys.path`` and imports the package, so it works from any

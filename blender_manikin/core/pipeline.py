@@ -217,10 +217,10 @@ def lock_planted_feet(ankle_pos, contact, threshold=CONTACT_THRESHOLD, blend=CON
                       axes=(0, 1, 2), max_drift=None):
     """Hold each ankle still while its foot is planted.
 
-    ankle_pos ``(T, 2, 3)``; contact ``(T, 2)`` probabilities.  Over each
-    contact run the ankle keeps, on ``axes`` (0, 1, 2 = x, y, z), the
-    coordinates it has at the run's median frame; ``blend`` frames on either
-    side ease in and out linearly.  A foot is only ever held where the
+    ankle_pos ``(T, 2, 3)``; contact ``(T, 2)`` probabilities (planted above
+    ``threshold``).  Over each plant the ankle is held, on ``axes`` (0, 1, 2 =
+    x, y, z), at the median of its predicted coordinates over the plant;
+    ``blend`` frames on either side ease in and out linearly.  A foot is only ever held where the
     prediction itself stays put: a run over which the predicted ankle moves
     more than ``max_drift`` metres (default :data:`LOCK_MAX_DRIFT`; a slow
     shuffle the network calls "planted") is split into consecutive plants,
