@@ -18,7 +18,8 @@ Each ``dist/blender_manikin-<version>-<platform>.zip`` holds
   only the one matching its Python), plus the dependencies onnxruntime imports at run time (numpy
   excluded: Blender ships it).  Which ones
   that is is not guessed: the build reads the wheel's metadata and scans the modules that
-  ``import onnxruntime`` loads; see docs/PACKAGING.md.
+  ``import onnxruntime`` loads; see docs/PACKAGING.md.  Likewise the ``.xror`` reader's codecs,
+  pymongo (``bson``) and fpzip (``requirements-xror.txt``), each checked to need nothing else.
 
 Wheels are fetched once with ``pip download --only-binary=:all: --no-deps`` into a cache
 (``$BLENDER_MANIKIN_WHEEL_CACHE`` or ``~/.cache/blender_manikin/wheels``), so rebuilds are offline.
