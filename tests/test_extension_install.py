@@ -185,20 +185,12 @@ CHILD = textwrap.dedent(r'''
 
 
 def _xror_bytes(n=90) -> bytes:
-    """A small XROR document (head and hands standing still for a second), made with the test
-    environment's bson and fpzip (requirements-xror.txt)."""
-    import bson
-    import fpzip
+    """A small XROR document: head and hands standing still for ``n`` frames at 90 Hz."""
     import numpy as np
-    t = np.arange(n) / 90.0
+    from fixtures_recordings import xror_bytes
     pose = np.tile(np.array([[0, 1.6, 0, 0, 0, 0, 1], [-0.3, 1.2, 0.3, 0, 0, 0, 1], [0.3, 1.2, 0.3, 0, 0, 0, 1]],
                             np.float64), (n, 1, 1))
-    rows = np.concatenate([t[:, None], pose.reshape(n, -1)], 1).astype(np.float32)
-    devices = [{"name": j, "type": "x", "joint": j, "axes": ["x", "y", "z", "i", "j", "k", "1"]}
-               for j in ("HEAD", "HAND_LEFT", "HAND_RIGHT")]
-    return bson.encode({"$schema": "https://metaguard.github.io/xror/schema/v1.0.0/schema.json",
-                        "info": {"hardware": {"devices": devices}, "software": {"app": {"name": "test"}}},
-                        "frames": fpzip.compress(np.ascontiguousarray(rows[None, None])), "events": []})
+    return xror_bytes(np.arange(n) / 90.0, pose, app="test")
 
 
 def _isolated_site(dest: Path) -> Path:

@@ -150,13 +150,12 @@ def test_chunked_solve_equals_the_whole_take_solve(runner, example, monkeypatch)
 
 
 def test_writers_in_chunks_write_the_same_files(runner, example, tmp_path, monkeypatch):
-    from blender_manikin.core import export_bvh, export_json, formats
+    from blender_manikin.core import export_json, formats, pose_result
     targets, body, _ = example
     res = pipeline.solve(targets, body, runner)
     written = {}
     for chunk in (10 ** 9, 13):
-        for mod, name in ((export_json, "CHUNK_FRAMES"), (export_bvh, "CHUNK_FRAMES"), (formats, "NPZ_CHUNK_FRAMES")):
-            monkeypatch.setattr(mod, name, chunk)
+        monkeypatch.setattr(pose_result, "CHUNK_FRAMES", chunk)
         for fmt in ("json", "bvh", "npz"):
             path = tmp_path / f"{chunk}.{fmt}"
             formats.WRITERS[fmt].write(str(path), res, source="x", options=None)

@@ -9,10 +9,10 @@ fpzip = pytest.importorskip("fpzip")
 
 from blender_manikin.core import formats  # noqa: E402
 from blender_manikin.core.recording import RecordingError, to_blender  # noqa: E402
+from fixtures_recordings import XROR_POSE_AXES as AXES, xror_bytes  # noqa: E402
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 VR = os.path.join(os.path.dirname(ROOT), "shared", "data", "vr")
-AXES = ["x", "y", "z", "i", "j", "k", "1"]
 
 
 def _xror(n=120, devices=("HEAD", "HAND_LEFT", "HAND_RIGHT"), app="Some App", axes=None, width=None, seed=0):
@@ -22,15 +22,7 @@ def _xror(n=120, devices=("HEAD", "HAND_LEFT", "HAND_RIGHT"), app="Some App", ax
     pose[..., :3] = rng.normal(size=(n, len(devices), 3)) * 0.1 + [0, 1.5, 0]
     q = rng.normal(size=(n, len(devices), 4))
     pose[..., 3:] = q / np.linalg.norm(q, axis=-1, keepdims=True)
-    rows = np.concatenate([t[:, None], pose.reshape(n, -1)], 1).astype(np.float32)
-    if width is not None:
-        rows = rows[:, :width]
-    doc = {"$schema": "https://metaguard.github.io/xror/schema/v1.0.0/schema.json",
-           "info": {"hardware": {"devices": [{"name": j, "type": "x", "joint": j, "axes": axes or AXES}
-                                             for j in devices]},
-                    "software": {"app": {"name": app, "version": "1"}}},
-           "frames": fpzip.compress(np.ascontiguousarray(rows[None, None])), "events": []}
-    return bson.encode(doc), t, pose
+    return xror_bytes(t, pose, devices, app=app, axes=axes, width=width), t, pose
 
 
 def test_synthetic_xror_reads_in_blender_axes(tmp_path):

@@ -37,8 +37,6 @@ from .plain import shown
 #: change of basis Blender (Z-up, -Y forward) → BVH (Y-up, +Z forward)
 C_BLENDER_TO_BVH = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, 1.0], [0.0, -1.0, 0.0]])
 UNIT_SCALE = {"m": 1.0, "cm": 100.0}
-#: frames converted and formatted at a time (bounds the writer's memory on long takes)
-CHUNK_FRAMES = 8192
 
 
 def end_site_offsets(body: sk.Body):
@@ -72,7 +70,7 @@ def bvh_string(local_rot, root_pos, body: sk.Body, fps: float, units: str = "cm"
     local_rot: ``(T, 22, 3, 3)`` body-model local rotations; root_pos:
     ``(T, 3)`` pelvis world positions (metres, Blender axes); ``fps`` frames
     per second; ``units`` ``"cm"`` or ``"m"``.  The motion is converted and formatted
-    ``chunk_frames`` (default :data:`CHUNK_FRAMES`) frames at a time, so writing a long take
+    ``chunk_frames`` (default :data:`.pose_result.CHUNK_FRAMES`) frames at a time, so writing a long take
     to ``out`` needs no more memory than a short one; the text does not depend on it.
     """
     if units not in UNIT_SCALE:
@@ -132,7 +130,8 @@ def bvh_string(local_rot, root_pos, body: sk.Body, fps: float, units: str = "cm"
     f = buf if out is None else out
     f.write("\n".join(lines) + "\n")
     unwrap = _Unwrap()
-    step = max(int(chunk_frames or CHUNK_FRAMES), 1)
+    from . import pose_result
+    step = max(int(chunk_frames or pose_result.CHUNK_FRAMES), 1)
     for a in range(0, T, step):
         fr = slice(a, min(a + step, T))
         Rb = np.einsum("ab,tjbc,dc->tjad", C, local_rot[fr][:, order], C)       # C R Cᵀ

@@ -128,24 +128,14 @@ def _wrap(a):
     return np.where(w <= -np.pi, w + 2 * np.pi, w)
 
 
-#: frames formatted at a time by :func:`write_json` (bounds its memory on long takes)
-CHUNK_FRAMES = 8192
-
-
-def _pose_chunks(result, chunk=None):
-    """``(positions (n,22,3), rotations (n,22,4), swivel (n,4))`` for successive frame chunks:
-    world positions, world quaternions sign-continuous over the whole take, swivel wrapped.
-    The same numbers as one pass over the take (FK is per frame; the sign carries over)."""
-    T = result.num_frames
-    sw_all = np.asarray(result.swivel, dtype=np.float64).reshape(T, len(SWIVEL_KEYS))
-    step = max(int(chunk or CHUNK_FRAMES), 1)
+def _pose_chunks(result):
+    """``(positions (n,22,3), rotations (n,22,4), swivel (n,4))`` for successive frame chunks
+    (:meth:`PoseResult.fk_chunks`): world positions, world quaternions sign-continuous over the
+    whole take, swivel wrapped.  The same numbers as one pass over the take (the sign carries
+    over from chunk to chunk)."""
+    sw_all = np.asarray(result.swivel, dtype=np.float64).reshape(result.num_frames, len(SWIVEL_KEYS))
     last = None
-    for a in range(0, T, step):
-        f = slice(a, min(a + step, T))
-        if result._fk is not None:
-            pos, wrot = result._fk[0][f], result._fk[1][f]
-        else:
-            pos, wrot = sk.forward_kinematics(result.local_rot[f], result.root_pos[f], result.body)
+    for f, pos, wrot in result.fk_chunks():
         q = rot.matrix_to_quat(wrot)
         if last is not None:          # continue the sign from the previous chunk's last frame
             q = rot.quat_continuous(np.concatenate([last[None], q], 0), axis=0)[1:]
@@ -241,7 +231,7 @@ def write_json(path, result, source: str = "", decimals: int = 6, indent=None, g
 
     The per-frame pose arrays are formatted straight from numpy with
     ``decimals`` fixed decimals (about 10x faster than ``json.dump`` of nested
-    lists), :data:`CHUNK_FRAMES` frames at a time straight into the file, so a
+    lists), :data:`.pose_result.CHUNK_FRAMES` frames at a time straight into the file, so a
     long take needs no more memory than a short one; ``indent`` applies to the
     other fields.  Written under a temporary name, then renamed.
     """

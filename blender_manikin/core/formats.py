@@ -184,22 +184,16 @@ def _write_bvh(path, result, source="", options=None):
     return write_bvh(path, result, units=getattr(options, "bvh_units", "cm") or "cm")
 
 
-#: frames put through FK at a time by the npz writer (bounds its memory on long takes)
-NPZ_CHUNK_FRAMES = 8192
-
-
 def _write_npz(path, result, source="", options=None):
     """Arrays for analysis pipelines: positions (T, 22, 3) metres, local rotations (T, 22, 3, 3),
     world orientations as wxyz quaternions (T, 22, 4), swivel (T, 4) radians, contacts (T, 2),
     fps, joint names, parents; Blender axes (+Z up, body faces -Y)."""
     from . import rotations as rot
-    from .skeleton import JOINT_NAMES, NUM_JOINTS, PARENTS, forward_kinematics
-    T, step = result.num_frames, NPZ_CHUNK_FRAMES
+    from .skeleton import JOINT_NAMES, NUM_JOINTS, PARENTS
+    T = result.num_frames
     positions = np.empty((T, NUM_JOINTS, 3), np.float32)
     quats = np.empty((T, NUM_JOINTS, 4), np.float32)
-    for a in range(0, T, step):      # FK a chunk at a time: no (T, 22, 3, 3) float64 copy of a long take
-        f = slice(a, min(a + step, T))
-        pos, world = forward_kinematics(result.local_rot[f], result.root_pos[f], result.body)
+    for f, pos, world in result.fk_chunks():      # no (T, 22, 3, 3) float64 copy of a long take
         positions[f], quats[f] = pos, rot.matrix_to_quat(world)
     tmp = os.fspath(path) + ".tmp.npz"
     np.savez_compressed(tmp, positions=positions,

@@ -358,9 +358,13 @@ def read_wide_csv(path, axes=None, units=None, layout=None, rate=None) -> Record
         eu_unit = eu.get("unit") or ("deg" if big > 2 * np.pi + 0.5 else "rad")
         angles = {d: np.radians(a) if eu_unit == "deg" else a for d, a in angles.items()}
 
-        def quats_for(order):
-            return {d: (rot.matrix_to_quat(rot.fixed_axes_euler_to_matrix(angles[d], order)) if g["rot"]
-                        else np.tile([1.0, 0, 0, 0], (len(t), 1))) for d, g in groups.items()}
+        made = {}
+
+        def quats_for(order):       # each order's quaternions once (detection, then the read)
+            if order not in made:
+                made[order] = {d: (rot.matrix_to_quat(rot.fixed_axes_euler_to_matrix(angles[d], order)) if g["rot"]
+                                   else np.tile([1.0, 0, 0, 0], (len(t), 1))) for d, g in groups.items()}
+            return made[order]
     else:
         quat = {d: (values[:, [g["rot"][a] for a in "wxyz"]] if g["rot"] else np.tile([1.0, 0, 0, 0], (len(t), 1)))
                 for d, g in groups.items()}

@@ -13,6 +13,10 @@ _LIMB_WORDS = {"left_arm": ("left hand", "shoulder", "elbow"), "right_arm": ("ri
 
 from .devices import DEVICES  # noqa: E402,F401  (the vocabulary lives in core/devices.py)
 
+#: frames the writers convert at a time (:meth:`PoseResult.fk_chunks`, the BVH writer): bounds
+#: their memory on long takes; what they write does not depend on it
+CHUNK_FRAMES = 8192
+
 
 @dataclass
 class TrackerTargets:
@@ -76,6 +80,19 @@ class PoseResult:
         if self._fk is None:
             self._fk = forward_kinematics(self.local_rot, self.root_pos, self.body)
         return self._fk
+
+    def fk_chunks(self, chunk=None):
+        """``(frames slice, positions (n, 22, 3), world_rot (n, 22, 3, 3))`` for successive chunks
+        of :data:`CHUNK_FRAMES` frames (or ``chunk``): the numbers of :meth:`fk` (FK is per frame),
+        without building the whole take's arrays unless :meth:`fk` already did."""
+        T = self.num_frames
+        step = max(int(chunk or CHUNK_FRAMES), 1)
+        for a in range(0, T, step):
+            f = slice(a, min(a + step, T))
+            if self._fk is not None:
+                yield f, self._fk[0][f], self._fk[1][f]
+            else:
+                yield (f,) + tuple(forward_kinematics(self.local_rot[f], self.root_pos[f], self.body))
 
     @property
     def positions(self):
