@@ -112,6 +112,24 @@ def test_arms_too_short_are_lengthened_from_the_reach(runner, example):
     assert calibration.arm_span_for_reach(pipeline.solve(targets, body, runner)) is None
 
 
+def test_predicted_feet_are_never_reported_out_of_reach_but_foot_trackers_are(runner, example):
+    """The network's ankles are no targets the performer set: a straight leg pointing at one a few
+    millimetres too low is no body-size problem.  A foot tracker the leg cannot reach is."""
+    targets, body, _ = example
+    res = pipeline.solve(targets, body, runner)
+    assert not any("foot" in n and "out of reach" in n for n in res.quality_notes()), res.quality_notes()
+    assert np.all(res.reach_error[:, 2:] == 0.0)
+    pos = res.positions
+    feet = type(targets)(fps=targets.fps, pos=dict(targets.pos), rot=dict(targets.rot))
+    for k, (dev, joint) in enumerate((("left_foot", "left_ankle"), ("right_foot", "right_ankle"))):
+        feet.pos[dev] = pos[:, sk.J[joint]].copy()
+        feet.rot[dev] = res.world_rot[:, sk.J[joint]].copy()
+    feet.pos["left_foot"][30:40, 2] -= 0.25                   # the left tracker 25 cm below the ankle
+    notes = pipeline.solve(feet, body, runner).quality_notes()
+    assert any(n.startswith("left foot out of reach on") for n in notes), notes
+    assert not any(n.startswith("right foot out of reach") for n in notes), notes
+
+
 def test_hand_on_the_shoulder_is_reported_as_an_offset_problem(runner, example):
     targets, body, _ = example
     res0 = pipeline.solve(targets, body, runner)

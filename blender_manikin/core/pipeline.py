@@ -425,6 +425,7 @@ def assemble(targets: TrackerTargets, body: Body, net: NetworkOutput, progress=N
     swivel = np.empty((T, 4))
     reach_error = np.empty((T, 4))
     lengths = body.limb_lengths()
+    untracked_feet = [d not in targets.pos for d in ("left_foot", "right_foot")]
     step = max(int(chunk_frames or ASSEMBLY_CHUNK_FRAMES), 1)
     for a in range(0, T, step):
         f = slice(a, min(a + step, T))
@@ -444,6 +445,9 @@ def assemble(targets: TrackerTargets, body: Body, net: NetworkOutput, progress=N
         loc[:, ls.LIMB_MID] = sol.mid_local
         loc[:, ls.LIMB_END] = sol.end_local
         local[f], root_pos[f], reach_error[f] = loc, root, sol.reach_error
+        # a foot the network placed (no tracker) has no target to miss: the straight leg points at
+        # the prediction, and "out of reach" notes are for trackers the body cannot reach
+        reach_error[f, 2:][:, untracked_feet] = 0.0
         del loc, pos, world, sol
         if progress is not None:
             progress(f.stop / T)
