@@ -131,3 +131,15 @@ def test_the_one_euler_implementation():
     assert np.allclose(rot.fixed_axes_euler_to_matrix(e, "ZXY"), ey(e[:, 1]) @ ex(e[:, 0]) @ ez(e[:, 2]))
     with pytest.raises(ValueError, match="not representable"):
         rot.matrix_to_euler(rot.euler_to_matrix([[0.1, 0.2]], "XY"), "Z")
+
+
+def test_vector_norm_matches_linalg_norm_and_feeds_normalize():
+    rng = np.random.default_rng(3)
+    for width in (3, 4):
+        v = rng.normal(size=(50, width)) * 10.0 ** rng.uniform(-3, 3, size=(50, 1))
+        v[0] = 0.0
+        n = rot.vector_norm(v)
+        np.testing.assert_array_equal(n, np.linalg.norm(v, axis=-1))
+        np.testing.assert_array_equal(rot.normalize(v, norm=n), rot.normalize(v))
+        assert np.all(rot.normalize(v)[0] == 0.0)
+        np.testing.assert_allclose(np.linalg.norm(rot.normalize(v)[1:], axis=-1), 1.0, atol=1e-12)

@@ -36,6 +36,7 @@ raise :class:`~.recording.RecordingError` naming the file, line and problem.
 from __future__ import annotations
 
 import csv
+import io
 import os
 import re
 
@@ -47,7 +48,7 @@ from .recording import (
     Recording, RecordingError, TrackerStream, UNITS, canonical_axes, canonical_device,
     canonical_units, from_blender, to_blender,
 )
-from .rotations import normalize
+from .rotations import normalize, vector_norm
 
 REQUIRED_COLUMNS = ("time", "device", "px", "py", "pz", "qw", "qx", "qy", "qz")
 _NUMERIC = ("time", "px", "py", "pz", "qw", "qx", "qy", "qz")
@@ -162,7 +163,7 @@ def _parse_fast(rows, lines, header, text=None):
     """The same as :func:`_parse_exact` through numpy's C CSV parser; None where that path
     cannot be sure (quotes, a cell it does not parse, a field count off), so the caller falls
     back to the exact path for the block.  text: the block's whole text when ``rows`` are all
-    its lines (lets the checks run on it in one pass)."""
+    its lines (lets the checks run on it in one pass); rows may then be None (not split yet)."""
     ncol = len(header)
     if ('"' in text) if text is not None else any('"' in r for r in rows):
         return None
@@ -170,15 +171,21 @@ def _parse_fast(rows, lines, header, text=None):
     # Field counts: numpy rejects a row that lacks a column it reads; the comma total then
     # catches rows with too many fields, unless unread columns follow the last one it reads.
     commas = text.count(",") if text is not None else sum(r.count(",") for r in rows)
-    if commas != (ncol - 1) * len(rows) or (
-            max(cols) < ncol - 1 and any(r.count(",") != ncol - 1 for r in rows)):
+    if commas != (ncol - 1) * len(lines):
         return None
+    if max(cols) < ncol - 1:
+        rows = text.splitlines() if rows is None else rows
+        if any(r.count(",") != ncol - 1 for r in rows):
+            return None
     dcol = header.index("device")
     use = sorted(cols + [dcol])
     dtype = np.dtype([(f"c{c}", f"S{_NAME_CHARS}" if c == dcol else np.float64) for c in use])
-    try:           # one pass of numpy's C parser over the block
-        rec = np.loadtxt(rows, delimiter=",", usecols=use, dtype=dtype, ndmin=1, comments=None)
+    try:           # one pass of numpy's C parser over the block (a text stream reads fastest)
+        rec = np.loadtxt(io.StringIO(text) if rows is None else rows, delimiter=",", usecols=use,
+                         dtype=dtype, ndmin=1, comments=None)
     except (ValueError, UnicodeEncodeError):
+        return None
+    if len(rec) != len(lines):          # numpy skipped a blank (whitespace) line: line numbers would slip
         return None
     names = np.ascontiguousarray(rec[f"c{dcol}"])
     if names.size and np.any(names.view(np.uint8).reshape(len(names), _NAME_CHARS)[:, -1]):
@@ -192,7 +199,7 @@ def _parse_fast(rows, lines, header, text=None):
             return None
         b.valid = v == 1
     else:
-        b.valid = np.ones(len(rows), dtype=bool)
+        b.valid = np.ones(len(lines), dtype=bool)
     b.names = names
     b.lines = lines
     return b
@@ -237,6 +244,15 @@ def read_csv(path, axes=None, units=None, block_bytes=None) -> Recording:
     any_text = False
     first = 1                                # line number of the block's first line
     for text in _text_blocks(path, max(int(block_bytes or BLOCK_BYTES), 1)):
+        if header is not None and text[:1] not in ("\n", "#") and "#" not in text and "\r" not in text \
+                and "\n\n" not in text:
+            # the usual block: data lines only (no comment, blank line or CR), parsed unsplit
+            n = text.count("\n") + (not text.endswith("\n"))
+            block = _parse_fast(None, np.arange(first, first + n, dtype=np.int64), header, text=text)
+            if block is not None:
+                blocks.append(block)
+                first += n
+                continue
         block_lines = text.splitlines()
         j = 0
         if header is None:                  # comments, metadata and the header, line by line
@@ -256,9 +272,9 @@ def read_csv(path, axes=None, units=None, block_bytes=None) -> Recording:
             continue
         rows = [s for s in rest if s and s[0] != "#"]
         block = None
-        if len(rows) == len(rest):          # the usual block: data lines only
+        if len(rows) == len(rest):          # data lines only
             block = _parse_fast(rows, np.arange(first + j, first + j + len(rest), dtype=np.int64), header,
-                                text=text if j == 0 else None)
+                                text="\n".join(rest))
         if block is None:                   # comments, blank or padded lines, odd cells: line by line
             rest = [ln.strip() for ln in rest]
             for i, s in enumerate(rest):
@@ -298,10 +314,10 @@ def read_csv(path, axes=None, units=None, block_bytes=None) -> Recording:
     del blocks
 
     scale = UNITS[units_used]
-    pos = pq[:, :3] * scale
+    pos = pq[:, :3] * scale if scale != 1.0 else pq[:, :3]
     quat = pq[:, 3:]
     del pq
-    qn = np.linalg.norm(quat, axis=-1)
+    qn = vector_norm(quat)
     finite_q = np.isfinite(qn)
     zero_q = finite_q & (qn < 1e-6)
     off_unit = finite_q & ~zero_q & (np.abs(qn - 1.0) > 0.01)
@@ -314,7 +330,7 @@ def read_csv(path, axes=None, units=None, block_bytes=None) -> Recording:
         warnings.append(f"{int(zero_q.sum())} sample(s) have a zero quaternion and are marked invalid "
                         f"(first at line {int(lines[k])})")
         valid = valid & ~zero_q
-    quat = normalize(quat)
+    quat = normalize(quat, norm=qn)
     pos, quat = to_blender(pos, quat, axes_used)
 
     streams = {}

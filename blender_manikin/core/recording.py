@@ -128,11 +128,24 @@ def axes_matrix(axes) -> np.ndarray:
     return _M[canonical_axes(axes)].copy()
 
 
+def _apply_axes(M, v, out=None):
+    """``M v`` for ``(..., 3)`` vectors ``v``; ``M`` is a signed axis permutation (every axes
+    convention is), so each output component is one input component times ±1: exact, and a
+    NaN stays in its own component.  out: ``(..., 3)`` array to write into."""
+    out = np.empty(np.shape(v), dtype=np.float64) if out is None else out
+    for i in range(3):
+        j = int(np.argmax(np.abs(M[i])))
+        np.multiply(v[..., j], M[i, j], out=out[..., i])
+    return out
+
+
 def _convert_quat(quat, M):
     q = np.asarray(quat, dtype=np.float64)
     det = float(np.round(np.linalg.det(M)))
-    v = np.einsum("ij,...j->...i", M, q[..., 1:]) * det
-    return np.concatenate([q[..., :1], v], axis=-1)
+    out = np.empty(q.shape, dtype=np.float64)
+    out[..., 0] = q[..., 0]
+    _apply_axes(M * det, q[..., 1:], out=out[..., 1:])
+    return out
 
 
 def to_blender(pos, quat, axes):
@@ -141,7 +154,7 @@ def to_blender(pos, quat, axes):
     Units are unchanged.  Either argument may be None.  Returns ``(pos, quat)``.
     """
     M = axes_matrix(axes)
-    p = None if pos is None else np.einsum("ij,...j->...i", M, np.asarray(pos, dtype=np.float64))
+    p = None if pos is None else _apply_axes(M, np.asarray(pos, dtype=np.float64))
     q = None if quat is None else _convert_quat(quat, M)
     return p, q
 
@@ -149,7 +162,7 @@ def to_blender(pos, quat, axes):
 def from_blender(pos, quat, axes):
     """Inverse of :func:`to_blender`: Blender axes → ``axes``."""
     Mt = axes_matrix(axes).T
-    p = None if pos is None else np.einsum("ij,...j->...i", Mt, np.asarray(pos, dtype=np.float64))
+    p = None if pos is None else _apply_axes(Mt, np.asarray(pos, dtype=np.float64))
     q = None if quat is None else _convert_quat(quat, Mt)
     return p, q
 

@@ -26,20 +26,24 @@ def _f64(x):
     return np.asarray(x, dtype=np.float64)
 
 
-def normalize(v, axis=-1, eps=_EPS):
-    """Unit vectors along ``axis``; zero vectors stay zero (no NaN)."""
+def vector_norm(v):
+    """``(...,)`` float64 Euclidean length of ``(..., 3)`` or ``(..., 4)`` vectors, in the same
+    sum order as ``np.linalg.norm`` without its temporaries (what :func:`normalize` divides by)."""
+    v = _f64(v)
+    n = np.empty(v.shape[:-1])
+    np.multiply(v[..., 0], v[..., 0], out=n)
+    for k in range(1, v.shape[-1]):
+        n += v[..., k] * v[..., k]
+    return np.sqrt(n, out=n)
+
+
+def normalize(v, axis=-1, eps=_EPS, norm=None):
+    """Unit vectors along ``axis``; zero vectors stay zero (no NaN).  norm: the lengths from
+    :func:`vector_norm` when the caller has them already (last axis only)."""
     v = _f64(v)
     if v.ndim and axis in (-1, v.ndim - 1) and v.shape[-1] in (3, 4):
-        # same sum order as np.linalg.norm, without its temporaries
-        n = np.empty(v.shape[:-1])
-        np.multiply(v[..., 0], v[..., 0], out=n)
-        n += v[..., 1] * v[..., 1]
-        n += v[..., 2] * v[..., 2]
-        if v.shape[-1] == 4:
-            n += v[..., 3] * v[..., 3]
-        np.sqrt(n, out=n)
-        np.maximum(n, eps, out=n)
-        return v / n[..., None]
+        n = vector_norm(v) if norm is None else norm
+        return v / np.maximum(n, eps)[..., None]
     n = np.linalg.norm(v, axis=axis, keepdims=True)
     return v / np.maximum(n, eps)
 
