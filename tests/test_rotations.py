@@ -141,5 +141,8 @@ def test_vector_norm_matches_linalg_norm_and_feeds_normalize():
         n = rot.vector_norm(v)
         np.testing.assert_array_equal(n, np.linalg.norm(v, axis=-1))
         np.testing.assert_array_equal(rot.normalize(v, norm=n), rot.normalize(v))
+        w = v.copy()
+        assert rot.normalize(w, norm=n, out=w) is w
+        np.testing.assert_array_equal(w, rot.normalize(v))
         assert np.all(rot.normalize(v)[0] == 0.0)
         np.testing.assert_allclose(np.linalg.norm(rot.normalize(v)[1:], axis=-1), 1.0, atol=1e-12)

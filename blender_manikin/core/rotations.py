@@ -37,13 +37,14 @@ def vector_norm(v):
     return np.sqrt(n, out=n)
 
 
-def normalize(v, axis=-1, eps=_EPS, norm=None):
+def normalize(v, axis=-1, eps=_EPS, norm=None, out=None):
     """Unit vectors along ``axis``; zero vectors stay zero (no NaN).  norm: the lengths from
-    :func:`vector_norm` when the caller has them already (last axis only)."""
+    :func:`vector_norm` when the caller has them already; out: array to write into (``v``
+    itself to normalise in place); both for the last axis of ``(..., 3|4)`` vectors only."""
     v = _f64(v)
     if v.ndim and axis in (-1, v.ndim - 1) and v.shape[-1] in (3, 4):
         n = vector_norm(v) if norm is None else norm
-        return v / np.maximum(n, eps)[..., None]
+        return np.divide(v, np.maximum(n, eps)[..., None], out=out)
     n = np.linalg.norm(v, axis=axis, keepdims=True)
     return v / np.maximum(n, eps)
 
