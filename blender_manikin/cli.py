@@ -7,11 +7,13 @@ Two ways to run it (the same code)::
                                                                      # without it for json/bvh
 
 INPUT is a recording (any format of :mod:`blender_manikin.core.formats`: ``.csv`` native
-or wide layout, ``.bsor`` Beat Saber replay, ``.xror`` XROR) or a folder (its recordings,
-sorted).  For every input the scene is reset to an empty factory scene, the recording is
-solved and ``DIR/STEM.<ext>`` is written for each format.  One line per converted input on
-stdout (``OK INPUT -> outputs (summary)``); problems on stderr as ``ERROR INPUT: message``; a
-bad file does not stop the others.  Exit status 0 only when every input converted, 1 when any
+or wide layout, ``.bsor`` Beat Saber replay, ``.xror`` XROR), 3D keypoints (a FreeMoCap
+recording folder, ``.npy`` / ``.npz`` arrays, a keypoint CSV; solved by HybrIK IK, see
+:mod:`blender_manikin.core.keypoint_solve`) or a folder (its recordings, sorted).  For every
+input the scene is reset to an empty factory scene, the recording is solved and
+``DIR/STEM.<ext>`` is written for each format.  One line per converted input on stdout
+(``OK INPUT -> outputs (summary)``); problems on stderr as ``ERROR INPUT: message``; a bad
+file does not stop the others.  Exit status 0 only when every input converted, 1 when any
 failed, 2 for usage errors.
 
 Options of ``solve`` (they mirror the panel; ``--help`` has them all):
@@ -28,8 +30,14 @@ Options of ``solve`` (they mirror the panel; ``--help`` has them all):
                               format's default), a preset name or a JSON file
 --layout FILE.json            the columns, time, units, axes and Euler order of
                               wide-layout CSV inputs (default: detected)
---rate HZ                     samples per second of a wide-layout CSV timed by a
-                              frame counter only
+--layout KEYPOINTS            the layout of keypoint inputs: mediapipe33, coco17,
+                              h36m17, smpl22, smpl24, body25 (default: detected)
+--rate HZ                     samples per second of a wide-layout CSV or keypoints
+                              with no times
+--up +x|-x|+y|-y|+z|-z        keypoints: the file's up axis (default: detected)
+--smoothing SECONDS           keypoints: Savitzky-Golay window (default 0.4; 0: off)
+--ik adaptive|naive           keypoints: HybrIK adaptive (default) or naive IK
+--mapping FILE.json           keypoints: a CSV's column names for the layout's points
 --save-layout FILE.json       write the layout detected in the first wide CSV
 --format blend,fbx,bvh,json,npz  one or several (default blend,fbx,json); without blend
                               and fbx, the numpy core writes them without Blender
@@ -78,12 +86,27 @@ def _add_solve_options(s):
                    help="device-to-joint offsets: a preset name, a JSON file, or auto (default: the "
                         "recording's '# offsets:' metadata, beat_saber for .bsor, else none)")
     s.add_argument("--bvh-units", choices=("cm", "m"), default="cm")
-    s.add_argument("--layout", default=None, metavar="FILE.json",
-                   help="the columns, time, units and axes of wide-layout CSV inputs (default: detected)")
+    s.add_argument("--layout", default=None, metavar="FILE.json|KEYPOINTS",
+                   help="the columns, time, units and axes of wide-layout CSV inputs (default: detected); "
+                        "or the layout of keypoint inputs: " + "|".join(_keypoint_layouts()))
     s.add_argument("--rate", type=float, default=None, metavar="HZ",
-                   help="samples per second of wide-layout CSV inputs whose only time is a frame counter")
+                   help="samples per second of wide-layout CSV or keypoint inputs without times")
+    s.add_argument("--up", default=None, choices=("+x", "-x", "+y", "-y", "+z", "-z"),
+                   help="keypoints: the file's up axis (default: told from the body)")
+    s.add_argument("--smoothing", type=float, default=0.4, metavar="SECONDS",
+                   help="keypoints: Savitzky-Golay window in seconds (default 0.4; 0: off)")
+    s.add_argument("--ik", choices=("adaptive", "naive"), default="adaptive",
+                   help="keypoints: HybrIK adaptive (default) or naive twist-and-swing IK")
+    s.add_argument("--mapping", default=None, metavar="FILE.json",
+                   help="keypoints: a CSV's columns for the layout's points "
+                        '({"layout": "coco17", "columns": {"nose": "Nose", ...}})')
     s.add_argument("--save-layout", default=None, metavar="FILE.json",
                    help="write the layout detected in the first wide-layout CSV input, for --layout")
+
+
+def _keypoint_layouts():
+    from .core.keypoint_layouts import LAYOUTS
+    return tuple(LAYOUTS)
 
 
 def build_parser():
@@ -124,10 +147,14 @@ def parse_formats(text):
 
 
 def expand_inputs(inputs):
-    """Files of ``inputs`` with folders expanded to their recordings (sorted).  Order kept."""
+    """Files of ``inputs`` with folders expanded to their recordings (sorted), except FreeMoCap
+    recording folders, which are one input each.  Order kept."""
+    from .core.io_keypoints import freemocap_body_file
     out = []
     for item in inputs:
-        if os.path.isdir(item):
+        if os.path.isdir(item) and freemocap_body_file(item):     # a FreeMoCap recording: one input
+            out.append(item.rstrip("/\\") or item)
+        elif os.path.isdir(item):
             found = sorted(os.path.join(item, n) for n in os.listdir(item)
                            if n.lower().endswith(INPUT_EXTENSIONS)
                            and os.path.isfile(os.path.join(item, n)))
@@ -144,8 +171,13 @@ def solve_settings(args):
     offsets = args.offsets
     if offsets and offsets.lower().endswith(".json"):
         offsets = device_offsets.load_offsets(offsets)
+    layout, keypoint_layout = getattr(args, "layout", None), None
+    if layout is not None and layout.strip().lower() in _keypoint_layouts():
+        layout, keypoint_layout = None, layout.strip().lower()
     st = SolveSettings(axes=args.axes, units=args.units, fps=float(args.fps), offsets=offsets,
-                       layout=getattr(args, "layout", None), rate=getattr(args, "rate", None))
+                       layout=layout, rate=getattr(args, "rate", None), keypoint_layout=keypoint_layout,
+                       up=getattr(args, "up", None), smoothing=float(getattr(args, "smoothing", 0.4)),
+                       ik=getattr(args, "ik", "adaptive"), mapping=getattr(args, "mapping", None))
     if args.calibration_time is not None:
         st.calibration, st.tpose_time = "TPOSE", float(args.calibration_time)
         st.height, st.arm_span = args.height, args.arm_span
@@ -208,7 +240,7 @@ def convert_one_core(path, out_dir, args, formats):
 
 def write_core_formats(path, out_dir, result, args, formats):
     """Write ``result`` in each of ``formats`` the numpy core writes; returns the paths."""
-    stem = os.path.splitext(os.path.basename(path))[0]
+    stem = os.path.splitext(os.path.basename(os.path.normpath(path)))[0]
     written = []
     for fmt in formats:
         writer = _formats.WRITERS[fmt]
@@ -228,7 +260,7 @@ def convert_one(path, out_dir, args, formats):
     reset_scene(args.fps)
     job = SolveJob(_config(path, args))
     job.run(bpy.context)
-    stem = os.path.splitext(os.path.basename(path))[0]
+    stem = os.path.splitext(os.path.basename(os.path.normpath(path)))[0]
     blender_writers = {"fbx": lambda dst: export_fbx(dst, job.output),
                        "blend": lambda dst: bpy.ops.wm.save_as_mainfile(filepath=dst, copy=True, compress=True)}
     written = []
@@ -311,6 +343,7 @@ def main(argv=None):
                   "needs Blender: run with Blender (blender -b --python cli.py -- ...) or install bpy "
                   "(json and bvh are written without it)", file=sys.stderr)
             return 2
+    from .core.io_keypoints import is_keypoint_input
     from .core.solve import error_message
     convert = convert_one if needs_blender else convert_one_core
 
@@ -322,7 +355,7 @@ def main(argv=None):
     failed = 0
     for path in inputs:
         try:
-            if not os.path.isfile(path):
+            if not os.path.isfile(path) and not is_keypoint_input(path):
                 raise FileNotFoundError("no such file")
             with quiet_stdout():
                 written, job = convert(path, args.out, args, formats)

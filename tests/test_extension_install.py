@@ -281,8 +281,11 @@ def test_zip_layout_and_manifest(build_dir):
     assert build_addon.PYTHON_VERSIONS == ((3, 11), (3, 13))
     assert not any("numpy" in w for w in wheels), "Blender ships numpy; bundling one breaks it"
     assert "__init__.py" in names and "core/onnx_runtime_loader.py" in names and "core/pipeline.py" in names
+    # the keypoint solve (the panel's Keypoints source) ships, with the HybrIK IK it runs
+    for used in ("core/keypoint_solve.py", "core/keypoint_layouts.py", "core/io_keypoints.py", "core/hybrik.py"):
+        assert used in names, used
     # mocap preparation and evaluation code is not shipped: the add-on never imports it
-    for unused in ("core/bvh.py", "core/asf_amc.py", "core/joint_maps.py", "core/hybrik.py", "core/metrics.py",
+    for unused in ("core/bvh.py", "core/asf_amc.py", "core/joint_maps.py", "core/metrics.py",
                    "core/baselines.py"):
         assert unused not in names, unused
     for n in names:

@@ -16,7 +16,8 @@ EXAMPLE = os.path.join(ROOT, "examples", "example_recording.csv")
 
 
 def test_readers_by_extension_and_by_content(tmp_path):
-    assert formats.input_extensions() == (".csv", ".bsor", ".xror")
+    assert formats.input_extensions() == (".csv", ".bsor", ".xror", ".npy", ".npz")
+    assert [f.name for f in formats.READERS.values() if f.kind == "keypoints"] == ["keypoints"]
     assert formats.reader_for("x.CSV").name == "csv" and formats.reader_for("y.bsor").name == "bsor"
     # a replay saved under another name is still recognised by its magic number
     path = tmp_path / "replay.dat"
@@ -35,6 +36,11 @@ def test_readers_by_extension_and_by_content(tmp_path):
         formats.load_recording(other)
     with pytest.raises(RecordingError, match="no such file"):
         formats.load_recording(tmp_path / "missing.csv")
+    # keypoints are no tracker recording: the message says how to solve them
+    import numpy as np
+    np.save(tmp_path / "poses.npy", np.zeros((4, 17, 3)))
+    with pytest.raises(RecordingError, match="poses.npy: 3D keypoints, not a tracker recording: solve it as keypoints"):
+        formats.load_recording(tmp_path / "poses.npy")
 
 
 def test_offsets_default_per_format():

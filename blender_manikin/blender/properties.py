@@ -55,12 +55,47 @@ class MANIKIN_DeviceSource(PropertyGroup):
                          description="Bone of an armature object to use instead of the object itself")
 
 
+def _layout_items():
+    from ..core.keypoint_layouts import LAYOUTS
+    return [('AUTO', "Detect", "Told from the file: its layout field, the point count or the column names")] + \
+        [(n.upper(), f.description, f"{len(f.points)} points") for n, f in LAYOUTS.items()]
+
+
+_UP_ITEMS = [('AUTO', "Detect", "Told from the body: the shoulders stand above the ankles")] + \
+    [(a.upper(), a.upper(), f"The file's up axis is {a}") for a in ("+y", "+z", "-y", "-z", "+x", "-x")]
+
+
 class MANIKIN_Settings(PropertyGroup):
     """Settings of the "Solve full body" panel (``scene.manikin``)."""
     source: EnumProperty(
         name="Source", default='FILE',
-        items=[('FILE', "Recording File", "A tracker recording: " + formats.describe_inputs()),
-               ('SCENE', "Scene Objects", "Animated objects or bones in this scene, mapped to devices")])
+        items=[('FILE', "Recording", "A tracker recording: "
+                + ", ".join(f"{'/'.join(f.extensions)} ({f.description})"
+                            for f in formats.READERS.values() if f.kind == "trackers")),
+               ('SCENE', "Scene Objects", "Animated objects or bones in this scene, mapped to devices"),
+               ('KEYPOINTS', "Keypoints", "3D keypoints from markerless or marker capture: a FreeMoCap "
+                "folder's mediapipe_body_3d_xyz.npy, an .npy / .npz array, or a keypoint CSV; solved by "
+                "HybrIK twist-and-swing IK")])
+    keypoint_path: StringProperty(
+        name="Keypoints", subtype='FILE_PATH', default="",
+        description="Keypoint file: FreeMoCap output_data/mediapipe_body_3d_xyz.npy (or the recording "
+                    "folder), .npy / .npz array (frames x points x 3), or CSV with time and <point>_x/_y/_z")
+    keypoint_layout: EnumProperty(name="Layout", items=_layout_items(), default='AUTO',
+                                  description="Keypoint layout of the file")
+    keypoint_units: EnumProperty(name="Units", items=[('AUTO', "Detect", "Told from the leg's length"),
+                                                      ('M', "Metres", ""), ('CM', "Centimetres", ""),
+                                                      ('MM', "Millimetres", "")], default='AUTO')
+    keypoint_up: EnumProperty(name="Up Axis", items=_UP_ITEMS, default='AUTO')
+    keypoint_rate: FloatProperty(name="Rate", default=0.0, min=0.0, max=1000.0,
+                                 description="Samples per second of files without times (0: the file's, "
+                                             "else 30)")
+    smoothing: FloatProperty(name="Smoothing", default=0.4, min=0.0, max=3.0, unit='TIME_ABSOLUTE',
+                             description="Savitzky-Golay window over the keypoints, seconds (0: off); "
+                                         "longer removes more noise and more fast detail")
+    ik: EnumProperty(name="IK", default='ADAPTIVE',
+                     items=[('ADAPTIVE', "Adaptive", "HybrIK adaptive: each bone aims at its keypoint from "
+                             "where the chain actually is, so errors do not accumulate"),
+                            ('NAIVE', "Naive", "Each bone takes the direction between its two keypoints")])
     filepath: StringProperty(name="Recording", subtype='FILE_PATH', default="",
                              description="Tracker recording (" + ", ".join(formats.input_extensions()) + ")")
     layout_file: StringProperty(name="Layout", subtype='FILE_PATH', default="",
@@ -139,13 +174,21 @@ def config_from_settings(context):
     cfg = SolveConfig()
     cfg.source = s.source
     cfg.filepath = bpy.path.abspath(s.filepath) if s.filepath else ""
+    if s.source == 'KEYPOINTS':
+        cfg.filepath = bpy.path.abspath(s.keypoint_path) if s.keypoint_path else ""
+        cfg.keypoint_layout = None if s.keypoint_layout == 'AUTO' else s.keypoint_layout.lower()
+        cfg.up = None if s.keypoint_up == 'AUTO' else s.keypoint_up.lower()
+        cfg.rate = float(s.keypoint_rate) if s.keypoint_rate > 0 else None
+        cfg.smoothing = float(s.smoothing)
+        cfg.ik = s.ik.lower()
     cfg.layout = bpy.path.abspath(s.layout_file) if s.layout_file else None
     cfg.axes = None if s.axes == 'AUTO' else s.axes.lower()
-    cfg.units = None if s.units == 'AUTO' else s.units.lower()
+    units = s.keypoint_units if s.source == 'KEYPOINTS' else s.units
+    cfg.units = None if units == 'AUTO' else units.lower()
     cfg.fps = scene_fps(scene) if s.use_scene_fps else float(s.fps)
     cfg.calibration = s.calibration
     cfg.tpose_time = float(s.tpose_time)
-    if s.calibration == 'MEASURE' or s.use_height:
+    if s.use_height or (s.calibration == 'MEASURE' and s.source != 'KEYPOINTS'):
         cfg.height = float(s.height)
     cfg.arm_span = float(s.arm_span) if s.arm_span > 0 else None
     if s.offsets_text is not None:

@@ -45,8 +45,10 @@ class SolveConfig(SolveSettings):
     height, arm_span, offsets, max_frames, layout; here ``fps`` None means the scene's), and
     what Blender adds.
 
-    source: ``"FILE"`` (``filepath``) or ``"SCENE"`` (``scene_sources``: device → ``(object
-    name, bone name or "")``, sampled over ``scene_frames`` = (first, last) scene frame).
+    source: ``"FILE"`` (``filepath``: a recording, or keypoints recognised by their file),
+    ``"KEYPOINTS"`` (``filepath``: 3D keypoints, :mod:`core.keypoint_solve`) or ``"SCENE"``
+    (``scene_sources``: device → ``(object name, bone name or "")``, sampled over
+    ``scene_frames`` = (first, last) scene frame).
     frame_start: scene frame of the first solved frame.  create_trackers: also key tracker
     empties.  live_rig: convert the solved armature to the live swivel rig (:mod:`.live_rig`):
     elbows/knees follow the swivel properties and the hand/foot controls; False keeps plain FK
@@ -167,7 +169,11 @@ class SolveJob:
         def progress(fraction, stage=None):
             self._set(lo + (_P_SOLVE - lo) * float(fraction), stage)
 
-        out = core_solve.solve_recording(source, cfg.settings(), solver=run_solver, progress=progress)
+        if cfg.source.upper() == "KEYPOINTS":        # 3D keypoints: HybrIK, whatever the file's name
+            from ..core.keypoint_solve import solve_keypoints
+            out = solve_keypoints(source, cfg.settings(), progress=progress)
+        else:
+            out = core_solve.solve_recording(source, cfg.settings(), solver=run_solver, progress=progress)
         self.outcome = out
         self.recording, self.report, self.targets = out.recording, out.report, out.targets
         self.body, self.offsets, self.info = out.body, out.offsets, out.info

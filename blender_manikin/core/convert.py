@@ -47,7 +47,7 @@ def collect_inputs(items):
     for item in items:
         item = os.path.expanduser(str(item))
         if os.path.isdir(item):
-            found = sorted(os.path.join(d, f) for d, _, fs in os.walk(item) for f in fs if _is_recording(f))
+            found = sorted(_walk_recordings(item))
         elif os.path.isfile(item) and item.lower().endswith(_MANIFEST_SUFFIXES) and not _is_recording(item):
             found = _read_manifest_file(item)
         elif os.path.isfile(item):
@@ -58,6 +58,19 @@ def collect_inputs(items):
                 raise ValueError(f"{item}: no such file, folder or matching files")
         out.extend(os.path.abspath(p) for p in found)
     return list(dict.fromkeys(out))
+
+
+def _walk_recordings(folder):
+    """Recordings under ``folder``: files with a reader's extension, and FreeMoCap recording
+    folders (one input each; their own arrays are not inputs)."""
+    from .io_keypoints import freemocap_body_file
+    for d, dirs, fs in os.walk(folder):
+        if freemocap_body_file(d):
+            dirs[:] = []
+            yield d
+            continue
+        dirs.sort()
+        yield from (os.path.join(d, f) for f in fs if _is_recording(f))
 
 
 def _read_manifest_file(path):

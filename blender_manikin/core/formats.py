@@ -23,13 +23,17 @@ class ReaderFormat:
     """A recording format: ``extensions`` (lower case, with the dot), ``read(path, axes, units)``
     → :class:`Recording`, an optional ``sniff(head_bytes) -> bool`` that recognises the format
     from the first bytes of a file whatever its name, and the device offsets ``auto`` means for
-    it (``"none"``: its poses are the joints' poses)."""
+    it (``"none"``: its poses are the joints' poses).  kind: ``"trackers"`` (device poses: read
+    into a :class:`Recording`) or ``"keypoints"`` (3D joint positions: ``read`` gives a
+    :class:`.io_keypoints.KeypointRecording`; :func:`.solve.solve_recording` solves them by
+    HybrIK, see :mod:`.keypoint_solve`)."""
     name: str
     description: str
     extensions: tuple
     read: Callable
     sniff: Optional[Callable] = None
     default_offsets: str = "none"
+    kind: str = "trackers"
 
 
 @dataclass(frozen=True)
@@ -98,6 +102,9 @@ def load_recording(path, axes=None, units=None, layout=None, rate=None) -> Recor
     if not os.path.isfile(path):
         raise RecordingError("no such file", path=path)
     fmt = reader_for(path)
+    if fmt.kind != "trackers":
+        raise RecordingError(f"{fmt.description}, not a tracker recording: solve it as keypoints "
+                             f"(the panel's Keypoints source, or the command line's solve)", path=path)
     if (layout is not None or rate) and fmt.name != "csv":
         what = "a layout file" if layout is not None else "a sample rate"
         raise RecordingError(f"{what} applies to wide-layout CSV files, not to {fmt.description}", path=path)
@@ -172,6 +179,15 @@ register_reader(ReaderFormat("bsor", "Beat Saber replay", (".bsor",), _read_bsor
                              default_offsets="beat_saber"))
 # XROR: the file names its app; the reader sets the offsets metadata (beat_saber for Beat Saber)
 register_reader(ReaderFormat("xror", "XROR / BOXRR-23", (".xror",), _read_xror))
+
+
+def _read_keypoints(path, axes=None, units=None):
+    from .io_keypoints import read_keypoints
+    return read_keypoints(path, units=units)
+
+
+# 3D keypoints; keypoint CSVs and FreeMoCap folders are recognised by io_keypoints.is_keypoint_input
+register_reader(ReaderFormat("keypoints", "3D keypoints", (".npy", ".npz"), _read_keypoints, kind="keypoints"))
 
 
 def _write_json(path, result, source="", options=None):

@@ -48,7 +48,12 @@ class SolveSettings:
     stature.  offsets: a device-offsets preset name, ``"none"``, ``"auto"`` (see
     :func:`resolve_offsets`) or an offsets dict (:mod:`.device_offsets`).  max_frames: crop.
     layout: a layout file (path or dict) fixing the columns of a wide-layout CSV.  rate: samples
-    per second of a wide-layout CSV timed by a frame counter only.
+    per second of a wide-layout CSV, or of keypoints, timed by a frame counter only.
+
+    Keypoint inputs (:mod:`.keypoint_solve`) also use: keypoint_layout (a
+    :mod:`.keypoint_layouts` name; None: told from the file), up (the file's up axis, ``+y``
+    ...; None: told from the body), smoothing (Savitzky-Golay window in seconds, 0: off), ik
+    (``"adaptive"`` or ``"naive"`` HybrIK) and mapping (a keypoint CSV's column mapping file).
     """
     axes: str | None = None
     units: str | None = None
@@ -61,6 +66,11 @@ class SolveSettings:
     max_frames: int | None = None
     layout: object = None
     rate: float | None = None
+    keypoint_layout: str | None = None
+    up: str | None = None
+    smoothing: float = 0.4
+    ik: str = "adaptive"
+    mapping: object = None
 
 
 @dataclass
@@ -91,7 +101,8 @@ class SolveOutcome:
         if self.body is not None:
             parts.append(f"stature {self.body.stature:.2f} m")
         for note in self.info:
-            if note.startswith(("calibrated", "arm span", "estimated stature")):
+            if note.startswith(("calibrated", "arm span", "estimated stature", "no twist information",
+                                "point(s) never seen")):
                 parts.append(note)
         if self.report is not None:
             gaps = getattr(self.report, "gaps", [])
@@ -257,7 +268,9 @@ STAGES = {"reading recording": 0.0, "resampling": 0.09, "calibrating": 0.16, "so
 
 def solve_recording(source, settings: SolveSettings | None = None, solver=None, progress=None) -> SolveOutcome:
     """Solve a recording: ``source`` is a file path or a :class:`.recording.Recording`
-    (e.g. sampled from scene objects).
+    (e.g. sampled from scene objects).  Keypoint inputs (a FreeMoCap folder, ``.npy`` / ``.npz``,
+    a keypoint CSV: :func:`.io_keypoints.is_keypoint_input`) go to
+    :func:`.keypoint_solve.solve_keypoints`.
 
     solver: ``(targets, body, progress) -> PoseResult`` (default :func:`default_solver`).
     progress: optional ``(fraction 0-1, stage text)`` callback; an exception raised from it
@@ -268,6 +281,11 @@ def solve_recording(source, settings: SolveSettings | None = None, solver=None, 
     report = progress or (lambda f, stage=None: None)
     if settings.fps is None or not settings.fps > 0:
         raise SolveError("no frame rate: set fps")
+    from .io_keypoints import KeypointRecording, is_keypoint_input
+    if isinstance(source, KeypointRecording) or (
+            (isinstance(source, str) or hasattr(source, "__fspath__")) and is_keypoint_input(source)):
+        from .keypoint_solve import solve_keypoints      # 3D keypoints: HybrIK, no network
+        return solve_keypoints(source, settings, progress=progress)
     out = SolveOutcome()
     t = _time.perf_counter()
     if isinstance(source, (str, bytes)) or hasattr(source, "__fspath__"):

@@ -33,6 +33,20 @@ class MANIKIN_PT_solve(_Base, Panel):
             col.prop(s, "axes")
             col.prop(s, "units")
             col.prop(s, "layout_file")
+        elif s.source == 'KEYPOINTS':
+            col.prop(s, "keypoint_path")
+            col.prop(s, "keypoint_layout")
+            col.prop(s, "keypoint_units")
+            col.prop(s, "keypoint_up")
+            col.prop(s, "keypoint_rate")
+            col.separator()
+            col.prop(s, "smoothing")
+            col.prop(s, "ik")
+            row = col.row(heading="Height")
+            row.prop(s, "use_height", text="")
+            sub = row.row()
+            sub.active = s.use_height
+            sub.prop(s, "height", text="")
         else:
             for d in DEVICES:
                 src = getattr(s, d)
@@ -68,6 +82,10 @@ class MANIKIN_PT_calibration(_Base, Panel):
     bl_label = "Calibration"
     bl_parent_id = "MANIKIN_PT_solve"
     bl_options = {'DEFAULT_CLOSED'}
+
+    @classmethod
+    def poll(cls, context):       # trackers only: keypoints are sized from the bones they show
+        return _Base.poll(context) and context.scene.manikin.source != 'KEYPOINTS'
 
     def draw(self, context):
         layout = self.layout
@@ -107,7 +125,7 @@ class MANIKIN_PT_output(_Base, Panel):
         s = context.scene.manikin
         layout.use_property_split = True
         layout.use_property_decorate = False
-        if s.source == 'FILE':
+        if s.source in ('FILE', 'KEYPOINTS'):
             layout.prop(s, "use_scene_fps")
             sub = layout.column()
             sub.active = not s.use_scene_fps
@@ -116,7 +134,7 @@ class MANIKIN_PT_output(_Base, Panel):
         col = layout.column(align=True)
         col.active = not s.use_scene_range
         col.prop(s, "frame_start")
-        if s.source == 'FILE':
+        if s.source in ('FILE', 'KEYPOINTS'):
             row = layout.row(heading="Limit")
             row.prop(s, "limit_frames", text="")
             sub = row.row()

@@ -1,0 +1,497 @@
+"""Read 3D keypoints (markerless or marker capture) into a :class:`KeypointRecording`.
+
+Inputs:
+
+* a FreeMoCap recording folder: ``output_data/mediapipe_body_3d_xyz.npy`` (frames × 33 × 3,
+  millimetres, NaN where a point was lost), with ``mediapipe_{left,right}_hand_3d_xyz.npy``
+  (frames × 21 × 3) when present (their knuckles then orient the hands); the folder itself,
+  its ``output_data`` folder or the ``.npy`` file may be given;
+* ``.npy``: ``(T, K, 3)``, ``(T, K, 4)`` (the 4th value a confidence 0-1) or ``(T, 3K)``;
+* ``.npz``: one such array under ``keypoints`` / ``joints3d`` / ``joints`` / ``positions`` /
+  ``points`` / ``pose3d`` / ``kp3d`` (or the only 2-3-D array), with optional ``fps``,
+  ``time`` (seconds), ``confidence`` ``(T, K)`` and ``layout``;
+* CSV: a ``time`` column (seconds; or ``timestamp`` in ms, or only ``frame`` with a rate) and
+  ``<point>_x``, ``<point>_y``, ``<point>_z`` columns named after the layout's points (empty
+  cells for missing points), or other names through a mapping file
+  (``{"layout": "coco17", "columns": {"nose": "Nose", ...}}``: layout point → column prefix).
+
+The layout (:mod:`.keypoint_layouts`) is given (``layout=``, ``--layout``), stored in the file,
+or told from the point count (17 points: COCO-17 or Human3.6M-17, told apart by their first
+points: COCO's nose sits near its ears, Human3.6M's pelvis far from its right ankle) or the
+CSV's column names.  Units (m, cm, mm) come from the leg's length, the up axis from the
+shoulders standing above the ankles, and the handedness from the face or the feet pointing
+forward of the body's left-right axis.  What was decided is said in one line
+(``metadata["detected"]``), e.g. ``keypoints: coco17 (17 points, told from the point count and
+the nose near the ears); units mm (leg 0.86 m); up +Y, right-handed (nose ahead of the ears);
+30 Hz (assumed: set the rate)``.
+
+Returned points are ``(T, K, 3)`` float64, metres, Blender axes (+Z up, right-handed), NaN where
+a point is missing or below the confidence threshold.  Errors are :class:`.recording.RecordingError`
+naming the file and the problem (and the line, for CSV).
+"""
+from __future__ import annotations
+
+import csv
+import json
+import os
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from . import keypoint_layouts as kl
+from . import rotations as rot
+from .plain import shown
+from .recording import RecordingError, UNITS, canonical_units
+
+#: points with a confidence below this are treated as missing
+MIN_CONFIDENCE = 0.3
+#: sample rate assumed for arrays with no time and no rate given (Hz)
+DEFAULT_RATE = 30.0
+FREEMOCAP_BODY = "mediapipe_body_3d_xyz.npy"
+_NPZ_KEYS = ("keypoints", "joints3d", "joints", "positions", "points", "pose3d", "kp3d", "data")
+
+
+@dataclass
+class KeypointRecording:
+    """3D keypoints of one performer.
+
+    time: ``(T,)`` float64 seconds, increasing.  points: ``(T, K, 3)`` float64 metres, Blender
+    axes (+Z up, right-handed), NaN = missing.  layout: :data:`.keypoint_layouts.LAYOUTS` name.
+    metadata: ``units``, ``up``, ``handed``, ``rate`` and ``detected`` (the one-line report).
+    """
+    time: np.ndarray
+    points: np.ndarray
+    layout: str
+    source: str = ""
+    metadata: dict = field(default_factory=dict)
+    warnings: list = field(default_factory=list)
+
+    @property
+    def num_frames(self) -> int:
+        return int(self.points.shape[0])
+
+
+# --------------------------------------------------------------------------
+# recognising keypoint inputs
+def freemocap_body_file(path):
+    """The ``mediapipe_body_3d_xyz.npy`` of a FreeMoCap folder at ``path`` (the recording
+    folder, its ``output_data`` or the file itself), else None."""
+    p = os.fspath(path)
+    if os.path.isfile(p):
+        return p if os.path.basename(p) == FREEMOCAP_BODY else None
+    for cand in (os.path.join(p, "output_data", FREEMOCAP_BODY), os.path.join(p, FREEMOCAP_BODY)):
+        if os.path.isfile(cand):
+            return cand
+    return None
+
+
+def is_keypoint_input(path) -> bool:
+    """True for what :func:`read_keypoints` reads: a FreeMoCap folder, a ``.npy`` / ``.npz``,
+    or a CSV whose columns are ``<point>_x/_y/_z`` of a keypoint layout (no tracker devices)."""
+    p = os.fspath(path)
+    if freemocap_body_file(p):
+        return True
+    ext = os.path.splitext(p)[1].lower()
+    if ext in (".npy", ".npz"):
+        return os.path.isfile(p)
+    if ext == ".csv" and os.path.isfile(p):
+        try:
+            with open(p, "r", encoding="utf-8-sig", errors="replace") as f:
+                header = f.readline()
+        except OSError:
+            return False
+        return _layout_from_columns([c.strip().lower() for c in header.split(",")]) is not None
+    return False
+
+
+# --------------------------------------------------------------------------
+def read_keypoints(path, layout=None, units=None, up=None, rate=None, mapping=None,
+                   handed=None) -> KeypointRecording:
+    """Read keypoints from ``path`` (see the module docstring).
+
+    layout: a layout name (overrides the file).  units: ``m``/``cm``/``mm`` (default: told from
+    the leg's length).  up: the file's up axis, ``+x``/``-x``/``+y``/``-y``/``+z``/``-z``
+    (default: told from the body).  rate: samples per second when the file has no time (default
+    :data:`DEFAULT_RATE`, said in the report).  mapping: a mapping file's path or dict for a CSV.
+    handed: ``right``/``left`` (default: told from the face or feet).
+    """
+    p = os.fspath(path)
+    body_file = freemocap_body_file(p)
+    decided = []
+    time = None
+    conf = None
+    file_layout = None
+    hands = None
+    if body_file:
+        X = _load_npy(body_file)
+        file_layout = "mediapipe33"
+        decided.append("FreeMoCap folder")
+        hands = {s: _optional_npy(os.path.join(os.path.dirname(body_file), f"mediapipe_{s}_hand_3d_xyz.npy"))
+                 for s in ("left", "right")}
+        src = body_file
+    else:
+        src = p
+        if not os.path.exists(p):
+            raise RecordingError("no such file", path=p)
+        ext = os.path.splitext(p)[1].lower()
+        if ext == ".npy":
+            X = _load_npy(p)
+        elif ext == ".npz":
+            X, time, conf, file_layout, npz_rate = _load_npz(p)
+            rate = rate or npz_rate
+        elif ext == ".csv":
+            X, time, file_layout, rate = _load_csv(p, mapping, rate)
+        else:
+            raise RecordingError(f"not a keypoint file: expected a FreeMoCap folder, .npy, .npz or .csv, "
+                                 f"got {ext or '(no extension)'!r}", path=p)
+    X, conf = _shape_points(X, conf, src)
+    T, K = X.shape[:2]
+    if T < 2:
+        raise RecordingError(f"{T} frame(s): at least 2 are needed", path=src)
+
+    # layout: option, file, else the point count
+    if layout is not None:
+        try:
+            name = kl.canonical_layout(layout)
+        except ValueError as exc:
+            raise RecordingError(str(exc), path=src) from None
+        how = "as set"
+    elif file_layout is not None:
+        name, how = kl.canonical_layout(file_layout), "from the file"
+    else:
+        name, how = _layout_from_count(X, src)
+    if len(kl.LAYOUTS[name].points) != K:
+        raise RecordingError(f"layout {name} has {len(kl.LAYOUTS[name].points)} points, the file {K}",
+                             path=src)
+    decided.insert(0, f"keypoints: {name} ({K} points, {how})")
+
+    # confidence → missing
+    if conf is not None:
+        low = np.isfinite(conf) & (conf < MIN_CONFIDENCE)
+        X[low] = np.nan
+        if low.any():
+            decided.append(f"{100.0 * low.mean():.1f}% of points below confidence {MIN_CONFIDENCE:g}")
+    X[~np.isfinite(X).all(-1)] = np.nan
+    if not np.isfinite(X).any():
+        raise RecordingError("no finite keypoint in the file", path=src)
+
+    lay = kl.LAYOUTS[name]
+    if hands is not None:
+        _hand_knuckles(X, lay, hands)
+
+    # units from the leg: hip to ankle, about 0.75-0.95 m for adults
+    leg = _median_dist(X, lay, "left_hip", "left_ankle", "right_hip", "right_ankle")
+    if units is not None:
+        try:
+            u = canonical_units(units)
+        except ValueError as exc:
+            raise RecordingError(f"units option: {exc}", path=src) from None
+        decided.append(f"units {u} (as set)")
+    else:
+        u = None
+        for cand in ("m", "cm", "mm"):
+            if 0.3 <= leg * UNITS[cand] <= 1.6:
+                u = cand
+                break
+        if u is None:
+            raise RecordingError(f"cannot tell the units: the hip-to-ankle distance is {leg:.4g} "
+                                 f"(expected about 0.85 m, 85 cm or 850 mm); set the units", path=src)
+        decided.append(f"units {u} (leg {leg * UNITS[u]:.2f} m)")
+    X *= UNITS[u]
+
+    # up axis and handedness
+    M, up_name, up_how = _up_matrix(X, lay, up, src)
+    X = X @ M.T
+    mirrored, hand_how = _handedness(X, lay, handed, src)
+    if mirrored:
+        X[..., 0] *= -1.0
+    decided.append(f"up {up_name}{up_how}, {'left' if mirrored else 'right'}-handed ({hand_how})")
+
+    # time
+    if time is None:
+        r = float(rate) if rate else DEFAULT_RATE
+        if not (np.isfinite(r) and r > 0):
+            raise RecordingError(f"sample rate {shown(rate)} must be a positive number", path=src)
+        time = np.arange(T, dtype=np.float64) / r
+        decided.append(f"{r:g} Hz" + ("" if rate else " (assumed: set the rate)"))
+    else:
+        time = np.asarray(time, np.float64).reshape(-1)
+        if time.shape[0] != T:
+            raise RecordingError(f"{time.shape[0]} times for {T} frames", path=src)
+        d = np.diff(time)
+        if not np.all(np.isfinite(time)) or np.any(d <= 0):
+            k = int(np.nonzero(~np.isfinite(time[1:]) | (d <= 0))[0][0]) + 1
+            raise RecordingError(f"time {shown(float(time[k]))} s of frame {k} is not after the previous "
+                                 f"frame's {shown(float(time[k - 1]))} s", path=src)
+        decided.append(f"{1.0 / np.median(d):.3g} Hz (from the times)")
+    missing = float(np.mean(~np.isfinite(X[..., 0])))
+    if missing > 0:
+        decided.append(f"{100.0 * missing:.1f}% of points missing")
+    meta = {"units": u, "up": up_name, "handed": "left" if mirrored else "right",
+            "detected": "; ".join(decided)}
+    return KeypointRecording(time=time, points=X, layout=name, source=src, metadata=meta)
+
+
+# --------------------------------------------------------------------------
+def _load_npy(path):
+    try:
+        return np.load(path, allow_pickle=False)
+    except (OSError, ValueError, EOFError) as exc:
+        raise RecordingError(f"not a readable .npy array ({exc})", path=path) from None
+
+
+def _optional_npy(path):
+    if not os.path.isfile(path):
+        return None
+    try:
+        a = np.asarray(np.load(path, allow_pickle=False), np.float64)
+    except (OSError, ValueError, EOFError):
+        return None
+    return a if a.ndim == 3 and a.shape[1:] == (21, 3) else None
+
+
+def _load_npz(path):
+    try:
+        z = np.load(path, allow_pickle=False)
+        keys = list(z.files)
+        arrays = {k: z[k] for k in keys}
+    except (OSError, ValueError, EOFError) as exc:
+        raise RecordingError(f"not a readable .npz archive ({exc})", path=path) from None
+    key = next((k for k in _NPZ_KEYS if k in arrays), None)
+    if key is None:
+        cands = [k for k, a in arrays.items() if a.ndim in (2, 3) and a.dtype.kind == "f"]
+        if len(cands) != 1:
+            raise RecordingError(f"no keypoint array: expected one of {', '.join(_NPZ_KEYS)} "
+                                 f"(the archive holds {', '.join(keys) or 'nothing'})", path=path)
+        key = cands[0]
+    time = arrays.get("time", arrays.get("times"))
+    conf = arrays.get("confidence", arrays.get("scores"))
+    layout = str(arrays["layout"]) if "layout" in arrays else None
+    fps = arrays.get("fps", arrays.get("rate"))
+    return arrays[key], time, conf, layout, (float(fps) if fps is not None and np.size(fps) == 1 else None)
+
+
+def _shape_points(X, conf, path):
+    X = np.asarray(X)
+    if X.dtype.kind not in "fiu":
+        raise RecordingError(f"keypoints must be numbers, found dtype {X.dtype}", path=path)
+    X = X.astype(np.float64)
+    if X.ndim == 2 and X.shape[1] % 3 == 0 and X.shape[1] >= 3 * 17:
+        X = X.reshape(X.shape[0], -1, 3)
+    if X.ndim != 3 or X.shape[2] not in (3, 4):
+        raise RecordingError(f"keypoints must be (frames, points, 3), (frames, points, 4) or "
+                             f"(frames, 3 x points); found shape {tuple(X.shape)}", path=path)
+    if X.shape[2] == 4:
+        conf = X[..., 3] if conf is None else conf
+        X = X[..., :3].copy()
+    if conf is not None:
+        conf = np.asarray(conf, np.float64)
+        if conf.shape != X.shape[:2]:
+            raise RecordingError(f"confidence shape {tuple(conf.shape)} does not match the keypoints' "
+                                 f"{tuple(X.shape[:2])}", path=path)
+    return X, conf
+
+
+def _median_dist(X, lay, *pairs):
+    d = []
+    for a, b in zip(pairs[0::2], pairs[1::2]):
+        d.append(np.linalg.norm(X[:, lay.index(a)] - X[:, lay.index(b)], axis=-1))
+    d = np.concatenate(d)
+    d = d[np.isfinite(d)]
+    return float(np.median(d)) if d.size else float("nan")
+
+
+def _layout_from_count(X, path):
+    K = X.shape[1]
+    names = kl.layouts_with(K)
+    if not names:
+        raise RecordingError(f"{K} points per frame match no keypoint layout "
+                             f"({', '.join(f'{n}: {len(f.points)}' for n, f in kl.LAYOUTS.items())}); "
+                             f"set the layout", path=path)
+    if len(names) == 1:
+        return names[0], "told from the point count"
+    if set(names) == {"coco17", "h36m17"}:
+        # point 0 to points 3 and 6: COCO nose → left ear, right shoulder (0.1, 0.25 m), Human3.6M
+        # pelvis → right ankle, left ankle (0.9 m), against the extent of the body (scale-free)
+        ext = np.linalg.norm(np.nanmax(X, axis=1) - np.nanmin(X, axis=1), axis=-1)
+        ratios = []
+        for k in (3, 6):
+            q = np.linalg.norm(X[:, 0] - X[:, k], axis=-1) / ext
+            q = q[np.isfinite(q)]
+            if q.size:
+                ratios.append(np.median(q))
+        r = float(np.mean(ratios)) if ratios else float("nan")
+        if np.isfinite(r) and r < 0.2:
+            return "coco17", "told from the point count and the nose near the ears"
+        if np.isfinite(r) and r > 0.3:
+            return "h36m17", "told from the point count and the pelvis far from the ankle"
+    raise RecordingError(f"{K} points per frame fit layouts {', '.join(names)}: set the layout "
+                         f"(--layout {'|'.join(names)})", path=path)
+
+
+def _layout_from_columns(cols):
+    """The layout whose points all have ``_x/_y/_z`` columns in ``cols`` (most points wins)."""
+    have = {c[:-2] for c in cols if c.endswith(("_x", "_y", "_z"))}
+    best = None
+    for name, lay in kl.LAYOUTS.items():
+        if all(p in have for p in lay.points) and (best is None or len(lay.points) > len(kl.LAYOUTS[best].points)):
+            best = name
+    return best
+
+
+def _load_csv(path, mapping, rate):
+    try:
+        with open(path, "r", encoding="utf-8-sig", newline="") as f:
+            rows = list(csv.reader(f))
+    except UnicodeDecodeError as exc:
+        raise RecordingError(f"not UTF-8 text ({exc.reason})", path=path) from None
+    except OSError as exc:
+        raise RecordingError(f"cannot read file ({exc.strerror or exc})", path=path) from None
+    rows = [(i + 1, r) for i, r in enumerate(rows) if r and any(c.strip() for c in r)
+            and not r[0].lstrip().startswith("#")]
+    if not rows:
+        raise RecordingError("file is empty", path=path)
+    hline, header = rows[0]
+    cols = [c.strip().lower() for c in header]
+    if mapping is not None:
+        if not isinstance(mapping, dict):
+            try:
+                with open(os.fspath(mapping), "r", encoding="utf-8") as f:
+                    mapping = json.load(f)
+            except (OSError, ValueError) as exc:
+                raise RecordingError(f"cannot read the mapping file ({exc})", path=os.fspath(mapping)) from None
+        try:
+            name = kl.canonical_layout(mapping.get("layout", ""))
+        except ValueError as exc:
+            raise RecordingError(f"mapping: {exc}", path=path) from None
+        prefix = {p: str(mapping.get("columns", {}).get(p, p)).strip().lower() for p in kl.LAYOUTS[name].points}
+    else:
+        name = _layout_from_columns(cols)
+        if name is None:
+            raise RecordingError("no keypoint layout's columns found: expected <point>_x, <point>_y, <point>_z "
+                                 f"for every point of one of {', '.join(kl.LAYOUTS)} (or a mapping file)",
+                                 path=path, line=hline)
+        prefix = {p: p for p in kl.LAYOUTS[name].points}
+    idx = []
+    for p in kl.LAYOUTS[name].points:
+        for ax in "xyz":
+            c = f"{prefix[p]}_{ax}"
+            if c not in cols:
+                raise RecordingError(f"column {c!r} (point {p} of {name}) is missing", path=path, line=hline)
+            idx.append(cols.index(c))
+    tcol = next((c for c in ("time", "t", "seconds", "timestamp", "frame") if c in cols), None)
+    data = rows[1:]
+    if not data:
+        raise RecordingError("no data rows after the header", path=path, line=hline)
+    X = np.empty((len(data), len(idx)))
+    tv = np.empty(len(data))
+    for k, (ln, r) in enumerate(data):
+        if len(r) != len(cols):
+            raise RecordingError(f"expected {len(cols)} comma-separated fields (as in the header), found {len(r)}",
+                                 path=path, line=ln)
+        for m, i in enumerate(idx):
+            cell = r[i].strip()
+            if not cell or cell.lower() == "nan":
+                X[k, m] = np.nan
+                continue
+            try:
+                X[k, m] = float(cell)
+            except ValueError:
+                raise RecordingError(f"column {cols[i]!r}: {cell!r} is not a number", path=path, line=ln) from None
+        if tcol is not None:
+            try:
+                tv[k] = float(r[cols.index(tcol)])
+            except ValueError:
+                raise RecordingError(f"column {tcol!r}: {r[cols.index(tcol)]!r} is not a number",
+                                     path=path, line=ln) from None
+    time = None
+    if tcol in ("time", "t", "seconds"):
+        time = tv
+    elif tcol == "timestamp":
+        time = tv / 1000.0
+    elif tcol == "frame" and rate:
+        time = (tv - tv[0]) / float(rate)
+    return X.reshape(len(data), -1, 3), time, name, rate
+
+
+def _hand_knuckles(X, lay, hands):
+    """Use FreeMoCap's hand points for the hand orientation: index / pinky knuckles (hand points
+    5 and 17) replace the pose's, where both are finite."""
+    for side, h in hands.items():
+        if h is None or h.shape[0] != X.shape[0]:
+            continue
+        for pose_pt, hand_pt in ((f"{side}_index", 5), (f"{side}_pinky", 17)):
+            ok = np.isfinite(h[:, hand_pt]).all(-1)
+            X[ok, lay.index(pose_pt)] = h[ok, hand_pt]
+
+
+_AXIS = {"+x": (0, 1.0), "x": (0, 1.0), "-x": (0, -1.0), "+y": (1, 1.0), "y": (1, 1.0), "-y": (1, -1.0),
+         "+z": (2, 1.0), "z": (2, 1.0), "-z": (2, -1.0)}
+
+
+def _up_matrix(X, lay, up, path):
+    """``(M, name, how)``: the proper rotation (a signed axis permutation) taking the file's up
+    axis to +Z."""
+    if up is not None:
+        key = str(up).strip().lower()
+        if key not in _AXIS:
+            raise RecordingError(f"up axis {up!r}: expected one of +x, -x, +y, -y, +z, -z", path=path)
+        a, s = _AXIS[key]
+        how = " (as set)"
+    else:
+        sh = 0.5 * (X[:, lay.index("left_shoulder")] + X[:, lay.index("right_shoulder")])
+        an = 0.5 * (X[:, lay.index("left_ankle")] + X[:, lay.index("right_ankle")])
+        v = np.nanmedian(rot.normalize(sh - an), axis=0)
+        if not np.all(np.isfinite(v)):
+            raise RecordingError("cannot tell the up axis (no frame with shoulders and ankles); set it", path=path)
+        a = int(np.argmax(np.abs(v)))
+        if abs(v[a]) < 0.7 * np.linalg.norm(v):
+            raise RecordingError(f"cannot tell the up axis: the body lies along no axis "
+                                 f"(shoulders − ankles ≈ {np.round(v, 2).tolist()}); set it", path=path)
+        s = float(np.sign(v[a]))
+        how = " (shoulders above the ankles)"
+    z = np.zeros(3)
+    z[a] = s
+    x = np.zeros(3)
+    x[(a + 1) % 3] = 1.0
+    y = np.cross(z, x)
+    return np.stack([x, y, z]), f"{'+' if s > 0 else '-'}{'xyz'[a].upper()}", how
+
+
+def _handedness(X, lay, handed, path):
+    """``(mirrored, how)``: whether the body's left-right labels disagree with its facing
+    (left x up should point forward) after the up axis is +Z."""
+    if handed is not None:
+        key = str(handed).strip().lower()
+        if key not in ("right", "left"):
+            raise RecordingError(f"handedness {handed!r}: expected right or left", path=path)
+        return key == "left", "as set"
+    up = np.array([0.0, 0.0, 1.0])
+    left = X[:, lay.index("left_hip")] - X[:, lay.index("right_hip")] + \
+        X[:, lay.index("left_shoulder")] - X[:, lay.index("right_shoulder")]
+    fwd = np.cross(left, up)
+    cues = []
+    if "nose" in lay and "left_ear" in lay:
+        cues.append(("nose ahead of the ears", X[:, lay.index("nose")]
+                     - 0.5 * (X[:, lay.index("left_ear")] + X[:, lay.index("right_ear")])))
+    for side in ("left", "right"):
+        for toe, back in ((f"{side}_foot_index", f"{side}_heel"), (f"{side}_big_toe", f"{side}_heel"),
+                          (f"{side}_foot", f"{side}_ankle")):
+            if toe in lay and back in lay:
+                cues.append(("toes ahead of the heels", X[:, lay.index(toe)] - X[:, lay.index(back)]))
+                break
+    if "nose" in lay and "head_top" in lay:
+        mid = 0.5 * (X[:, lay.index("head_top")] + X[:, lay.index("thorax")])
+        cues.append(("nose ahead of the head", X[:, lay.index("nose")] - mid))
+    if not cues:
+        return False, "assumed"
+    votes = []
+    for _, v in cues:
+        d = np.sum(rot.normalize(fwd) * rot.normalize(v), -1)
+        d = d[np.isfinite(d)]
+        if d.size:
+            votes.append(float(np.median(d)))
+    score = float(np.sum(votes))
+    if not np.isfinite(score) or abs(score) < 0.1:
+        return False, "assumed: no clear facing"
+    return score < 0, cues[0][0]

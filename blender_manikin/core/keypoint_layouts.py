@@ -1,0 +1,317 @@
+"""3D keypoint layouts (MediaPipe-33, COCO-17, Human3.6M-17, SMPL-22/24, OpenPose BODY_25) and
+how each becomes the 22 joints of :mod:`.skeleton`.
+
+A keypoint array is ``(T, K, 3)`` float64, metres, Blender axes (+Z up, right-handed; see
+:mod:`.io_keypoints` for the conversion from files), NaN where a point is missing.  Each layout
+names its K points in file order.  :func:`body22_from_keypoints` places the 22 body joints:
+
+* joints a layout has (hips, knees, ankles, shoulders, elbows, wrists; SMPL has all 22) are
+  taken as they are;
+* the pelvis sits :data:`~.skeleton.PROPORTIONS` ``pelvis_above_hips`` above the hips' midpoint
+  along the trunk, the neck base ``neck_height - shoulder_height`` above the shoulders'
+  midpoint (or is the layout's neck / thorax), spine1-3 are spaced between them (through the
+  Human3.6M spine point where there is one), the collars sit where the rest body puts them
+  relative to the neck and shoulders, and the head joint (skull base) lies between the ears,
+  or 0.44 of the way from the neck to the head top;
+* the toes / ball of the foot (the ``foot`` joints) come from the layout's toe points, else
+  flat ahead of the ankle, facing the way the hips face.
+
+Twist (rotation about a bone) cannot be seen from one point per joint.  Where a layout has the
+points for it, :func:`body22_from_keypoints` also returns world orientations: the head from the
+face (ears and nose, or the head top and nose), the hands from the pinky / index points, the
+feet from the heel and toes.  ``no_twist`` names the joints left with the rest twist; the solve's
+summary lists them.  Orientations follow the body model's convention: the rest pose has every
+joint frame equal to the world axes (the body faces -Y, its left is +X).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from . import rotations as rot
+from .skeleton import J, NUM_JOINTS, PROPORTIONS
+
+_MP33 = (
+    "nose", "left_eye_inner", "left_eye", "left_eye_outer", "right_eye_inner", "right_eye",
+    "right_eye_outer", "left_ear", "right_ear", "mouth_left", "mouth_right", "left_shoulder",
+    "right_shoulder", "left_elbow", "right_elbow", "left_wrist", "right_wrist", "left_pinky",
+    "right_pinky", "left_index", "right_index", "left_thumb", "right_thumb", "left_hip", "right_hip",
+    "left_knee", "right_knee", "left_ankle", "right_ankle", "left_heel", "right_heel",
+    "left_foot_index", "right_foot_index",
+)
+_COCO17 = (
+    "nose", "left_eye", "right_eye", "left_ear", "right_ear", "left_shoulder", "right_shoulder",
+    "left_elbow", "right_elbow", "left_wrist", "right_wrist", "left_hip", "right_hip", "left_knee",
+    "right_knee", "left_ankle", "right_ankle",
+)
+#: Human3.6M's 17 joints in the order VideoPose3D, MotionBERT and most 3D lifters write them
+_H36M17 = (
+    "pelvis", "right_hip", "right_knee", "right_ankle", "left_hip", "left_knee", "left_ankle",
+    "spine", "thorax", "nose", "head_top", "left_shoulder", "left_elbow", "left_wrist",
+    "right_shoulder", "right_elbow", "right_wrist",
+)
+_SMPL22 = (
+    "pelvis", "left_hip", "right_hip", "spine1", "left_knee", "right_knee", "spine2", "left_ankle",
+    "right_ankle", "spine3", "left_foot", "right_foot", "neck", "left_collar", "right_collar", "head",
+    "left_shoulder", "right_shoulder", "left_elbow", "right_elbow", "left_wrist", "right_wrist",
+)
+_BODY25 = (
+    "nose", "neck", "right_shoulder", "right_elbow", "right_wrist", "left_shoulder", "left_elbow",
+    "left_wrist", "mid_hip", "right_hip", "right_knee", "right_ankle", "left_hip", "left_knee",
+    "left_ankle", "right_eye", "left_eye", "right_ear", "left_ear", "left_big_toe", "left_small_toe",
+    "left_heel", "right_big_toe", "right_small_toe", "right_heel",
+)
+
+
+#: the head joint (skull base) lies this far from the neck base to the head top
+_HEAD_ALONG_NECK = (PROPORTIONS["head_height"] - PROPORTIONS["neck_height"]) / (1.0 - PROPORTIONS["neck_height"])
+
+
+@dataclass(frozen=True)
+class KeypointLayout:
+    """A named keypoint layout: ``points`` in file order and a one-line ``description``."""
+    name: str
+    description: str
+    points: tuple
+
+    def index(self, point: str) -> int:
+        return self.points.index(point)
+
+    def __contains__(self, point) -> bool:
+        return point in self.points
+
+
+LAYOUTS = {f.name: f for f in (
+    KeypointLayout("mediapipe33", "MediaPipe / BlazePose 33 (FreeMoCap)", _MP33),
+    KeypointLayout("coco17", "COCO 17", _COCO17),
+    KeypointLayout("h36m17", "Human3.6M 17 (VideoPose3D, MotionBERT)", _H36M17),
+    KeypointLayout("smpl22", "SMPL 22 body joints", _SMPL22),
+    KeypointLayout("smpl24", "SMPL 24 (22 + hands; 4D-Humans, SMPL fits)", _SMPL22 + ("left_hand", "right_hand")),
+    KeypointLayout("body25", "OpenPose BODY_25", _BODY25),
+)}
+
+_ALIASES = {"mediapipe": "mediapipe33", "blazepose": "mediapipe33", "freemocap": "mediapipe33",
+            "coco": "coco17", "h36m": "h36m17", "human36m": "h36m17", "smpl": "smpl24",
+            "openpose": "body25"}
+
+
+def canonical_layout(name) -> str:
+    """The layout name for ``name`` (case-insensitive; ``coco``, ``mediapipe``, ``h36m``,
+    ``smpl``, ``openpose`` are aliases).  Raises ``ValueError`` listing the layouts."""
+    key = str(name).strip().lower().replace("-", "").replace("_", "").replace(".", "")
+    key = _ALIASES.get(key, key)
+    if key not in LAYOUTS:
+        raise ValueError(f"unknown keypoint layout {name!r}: expected one of {', '.join(LAYOUTS)}")
+    return key
+
+
+def layouts_with(count: int) -> list:
+    """Names of the layouts with ``count`` points (what an unnamed ``(T, count, 3)`` array may be)."""
+    return [n for n, f in LAYOUTS.items() if len(f.points) == count]
+
+
+@dataclass
+class Body22:
+    """The body joints a keypoint layout gives.
+
+    positions: ``(T, 22, 3)`` float64 metres, Blender axes, NaN where the keypoints were.
+    end_rot: joint index → ``(T, 3, 3)`` world orientation (body-model convention; NaN on
+    frames where its points were missing) for the joints whose twist the layout shows.
+    no_twist: names of the joints whose twist the layout cannot show (rest twist used).
+    """
+    positions: np.ndarray
+    end_rot: dict
+    no_twist: tuple
+
+
+def _frame_from(a, b, order):
+    """``(T, 3, 3)`` rotation whose columns are world axes: ``order`` names the axes ``a`` and
+    ``b`` give (``"xy"``, ``"yz"``, ...); ``a`` is kept exactly (normalised), ``b`` is made
+    orthogonal to it and the third axis completes a right-handed frame."""
+    i, j = "xyz".index(order[0]), "xyz".index(order[1])
+    k = 3 - i - j
+    e = [None, None, None]
+    e[i] = rot.normalize(a)
+    e[j] = rot.normalize(b - np.sum(b * e[i], -1, keepdims=True) * e[i])
+    e[k] = np.cross(e[i], e[j]) if (j - i) % 3 == 1 else np.cross(e[j], e[i])
+    return np.stack(e, axis=-1)
+
+
+def _flat_roll(fwd):
+    """``(T, 3, 3)`` frame of a foot pointing along ``fwd`` (its -Y) with no roll: +X horizontal."""
+    up = np.broadcast_to([0.0, 0.0, 1.0], np.shape(fwd))
+    y = -np.asarray(fwd, np.float64)
+    return _frame_from(y, np.cross(y, up), "yx")
+
+
+def _trunk_up(P):
+    """``(T, 3)`` unit vector from the hips' midpoint to the shoulders' midpoint."""
+    mid_hip = 0.5 * (P[:, J["left_hip"]] + P[:, J["right_hip"]])
+    mid_sh = 0.5 * (P[:, J["left_shoulder"]] + P[:, J["right_shoulder"]])
+    return rot.normalize(mid_sh - mid_hip), mid_hip, mid_sh
+
+
+def body22_from_keypoints(points, layout) -> Body22:
+    """The 22 body joints (and the orientations the layout shows) from keypoints.
+
+    points: ``(T, K, 3)`` float64 metres, Blender axes (+Z up), NaN = missing; K = the layout's
+    point count.  layout: a :class:`KeypointLayout` or its name.  Missing points stay NaN in
+    the joints made from them (the solve bridges gaps before this).
+    """
+    lay = LAYOUTS[canonical_layout(layout)] if not isinstance(layout, KeypointLayout) else layout
+    X = np.asarray(points, np.float64)
+    if X.ndim != 3 or X.shape[1:] != (len(lay.points), 3):
+        raise ValueError(f"{lay.name} keypoints must be (T, {len(lay.points)}, 3), got {X.shape}")
+    T = X.shape[0]
+
+    def pt(name):
+        return X[:, lay.index(name)]
+
+    P = np.full((T, NUM_JOINTS, 3), np.nan)
+    end_rot = {}
+    if lay.name in ("smpl22", "smpl24"):
+        P[:] = X[:, :NUM_JOINTS]
+        return Body22(P, end_rot, ("left_wrist", "right_wrist", "head", "left_foot", "right_foot"))
+
+    for side in ("left", "right"):
+        for j in ("hip", "knee", "ankle", "shoulder", "elbow", "wrist"):
+            P[:, J[f"{side}_{j}"]] = pt(f"{side}_{j}")
+    up, mid_hip, mid_sh = _trunk_up(P)
+    # a stature estimate per take, only for the small fixed offsets below (pelvis above the
+    # hips, neck above the shoulders): the median shoulder-to-hip distance / its rest fraction
+    trunk = np.nanmedian(np.linalg.norm(mid_sh - mid_hip, axis=-1))
+    H = trunk / (PROPORTIONS["shoulder_height"] - PROPORTIONS["hip_height"]) if np.isfinite(trunk) else 1.7
+    pelvis = pt("pelvis") if "pelvis" in lay else \
+        (pt("mid_hip") if "mid_hip" in lay else mid_hip) + PROPORTIONS["pelvis_above_hips"] * H * up
+    if "pelvis" in lay:       # H36M's pelvis is the hips' midpoint; ours sits a little above it
+        pelvis = pelvis + PROPORTIONS["pelvis_above_hips"] * H * up
+    neck_above = (PROPORTIONS["neck_height"] - PROPORTIONS["shoulder_height"]) * H
+    if "thorax" in lay:
+        neck = pt("thorax")
+    elif "neck" in lay:
+        neck = pt("neck") + neck_above * up
+    else:
+        neck = mid_sh + neck_above * up
+    P[:, J["pelvis"]] = pelvis
+    P[:, J["neck"]] = neck
+    if "spine" in lay:
+        sp = pt("spine")
+        P[:, J["spine1"]], P[:, J["spine2"]], P[:, J["spine3"]] = 0.5 * (pelvis + sp), sp, 0.5 * (sp + neck)
+    else:
+        for k, name in enumerate(("spine1", "spine2", "spine3"), start=1):
+            P[:, J[name]] = pelvis + (neck - pelvis) * (k / 4.0)
+    # collars: where the rest body puts them relative to the neck and the shoulders
+    a = PROPORTIONS["collar_out"] / (0.5 * PROPORTIONS["shoulder_width"])
+    b = (PROPORTIONS["collar_height"] - PROPORTIONS["neck_height"]
+         - a * (PROPORTIONS["shoulder_height"] - PROPORTIONS["neck_height"])) * H
+    for side in ("left", "right"):
+        P[:, J[f"{side}_collar"]] = neck + a * (P[:, J[f"{side}_shoulder"]] - neck) + b * up
+
+    no_twist = []
+    # head: the skull base between the ears, oriented by the face
+    if "left_ear" in lay:
+        ears = 0.5 * (pt("left_ear") + pt("right_ear"))
+        P[:, J["head"]] = ears
+        left = pt("left_ear") - pt("right_ear")
+        fwd = pt("nose") - ears
+        end_rot[J["head"]] = _frame_from(left, -fwd, "xy")     # +X the head's left, +Y its back
+    elif "head_top" in lay:
+        top = pt("head_top")
+        P[:, J["head"]] = neck + _HEAD_ALONG_NECK * (top - neck)
+        end_rot[J["head"]] = _frame_from(top - P[:, J["head"]], -(pt("nose") - P[:, J["head"]]), "zy")
+    else:
+        P[:, J["head"]] = neck + (PROPORTIONS["head_height"] - PROPORTIONS["neck_height"]) * H * up
+        no_twist.append("head")
+    # hands: the palm's plane from the index and pinky knuckles (T-pose: palms down, thumbs forward)
+    for side, sign in (("left", 1.0), ("right", -1.0)):
+        if f"{side}_index" in lay and f"{side}_pinky" in lay:
+            w = pt(f"{side}_wrist")
+            idx, pky = pt(f"{side}_index"), pt(f"{side}_pinky")
+            end_rot[J[f"{side}_wrist"]] = _frame_from(sign * (0.5 * (idx + pky) - w), -(idx - pky), "xy")
+        else:
+            no_twist.append(f"{side}_wrist")
+    # feet: heel -> toes gives the foot's direction, big -> small toe its roll
+    hip_left = P[:, J["left_hip"]] - P[:, J["right_hip"]]
+    for side, sign in (("left", 1.0), ("right", -1.0)):
+        ankle = P[:, J[f"{side}_ankle"]]
+        if f"{side}_heel" in lay and (f"{side}_foot_index" in lay or f"{side}_big_toe" in lay):
+            heel = pt(f"{side}_heel")
+            if f"{side}_big_toe" in lay:
+                big, small = pt(f"{side}_big_toe"), pt(f"{side}_small_toe")
+                toe = 0.5 * (big + small)
+                R = _frame_from(-(toe - heel), sign * (small - big), "yx")
+            else:
+                toe = pt(f"{side}_foot_index")
+                R = _flat_roll(toe - heel)
+                no_twist.append(f"{side}_foot")
+            end_rot[J[f"{side}_ankle"]] = R
+            P[:, J[f"{side}_foot"]] = ankle + R @ _rest_foot(H)
+        else:
+            # flat, facing the way the hips face (forward = left x up)
+            R = _flat_roll(np.cross(hip_left, np.broadcast_to([0.0, 0.0, 1.0], hip_left.shape)))
+            P[:, J[f"{side}_foot"]] = ankle + R @ _rest_foot(H)
+            no_twist.append(f"{side}_foot")
+    return Body22(P, end_rot, tuple(no_twist))
+
+
+def _rest_foot(H):
+    """``(3,)`` rest offset ankle → ball of the foot for a stature ``H`` (metres)."""
+    return np.array([0.0, -PROPORTIONS["foot_forward"],
+                     PROPORTIONS["foot_height"] - PROPORTIONS["ankle_height"]]) * H
+
+
+def keypoints_from_body22(positions, world_rot, layout, body_stature=1.7):
+    """Keypoints of ``layout`` placed on a posed 22-joint body (for fixtures and benchmarks).
+
+    positions ``(T, 22, 3)`` metres, world_rot ``(T, 22, 3, 3)`` (body-model convention).
+    Face, hand and foot points sit at fixed offsets in the head, wrist and ankle frames, sized by
+    ``body_stature`` metres, chosen so that :func:`body22_from_keypoints` gives back the joints
+    (exactly for the joints a layout has, and the head / wrist / ankle orientations it shows).
+    Returns ``(T, K, 3)``.
+    """
+    lay = LAYOUTS[canonical_layout(layout)] if not isinstance(layout, KeypointLayout) else layout
+    P = np.asarray(positions, np.float64)
+    R = np.asarray(world_rot, np.float64)
+    H = float(body_stature)
+    T = P.shape[0]
+
+    def at(joint, offset):
+        j = J[joint]
+        return P[:, j] + R[:, j] @ (np.asarray(offset, np.float64) * H)
+
+    up = rot.normalize(0.5 * (P[:, J["left_shoulder"]] + P[:, J["right_shoulder"]])
+                       - 0.5 * (P[:, J["left_hip"]] + P[:, J["right_hip"]]))
+    mid_hip = 0.5 * (P[:, J["left_hip"]] + P[:, J["right_hip"]])
+    pts = {}
+    for side, sx in (("left", 1.0), ("right", -1.0)):
+        for j in ("hip", "knee", "ankle", "shoulder", "elbow", "wrist"):
+            pts[f"{side}_{j}"] = P[:, J[f"{side}_{j}"]]
+        pts[f"{side}_ear"] = at("head", [sx * 0.045, 0.0, 0.0])
+        pts[f"{side}_eye"] = at("head", [sx * 0.018, -0.05, 0.02])
+        pts[f"{side}_eye_inner"] = at("head", [sx * 0.010, -0.05, 0.02])
+        pts[f"{side}_eye_outer"] = at("head", [sx * 0.026, -0.048, 0.02])
+        pts[f"mouth_{side}"] = at("head", [sx * 0.014, -0.052, -0.03])
+        pts[f"{side}_index"] = at(f"{side}_wrist", [sx * 0.055, -0.012, 0.0])
+        pts[f"{side}_pinky"] = at(f"{side}_wrist", [sx * 0.055, 0.012, 0.0])
+        pts[f"{side}_thumb"] = at(f"{side}_wrist", [sx * 0.03, -0.025, -0.005])
+        pts[f"{side}_heel"] = at(f"{side}_ankle", [0.0, 0.03, -0.027])
+        pts[f"{side}_foot_index"] = at(f"{side}_ankle", [0.0, -0.115, -0.027])
+        pts[f"{side}_big_toe"] = at(f"{side}_ankle", [-sx * 0.015, -0.11, -0.027])
+        pts[f"{side}_small_toe"] = at(f"{side}_ankle", [sx * 0.015, -0.10, -0.027])
+        pts[f"{side}_hand"] = at(f"{side}_wrist", [sx * 0.05, 0.0, 0.0])
+    pts["nose"] = at("head", [0.0, -0.06, 0.0])
+    pts["head_top"] = P[:, J["neck"]] + (P[:, J["head"]] - P[:, J["neck"]]) / _HEAD_ALONG_NECK
+    pts["thorax"] = P[:, J["neck"]]
+    pts["spine"] = P[:, J["spine2"]]
+    trunk = np.median(np.linalg.norm(0.5 * (P[:, J["left_shoulder"]] + P[:, J["right_shoulder"]]) - mid_hip,
+                                     axis=-1))
+    Hk = trunk / (PROPORTIONS["shoulder_height"] - PROPORTIONS["hip_height"])
+    pts["pelvis"] = P[:, J["pelvis"]] - PROPORTIONS["pelvis_above_hips"] * Hk * up
+    pts["mid_hip"] = pts["pelvis"]
+    pts["neck"] = P[:, J["neck"]] - (PROPORTIONS["neck_height"] - PROPORTIONS["shoulder_height"]) * Hk * up
+    for name in ("spine1", "spine2", "spine3", "left_collar", "right_collar", "head", "left_foot", "right_foot"):
+        pts[name] = P[:, J[name]]
+    if lay.name in ("smpl22", "smpl24"):
+        pts["pelvis"], pts["neck"] = P[:, J["pelvis"]], P[:, J["neck"]]
+    return np.stack([pts[p] for p in lay.points], axis=1).reshape(T, len(lay.points), 3)

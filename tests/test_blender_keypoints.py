@@ -1,0 +1,80 @@
+"""Keypoints → keyed armature in Blender: the panel's Keypoints source, the live rig, the CLI."""
+import os
+
+import numpy as np
+import pytest
+
+bpy = pytest.importorskip("bpy")
+
+import blender_manikin  # noqa: E402
+from blender_manikin import cli  # noqa: E402
+from blender_manikin.blender import keying, live_rig  # noqa: E402
+from blender_manikin.core import skeleton as sk  # noqa: E402
+from blender_manikin.core.solve import SolveSettings, solve_recording  # noqa: E402
+
+from blender_util import fresh_scene  # noqa: E402
+from fixtures_keypoints import hinge_motion, write_freemocap, write_layout_npy  # noqa: E402
+
+
+@pytest.fixture
+def addon():
+    fresh_scene()
+    blender_manikin.register()
+    yield
+    blender_manikin.unregister()
+
+
+@pytest.fixture(scope="module")
+def motion():
+    return hinge_motion(frames=90, seed=1)
+
+
+def _bone_heads(obj, frame, names):
+    bpy.context.scene.frame_set(frame)
+    mw = np.array(obj.matrix_world)
+    return np.array([(mw @ np.append(np.array(obj.pose.bones[n].head), 1.0))[:3] for n in names])
+
+
+def test_panel_keypoints_source_keys_a_live_rig_that_follows_the_solve(addon, tmp_path, motion):
+    folder, _ = write_freemocap(str(tmp_path / "session"), *motion, sigma=0.01, drop=0.02, seed=2)
+    npy = os.path.join(folder, "output_data", "mediapipe_body_3d_xyz.npy")
+    sc = bpy.context.scene
+    sc.render.fps, sc.render.fps_base = 30, 1.0
+    s = sc.manikin
+    s.source, s.keypoint_path = 'KEYPOINTS', npy
+    s.smoothing, s.ik = 0.3, 'ADAPTIVE'
+    assert bpy.ops.manikin.solve_full_body() == {'FINISHED'}
+    obj = s.armature
+    assert obj is not None and live_rig.is_live_rig(obj)
+    assert s.last_report.startswith("keypoints: mediapipe33 (33 points, from the file); FreeMoCap folder")
+    assert "no twist information: left_foot, right_foot" in s.last_report
+    action = obj.animation_data.action
+    paths = {fc.data_path for fc in keying.action_fcurves(action, obj)}
+    assert {f'["swivel_{limb}"]' for limb in sk.LIMB_NAMES} <= paths
+    # the same solve without Blender: the evaluated (live-rig) joints sit where its FK puts them
+    ref = solve_recording(npy, SolveSettings(fps=30.0, smoothing=0.3)).result.fk()[0]
+    names = ["left_wrist", "right_wrist", "left_elbow", "right_knee", "left_ankle", "head", "pelvis"]
+    for k in (0, 33, 89):
+        got = _bone_heads(obj, 1 + k, names)
+        np.testing.assert_allclose(got, ref[k, [sk.J[n] for n in names]], atol=1e-3)
+    # and a swivel edit moves the elbow, the wrist stays
+    before = _bone_heads(obj, 34, ["left_elbow", "left_wrist"])
+    fc = live_rig.swivel_fcurve(obj, "left_arm")
+    for kp in fc.keyframe_points:
+        kp.co[1] += 0.5
+    fc.update()
+    after = _bone_heads(obj, 34, ["left_elbow", "left_wrist"])
+    assert np.linalg.norm(after[0] - before[0]) > 0.02
+    np.testing.assert_allclose(after[1], before[1], atol=1e-3)
+
+
+def test_cli_in_blender_writes_a_blend_from_a_coco_array(tmp_path, motion):
+    body, pos, world = motion
+    write_layout_npy(tmp_path / "coco.npy", "coco17", body, pos, world, sigma=0.01, scale=1000.0)
+    out = tmp_path / "out"
+    assert cli.main(["solve", str(tmp_path / "coco.npy"), "--out", str(out), "--format", "blend,json",
+                     "--fps", "30"]) == 0
+    assert (out / "coco.blend").stat().st_size > 0 and (out / "coco.json").stat().st_size > 0
+    bpy.ops.wm.open_mainfile(filepath=str(out / "coco.blend"))
+    arm = [o for o in bpy.data.objects if o.type == 'ARMATURE']
+    assert len(arm) == 1 and arm[0].animation_data.action is not None

@@ -1,0 +1,289 @@
+"""3D keypoints → animated 22-joint body (HybrIK twist-and-swing): layouts, readers, solve, CLI."""
+import json
+import os
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from blender_manikin.core import keypoint_layouts as kl
+from blender_manikin.core import keypoint_solve as ks
+from blender_manikin.core import skeleton as sk
+from blender_manikin.core.io_keypoints import is_keypoint_input, read_keypoints
+from blender_manikin.core.recording import RecordingError
+from blender_manikin.core.solve import SolveError, SolveSettings, solve_recording
+
+from fixtures_keypoints import (hinge_motion, to_y_up, write_freemocap, write_layout_csv,
+                                write_layout_npy)
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+LIMB_JOINTS = [sk.J[f"{s}_{j}"] for s in ("left", "right")
+               for j in ("shoulder", "elbow", "wrist", "hip", "knee", "ankle")]
+
+
+@pytest.fixture(scope="module")
+def motion():
+    return hinge_motion(frames=240, seed=0)
+
+
+def _fit_error(outcome, clean_file, layout):
+    """Mean distance (m) of the fitted limb joints to the clean keypoints' joints, both in the
+    solver's frame (the clean file read the same way; the solve's floor shift removed)."""
+    ref = kl.body22_from_keypoints(read_keypoints(clean_file, layout=layout).points, layout).positions
+    fit = outcome.result.fk()[0]
+    ref = ref.copy()
+    ref[..., 2] += np.median(fit[..., 2] - ref[..., 2])
+    return float(np.linalg.norm(fit[:, LIMB_JOINTS] - ref[:, LIMB_JOINTS], axis=-1).mean())
+
+
+def _bone_drift(outcome):
+    pos = outcome.result.fk()[0]
+    L = np.linalg.norm(pos[:, 1:] - pos[:, sk.PARENTS[1:]], axis=-1)
+    return float(np.abs(L - L[:1]).max())
+
+
+# --------------------------------------------------------------------------
+# layouts
+@pytest.mark.parametrize("layout", list(kl.LAYOUTS))
+def test_layout_joints_and_orientations_round_trip(layout, motion):
+    body, pos, world = motion
+    kp = kl.keypoints_from_body22(pos, world, layout, body.stature)
+    assert kp.shape == (len(pos), len(kl.LAYOUTS[layout].points), 3)
+    b = kl.body22_from_keypoints(kp, layout)
+    have = range(22) if layout.startswith("smpl") else LIMB_JOINTS
+    np.testing.assert_allclose(b.positions[:, have], pos[:, have], atol=1e-9)
+    assert np.isfinite(b.positions).all()
+    # the orientations a layout shows are the body's (twist included), except the flat-roll feet
+    flat = {sk.J[f"{s}_ankle"] for s in ("left", "right")} if layout == "mediapipe33" else set()
+    for j, R in b.end_rot.items():
+        if j not in flat:
+            np.testing.assert_allclose(R, world[:, j], atol=1e-6 if layout != "h36m17" else 0.7)
+    shows = {"mediapipe33": {"head", "left_wrist", "right_wrist", "left_ankle", "right_ankle"},
+             "coco17": {"head"}, "h36m17": {"head"}, "body25": {"head", "left_ankle", "right_ankle"},
+             "smpl22": set(), "smpl24": set()}[layout]
+    assert {sk.JOINT_NAMES[j] for j in b.end_rot} == shows
+    assert "left_wrist" in b.no_twist or "left_wrist" in shows
+
+
+def test_layout_names_and_aliases():
+    assert kl.canonical_layout("COCO") == "coco17"
+    assert kl.canonical_layout("MediaPipe-33") == "mediapipe33"
+    assert kl.canonical_layout("openpose") == "body25"
+    with pytest.raises(ValueError, match="unknown keypoint layout 'coco18'.*coco17"):
+        kl.canonical_layout("coco18")
+
+
+# --------------------------------------------------------------------------
+# readers
+def test_freemocap_folder_detection_line(tmp_path, motion):
+    folder, _ = write_freemocap(str(tmp_path / "session"), *motion)
+    assert is_keypoint_input(folder) and is_keypoint_input(os.path.join(folder, "output_data"))
+    rec = read_keypoints(folder)
+    assert rec.layout == "mediapipe33" and rec.points.shape == (240, 33, 3)
+    line = rec.metadata["detected"]
+    assert line.startswith("keypoints: mediapipe33 (33 points, from the file); FreeMoCap folder;")
+    assert "units mm (leg 0.7" in line
+    assert "up +Y (shoulders above the ankles), right-handed (nose ahead of the ears)" in line
+    assert "30 Hz (assumed: set the rate)" in line
+    # metres, +Z up: the head is above the feet, the performer about 1.7 m tall
+    lay = kl.LAYOUTS["mediapipe33"]
+    h = rec.points[:, lay.index("nose"), 2] - rec.points[:, lay.index("left_ankle"), 2]
+    assert 1.3 < np.median(h) < 1.8
+
+
+def test_seventeen_points_told_apart_and_mirrored_files_found(tmp_path, motion):
+    body, pos, world = motion
+    for layout in ("coco17", "h36m17"):
+        p = tmp_path / f"{layout}.npy"
+        write_layout_npy(p, layout, body, pos, world, scale=100.0)       # centimetres
+        rec = read_keypoints(p)
+        assert rec.layout == layout and rec.metadata["units"] == "cm"
+    # a left-handed file (Unity-like: X mirrored) is recognised by the face and put right
+    clean = kl.keypoints_from_body22(pos, world, "coco17", body.stature)
+    np.save(tmp_path / "mirrored.npy", to_y_up(clean) * np.array([-1.0, 1.0, 1.0]))
+    np.save(tmp_path / "plain.npy", to_y_up(clean))
+    a, b = read_keypoints(tmp_path / "mirrored.npy"), read_keypoints(tmp_path / "plain.npy")
+    assert a.metadata["handed"] == "left" and b.metadata["handed"] == "right"
+    la, lb = kl.body22_from_keypoints(a.points, "coco17"), kl.body22_from_keypoints(b.points, "coco17")
+    # the same body, its left still on its left (same limb lengths, same facing relative to it)
+    np.testing.assert_allclose(np.linalg.norm(la.positions[:, 7] - la.positions[:, 8], axis=-1),
+                               np.linalg.norm(lb.positions[:, 7] - lb.positions[:, 8], axis=-1), atol=1e-9)
+    np.testing.assert_allclose(la.end_rot[sk.J["head"]] @ np.eye(3), la.end_rot[sk.J["head"]], atol=1e-9)
+    assert np.linalg.det(la.end_rot[sk.J["head"]]).min() > 0.99
+
+
+def test_keypoint_csv_with_gaps_and_a_mapping_file(tmp_path, motion):
+    body, pos, world = motion
+    p = tmp_path / "coco.csv"
+    write_layout_csv(p, "coco17", body, pos, world, drop=0.02, seed=3)
+    assert is_keypoint_input(p)
+    rec = read_keypoints(p)
+    assert rec.layout == "coco17" and np.isnan(rec.points).any()
+    assert "30 Hz (from the times)" in rec.metadata["detected"]
+    names = {"nose": "Nose", "left_wrist": "LWrist", "right_wrist": "RWrist"}
+    q = tmp_path / "renamed.csv"
+    write_layout_csv(q, "coco17", body, pos, world, names=names)
+    assert not is_keypoint_input(q)              # not a layout's own column names
+    mapping = tmp_path / "map.json"
+    mapping.write_text(json.dumps({"layout": "coco", "columns": names}))
+    rec2 = read_keypoints(q, mapping=str(mapping))
+    assert rec2.layout == "coco17" and np.isfinite(rec2.points).all()
+
+
+@pytest.mark.parametrize("content, problem", [
+    (b"\x93NUMPY garbage", "not a readable .npy array"),
+])
+def test_bad_npy(tmp_path, content, problem):
+    p = tmp_path / "bad.npy"
+    p.write_bytes(content)
+    with pytest.raises(RecordingError, match=rf"bad.npy: {problem}"):
+        read_keypoints(p)
+
+
+def test_bad_inputs_name_the_file_line_and_problem(tmp_path, motion):
+    body, pos, world = motion
+    np.save(tmp_path / "shape.npy", np.zeros((10, 5)))
+    with pytest.raises(RecordingError, match=r"shape.npy: keypoints must be \(frames, points, 3\).*\(10, 5\)"):
+        read_keypoints(tmp_path / "shape.npy")
+    np.save(tmp_path / "count.npy", np.zeros((10, 19, 3)))
+    with pytest.raises(RecordingError, match="count.npy: 19 points per frame match no keypoint layout"):
+        read_keypoints(tmp_path / "count.npy")
+    clean = kl.keypoints_from_body22(pos, world, "coco17", body.stature)
+    np.save(tmp_path / "tiny.npy", to_y_up(clean) * 1e-5)
+    with pytest.raises(RecordingError, match="tiny.npy: cannot tell the units.*set the units"):
+        read_keypoints(tmp_path / "tiny.npy")
+    p = tmp_path / "cells.csv"
+    write_layout_csv(p, "coco17", body, pos, world)
+    lines = p.read_text().splitlines()
+    cells = lines[5].split(",")
+    cells[4] = "oops"
+    lines[5] = ",".join(cells)
+    p.write_text("\n".join(lines) + "\n")
+    with pytest.raises(RecordingError, match=r"cells.csv, line 6: column 'left_eye_x': 'oops' is not a number"):
+        read_keypoints(p)
+    with pytest.raises(RecordingError, match="layout coco17 has 17 points, the file 33"):
+        read_keypoints(write_freemocap(str(tmp_path / "fm"), *motion)[0], layout="coco17")
+
+
+# --------------------------------------------------------------------------
+# stages
+def test_bridge_gaps_and_smoothing():
+    t = np.arange(20) / 10.0
+    x = np.stack([t, t ** 2, np.ones_like(t)], -1)[:, None, :].copy()
+    y = x.copy()
+    y[3:6] = np.nan
+    y[0] = np.nan
+    filled, gaps = ks.bridge_gaps(t, y, ["p"])
+    assert [(g.reason, g.samples) for g in gaps] == [("start", 1), ("lost", 3)]
+    np.testing.assert_allclose(filled[3:6, 0, 0], t[3:6])               # linear: exact on a line
+    np.testing.assert_allclose(filled[0], filled[1])                     # held before the first
+    # Savitzky-Golay (quadratic) keeps quadratics exactly, ends included; noise shrinks
+    np.testing.assert_allclose(ks.smooth(x, 10.0, 0.5), x, atol=1e-12)
+    rng = np.random.default_rng(0)
+    n = rng.normal(size=(400, 3))
+    assert ks.smooth(n, 30.0, 0.4).std() < 0.6 * n.std()
+    np.testing.assert_array_equal(ks.smooth(n, 30.0, 0.0), n)
+
+
+def test_sized_body_has_the_takes_bones_and_stands_on_the_floor(motion):
+    body, pos, world = motion
+    b = ks.size_body(pos)
+    np.testing.assert_allclose(b.bone_lengths(), body.bone_lengths(), atol=1e-9)
+    np.testing.assert_allclose(b.rest_positions(), body.rest_positions(), atol=1e-9)
+    assert abs(b.stature - body.stature) < 1e-9
+    lifted = pos + np.array([0.0, 0.0, 0.3])
+    assert abs(ks.estimate_floor(lifted, b) - 0.3) < 0.02
+
+
+# --------------------------------------------------------------------------
+# whole solves
+def test_freemocap_folder_with_noise_and_gaps_solves_within_targets(tmp_path, motion):
+    """The issue's target: fitted joints within 1.5 cm of the clean keypoints at 2 cm noise
+    (σ per coordinate... here 1.15 cm per coordinate = 2 cm in 3D), bones constant to 0.1 mm."""
+    body, pos, world = motion
+    folder, clean = write_freemocap(str(tmp_path / "fm"), body, pos, world, sigma=0.02 / np.sqrt(3),
+                                    drop=0.03, seed=5)
+    np.save(tmp_path / "clean.npy", to_y_up(clean, 1000.0))
+    out = solve_recording(folder, SolveSettings(fps=30.0))
+    assert out.result.num_frames == 240 and out.body is not None
+    err = _fit_error(out, tmp_path / "clean.npy", "mediapipe33")
+    assert err < 0.015, err
+    assert _bone_drift(out) < 1e-4
+    assert abs(out.body.stature - body.stature) < 0.03
+    s = out.summary()
+    assert s.startswith("keypoints: mediapipe33") and "gap(s) bridged" in s
+    assert "no twist information: left_foot, right_foot (rest twist)" in s
+    # hinges within limits, feet above the floor
+    from blender_manikin.core import limb_solver as ls
+    P, W = out.result.fk()
+    for li, (_, b, m, e) in enumerate(sk.LIMBS):
+        loc = out.result.local_rot[:, m]
+        axis_angle = np.degrees(np.arccos(np.clip((np.trace(loc, axis1=-2, axis2=-1) - 1) / 2, -1, 1)))
+        assert axis_angle.max() <= np.degrees(ls.FLEX_MAX[li]) + 60.0       # flexion plus twist range
+    assert P[:, [sk.J["left_ankle"], sk.J["right_ankle"]], 2].min() > 0.0
+
+
+@pytest.mark.parametrize("sigma", [0.02, 0.04])
+def test_adaptive_beats_naive_as_noise_grows(tmp_path, motion, sigma):
+    body, pos, world = motion
+    clean = write_layout_npy(tmp_path / "k.npy", "h36m17", body, pos, world, sigma=sigma, seed=2)
+    np.save(tmp_path / "clean.npy", to_y_up(clean))
+    err = {}
+    for ik in ("adaptive", "naive"):
+        out = solve_recording(tmp_path / "k.npy", SolveSettings(fps=30.0, ik=ik, smoothing=0.0))
+        err[ik] = _fit_error(out, tmp_path / "clean.npy", "h36m17")
+    assert err["adaptive"] < err["naive"], err
+
+
+def test_unknown_ik_and_never_seen_points(tmp_path, motion):
+    body, pos, world = motion
+    write_layout_npy(tmp_path / "k.npy", "coco17", body, pos, world)
+    with pytest.raises(SolveError, match="ik 'fancy': expected adaptive or naive"):
+        solve_recording(tmp_path / "k.npy", SolveSettings(ik="fancy"))
+    kp = to_y_up(kl.keypoints_from_body22(pos, world, "coco17", body.stature))
+    kp[:, kl.LAYOUTS["coco17"].index("left_ear")] = np.nan
+    np.save(tmp_path / "noear.npy", kp)
+    with pytest.raises(SolveError, match="joint\\(s\\) head cannot be placed: point\\(s\\) left_ear never seen"):
+        solve_recording(tmp_path / "noear.npy", SolveSettings())
+
+
+def test_cli_solves_keypoints_without_blender(tmp_path, motion):
+    """``python -m blender_manikin solve`` on a FreeMoCap folder and a COCO-17 .npy: json + bvh,
+    no bpy needed (run in a fresh process with bpy hidden)."""
+    body, pos, world = motion
+    d = tmp_path / "in"
+    d.mkdir()
+    write_layout_npy(d / "coco.npy", "coco17", body, pos, world, sigma=0.01, drop=0.02, scale=1000.0)
+    folder, _ = write_freemocap(str(tmp_path / "session1"), body, pos, world, sigma=0.01)
+    out = tmp_path / "out"
+    code = ("import sys; sys.modules['bpy'] = None\n"
+            "from blender_manikin import cli\n"
+            f"sys.exit(cli.main(['solve', {str(d)!r}, {folder!r}, '--out', {str(out)!r}, "
+            "'--format', 'json,bvh', '--fps', '30', '--smoothing', '0.3', '--layout', 'coco17']))")
+    r = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True,
+                       env=dict(os.environ, PYTHONPATH=ROOT))
+    assert r.returncode == 1, r.stderr          # --layout coco17 does not fit the 33-point folder
+    assert "session1" in r.stderr and "layout coco17 has 17 points, the file 33" in r.stderr
+    ok = [ln for ln in r.stdout.splitlines() if ln.startswith("OK ")]
+    assert len(ok) == 1 and "coco.npy" in ok[0] and "keypoints: coco17 (17 points, as set)" in ok[0]
+    doc = json.loads((out / "coco.json").read_text())
+    assert len(doc["positions"]) == 240
+    assert (out / "coco.bvh").read_text().startswith("HIERARCHY")
+    code = code.replace(", '--layout', 'coco17'", "")
+    r = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True,
+                       env=dict(os.environ, PYTHONPATH=ROOT))
+    assert r.returncode == 0, r.stderr
+    assert (out / "session1.json").exists() and (out / "session1.bvh").exists()
+
+
+def test_dataset_conversion_takes_a_freemocap_folder_as_one_input(tmp_path, motion):
+    from blender_manikin.core import convert
+    root = tmp_path / "captures"
+    folder, _ = write_freemocap(str(root / "day1" / "session_a"), *motion)
+    os.makedirs(os.path.join(folder, "output_data", "raw_data"))
+    np.save(os.path.join(folder, "output_data", "raw_data", "mediapipe_2d.npy"), np.zeros((3, 33, 2)))
+    body, pos, world = motion
+    write_layout_npy(root / "day1" / "clip.npy", "coco17", body, pos, world)
+    found = convert.collect_inputs([str(root)])
+    assert found == [os.path.abspath(root / "day1" / "clip.npy"), os.path.abspath(folder)]
