@@ -68,9 +68,27 @@ def test_panel_keypoints_source_keys_a_live_rig_that_follows_the_solve(addon, tm
     np.testing.assert_allclose(after[1], before[1], atol=1e-3)
 
 
+def test_panel_solves_a_coco_array_with_gaps_into_a_new_armature(addon, tmp_path, motion):
+    body, pos, world = motion
+    write_layout_npy(tmp_path / "coco.npy", "coco17", body, pos, world, sigma=0.01, drop=0.03, scale=1000.0)
+    sc = bpy.context.scene
+    sc.render.fps, sc.render.fps_base = 30, 1.0
+    s = sc.manikin
+    s.source, s.keypoint_path, s.keypoint_layout = 'KEYPOINTS', str(tmp_path / "coco.npy"), 'COCO17'
+    s.live_rig = False
+    before = set(bpy.data.objects.keys())
+    assert bpy.ops.manikin.solve_full_body() == {'FINISHED'}
+    obj = s.armature
+    assert obj.name not in before and obj.animation_data.action is not None
+    assert "keypoints: coco17 (17 points, as set)" in s.last_report and "gap(s) bridged" in s.last_report
+    assert "no twist information: left_wrist, right_wrist, left_foot, right_foot" in s.last_report
+    fcs = keying.action_fcurves(obj.animation_data.action, obj)
+    assert all(len(fc.keyframe_points) == 90 for fc in fcs)
+
+
 def test_cli_in_blender_writes_a_blend_from_a_coco_array(tmp_path, motion):
     body, pos, world = motion
-    write_layout_npy(tmp_path / "coco.npy", "coco17", body, pos, world, sigma=0.01, scale=1000.0)
+    write_layout_npy(tmp_path / "coco.npy", "coco17", body, pos, world, sigma=0.01, drop=0.03, scale=1000.0)
     out = tmp_path / "out"
     assert cli.main(["solve", str(tmp_path / "coco.npy"), "--out", str(out), "--format", "blend,json",
                      "--fps", "30"]) == 0
