@@ -76,3 +76,27 @@ def test_rest_pose_gives_identity():
     body = sk.make_body(1.7)
     res = hybrik.ik_from_positions(np.tile(body.rest_positions(), (2, 1, 1)), body)
     assert np.allclose(res.local_rot, np.eye(3), atol=1e-7)
+
+
+@pytest.mark.parametrize("adaptive", [True, False])
+def test_aimed_chain_reproduces_exact_positions_and_keeps_axial_limits(adaptive):
+    """Keypoint IK (aim_chain, within_limits): exact positions still give the pose back, noisy
+    ones never turn a shoulder or hip about its own axis past its range."""
+    from blender_manikin.core import limb_solver as ls
+    rng, body, loc, pos, wr = _pose(1)
+    ends = {j: wr[:, j] for j in ENDS}
+    res = hybrik.ik_from_positions(pos, body, end_rot=ends, adaptive=adaptive, aim_chain=True)
+    assert np.abs(res.positions - pos).max() < 1e-6
+    noisy = pos + rng.normal(size=pos.shape) * 0.03
+    res = hybrik.ik_from_positions(noisy, body, end_rot=ends, adaptive=adaptive, aim_chain=True,
+                                   within_limits=True)
+    base = [b for _, b, _, _ in sk.LIMBS]
+    psi, elev = ls.axial_rotation(res.local_rot[:, base], list(range(4)))
+    lo, hi = ls.axial_range(elev, list(range(4)))
+    assert np.all((psi >= lo - 1e-3) & (psi <= hi + 1e-3))        # the secant steps stop within 0.06°
+    # the elbows / knees sit on their positions' directions from the (reconstructed) base
+    for _, b, m, e in sk.LIMBS:
+        d_fit = rot.normalize(res.positions[:, m] - res.positions[:, b])
+        d_in = rot.normalize(noisy[:, m] - (res.positions[:, b] if adaptive else noisy[:, b]))
+        ok = np.sum(d_fit * d_in, -1) > np.cos(np.radians(0.01))
+        assert ok.mean() > 0.5            # the rest moved their swivel to a limit

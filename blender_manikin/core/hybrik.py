@@ -71,7 +71,7 @@ def kabsch(rest_vecs, target_vecs, weights=None):
 
 
 def ik_from_positions(positions, body: Body, end_rot=None, twists=None, adaptive=True,
-                      base_rot=None, swivel=None):
+                      base_rot=None, swivel=None, aim_chain=False, within_limits=False):
     """Local rotations reproducing ``positions`` with the bone lengths of ``body``.
 
     positions: ``(T, 22, 3)`` target joint positions, metres, Blender axes.
@@ -84,6 +84,13 @@ def ik_from_positions(positions, body: Body, end_rot=None, twists=None, adaptive
     swivel: optional ``(T, 4)`` swivel angles overriding the ones measured
     from the mid joints.
     adaptive: HybrIK Algorithm 2 (True) or naive (False).
+    aim_chain: limbs as HybrIK's chain (for noisy positions, e.g. keypoints): the upper bone aims
+    at the mid joint's position, the lower bone from there at the end's, and the limb solver puts
+    the end where that chain ends (elbow / knee on their positions' directions, the hand / foot
+    within the positions' bone-length noise of its own); False (mocap, training targets): the
+    end lands exactly on its position and the mid joint on its swivel circle.
+    within_limits: the swivel of a limb that would turn the shoulder / hip about its own axis
+    beyond its range is moved to the limit (:func:`.limb_solver.solve_limbs_within_limits`).
     """
     P = np.asarray(positions, np.float64)
     if P.ndim != 3 or P.shape[1:] != (NUM_JOINTS, 3):
@@ -126,17 +133,26 @@ def ik_from_positions(positions, body: Body, end_rot=None, twists=None, adaptive
             li = _LIMB_OF_BASE[j]
             _, b, m, e = LIMBS[li]
             base_p = src(b)
-            phi = ls.swivel_from_positions(base_p[:, None], P[:, m][:, None], P[:, e][:, None],
+            l1, l2 = np.linalg.norm(off[m]), np.linalg.norm(off[e])
+            mid_t, end_t = P[:, m], P[:, e]
+            if aim_chain:       # the chain's own mid and end: each bone along its positions' direction
+                mid_t = base_p + l1 * rot.normalize(P[:, m] - base_p)
+                end_t = mid_t + l2 * rot.normalize(P[:, e] - (mid_t if adaptive else P[:, m]))
+            phi = ls.swivel_from_positions(base_p[:, None], mid_t[:, None], end_t[:, None],
                                            Rp[:, None], [li],
                                            base_rot=None if b not in base_rot else base_rot[b][:, None])[:, 0]
             if swivel is not None:
                 phi = np.asarray(swivel, np.float64)[:, li]
             er = end_rot.get(e)
-            sol = ls.solve_limbs(recon[:, b][:, None] if adaptive else base_p[:, None],
-                                 P[:, e][:, None], phi[:, None],
-                                 np.array([[np.linalg.norm(off[m]), np.linalg.norm(off[e])]]),
-                                 Rp[:, None], end_rot=None if er is None else er[:, None],
-                                 limb_ids=[li], clamp_twist=True)
+            args = (recon[:, b][:, None] if adaptive else base_p[:, None], end_t[:, None], phi[:, None],
+                    np.array([[l1, l2]]), Rp[:, None])
+            if within_limits:
+                sol, used = ls.solve_limbs_within_limits(*args, end_rot=None if er is None else er[:, None],
+                                                         limb_ids=[li])
+                phi = used[:, 0]
+            else:
+                sol = ls.solve_limbs(*args, end_rot=None if er is None else er[:, None],
+                                     limb_ids=[li], clamp_twist=True)
             swiv[:, li] = phi
             reach[:, li] = sol.reach_error[:, 0]
             local[:, b] = sol.base_local[:, 0]

@@ -268,6 +268,8 @@ def keypoints_from_body22(positions, world_rot, layout, body_stature=1.7):
     Face, hand and foot points sit at fixed offsets in the head, wrist and ankle frames, sized by
     ``body_stature`` metres, chosen so that :func:`body22_from_keypoints` gives back the joints
     (exactly for the joints a layout has, and the head / wrist / ankle orientations it shows).
+    Human3.6M's pelvis and OpenPose's mid-hip and neck are where those tools put them: between
+    the hips, between the shoulders.
     Returns ``(T, K, 3)``.
     """
     lay = LAYOUTS[canonical_layout(layout)] if not isinstance(layout, KeypointLayout) else layout
@@ -280,8 +282,6 @@ def keypoints_from_body22(positions, world_rot, layout, body_stature=1.7):
         j = J[joint]
         return P[:, j] + R[:, j] @ (np.asarray(offset, np.float64) * H)
 
-    up = rot.normalize(0.5 * (P[:, J["left_shoulder"]] + P[:, J["right_shoulder"]])
-                       - 0.5 * (P[:, J["left_hip"]] + P[:, J["right_hip"]]))
     mid_hip = 0.5 * (P[:, J["left_hip"]] + P[:, J["right_hip"]])
     pts = {}
     for side, sx in (("left", 1.0), ("right", -1.0)):
@@ -304,12 +304,10 @@ def keypoints_from_body22(positions, world_rot, layout, body_stature=1.7):
     pts["head_top"] = P[:, J["neck"]] + (P[:, J["head"]] - P[:, J["neck"]]) / _HEAD_ALONG_NECK
     pts["thorax"] = P[:, J["neck"]]
     pts["spine"] = P[:, J["spine2"]]
-    trunk = np.median(np.linalg.norm(0.5 * (P[:, J["left_shoulder"]] + P[:, J["right_shoulder"]]) - mid_hip,
-                                     axis=-1))
-    Hk = trunk / (PROPORTIONS["shoulder_height"] - PROPORTIONS["hip_height"])
-    pts["pelvis"] = P[:, J["pelvis"]] - PROPORTIONS["pelvis_above_hips"] * Hk * up
-    pts["mid_hip"] = pts["pelvis"]
-    pts["neck"] = P[:, J["neck"]] - (PROPORTIONS["neck_height"] - PROPORTIONS["shoulder_height"]) * Hk * up
+    mid_sh = 0.5 * (P[:, J["left_shoulder"]] + P[:, J["right_shoulder"]])
+    pts["pelvis"] = mid_hip                   # Human3.6M's pelvis and OpenPose's mid-hip: between the hips
+    pts["mid_hip"] = mid_hip
+    pts["neck"] = mid_sh                      # OpenPose's neck: between the shoulders
     for name in ("spine1", "spine2", "spine3", "left_collar", "right_collar", "head", "left_foot", "right_foot"):
         pts[name] = P[:, J[name]]
     if lay.name in ("smpl22", "smpl24"):

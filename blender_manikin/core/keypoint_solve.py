@@ -26,6 +26,7 @@ Stages (each a function, for tests and benchmarks):
 from __future__ import annotations
 
 import time as _time
+from dataclasses import dataclass
 import numpy as np
 
 from . import hybrik
@@ -135,6 +136,13 @@ def size_body(P, height=None) -> sk.Body:
     tmpl = sk.make_body(1.75)
     dirs = tmpl.offsets / np.maximum(tmpl.bone_lengths()[:, None], 1e-12)
     off = dirs * L[:, None]
+    # the branching joints' children (hips and spine under the pelvis; neck and collars on the
+    # upper chest) where the take has them: their layout is the performer's (or the capture's)
+    for j, (lc, rc, up) in _BRANCHES.items():
+        measured = _branch_offsets(P, j, lc, rc, up)
+        if measured is not None:
+            for c, o in measured.items():
+                off[c] = o
     rel = np.zeros((sk.NUM_JOINTS, 3))
     for j in range(1, sk.NUM_JOINTS):
         rel[j] = rel[sk.PARENTS[j]] + off[j]
@@ -147,6 +155,31 @@ def size_body(P, height=None) -> sk.Body:
     root = np.array([0.0, 0.0, -ankle + sk.PROPORTIONS["ankle_height"] * H])
     body = sk.Body.from_offsets(off, root, stature=H)
     return body
+
+
+#: branching joint -> (left child, right child, the child along the trunk)
+_BRANCHES = {sk.J["pelvis"]: (sk.J["left_hip"], sk.J["right_hip"], sk.J["spine1"]),
+             sk.J["spine3"]: (sk.J["left_collar"], sk.J["right_collar"], sk.J["neck"])}
+
+
+def _branch_offsets(P, j, lc, rc, up):
+    """Rest offsets ``{child: (3,)}`` of joint ``j``'s three children, metres: the median of their
+    offsets in a frame of ``j`` (+X from the right child to the left one, +Z towards the trunk
+    child, so the trunk child sits straight above), left and right made mirror images.  None
+    when the take gives no frame."""
+    x = P[:, lc] - P[:, rc]
+    z = P[:, up] - P[:, j]
+    x = x / np.linalg.norm(x, axis=-1, keepdims=True)
+    z = z - np.sum(z * x, -1, keepdims=True) * x
+    z = z / np.linalg.norm(z, axis=-1, keepdims=True)
+    R = np.stack([x, np.cross(z, x), z], axis=-1)                     # columns: the frame's axes
+    rel = np.einsum("tji,tkj->tki", R, P[:, [lc, rc, up]] - P[:, j:j + 1])
+    ok = np.isfinite(rel).all(axis=(1, 2))
+    if not ok.any():
+        return None
+    o = np.median(rel[ok], axis=0)                                    # (3 children, 3)
+    side = 0.5 * (o[0] + o[1] * np.array([-1.0, 1.0, 1.0]))           # left, right mirrored
+    return {lc: side, rc: side * np.array([-1.0, 1.0, 1.0]), up: np.array([0.0, 0.0, o[2, 2]])}
 
 
 def estimate_floor(P, body: sk.Body):
@@ -190,7 +223,8 @@ def _finite_orientations(b22: kl.Body22):
 def fit_keypoints(P, end_rot, body: sk.Body, fps, adaptive=True, lock_feet=True):
     """IK of the 22 joints ``P`` ``(T, 22, 3)`` (floor at ``z = 0``) onto ``body``: a
     :class:`PoseResult` with contacts and the ankles kept above the floor."""
-    ik = hybrik.ik_from_positions(P, body, end_rot=end_rot, adaptive=adaptive)
+    ik = hybrik.ik_from_positions(P, body, end_rot=end_rot, adaptive=adaptive, aim_chain=True,
+                                  within_limits=True)
     ank = [sk.J["left_ankle"], sk.J["right_ankle"]]
     contacts = foot_contacts(ik.positions[:, ank], body, fps)
     targets = ik.positions[:, ank]
@@ -199,16 +233,57 @@ def fit_keypoints(P, end_rot, body: sk.Body, fps, adaptive=True, lock_feet=True)
     targets = pipeline.keep_feet_above_floor(targets, ik.world_rot[:, ank], body)
     moved = np.abs(targets - ik.positions[:, ank]).max() > 1e-9
     if moved:
-        Q = P.copy()
-        delta = targets - P[:, ank]
+        # again from the first pass's own joints (it reproduces them exactly), the ankles moved:
+        # the legs reach the new ankle targets, the knees keep their swivel
+        Q = ik.positions.copy()
         Q[:, ank] = targets
-        Q[:, [sk.J["left_foot"], sk.J["right_foot"]]] += delta
         er = dict(end_rot)
-        for k, j in enumerate(ank):       # keep the feet's orientation from the first pass
-            er.setdefault(j, ik.world_rot[:, j])
-        ik = hybrik.ik_from_positions(Q, body, end_rot=er, adaptive=adaptive)
+        for j in ank + [sk.J["left_wrist"], sk.J["right_wrist"]]:
+            er[j] = ik.world_rot[:, j]
+        ik = hybrik.ik_from_positions(Q, body, end_rot=er, adaptive=True, within_limits=True)
     return PoseResult(fps=float(fps), body=body, local_rot=ik.local_rot, root_pos=ik.root_pos,
                       swivel=ik.swivel, contacts=contacts > 0.5, reach_error=ik.reach_error)
+
+
+@dataclass
+class PreparedKeypoints:
+    """The 22 joints a keypoint take gives, ready for IK (:func:`prepare_keypoints`).
+
+    times ``(T,)`` seconds on the solve's grid; P ``(T, 22, 3)`` metres, Blender axes, the floor
+    moved to z = 0; b22: the :class:`.keypoint_layouts.Body22` (orientations, joints without
+    twist); body: the sized :class:`.skeleton.Body`; floor: the floor height found in the
+    keypoints (metres); gaps: the bridged :class:`.resample.Gap` s; never: points never seen."""
+    times: np.ndarray
+    P: np.ndarray
+    b22: kl.Body22
+    body: sk.Body
+    floor: float
+    gaps: list
+    never: list
+
+
+def prepare_keypoints(rec, fps, smoothing, height=None, max_frames=None) -> PreparedKeypoints:
+    """Stages 2-7 of the module docstring on a :class:`.io_keypoints.KeypointRecording`: gaps
+    bridged, smoothed over ``smoothing`` seconds, resampled to ``fps``, the 22 joints placed, the
+    body sized (scaled to ``height`` metres when given) and the floor moved to z = 0.  Raises
+    :class:`.solve.SolveError` when a joint cannot be placed (a point it needs was never seen)."""
+    lay = kl.LAYOUTS[rec.layout]
+    X, gaps = bridge_gaps(rec.time, rec.points, lay.points)
+    never = [lay.points[k] for k in range(X.shape[1]) if not np.isfinite(X[:, k]).any()]
+    rate = 1.0 / float(np.median(np.diff(rec.time)))
+    X = smooth(X, rate, smoothing) if smoothing else X
+    times, X = resample_points(rec.time, X, fps)
+    if max_frames and len(times) > max_frames:
+        times, X = times[:max_frames], X[:max_frames]
+    b22 = _finite_orientations(kl.body22_from_keypoints(X, lay))
+    P = b22.positions
+    bad = [sk.JOINT_NAMES[j] for j in range(sk.NUM_JOINTS) if not np.isfinite(P[:, j]).all()]
+    if bad:
+        raise SolveError(f"{rec.source}: joint(s) {', '.join(bad)} cannot be placed: point(s) "
+                         f"{', '.join(never) or '?'} never seen")
+    body = size_body(P, height)
+    floor = estimate_floor(P, body)
+    return PreparedKeypoints(times, P - np.array([0.0, 0.0, floor]), b22, body, floor, gaps, never)
 
 
 def solve_keypoints(source, settings: SolveSettings | None = None, progress=None) -> SolveOutcome:
@@ -239,39 +314,21 @@ def solve_keypoints(source, settings: SolveSettings | None = None, progress=None
     out.recording = rec
     out.timings["read"] = _time.perf_counter() - t
     t = _time.perf_counter()
-    report(0.1, "bridging gaps")
-    lay = kl.LAYOUTS[rec.layout]
-    X, gaps = bridge_gaps(rec.time, rec.points, lay.points)
-    never = [lay.points[k] for k in range(X.shape[1]) if not np.isfinite(X[:, k]).any()]
+    report(0.1, "preparing keypoints")
     fps = float(s.fps) if s.fps else 1.0 / float(np.median(np.diff(rec.time)))
-    rate = 1.0 / float(np.median(np.diff(rec.time)))
-    X = smooth(X, rate, float(s.smoothing)) if s.smoothing else X
-    times, X = resample_points(rec.time, X, fps)
-    if s.max_frames and len(times) > s.max_frames:
-        times, X = times[:s.max_frames], X[:s.max_frames]
-    out.report = GapReport(fps=fps, t0=float(times[0]), t_end=float(times[-1]), num_frames=len(times),
-                           devices=lay.points, gaps=gaps)
-    b22 = _finite_orientations(kl.body22_from_keypoints(X, lay))
-    P = b22.positions
-    bad = [sk.JOINT_NAMES[j] for j in range(sk.NUM_JOINTS) if not np.isfinite(P[:, j]).all()]
-    if bad:
-        raise SolveError(f"{rec.source}: joint(s) {', '.join(bad)} cannot be placed: point(s) "
-                         f"{', '.join(never) or '?'} never seen")
+    prep = prepare_keypoints(rec, fps, float(s.smoothing or 0.0), height=s.height, max_frames=s.max_frames)
+    lay, b22, never = kl.LAYOUTS[rec.layout], prep.b22, prep.never
+    out.report = GapReport(fps=fps, t0=float(prep.times[0]), t_end=float(prep.times[-1]),
+                           num_frames=len(prep.times), devices=lay.points, gaps=prep.gaps)
+    out.body, out.floor = prep.body, prep.floor
     out.timings["prepare"] = _time.perf_counter() - t
-    report(0.3, "sizing")
-    t = _time.perf_counter()
-    body = size_body(P, s.height)
-    floor = estimate_floor(P, body)
-    P = P - np.array([0.0, 0.0, floor])
-    out.body = body
-    out.timings["size"] = _time.perf_counter() - t
     report(0.4, "solving")
     t = _time.perf_counter()
-    result = fit_keypoints(P, b22.end_rot, body, fps, adaptive=adaptive)
-    result.t0 = float(times[0])
+    result = fit_keypoints(prep.P, b22.end_rot, prep.body, fps, adaptive=adaptive)
+    result.t0 = float(prep.times[0])
     out.result = result
     out.timings["solve"] = _time.perf_counter() - t
-    out.info.append(f"keypoints: {'adaptive' if adaptive else 'naive'} HybrIK, floor at {floor:+.3f} m "
+    out.info.append(f"keypoints: {'adaptive' if adaptive else 'naive'} HybrIK, floor at {prep.floor:+.3f} m "
                     f"moved to 0, smoothing {s.smoothing:g} s")
     if b22.no_twist:
         out.info.append(f"no twist information: {', '.join(b22.no_twist)} (rest twist)")

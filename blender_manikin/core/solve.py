@@ -88,6 +88,7 @@ class SolveOutcome:
     info: list = field(default_factory=list)
     result: PoseResult | None = None
     timings: dict = field(default_factory=dict)
+    floor: float | None = None          # keypoint solves: the floor height found (metres), moved to z = 0
 
     def summary(self, extra_timings=None) -> str:
         """One line: frames, fps, where the solve gave way, stature, calibration, gaps, timings."""
