@@ -518,25 +518,30 @@ def live_channels(obj, result: PoseResult):
     (``Q = Bᵀ R_world B``), swivel angles (radians, unwrapped).
     """
     heads, rest_mats = arm_mod.rest_matrices(obj)
-    quats = arm_mod.pose_bone_quaternions(result.local_rot, rest_mats)
-    pos, wrot = result.fk()
+    fk_j = [sk.J[name] for name in FK_JOINTS]
+    quats = arm_mod.pose_bone_quaternions(result.local_rot[:, fk_j], rest_mats[fk_j])
+    # world poses of the wrists and ankles only, a chunk at a time (a long take's whole FK,
+    # (T, 22, 3, 3), would stay cached on the result)
+    ends = [sk.J[r.end] for r in LIMB_RIGS]
+    T = result.num_frames
+    pos, wrot = np.empty((T, len(ends), 3)), np.empty((T, len(ends), 3, 3))
+    for f, p, w in result.fk_chunks():
+        pos[f], wrot[f] = p[:, ends], w[:, ends]
     ch = []
-    for name in FK_JOINTS:
-        j = sk.J[name]
+    for k, name in enumerate(FK_JOINTS):
         for i in range(4):
-            ch.append((f'pose.bones["{name}"].rotation_quaternion', i, name, quats[:, j, i]))
+            ch.append((f'pose.bones["{name}"].rotation_quaternion', i, name, quats[:, k, i]))
     loc = arm_mod.root_locations(result.root_pos, heads[0], rest_mats[0])
     root = sk.JOINT_NAMES[0]
     for i in range(3):
         ch.append((f'pose.bones["{root}"].location', i, root, loc[:, i]))
     bones = obj.data.bones
-    for r in LIMB_RIGS:
+    for k, r in enumerate(LIMB_RIGS):
         m = np.array(bones[r.ctrl].matrix_local, dtype=np.float64)
         B = rot.orthonormalize(m[:3, :3])
-        j = sk.J[r.end]
-        Q = np.einsum("ki,tkl,lm->tim", B, wrot[:, j], B)
+        Q = np.einsum("ki,tkl,lm->tim", B, wrot[:, k], B)
         q = rot.quat_continuous(rot.matrix_to_quat(Q), axis=0)
-        cl = (pos[:, j] - m[:3, 3]) @ B
+        cl = (pos[:, k] - m[:3, 3]) @ B
         for i in range(3):
             ch.append((f'pose.bones["{r.ctrl}"].location', i, CTRL_GROUP, cl[:, i]))
         for i in range(4):

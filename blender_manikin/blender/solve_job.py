@@ -190,10 +190,13 @@ class SolveJob:
         cfg = self.config
         t = _time.perf_counter()
         self.stage = "keying"
+        # With the live rig, its action is the only one keyed: the limbs' FK keys would be
+        # overridden by its constraints, and a plain FK action is one Bake away (a 60-minute take
+        # at 60 fps holds 216,000 keys per F-curve: a second action would double the memory).
         opts = writer.WriteOptions(frame_start=cfg.frame_start, armature=cfg.reuse_armature,
                                    armature_name=cfg.armature_name,
                                    create_trackers=cfg.create_trackers,
-                                   set_scene_range=cfg.set_scene_range)
+                                   set_scene_range=cfg.set_scene_range, key_pose=not cfg.live_rig)
         out = writer.write_result(self.result, opts, context=context)
         self.timings["keying"] = _time.perf_counter() - t
         t = _time.perf_counter()
@@ -203,6 +206,7 @@ class SolveJob:
             try:
                 out.live_action = live_rig.build_live_rig(out.armature, self.result, frames=out.frames,
                                                           context=context)
+                out.action = out.live_action
             except BaseException:
                 writer.remove_output(out)
                 raise

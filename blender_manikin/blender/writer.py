@@ -59,6 +59,7 @@ class WriteOptions:
     tracker_collection: str = TRACKER_COLLECTION
     set_scene_range: bool = False
     interpolation: str = 'LINEAR'
+    key_pose: bool = True                    # False: armature only (the live rig keys its own action)
 
 
 @dataclass
@@ -150,8 +151,10 @@ def write_result(result, options: WriteOptions | None = None, context=None) -> W
     """Write ``result`` into the scene of ``context`` (default ``bpy.context``).
 
     Creates a new armature (or reuses ``options.armature`` when it is a
-    MANIKIN armature of the same body), a NEW action assigned to it, the
-    swivel custom properties, and optionally tracker empties.  All or nothing.
+    MANIKIN armature of the same body), a NEW action assigned to it (not
+    with ``options.key_pose`` False: the caller keys the armature, e.g. the
+    live rig's own action), the swivel custom properties, and optionally
+    tracker empties.  All or nothing.
     """
     options = options or WriteOptions()
     context = context or bpy.context
@@ -176,10 +179,12 @@ def write_result(result, options: WriteOptions | None = None, context=None) -> W
         else:
             prev_action = obj.animation_data.action if obj.animation_data else None
         ensure_swivel_properties(obj)
-        action = keying.new_action(options.action_name)
-        created.append(action)
-        keying.assign_action(obj, action)
-        keying.key_channels(action, obj, frames, _pose_channels(obj, result), options.interpolation)
+        action = None
+        if options.key_pose:
+            action = keying.new_action(options.action_name)
+            created.append(action)
+            keying.assign_action(obj, action)
+            keying.key_channels(action, obj, frames, _pose_channels(obj, result), options.interpolation)
         out = WriteOutput(obj, action, not reuse, frames)
 
         if options.create_trackers and result.targets is not None:
@@ -235,7 +240,7 @@ def remove_output(out: WriteOutput):
     ids = []
     if out.created_armature:
         ids += [out.armature.data, out.armature]
-    ids.append(out.action)
+    ids += [a for a in (out.action, out.live_action) if a is not None]
     if out.tracker_collection is not None:
         ids.append(out.tracker_collection)
     ids += list(out.trackers.values()) + list(out.tracker_actions.values())
