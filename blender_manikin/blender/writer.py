@@ -115,21 +115,22 @@ def unwrap_swivel(swivel):
 
 
 def _pose_channels(obj, result):
+    """The channels of the solve action, ``(data_path, index, group, values (T,))``, made one
+    bone at a time as they are keyed (a long take's (T, 22, 4) float64 arrays would be held
+    while Blender stores the keys)."""
     heads, rest_mats = arm_mod.rest_matrices(obj)
-    quats = arm_mod.pose_bone_quaternions(result.local_rot, rest_mats)      # (T, 22, 4)
-    loc = arm_mod.root_locations(result.root_pos, heads[0], rest_mats[0])  # (T, 3)
-    ch = []
     for j, name in enumerate(sk.JOINT_NAMES):
+        q = arm_mod.pose_bone_quaternions(result.local_rot[:, j:j + 1], rest_mats[j:j + 1])[:, 0]
         path = f'pose.bones["{name}"].rotation_quaternion'
         for i in range(4):
-            ch.append((path, i, name, quats[:, j, i]))
+            yield (path, i, name, q[:, i])
+    loc = arm_mod.root_locations(result.root_pos, heads[0], rest_mats[0])  # (T, 3)
     root = sk.JOINT_NAMES[0]
     for i in range(3):
-        ch.append((f'pose.bones["{root}"].location', i, root, loc[:, i]))
+        yield (f'pose.bones["{root}"].location', i, root, loc[:, i])
     swivel = unwrap_swivel(result.swivel)
     for li, limb in enumerate(sk.LIMB_NAMES):
-        ch.append((f'["{SWIVEL_PROPS[limb]}"]', 0, SWIVEL_GROUP, swivel[:, li]))
-    return ch
+        yield (f'["{SWIVEL_PROPS[limb]}"]', 0, SWIVEL_GROUP, swivel[:, li])
 
 
 def _remove_ids(ids):
