@@ -313,7 +313,7 @@ def _relative_targets(node, package):
 
 def unused_core_modules(files: list[tuple[Path, str]]) -> set[str]:
     """Archive names of the ``core/`` modules that nothing outside ``core/`` reaches through
-    imports (mocap preparation and evaluation code: the BVH and ASF readers, HybrIK, metrics,
+    imports (mocap preparation and evaluation code: the BVH and ASF readers, joint maps, metrics,
     baselines), so they stay out of the zip."""
     py = {rel: src for src, rel in files if rel.endswith(".py")}
 

@@ -157,7 +157,7 @@ def run_child(kind, **kw):
 STAGES = [("read", "read", "reading recording"), ("resample", "resample", "resampling"),
           ("calibrate", "calibrate", "calibrating"), ("network (onnxruntime)", "solve.network", None),
           ("solver (torso FK, feet, limbs)", "solve.solver", None), ("solve (network + solver)", None, "solving"),
-          ("keying (armature + bulk F-curves)", "keying", "keying"), ("live swivel rig", "live rig", "live rig")]
+          ("armature (+ FK keys: no live rig)", "keying", "keying"), ("live swivel rig", "live rig", "live rig")]
 
 
 def main(argv=None):

@@ -1,6 +1,8 @@
 """Live swivel rig: edit an elbow or knee by its swivel angle, with Blender's own constraints.
 
-A solved armature (see :mod:`.writer`) carries FK keys on every bone.  The
+A solve builds this rig by default (``blender/solve_job.py``: the rig's
+action is then the only one keyed; a solve without it, or the "Make Live"
+operator on an existing FK action, gives FK keys on every bone first).  The
 *live* form built by :func:`build_live_rig` keeps the torso, head, collars
 and toes on FK keys but drives the limbs with constraints, so the animator
 changes a limb by its swivel angle (a keyed custom property) or by grabbing a
@@ -467,7 +469,8 @@ def set_rig_enabled(obj, enabled: bool):
     """Mute (``enabled=False``) or unmute the live rig's constraints on ``obj``.
 
     Muted, the limb bones play their own keys again (e.g. after assigning
-    the plain FK solve action back).  Returns the number of constraints changed.
+    an FK action back: a solve made without the live rig, or a bake).  Returns the number of
+    constraints changed.
     """
     n = 0
     for pb in obj.pose.bones:
@@ -558,11 +561,12 @@ def build_live_rig(armature_obj, result: PoseResult, action=None, frames=None, c
     """Convert a solved MANIKIN armature to the live swivel rig and key ``result`` on it.
 
     armature_obj: armature made by :func:`.armature.create_armature` (the
-    22 joint bones; usually the one :func:`.writer.write_result` keyed).
+    22 joint bones; the one :func:`.writer.write_result` made, keyed or not).
     result: the :class:`PoseResult` to key.  action: the action to write
     into; None (default) creates a NEW action ``MANIKIN_live[.NNN]`` -- the
-    armature's current action is never modified (it stays in the file with
-    a fake user; assign it back to return to plain FK).  frames: scene
+    armature's current action, if any, is never modified (it stays in the
+    file with a fake user; assign it back, with :func:`set_rig_enabled` off, to
+    return to its FK keys).  frames: scene
     frame of each result frame; None: the frames of the current action's
     swivel keys when it has one key per result frame, else
     ``1 + k * scene_fps / result.fps``.

@@ -11,7 +11,9 @@ Timing: result frame ``k`` is keyed at scene frame
 ``frame_start + k * frame_step``; by default ``frame_step`` is
 ``scene_fps / result.fps`` so the animation plays back in real time.
 
-Data written (armature object ``obj``, new action ``MANIKIN_solve[.NNN]``):
+Data written (armature object ``obj``, new action ``MANIKIN_solve[.NNN]``; with
+``WriteOptions.key_pose`` False only the armature, its swivel properties and the
+trackers: the live rig then keys its own action, see ``solve_job.SolveJob.write``):
 
 * ``pose.bones["<joint>"].rotation_quaternion`` (w, x, y, z), every bone,
   see :mod:`.armature` for the mapping and the bone axes;
