@@ -90,6 +90,11 @@ def test_freemocap_folder_detection_line(tmp_path, motion):
     lay = kl.LAYOUTS["mediapipe33"]
     h = rec.points[:, lay.index("nose"), 2] - rec.points[:, lay.index("left_ankle"), 2]
     assert 1.3 < np.median(h) < 1.8
+    # +Y up turned as Blender's importers turn it, (x, y, z) -> (x, -z, y): the body made facing
+    # -Y (Blender's front view) comes back facing -Y, its left at +X
+    body, pos, world = motion
+    clean = kl.keypoints_from_body22(pos, world, "mediapipe33", body.stature)
+    np.testing.assert_allclose(rec.points[0] - rec.points[0, :1], clean[0] - clean[0, :1], atol=0.002)
 
 
 def test_seventeen_points_told_apart_and_mirrored_files_found(tmp_path, motion):

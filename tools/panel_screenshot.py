@@ -3,7 +3,7 @@
 Runs inside a windowed Blender (under Xvfb) in which the extension zip was installed and enabled:
 
     blender --python tools/panel_screenshot.py -- --example examples/example_recording.csv \
-            --ready /tmp/ready --done /tmp/done [--frame 60]
+            --ready /tmp/ready --done /tmp/done [--frame 60] [--keypoints examples/example_keypoints]
 
 It solves the example through the add-on's own operator (as a click on "Solve full body" does),
 opens the 3D Viewport sidebar, frames the solved body, and, once the window has redrawn, keeps
@@ -27,6 +27,8 @@ def parse_args():
     ap.add_argument("--ready", required=True)
     ap.add_argument("--done", required=True)
     ap.add_argument("--frame", type=int, default=60)
+    ap.add_argument("--keypoints", default=None,
+                    help="solve this keypoint file / FreeMoCap folder with the Keypoints source instead")
     return ap.parse_args(argv)
 
 
@@ -55,8 +57,12 @@ def prepare():
         if obj.type == 'MESH':
             bpy.data.objects.remove(obj)
     settings = bpy.context.scene.manikin
-    settings.source = 'FILE'
-    settings.filepath = os.path.abspath(ARGS.example)
+    if ARGS.keypoints:
+        settings.source = 'KEYPOINTS'
+        settings.keypoint_path = os.path.abspath(ARGS.keypoints)
+    else:
+        settings.source = 'FILE'
+        settings.filepath = os.path.abspath(ARGS.example)
     result = bpy.ops.manikin.solve_full_body('EXEC_DEFAULT')
     if 'FINISHED' not in result:
         fail(f"solve failed: {result} {settings.last_report}")

@@ -72,7 +72,7 @@ class MANIKIN_Settings(PropertyGroup):
         items=[('FILE', "Recording", "A tracker recording: "
                 + ", ".join(f"{'/'.join(f.extensions)} ({f.description})"
                             for f in formats.READERS.values() if f.kind == "trackers")),
-               ('SCENE', "Scene Objects", "Animated objects or bones in this scene, mapped to devices"),
+               ('SCENE', "Scene", "Animated objects or bones in this scene, mapped to devices"),
                ('KEYPOINTS', "Keypoints", "3D keypoints from markerless or marker capture: a FreeMoCap "
                 "folder's mediapipe_body_3d_xyz.npy, an .npy / .npz array, or a keypoint CSV; solved by "
                 "HybrIK twist-and-swing IK")])
@@ -86,9 +86,11 @@ class MANIKIN_Settings(PropertyGroup):
                                                       ('M', "Metres", ""), ('CM', "Centimetres", ""),
                                                       ('MM', "Millimetres", "")], default='AUTO')
     keypoint_up: EnumProperty(name="Up Axis", items=_UP_ITEMS, default='AUTO')
-    keypoint_rate: FloatProperty(name="Rate", default=0.0, min=0.0, max=1000.0,
-                                 description="Samples per second of files without times (0: the file's, "
-                                             "else 30)")
+    use_keypoint_rate: BoolProperty(name="Set Rate", default=False,
+                                    description="Give the sample rate of a keypoint file that has no times "
+                                                "(else 30 Hz is assumed, and said)")
+    keypoint_rate: FloatProperty(name="Rate", default=30.0, min=1.0, max=1000.0,
+                                 description="Samples per second of a keypoint file without times")
     smoothing: FloatProperty(name="Smoothing", default=0.4, min=0.0, max=3.0, unit='TIME_ABSOLUTE',
                              description="Savitzky-Golay window over the keypoints, seconds (0: off); "
                                          "longer removes more noise and more fast detail")
@@ -178,7 +180,7 @@ def config_from_settings(context):
         cfg.filepath = bpy.path.abspath(s.keypoint_path) if s.keypoint_path else ""
         cfg.keypoint_layout = None if s.keypoint_layout == 'AUTO' else s.keypoint_layout.lower()
         cfg.up = None if s.keypoint_up == 'AUTO' else s.keypoint_up.lower()
-        cfg.rate = float(s.keypoint_rate) if s.keypoint_rate > 0 else None
+        cfg.rate = float(s.keypoint_rate) if s.use_keypoint_rate else None
         cfg.smoothing = float(s.smoothing)
         cfg.ik = s.ik.lower()
     cfg.layout = bpy.path.abspath(s.layout_file) if s.layout_file else None

@@ -431,7 +431,7 @@ _AXIS = {"+x": (0, 1.0), "x": (0, 1.0), "-x": (0, -1.0), "+y": (1, 1.0), "y": (1
 
 def _up_matrix(X, lay, up, path):
     """``(M, name, how)``: the proper rotation (a signed axis permutation) taking the file's up
-    axis to +Z."""
+    axis to +Z, X kept where it can be (so a +Y-up file turns as Blender's importers turn it)."""
     if up is not None:
         key = str(up).strip().lower()
         if key not in _AXIS:
@@ -450,10 +450,12 @@ def _up_matrix(X, lay, up, path):
                                  f"(shoulders − ankles ≈ {np.round(v, 2).tolist()}); set it", path=path)
         s = float(np.sign(v[a]))
         how = " (shoulders above the ankles)"
+    # as Blender's importers turn +Y up into +Z up ((x, y, z) -> (x, -z, y)): X stays where it
+    # is (the first axis that is not up), Z is up, Y completes a right-handed frame
     z = np.zeros(3)
     z[a] = s
     x = np.zeros(3)
-    x[(a + 1) % 3] = 1.0
+    x[0 if a != 0 else 1] = 1.0
     y = np.cross(z, x)
     return np.stack([x, y, z]), f"{'+' if s > 0 else '-'}{'xyz'[a].upper()}", how
 

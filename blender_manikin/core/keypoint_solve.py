@@ -231,6 +231,10 @@ def fit_keypoints(P, end_rot, body: sk.Body, fps, adaptive=True, lock_feet=True)
     if lock_feet:
         targets = pipeline.lock_planted_feet(targets, contacts, threshold=0.5)
     targets = pipeline.keep_feet_above_floor(targets, ik.world_rot[:, ank], body)
+    # the limbs reach the chain the keypoints give (aim_chain): the first pass's reach error is
+    # what the summary reports; a planted or lifted ankle the leg misses by a few millimetres
+    # is the lock's own doing, not a sizing problem the user should check
+    reach = ik.reach_error
     moved = np.abs(targets - ik.positions[:, ank]).max() > 1e-9
     if moved:
         # again from the first pass's own joints (it reproduces them exactly), the ankles moved:
@@ -242,7 +246,7 @@ def fit_keypoints(P, end_rot, body: sk.Body, fps, adaptive=True, lock_feet=True)
             er[j] = ik.world_rot[:, j]
         ik = hybrik.ik_from_positions(Q, body, end_rot=er, adaptive=True, within_limits=True)
     return PoseResult(fps=float(fps), body=body, local_rot=ik.local_rot, root_pos=ik.root_pos,
-                      swivel=ik.swivel, contacts=contacts > 0.5, reach_error=ik.reach_error)
+                      swivel=ik.swivel, contacts=contacts > 0.5, reach_error=reach)
 
 
 @dataclass

@@ -26,7 +26,9 @@ class MANIKIN_PT_solve(_Base, Panel):
         s = context.scene.manikin
         layout.use_property_split = True
         layout.use_property_decorate = False
-        layout.prop(s, "source", expand=True)
+        row = layout.row()
+        row.use_property_split = False          # the whole width for the three sources
+        row.prop(s, "source", expand=True)
         col = layout.column()
         if s.source == 'FILE':
             col.prop(s, "filepath")
@@ -38,7 +40,11 @@ class MANIKIN_PT_solve(_Base, Panel):
             col.prop(s, "keypoint_layout")
             col.prop(s, "keypoint_units")
             col.prop(s, "keypoint_up")
-            col.prop(s, "keypoint_rate")
+            row = col.row(heading="Rate")
+            row.prop(s, "use_keypoint_rate", text="")
+            sub = row.row()
+            sub.active = s.use_keypoint_rate
+            sub.prop(s, "keypoint_rate", text="")
             col.separator()
             col.prop(s, "smoothing")
             col.prop(s, "ik")
