@@ -192,7 +192,10 @@ def test_tpose_recovers_stature_span_and_rotation_offsets(stature, span, heading
         _, jR = apply_offsets(devpos[d], quat_to_matrix(devquat[d]), res.offsets["devices"][d])
         assert deg(jR, rot[:, j]).max() < 1.0, d
         assert res.rotation_change_deg[d] > 4.0                     # the perturbation was seen
-        assert res.offsets["devices"][d]["pos"] == get_preset("openxr_generic")["devices"][d]["pos"]
+        if d in ("head", "left_hand", "right_hand"):          # their positions are the preset's;
+            assert res.offsets["devices"][d]["pos"] == get_preset("openxr_generic")["devices"][d]["pos"]
+        else:                                                 # the extra trackers' are measured
+            assert np.linalg.norm(res.offsets["devices"][d]["pos"]) < 0.01, d
     # and the calibrated body rebuilt from the measurements has the performer's span
     rebuilt = make_body(res.measurements).rest_positions()
     assert np.linalg.norm(rebuilt[J["left_wrist"]] - rebuilt[J["right_wrist"]]) == pytest.approx(true_span, abs=0.01)

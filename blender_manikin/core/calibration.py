@@ -25,9 +25,56 @@ The heading is the horizontal line from the right to the left wrist (the
 performer's left is +X at heading 0, facing -Y).  Checks report when the
 moment is not plausibly a still T/A-pose (:attr:`CalibrationResult.problems`).
 
+Six trackers (pelvis and feet, as in SparsePoser)
+-------------------------------------------------
+
+Extra trackers are strapped on at any rotation and some centimetres from
+their joints, so their whole offset (translation *and* rotation) is measured
+from the pose: the body model's rest T-pose (:meth:`.skeleton.Body.rest_positions`,
+built from the measurements, feet on z = 0) is stood under the head joint
+target, turned by the heading; that gives the expected pelvis and ankle
+positions, and with the raw device pose (the targets with the current offsets
+removed) ``offset_pos = R_deviceᵀ (p_joint - p_device)`` and
+``offset_rot = R_deviceᵀ R_joint`` (:mod:`.device_offsets` convention).
+Typed offsets win: an extra device whose entry in ``offsets`` is not the
+identity (see :func:`typed_tracker_offsets`) keeps it, and the result only
+reports how far the pose disagrees.  Head and controller offsets are handled
+as before (rotations refined, positions kept).
+
+What one still pose can and cannot tell (identifiability): a tracker's
+position is all that is observed, so each joint position needs an
+assumption, and whatever deviates from it ends up in the offset:
+
+* *ankles*: the feet stand like the body model's: under the hips (ankle
+  centres ``hip_width`` = 0.100 H apart), straight below the head joint
+  front-to-back, at the model's ankle height 0.039 H, flat and pointing along
+  the heading.  Ankle height, stance width and toe-out are therefore not
+  measured (a tracker 8 cm above the ankle looks exactly like an ankle 8 cm
+  higher); feet set wider than the hips shift the foot offsets inward by the
+  excess.  A foot that is higher or tilted at the calibration moment than
+  when it is stood on later in the recording is reported (a lifted foot).
+* *pelvis*: horizontally below the head joint (upright stance).  Its height
+  and the legs' length trade off exactly (a tracker 5 cm above the pelvis
+  joint is indistinguishable from legs 5 cm longer), so one of them must be
+  given.  Here: with a typed pelvis offset the pelvis joint height follows
+  from it; otherwise the tracker is assumed level with the pelvis joint
+  (:data:`PELVIS_TRACKER_ABOVE_JOINT`, 0 m: a tracker at the back of the
+  pelvis, e.g. on a belt over the sacrum), its horizontal offset is measured
+  and the pelvis height is the tracker's height.  Either way the hip height
+  is the pelvis joint height - 0.030 H (:data:`.skeleton.PROPORTIONS`
+  ``pelvis_above_hips``), the leg (hip to ankle) that minus the ankle height,
+  split into thigh and shank as the proportions do (0.245 : 0.246), and put
+  into :class:`.skeleton.BodyMeasurements` so the legs are measured, not
+  proportional.  A hip height far from the proportions (more than
+  :data:`HIP_HEIGHT_NOTE` H) is reported: a tracker worn higher (at the waist)
+  makes the legs that much too long unless its offset is typed; beyond
+  :data:`HIP_HEIGHT_LIMIT` H the proportional legs are kept.  Without a
+  pelvis tracker the legs stay proportional.
+
 Targets in, offsets out: ``targets`` must have been made with ``offsets``
-(:func:`.device_offsets.to_targets`); the result holds updated offsets with
-the position offsets unchanged and the rotations corrected.
+(:func:`.device_offsets.to_targets`); the result holds updated offsets: the
+head's and hands' positions unchanged and their rotations corrected, the
+extra trackers' measured (or typed, kept).
 """
 from __future__ import annotations
 
@@ -35,9 +82,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .device_offsets import validate_offsets
+from .device_offsets import JOINT_OF_DEVICE, validate_offsets
 from .plain import shown
-from .devices import HAND_DEVICES, REQUIRED_DEVICES
+from .devices import EXTRA_DEVICES, HAND_DEVICES, REQUIRED_DEVICES
 from .pose_result import TrackerTargets
 from .rotations import geodesic_angle, matrix_to_quat, normalize, orthonormalize, quat_to_matrix, rotation_between
 from .skeleton import J, PROPORTIONS, BodyMeasurements, make_body
@@ -51,6 +98,25 @@ ARM_LENGTH = PROPORTIONS["upper_arm"] + PROPORTIONS["forearm"]     # shoulder to
 TPOSE_WRIST_DISTANCE = SHOULDER_WIDTH + 2 * ARM_LENGTH             # 0.873 H
 
 _Z = np.array([0.0, 0.0, 1.0])
+
+#: metres the pelvis tracker is assumed to sit above the pelvis joint in the calibration pose
+#: (world vertical) when its offset is not typed; see the module docstring (identifiability)
+PELVIS_TRACKER_ABOVE_JOINT = 0.0
+#: hip height (fraction of stature) the proportions give: ankle height + shank + thigh
+PROPORTIONAL_HIP_HEIGHT = PROPORTIONS["ankle_height"] + PROPORTIONS["shank"] + PROPORTIONS["thigh"]
+#: a measured hip height further than this (fraction of stature) from the proportions is reported
+#: (adult hip height / stature varies by about ±0.03, two standard deviations)
+HIP_HEIGHT_NOTE = 0.04
+#: ... and further than this is not used (the proportional legs are kept)
+HIP_HEIGHT_LIMIT = 0.08
+#: metres: a measured extra-tracker offset longer than this is reported (straps put trackers
+#: 5-15 cm from the joints; further means the pose or the tracker is not what it should be)
+MAX_TRACKER_OFFSET = 0.25
+#: metres a foot tracker may stand higher at the calibration moment than it does when the foot is
+#: stood on later in the recording (its 5th-percentile height), before the foot counts as lifted
+FOOT_LIFT_TOLERANCE = 0.03
+#: degrees a foot tracker may be tilted at the calibration moment relative to its tilt when stood on
+FOOT_TILT_TOLERANCE = 15.0
 
 
 class CalibrationError(ValueError):
@@ -111,10 +177,21 @@ class CalibrationResult:
     pose: ``'T'`` or ``'A'`` (as classified or requested).  arm_angle_deg:
     mean arm elevation below horizontal.  heading_deg: body yaw, 0 = facing
     -Y, positive = turned counter-clockwise seen from above.
-    rotation_change_deg: device → angle of the rotation correction.
+    rotation_change_deg: device → angle of the rotation correction (0 for a
+    typed extra-tracker offset, which is kept).
+    tracker_offsets: extra device (pelvis, feet) → what became of its offset:
+    ``source`` (``"T-pose"``: measured, or ``"typed"``: kept), ``distance``
+    (m, length of the position offset) and ``angle_deg`` (of the rotation
+    offset), ``pos`` (m, device frame) and ``rot`` (wxyz); for a typed one
+    also ``disagree_m`` / ``disagree_deg``, how far the offset the pose
+    implies is from it.
     measured: raw numbers (head height, wrist distance, stature and arm span
-    as measured, per-device motion).  problems: reasons the moment does not
-    look like a still T/A-pose (empty = plausible).
+    as measured, per-device motion; ``legs``: ``source`` (``"pelvis
+    tracker"``, ``"typed pelvis offset"`` or ``"proportions"``), and when
+    measured ``pelvis_height``, ``hip_height``, ``leg_length`` (hip to ankle),
+    ``thigh``, ``shank`` in metres and ``used`` (False when implausible)).
+    problems: reasons the moment does not look like a still T/A-pose, or the
+    trackers not like worn as assumed (empty = plausible).
     """
     measurements: BodyMeasurements
     offsets: dict
@@ -126,6 +203,7 @@ class CalibrationResult:
     rotation_change_deg: dict = field(default_factory=dict)
     measured: dict = field(default_factory=dict)
     problems: list = field(default_factory=list)
+    tracker_offsets: dict = field(default_factory=dict)
 
     @property
     def plausible(self) -> bool:
@@ -219,22 +297,84 @@ def _wrap_deg(a):
     return float((a + 180.0) % 360.0 - 180.0)
 
 
+def _is_identity(entry, tol=1e-9):
+    q = np.asarray(entry.get("rot", [1.0, 0.0, 0.0, 0.0]), dtype=np.float64)
+    return bool(np.linalg.norm(entry.get("pos", [0.0, 0.0, 0.0])) <= tol and abs(abs(q[0]) - 1.0) <= tol)
+
+
+def typed_tracker_offsets(offsets) -> tuple:
+    """The extra devices (pelvis, feet) whose offsets in ``offsets`` were typed and are kept.
+
+    offsets: any form :func:`.device_offsets.validate_offsets` accepts.  An entry counts as typed
+    when it is present and not the identity (position 0 and rotation identity); the presets have
+    identity entries for these devices, so with a preset (or none) every extra tracker is measured
+    from the calibration pose.  (A tracker truly at its joint cannot be told apart from "not
+    given": it is measured, which gives the same offset.)  Returns device names in
+    :data:`.devices.EXTRA_DEVICES` order.
+    """
+    devs = validate_offsets(offsets)["devices"]
+    return tuple(d for d in EXTRA_DEVICES if d in devs and not _is_identity(devs[d]))
+
+
+def _legs_from_pelvis_height(pelvis_z, stature):
+    """Leg measurements (metres) from the pelvis joint height ``pelvis_z`` above the floor (m).
+
+    hip height = pelvis height - ``pelvis_above_hips`` H; leg (hip to ankle) = hip height - ankle
+    height (0.039 H, the body model's); thigh : shank as the proportions (0.245 : 0.246).
+    Returns a dict of ``pelvis_height``, ``hip_height``, ``leg_length``, ``thigh``, ``shank``."""
+    H = float(stature)
+    hip = float(pelvis_z) - PROPORTIONS["pelvis_above_hips"] * H
+    leg = hip - PROPORTIONS["ankle_height"] * H
+    k = PROPORTIONS["thigh"] / (PROPORTIONS["thigh"] + PROPORTIONS["shank"])
+    return dict(pelvis_height=float(pelvis_z), hip_height=hip, leg_length=leg, thigh=leg * k, shank=leg * (1 - k))
+
+
+def _foot_stance(targets, device, z_cal, R_cal):
+    """How much higher (m) and more tilted (degrees) ``device`` is at the calibration moment than
+    when it is stood on later (its lowest 5 % of valid frames): ``(lift, tilt)``, or ``None`` with
+    fewer than 10 valid frames.  z_cal: its target height at the moment; R_cal: its orientation.
+    The tilt compares the direction that is up in the tracker at the moment with the vertical on
+    the low frames, so it does not depend on the device's offset."""
+    z = np.asarray(targets.pos[device][:, 2], dtype=np.float64)
+    R = np.asarray(targets.rot[device], dtype=np.float64)
+    v = targets.valid.get(device)
+    ok = np.isfinite(z) & np.all(np.isfinite(R), (-1, -2))
+    if v is not None:
+        ok &= np.asarray(v, dtype=bool)
+    if ok.sum() < 10:
+        return None
+    low = float(np.percentile(z[ok], 5))
+    near = ok & (z <= low + 0.01)
+    up = R_cal.T @ _Z                                   # the tracker's up at the calibration moment
+    cos = np.clip(np.einsum("tij,j->ti", R[near], up)[:, 2], -1.0, 1.0)
+    return float(z_cal - low), float(np.degrees(np.median(np.arccos(cos))))
+
+
+_TRACKER_LABEL = {"pelvis": "pelvis", "left_foot": "left foot", "right_foot": "right foot"}
+
+
 def calibrate(targets: TrackerTargets, time=None, offsets=None, window=0.25, pose="auto",
               measurements=None, t0=0.0, frame=None, strict=False) -> CalibrationResult:
-    """Measure body size and device rotation offsets at a T/A-pose moment.
+    """Measure body size and device offsets at a T/A-pose moment.
 
     targets: joint targets made with ``offsets`` (head, left_hand,
     right_hand required; pelvis/feet used when present).
     time: calibration moment in seconds (recording clock, frame ``k`` at
     ``t0 + k / fps``); or give ``frame``; default: :func:`find_tpose`.
     offsets: the offsets ``targets`` were made with (any form
-    :func:`.device_offsets.validate_offsets` accepts; default none).
+    :func:`.device_offsets.validate_offsets` accepts; default none).  Head
+    and hands: their rotations are refined, positions kept.  Pelvis and
+    feet: measured whole (position and rotation) from the pose, unless typed
+    (a non-identity entry, :func:`typed_tracker_offsets`), which is kept.
     window: half-width (s) of the averaging window.
     pose: ``'auto'`` (classify by arm elevation: < 20° T, 20-65° A), ``'T'``
     or ``'A'``.
     measurements: explicit body measurements: a :class:`BodyMeasurements` is
     passed through unchanged; a dict overrides only the given fields of the
-    measured ones (e.g. ``{"stature": 1.80}``).
+    measured ones (e.g. ``{"stature": 1.80}``, or ``thigh``/``shank``, which
+    then also fix where the pelvis is and so the pelvis tracker's height offset).
+    With a pelvis tracker the legs (``thigh``, ``shank``, metres) are measured
+    from its height (module docstring: identifiability), else proportional.
     strict: raise :class:`CalibrationError` when problems were found.
     """
     for d in REQUIRED_DEVICES:
@@ -255,9 +395,12 @@ def calibrate(targets: TrackerTargets, time=None, offsets=None, window=0.25, pos
     w = max(0, int(round(window * fps)))
     sl = slice(max(0, frame - w), min(n, frame + w + 1))
     problems = []
+    new = validate_offsets(offsets)
+    typed = typed_tracker_offsets(new)
 
-    # --- average each device over the window
-    mean_pos, mean_rot, motion = {}, {}, {}
+    # --- average each device over the window (and, for the extra trackers, the raw device poses:
+    # the targets were made with the current offsets, joint = device ∘ offset)
+    mean_pos, mean_rot, motion, dev_pos = {}, {}, {}, {}
     for d in targets.devices:
         P = targets.pos[d][sl]
         R = targets.rot[d][sl]
@@ -265,13 +408,28 @@ def calibrate(targets: TrackerTargets, time=None, offsets=None, window=0.25, pos
         m = np.ones(P.shape[0], dtype=bool) if v is None else np.asarray(v, dtype=bool)[sl]
         m &= np.all(np.isfinite(P), -1) & np.all(np.isfinite(R), (-1, -2))
         if m.sum() == 0:
-            problems.append(f"{d} is not tracked at {time:.2f} s")
+            if d not in EXTRA_DEVICES:
+                problems.append(f"{d} is not tracked at {time:.2f} s")
+                continue
+            text = f"the {_TRACKER_LABEL[d]} tracker is not tracked at {time:.2f} s: "
+            if d in typed:
+                text += "its typed offset is kept unchecked"
+            else:
+                text += (f"its offset cannot be measured (the tracker's own pose would be taken as the "
+                         f"{JOINT_OF_DEVICE[d]}'s): calibrate where it is tracked or type its offset")
+            if d == "pelvis":
+                text += "; the legs stay proportional"
+            problems.append(text)
             continue
         if m.mean() < 0.5:
             problems.append(f"{d} lost tracking for {100 * (1 - m.mean()):.0f}% of the calibration window")
         P, R = P[m], R[m]
         mean_pos[d] = P.mean(0)
         mean_rot[d] = orthonormalize(R.mean(0))
+        if d in EXTRA_DEVICES:
+            e = new["devices"].get(d, {"pos": [0.0, 0.0, 0.0], "rot": [1.0, 0.0, 0.0, 0.0]})
+            R_dev = R @ quat_to_matrix(np.asarray(e["rot"])).T
+            dev_pos[d] = (P - R_dev @ np.asarray(e["pos"], dtype=np.float64)).mean(0)
         moved = float(np.linalg.norm(P.max(0) - P.min(0)))
         turned = float(np.degrees(geodesic_angle(mean_rot[d][None], R).max()))
         motion[d] = (moved, turned)
@@ -370,19 +528,48 @@ def calibrate(targets: TrackerTargets, time=None, offsets=None, window=0.25, pos
         span = wrist_distance
     else:
         span = float(sw + np.linalg.norm(a_l) + np.linalg.norm(a_r))
+    # legs from the pelvis tracker (see the module docstring: its height and the legs' length trade
+    # off; with a typed offset the target is the joint, else the tracker is taken level with it)
+    legs = {"source": "proportions"}
+    if "pelvis" in mean_pos:
+        from_typed = "pelvis" in typed
+        z_pelvis = float(mean_pos["pelvis"][2]) if from_typed else \
+            float(dev_pos["pelvis"][2]) - PELVIS_TRACKER_ABOVE_JOINT
+        legs = {"source": "typed pelvis offset" if from_typed else "pelvis tracker",
+                **_legs_from_pelvis_height(z_pelvis, H)}
+        dev = legs["hip_height"] / H - PROPORTIONAL_HIP_HEIGHT
+        legs["used"] = bool(abs(dev) <= HIP_HEIGHT_LIMIT and legs["leg_length"] > 0.1 * H)
+        if abs(dev) > HIP_HEIGHT_NOTE or not legs["used"]:
+            expect = PROPORTIONAL_HIP_HEIGHT * H
+            if from_typed:
+                text = (f"with the typed pelvis offset the hips are at {legs['hip_height']:.2f} m, the proportions "
+                        f"put them at {expect:.2f} m: check the pelvis offset")
+            else:
+                text = (f"the pelvis tracker is {100 * abs(dev) * H:.0f} cm {'above' if dev > 0 else 'below'} where "
+                        f"the proportions put the pelvis joint (hips at {legs['hip_height']:.2f} m, expected about "
+                        f"{expect:.2f} m): if it is not worn level with the pelvis joint (at the back of the "
+                        f"pelvis; a belt at the waist is higher), type its offset: worn higher or lower than "
+                        f"the joint, it makes the legs longer or shorter by as much")
+            problems.append(text + ("" if legs["used"] else "; the legs stay proportional"))
+
     measured = dict(head_height=float(head[2]), stature=H_meas, arm_span=span, wrist_distance=wrist_distance,
                     arm_angles_deg={k: v[0] for k, v in angles.items()},
                     arm_swing_deg={k: v[1] for k, v in angles.items()},
-                    head_turn_deg=head_turn, motion=motion)
+                    head_turn_deg=head_turn, motion=motion, legs=legs)
     if isinstance(measurements, BodyMeasurements):
         meas = measurements
     else:
         fields_ = dict(stature=float(H_meas), arm_span=float(span))
+        if legs.get("used"):
+            fields_.update(thigh=float(legs["thigh"]), shank=float(legs["shank"]))
         if isinstance(measurements, dict):
             fields_.update({k: v for k, v in measurements.items() if v is not None})
         meas = BodyMeasurements(**fields_)
+    rest = None
     try:
-        make_body(meas)
+        # the body's rest T-pose stood under the head joint, turned by the heading: where the
+        # pelvis and ankles are in the calibration pose (feet on z = 0, rest head at x = y = 0)
+        rest = np.array([head[0], head[1], 0.0]) + make_body(meas).rest_positions() @ Rh.T
     except ValueError as exc:
         problems.append(f"measurements are not usable: {exc}")
 
@@ -390,20 +577,66 @@ def calibrate(targets: TrackerTargets, time=None, offsets=None, window=0.25, pos
     expected = {"head": Rh, "pelvis": Rh, "left_foot": Rh, "right_foot": Rh,
                 "left_hand": Rh @ rotation_between(np.array([1.0, 0, 0]), a_l),
                 "right_hand": Rh @ rotation_between(np.array([-1.0, 0, 0]), a_r)}
-    new = validate_offsets(offsets)
-    changes = {}
+    changes, trackers = {}, {}
     for d, R_t in mean_rot.items():
         e = new["devices"].get(d, {"pos": [0.0, 0.0, 0.0], "rot": [1.0, 0.0, 0.0, 0.0]})
         off_R = quat_to_matrix(np.asarray(e["rot"]))
         R_exp = expected[d]
-        new_R = orthonormalize(off_R @ R_t.T @ R_exp)
+        new_R = orthonormalize(off_R @ R_t.T @ R_exp)       # = R_deviceᵀ R_exp, R_device = R_t off_Rᵀ
+        new_p = np.asarray(e["pos"], dtype=np.float64)
+        if d in EXTRA_DEVICES and rest is not None:
+            R_dev = R_t @ off_R.T
+            # rounded to 0.1 µm as the presets are (plain JSON numbers, far below what is measured)
+            new_p = np.round(R_dev.T @ (rest[J[JOINT_OF_DEVICE[d]]] - dev_pos[d]), 7) + 0.0
+        if d in typed:      # typed offsets win; report how far the pose disagrees
+            changes[d] = 0.0
+            kept_R = off_R
+            kept_p = np.asarray(e["pos"], dtype=np.float64)
+            trackers[d] = dict(source="typed", distance=float(np.linalg.norm(kept_p)),
+                               angle_deg=float(np.degrees(geodesic_angle(np.eye(3), kept_R))),
+                               pos=[float(v) for v in kept_p], rot=[float(v) for v in e["rot"]])
+            if rest is not None:
+                trackers[d].update(disagree_m=float(np.linalg.norm(new_p - kept_p)),
+                                   disagree_deg=float(np.degrees(geodesic_angle(new_R, kept_R))))
+            continue
         changes[d] = float(np.degrees(geodesic_angle(R_t, R_exp)))
-        new["devices"][d] = {"pos": list(e["pos"]), "rot": [float(v) for v in matrix_to_quat(new_R)]}
+        new["devices"][d] = {"pos": [float(v) for v in new_p], "rot": [float(v) for v in matrix_to_quat(new_R)]}
+        if d in EXTRA_DEVICES and rest is not None:
+            dist = float(np.linalg.norm(new_p))
+            trackers[d] = dict(source="T-pose", distance=dist,
+                               angle_deg=float(np.degrees(geodesic_angle(np.eye(3), new_R))),
+                               pos=new["devices"][d]["pos"], rot=new["devices"][d]["rot"])
+            if dist > MAX_TRACKER_OFFSET:
+                where = ("stand upright with the head above the pelvis" if d == "pelvis" else
+                         "stand with the feet under the hips, flat on the floor; is it on the "
+                         f"{d.split('_')[0]} foot?")
+                problems.append(f"the {_TRACKER_LABEL[d]} tracker comes out {100 * dist:.0f} cm from the "
+                                f"{JOINT_OF_DEVICE[d].replace('_', ' ')} (straps keep it within about "
+                                f"{100 * MAX_TRACKER_OFFSET:.0f} cm): {where}")
+    # a foot lifted (or on its toes) at the calibration moment: its tracker stands higher or more tilted
+    # there than when the foot is stood on later in the recording (only matters for a measured offset)
+    feet = {}
+    for d in ("left_foot", "right_foot"):
+        if d not in mean_pos or d in typed:
+            continue
+        st = _foot_stance(targets, d, float(mean_pos[d][2]), mean_rot[d])
+        if st is None:
+            continue
+        feet[d] = dict(lift=st[0], tilt_deg=st[1])
+        side = d.split("_")[0]
+        if st[0] > FOOT_LIFT_TOLERANCE:
+            problems.append(f"the {side} foot is {100 * st[0]:.0f} cm higher at {time:.2f} s than when it is "
+                            f"stood on later: put both feet flat on the floor for the calibration")
+        elif st[1] > FOOT_TILT_TOLERANCE:
+            problems.append(f"the {side} foot is tilted {st[1]:.0f}° at {time:.2f} s compared with when it is "
+                            f"stood on later: put both feet flat on the floor for the calibration")
+    measured["feet"] = feet
     new["name"] = f"{new['name']} (calibrated)" if not new["name"].endswith("(calibrated)") else new["name"]
 
     result = CalibrationResult(measurements=meas, offsets=new, time=time, frame=frame, pose=kind,
                                arm_angle_deg=float(arm_angle), heading_deg=heading,
-                               rotation_change_deg=changes, measured=measured, problems=problems)
+                               rotation_change_deg=changes, measured=measured, problems=problems,
+                               tracker_offsets=trackers)
     if strict and problems:
         raise CalibrationError(f"not a usable {kind}-pose at {time:.2f} s: " + "; ".join(problems))
     return result

@@ -81,8 +81,10 @@ controller pose; the user's own in-game controller offsets are assumed zero.
 Check on real data: on the shared real BSOR sample (Valve Index, game
 1.29.1) the ``beat_saber`` wrists stay within arm's reach of the shoulders
 (estimated from the head) far more consistently than the raw saber poses.
-Pelvis and foot trackers have no preset offset (identity; mount them
-facing forward or calibrate).
+Pelvis and foot trackers have no preset offset (identity): a T-pose
+calibration (:mod:`.calibration`) measures their whole offset, translation and
+rotation, however they are strapped on; an entry that is not the identity is
+taken as typed by the user and kept.
 """
 from __future__ import annotations
 

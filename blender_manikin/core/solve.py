@@ -175,13 +175,24 @@ def calibrate(settings: SolveSettings, targets: TrackerTargets, times, offsets):
     """The performer's body for ``settings.calibration``.
 
     Returns ``(body, offsets, info)``: the offsets refined by a T/A-pose calibration (else
-    unchanged) and ``info``, notes for the user (the calibration moment, its problems)."""
+    unchanged) and ``info``, notes for the user (the calibration moment, its problems).  With
+    pelvis / foot trackers the T/A-pose also measures their whole offsets (unless typed, which
+    are kept) and, from the pelvis tracker, the legs (:mod:`.calibration`, "Six trackers"):
+    one note per tracker (``"pelvis tracker offset 12.3 cm, 171° (from the T-pose)"``) and the
+    legs in the calibration note.  Without a calibration pose, extra trackers whose offsets are
+    not typed get a note: their raw poses are taken as the joints'."""
     from . import calibration as cal
     mode = (settings.calibration or "AUTO").upper()
     info = []
+    extra = [d for d in ("pelvis", "left_foot", "right_foot") if d in targets.pos]
+    untyped = [d for d in extra if d not in cal.typed_tracker_offsets(offsets)]
+    no_pose_note = (f"{', '.join(d.replace('_', ' ') for d in untyped)} tracker offsets not measured (no "
+                    f"T-pose): their poses are taken as the joints'; type their offsets or calibrate on a T-pose")
     if mode == "MEASURE":
         if not settings.height or settings.height <= 0:
             raise SolveError("calibration by measurements needs a height (metres)")
+        if untyped:
+            info.append(no_pose_note)
         return body_from_head_height(targets, settings.height, settings.arm_span), offsets, info
     t0 = float(times[0])
     meas = {"stature": float(settings.height)} if settings.height else None
@@ -199,6 +210,8 @@ def calibrate(settings: SolveSettings, targets: TrackerTargets, times, offsets):
         cand = cal.find_tpose(targets, t0=t0)
         if not cand.plausible:
             info.append("no T-pose found: stature from the standing head height")
+            if untyped:
+                info.append(no_pose_note)
             return body_from_head_height(targets, settings.height, settings.arm_span), offsets, info
         t = cand.time
     try:
@@ -206,8 +219,27 @@ def calibrate(settings: SolveSettings, targets: TrackerTargets, times, offsets):
         body = cal.body_for(res.measurements)
     except ValueError as exc:
         raise SolveError(f"calibration at {t - t0:.2f} s: {exc}") from exc
-    info.append(f"calibrated on a {res.pose}-pose at {t - t0:.2f} s: stature "
-                f"{res.measurements.stature:.2f} m, arm span {res.measurements.arm_span or 0:.2f} m")
+    note = (f"calibrated on a {res.pose}-pose at {t - t0:.2f} s: stature "
+            f"{res.measurements.stature:.2f} m, arm span {res.measurements.arm_span or 0:.2f} m")
+    legs = res.measured.get("legs") or {}
+    if legs.get("used") and res.measurements.thigh is not None and res.measurements.shank is not None:
+        src = "pelvis tracker" if legs["source"] == "pelvis tracker" else "typed pelvis offset"
+        note += f", legs {res.measurements.thigh + res.measurements.shank:.2f} m (from the {src})"
+    elif extra:
+        note += ", legs proportional"
+    info.append(note)
+    for d, tr in res.tracker_offsets.items():
+        label = d.replace("_", " ")
+        text = f"{label} tracker offset {100 * tr['distance']:.1f} cm, {tr['angle_deg']:.0f}°"
+        if tr["source"] == "typed":
+            text += " (typed, kept"
+            if "disagree_m" in tr:
+                text += (f"; the T-pose suggests one {100 * tr['disagree_m']:.1f} cm, {tr['disagree_deg']:.0f}° "
+                         f"different")
+            text += ")"
+        else:
+            text += " (from the T-pose)" if res.pose == "T" else " (from the A-pose)"
+        info.append(text)
     info += [f"calibration: {p}" for p in res.problems]
     return body, res.offsets, info
 
