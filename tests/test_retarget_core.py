@@ -1,0 +1,618 @@
+"""Retargeting core (numpy only): bone maps, rest alignment, pose-bone bases, root motion, limb re-solve.
+
+Target rigs are described directly by rest matrices (armature space, bone Y along the bone, as
+Blender's ``bone.matrix_local``), no bpy.
+"""
+import numpy as np
+import pytest
+
+from blender_manikin.blender import armature as am        # bone_layout / pose_bone_quaternions: no bpy
+from blender_manikin.core import bone_maps as bmaps
+from blender_manikin.core import limb_solver as ls
+from blender_manikin.core import retarget as rt
+from blender_manikin.core import rotations as rot
+from blender_manikin.core import skeleton as sk
+from blender_manikin.core.export_bvh import end_site_offsets
+from tests.fixtures_bvh import synthetic_motion
+from tests.pose_sampling import random_pose
+
+J = sk.J
+JN = sk.JOINT_NAMES
+
+
+def _smooth_source(frames=60, seed=0):
+    body, local, root, pos, wrot = synthetic_motion(frames=frames, seed=seed, fixed=())
+    return body, local, root, pos, wrot
+
+
+def _swivel(pos, wrot):
+    b = pos[:, ls.LIMB_BASE]
+    return ls.swivel_from_positions(b, pos[:, ls.LIMB_MID], pos[:, ls.LIMB_END], wrot[:, ls.LIMB_PARENT],
+                                    base_rot=wrot[:, ls.LIMB_BASE])
+
+
+def _hinge_source(T=40, seed=3):
+    """Random poses with hinge elbows / knees (what the solver produces), and their swivel."""
+    body = sk.make_body(1.75)
+    rng = np.random.default_rng(seed)
+    local = random_pose(rng, T, spread=0.3)
+    root = body.root_rest + rng.normal(size=(T, 3)) * [0.3, 0.3, 0.05]
+    pos, wrot = sk.forward_kinematics(local, root, body)
+    return body, local, root, pos, wrot, _swivel(pos, wrot)
+
+
+def _frame(y, rng=None):
+    """Rest rotation with Y along ``y``, X perpendicular, rolled about Y by a random angle."""
+    y = rot.normalize(np.asarray(y, float))
+    helper = np.array([0.0, 0, 1]) if abs(y[2]) < 0.9 else np.array([1.0, 0, 0])
+    x = rot.normalize(np.cross(y, helper))
+    B = np.stack([x, y, np.cross(x, y)], -1)
+    if rng is not None:
+        B = B @ rot.axis_angle_rotation(np.array([0, 1.0, 0]), np.array(rng.uniform(-np.pi, np.pi)))
+    return B
+
+
+MIX = {"pelvis": "Hips", "spine1": "Spine", "spine2": "Spine1", "spine3": "Spine2", "neck": "Neck", "head": "Head"}
+for _s, _S in (("left", "Left"), ("right", "Right")):
+    MIX.update({f"{_s}_collar": f"{_S}Shoulder", f"{_s}_shoulder": f"{_S}Arm", f"{_s}_elbow": f"{_S}ForeArm",
+                f"{_s}_wrist": f"{_S}Hand", f"{_s}_hip": f"{_S}UpLeg", f"{_s}_knee": f"{_S}Leg",
+                f"{_s}_ankle": f"{_S}Foot", f"{_s}_foot": f"{_S}ToeBase"})
+
+ARM_JOINTS = {"left": ("left_elbow", "left_wrist"), "right": ("right_elbow", "right_wrist")}
+ARMS = ("collar", "shoulder", "elbow", "wrist")
+LEGS = ("hip", "knee", "ankle", "foot")
+
+
+def _scales(arm=1.15, leg=0.92, torso=1.05):
+    s = np.full(sk.NUM_JOINTS, torso)
+    for side in ("left", "right"):
+        for n in ("elbow", "wrist"):
+            s[J[f"{side}_{n}"]] = arm
+        for n in ("knee", "ankle", "foot"):
+            s[J[f"{side}_{n}"]] = leg
+    return s
+
+
+def _joint_rig_geometry(body, scales, apose_deg=45.0):
+    """Rest joint positions (world, metres) of a differently proportioned body in an A-pose,
+    and each joint's bone Y direction (towards its chain child / end site)."""
+    P = np.zeros((sk.NUM_JOINTS, 3))
+    P[0] = body.root_rest
+    for j in range(1, sk.NUM_JOINTS):
+        P[j] = P[sk.PARENTS[j]] + scales[j] * body.offsets[j]
+    leaf = end_site_offsets(body)
+    ydir = np.zeros((sk.NUM_JOINTS, 3))
+    for j in range(sk.NUM_JOINTS):
+        c = rt.PRIMARY_CHILD[j]
+        ydir[j] = P[c] - P[j] if c >= 0 else leaf[j]
+    for side, sgn in (("left", 1.0), ("right", -1.0)):
+        Ra = rot.axis_angle_rotation(np.array([0, 1.0, 0]), np.array(sgn * np.radians(apose_deg)))
+        s = P[J[f"{side}_shoulder"]]
+        for n in ("elbow", "wrist"):
+            j = J[f"{side}_{n}"]
+            P[j] = s + Ra @ (P[j] - s)
+        for n in ("shoulder", "elbow", "wrist"):
+            ydir[J[f"{side}_{n}"]] = Ra @ ydir[J[f"{side}_{n}"]]
+    # feet on the floor
+    P[:, 2] -= P[J["left_ankle"], 2] - scales[J["left_ankle"]] * body.rest_positions()[J["left_ankle"], 2]
+    return P, ydir
+
+
+def mixamo_rig(body, seed=1, prefix="mixamorig:", scales=None, extra=True, apose_deg=45.0):
+    """A Mixamo-named rig: A-pose, random bone rolls, different proportions (returns rig, map, P)."""
+    rng = np.random.default_rng(seed)
+    scales = _scales() if scales is None else scales
+    P, ydir = _joint_rig_geometry(body, scales, apose_deg)
+    names, parents, B, heads = [], [], [], []
+    for j in range(sk.NUM_JOINTS):
+        names.append(prefix + MIX[JN[j]])
+        parents.append(None if sk.PARENTS[j] < 0 else prefix + MIX[JN[sk.PARENTS[j]]])
+        B.append(_frame(ydir[j], rng))
+        heads.append(P[j])
+    if extra:                                   # unmapped leaf bones
+        for n, par, off in (("HeadTop_End", "Head", [0, 0, 0.15]), ("LeftHandIndex1", "LeftHand", [0.08, 0, -0.05]),
+                            ("RightHandIndex1", "RightHand", [-0.08, 0, -0.05])):
+            k = names.index(prefix + par)
+            names.append(prefix + n)
+            parents.append(prefix + par)
+            B.append(_frame(off, rng))
+            heads.append(heads[k] + np.array(off))
+    rig = rt.TargetRig(names, parents, np.array(B), np.array(heads))
+    bmap = bmaps.BoneMap("mixamo", {j: prefix + b for j, b in MIX.items()})
+    return rig, bmap, P
+
+
+def _seg_dirs(res, rig, bmap, pos, wrot, body):
+    """Angles (rad) between target segment / leaf directions and the source's, (T, n)."""
+    bm = bmaps.as_bone_map(bmap)
+    hw = res.world_heads()
+    Gw = res.world_orientations()
+    leaf = end_site_offsets(body)
+    out = []
+    for jn, b in bm.bones.items():
+        j = J[jn]
+        c = rt.PRIMARY_CHILD[j]
+        while c >= 0 and JN[c] not in bm.bones:
+            c = rt.PRIMARY_CHILD[c]
+        if c >= 0:
+            t_dir = hw[:, rig.index[bm.bones[JN[c]]]] - hw[:, rig.index[b]]
+            s_dir = pos[:, c] - pos[:, j]
+        else:
+            t_dir = Gw[:, rig.index[b], :, 1]
+            s_dir = wrot[:, j] @ leaf[j]
+        cos = np.sum(rot.normalize(t_dir) * rot.normalize(s_dir), -1)
+        out.append(np.arccos(np.clip(cos, -1, 1)))
+    return np.stack(out, -1)
+
+
+# ---------------------------------------------------------------------- (a) identity
+def test_body_model_as_target_reproduces_the_source_exactly():
+    body, local, root, pos, wrot = _smooth_source()
+    heads, _, B, _ = am.bone_layout(body)
+    rig = rt.TargetRig(JN, sk.PARENTS, B, heads)
+    bmap = {j: j for j in JN}
+    res = rt.retarget(wrot, pos, body, rig, bmap, root_motion="as_is")
+    assert np.abs(res.world_heads() - pos).max() < 1e-9
+    assert np.abs(res.world_orientations() - wrot @ B).max() < 1e-9
+    q_ref = am.pose_bone_quaternions(local, B)
+    dots = np.abs(np.sum(res.quaternions * q_ref, -1))
+    assert np.abs(dots - 1).max() < 1e-9
+    assert np.abs(res.root_location - am.root_locations(root, heads[0], B[0])).max() < 1e-9
+    assert res.keyed.all() and res.root_bone == "pelvis"
+    # a same-size body: "scaled" is "as_is"
+    res2 = rt.retarget(wrot, pos, body, rig, bmap, root_motion="scaled")
+    assert abs(res2.plan.leg_ratio - 1) < 1e-12
+    assert np.abs(res2.world_heads() - pos).max() < 1e-9
+    # keep_ends on the body itself lands exactly
+    sw = _swivel(pos, wrot)
+    res3 = rt.keep_ends_on_targets(res, wrot, pos, sw)
+    ends = [J[n] for n in ("left_wrist", "right_wrist", "left_ankle", "right_ankle")]
+    assert np.abs(res3.world_heads()[:, ends] - pos[:, ends]).max() < 1e-9
+
+
+def test_in_place_and_scaled_root_motion():
+    body, local, root, pos, wrot = _smooth_source()
+    rig, bmap, P = mixamo_rig(body)
+    k = rig.index["mixamorig:Hips"]
+    rest = rig.rest_world_heads()[k]
+    d = root - body.root_rest
+    res_s = rt.retarget(wrot, pos, body, rig, bmap, "scaled")
+    r = res_s.plan.leg_ratio
+    assert abs(r - 0.92) < 1e-9            # thigh + shank scaled by 0.92
+    assert np.abs(res_s.world_heads()[:, k] - (rest + r * d)).max() < 1e-12
+    res_i = rt.retarget(wrot, pos, body, rig, bmap, "in_place")
+    h = res_i.world_heads()[:, k]
+    assert np.abs(h[:, :2] - rest[:2]).max() < 1e-12
+    assert np.abs(h[:, 2] - (rest[2] + r * d[:, 2])).max() < 1e-12
+    res_a = rt.retarget(wrot, pos, body, rig, bmap, "as_is")
+    assert np.abs(res_a.world_heads()[:, k] - (rest + d)).max() < 1e-12
+    # the location channel puts the bone's head there (parentless bone: head = rest + B loc)
+    assert np.abs(rig.heads[k] + res_a.root_location @ rig.rest_rot[k].T - res_a.heads[:, k]).max() < 1e-12
+    with pytest.raises(ValueError, match="root_motion"):
+        rt.retarget(wrot, pos, body, rig, bmap, "sideways")
+
+
+# ---------------------------------------------------------------------- (b) A-pose Mixamo rig
+def test_apose_mixamo_rig_with_rolls_and_other_proportions():
+    body, local, root, pos, wrot = _smooth_source(frames=90, seed=2)
+    rig, bmap, P = mixamo_rig(body)
+    res = rt.retarget(wrot, pos, body, rig, bmap, "scaled")
+    # every mapped segment (and the leaf bones' Y axes) points where the source's does
+    ang = _seg_dirs(res, rig, bmap, pos, wrot, body)
+    assert ang.max() < 1e-7, ang.max()
+    # ends after proportion scaling: limb vectors scale by their limb's ratio (1.15 arms,
+    # 0.92 legs), head relative to hips by the torso's (1.05)
+    hw = res.world_heads()
+    i = rig.index
+    worst = 0.0
+    for side, S in (("left", "Left"), ("right", "Right")):
+        e = hw[:, i[f"mixamorig:{S}Hand"]] - hw[:, i[f"mixamorig:{S}Arm"]]
+        worst = max(worst, np.abs(e - 1.15 * (pos[:, J[f"{side}_wrist"]] - pos[:, J[f"{side}_shoulder"]])).max())
+        e = hw[:, i[f"mixamorig:{S}Foot"]] - hw[:, i[f"mixamorig:{S}UpLeg"]]
+        worst = max(worst, np.abs(e - 0.92 * (pos[:, J[f"{side}_ankle"]] - pos[:, J[f"{side}_hip"]])).max())
+    e = hw[:, i["mixamorig:Head"]] - hw[:, i["mixamorig:Hips"]]
+    worst = max(worst, np.abs(e - 1.05 * (pos[:, J["head"]] - pos[:, J["pelvis"]])).max())
+    assert worst < 0.01
+    assert worst < 1e-9                    # in fact exact
+    # the source's rest T-pose gives the A-pose rig a T-pose
+    T0 = np.broadcast_to(np.eye(3), (1, 22, 3, 3))
+    p0 = body.rest_positions()[None]
+    r0 = rt.retarget(T0, p0, body, rig, bmap, "as_is")
+    h0 = r0.world_heads()[0]
+    arm = h0[i["mixamorig:LeftHand"]] - h0[i["mixamorig:LeftArm"]]
+    assert np.abs(rot.normalize(arm) - [1, 0, 0]).max() < 1e-12
+    # rolls kept: the upper arm's rest X axis is only swung (no twist about the bone)
+    Gw = r0.world_orientations()[0, i["mixamorig:LeftArm"]]
+    sw = rot.rotation_between(rig.rest_world_rot()[i["mixamorig:LeftArm"]][:, 1], [1, 0, 0])
+    assert np.abs(Gw - sw @ rig.rest_world_rot()[i["mixamorig:LeftArm"]]).max() < 1e-12
+    # unmapped bones keep identity pose bases and are not keyed
+    extra = [i["mixamorig:HeadTop_End"], i["mixamorig:LeftHandIndex1"]]
+    assert not res.keyed[extra].any()
+    assert np.abs(res.quaternions[:, extra] - [1, 0, 0, 0]).max() < 1e-12
+
+
+def test_keep_ends_on_targets_mixamo():
+    body, local, root, pos, wrot, sw = _hinge_source()
+    rig, bmap, P = mixamo_rig(body)
+    res = rt.retarget(wrot, pos, body, rig, bmap, "as_is")
+    out = rt.keep_ends_on_targets(res, wrot, pos, sw)
+    hw = out.world_heads()
+    ends = {"left_arm": "LeftHand", "right_arm": "RightHand", "left_leg": "LeftFoot", "right_leg": "RightFoot"}
+    reached_any = 0
+    for li, (limb, bone) in enumerate(ends.items()):
+        e = sk.LIMBS[li][3]
+        err = np.linalg.norm(hw[:, rig.index["mixamorig:" + bone]] - pos[:, e], axis=-1)
+        ok = out.reach_error[:, li] < 1e-9
+        reached_any += ok.sum()
+        assert ok.mean() > 0.3, (limb, ok.mean())
+        assert err[ok].max() < 1e-4, (limb, err[ok].max())                  # 0.1 mm
+        assert np.abs(err[~ok] - out.reach_error[~ok, li]).max() < 1e-6      # misses are reported
+    # the swivel is kept: the target's elbow / knee lies on the source's swivel angle
+    base_ids = [rig.index["mixamorig:" + n] for n in ("LeftArm", "RightArm", "LeftUpLeg", "RightUpLeg")]
+    mid_ids = [rig.index["mixamorig:" + n] for n in ("LeftForeArm", "RightForeArm", "LeftLeg", "RightLeg")]
+    end_ids = [rig.index["mixamorig:" + n] for n in ("LeftHand", "RightHand", "LeftFoot", "RightFoot")]
+    phi = ls.swivel_from_positions(hw[:, base_ids], hw[:, mid_ids], hw[:, end_ids], wrot[:, ls.LIMB_PARENT])
+    d = np.angle(np.exp(1j * (phi - sw)))
+    bent = out.reach_error < 1e-9          # a straight (out of reach) limb has no swivel to measure
+    assert np.abs(d[bent]).max() < 1e-6
+    # hands / feet keep the transferred world orientation
+    assert np.abs(out.world_orientations()[:, end_ids] - res.world_orientations()[:, end_ids]).max() < 1e-9
+
+
+def test_keep_ends_scaled_targets_and_planted_foot():
+    """ends='scaled' follows the scaled root; a foot planted in the source stays planted."""
+    body, local, root, pos, wrot, sw = _hinge_source(T=30, seed=5)
+    # plant the left ankle: re-solve the source's left leg onto a fixed point below its hip
+    hip = pos[:, J["left_hip"]]
+    anchor = np.array([0.10, -0.05, 0.09])
+    root = np.broadcast_to(body.root_rest, (30, 3)).copy()
+    root[:, 0] += 0.03 * np.cos(np.arange(30) / 4)
+    root[:, 2] += -0.08 + 0.03 * np.sin(np.arange(30) / 5)
+    pos, wrot = sk.forward_kinematics(local, root, body)
+    hip = pos[:, J["left_hip"]]
+    sol = ls.solve_limbs(hip[:, None], np.broadcast_to(anchor, (30, 1, 3)), sw[:, 2:3],
+                         body.limb_lengths()[2:3], wrot[:, None, J["pelvis"]], limb_ids=[2])
+    local = local.copy()
+    local[:, J["left_hip"]] = sol.base_local[:, 0]
+    local[:, J["left_knee"]] = sol.mid_local[:, 0]
+    pos, wrot = sk.forward_kinematics(local, root, body)
+    assert np.abs(pos[:, J["left_ankle"]] - anchor).max() < 1e-9
+    rig, bmap, P = mixamo_rig(body, scales=_scales(arm=1.1, leg=1.1, torso=1.1))
+    res = rt.retarget(wrot, pos, body, rig, bmap, "scaled")
+    out = rt.keep_ends_on_targets(res, wrot, pos, sw, limbs=("left_leg",), ends="scaled")
+    foot = out.world_heads()[:, rig.index["mixamorig:LeftFoot"]]
+    assert np.all(out.reach_error[:, 2] < 1e-9)
+    assert np.isnan(out.reach_error[:, [0, 1, 3]]).all()
+    assert np.abs(foot - foot[0]).max() < 1e-9             # planted
+    assert np.abs(foot[0] - (rig.rest_world_heads()[rig.index["mixamorig:Hips"]]
+                             + 1.1 * (anchor - body.root_rest))).max() < 1e-9
+
+
+# ---------------------------------------------------------------------- (c) forward +Y, scale 0.01
+def test_rig_facing_plus_y_in_centimetres_with_y_up_data():
+    body, local, root, pos, wrot = _smooth_source(frames=30)
+    rig_m, bmap, _ = mixamo_rig(body)
+    Rz = rot.axis_angle_rotation(np.array([0, 0, 1.0]), np.array(np.pi))
+    M = rot.axis_angle_rotation(np.array([1.0, 0, 0]), np.array(np.pi / 2))      # Y-up data -> Z-up
+    # the same character turned to face +Y, stored as Y-up centimetres, object rot X 90 and scale 0.01
+    A = np.tile(np.eye(4), (rig_m.num_bones, 1, 1))
+    A[:, :3, :3] = M.T @ Rz @ rig_m.rest_rot
+    A[:, :3, 3] = 100.0 * rig_m.heads @ (M.T @ Rz).T
+    W = np.eye(4)
+    W[:3, :3] = 0.01 * M
+    parents = [None if p < 0 else rig_m.names[p] for p in rig_m.parents]
+    rig_c = rt.TargetRig.from_matrices(rig_m.names, parents, A, W)
+    assert abs(rig_c.world_scale - 0.01) < 1e-12
+    assert np.abs(rig_c.rest_world_heads() - rig_m.rest_world_heads() @ Rz.T).max() < 1e-12
+    for mode in ("scaled", "as_is"):
+        rm = rt.retarget(wrot, pos, body, rig_m, bmap, mode)
+        rc = rt.retarget(wrot, pos, body, rig_c, bmap, mode)
+        assert abs(np.degrees(np.arctan2(rc.plan.F[1, 0], rc.plan.F[0, 0])) - 180) < 1e-9
+        # the character performs facing +Y: everything turned half-way round about the origin
+        assert np.abs(rc.world_heads() - rm.world_heads() @ Rz.T).max() < 1e-9
+        assert np.abs(rc.world_orientations() - Rz @ rm.world_orientations()).max() < 1e-9
+        # pose-bone rotations are the same numbers; locations are in centimetres
+        assert np.abs(np.abs(np.sum(rc.quaternions * rm.quaternions, -1)) - 1).max() < 1e-9
+        assert np.abs(rc.root_location - 100 * rm.root_location).max() < 1e-7
+    # walking: the source goes towards -Y, the +Y-facing character towards +Y
+    k = rig_c.index["mixamorig:Hips"]
+    assert rc.world_heads()[-1, k, 1] - rc.world_heads()[0, k, 1] > 0.3
+    # explicit facing overrides the detection
+    rf = rt.retarget(wrot, pos, body, rig_c, bmap, "as_is", facing_yaw=0.0)
+    assert np.abs(rf.plan.F - np.eye(3)).max() < 1e-12
+    with pytest.raises(ValueError, match="non-uniform"):
+        rt.TargetRig.from_matrices(rig_m.names, parents, A, np.diag([1.0, 2.0, 1.0, 1.0]))
+
+
+# ---------------------------------------------------------------------- (d) no flips
+def _ue_rig(body, seed=4, version=5):
+    """A UE-mannequin-like rig: root bone, 5 spine bones (UE5), twist bones, A-pose, rolls."""
+    rng = np.random.default_rng(seed)
+    P, ydir = _joint_rig_geometry(body, _scales(1.0, 1.05, 0.95), 40.0)
+    bm = bmaps.preset(f"ue{version}")
+    names, parents, B, heads = ["root"], [None], [_frame([0, 0, 1.0], rng)], [np.zeros(3)]
+
+    def add(name, parent, head, y):
+        names.append(name)
+        parents.append(parent)
+        B.append(_frame(y, rng))
+        heads.append(np.asarray(head, float))
+
+    add("pelvis", "root", P[0], P[J["spine1"]] - P[0])
+    nspine = 5 if version == 5 else 3
+    sp = [P[0] + (P[J["neck"]] - P[0]) * (i + 1) / (nspine + 1) for i in range(nspine)]
+    prev = "pelvis"
+    for i in range(nspine):
+        nxt = sp[i + 1] if i + 1 < nspine else P[J["neck"]]
+        add(f"spine_{i + 1:02d}", prev, sp[i], nxt - sp[i])
+        prev = f"spine_{i + 1:02d}"
+    add("neck_01", prev, P[J["neck"]], P[J["head"]] - P[J["neck"]])
+    add("head", "neck_01", P[J["head"]], [0, 0, 1.0])
+    for side, s in (("left", "l"), ("right", "r")):
+        add(f"clavicle_{s}", prev, P[J[f"{side}_collar"]], ydir[J[f"{side}_collar"]])
+        for part, nm, par in (("shoulder", "upperarm", "clavicle"), ("elbow", "lowerarm", "upperarm"),
+                              ("wrist", "hand", "lowerarm")):
+            add(f"{nm}_{s}", f"{par}_{s}", P[J[f"{side}_{part}"]], ydir[J[f"{side}_{part}"]])
+        for part, nm, par in (("hip", "thigh", None), ("knee", "calf", "thigh"), ("ankle", "foot", "calf"),
+                              ("foot", "ball", "foot")):
+            add(f"{nm}_{s}", "pelvis" if par is None else f"{par}_{s}", P[J[f"{side}_{part}"]],
+                ydir[J[f"{side}_{part}"]])
+        for main, part in (("upperarm", "shoulder"), ("lowerarm", "elbow"), ("thigh", "hip"), ("calf", "knee")):
+            for t in bm.twist[f"{side}_{part}"]:
+                f = 0.3 if t.endswith(f"01_{s}") else 0.6
+                k = names.index(f"{main}_{s}")
+                add(t, f"{main}_{s}", heads[k] + f * (P[rt.PRIMARY_CHILD[J[f'{side}_{part}']]] - heads[k]),
+                    ydir[J[f"{side}_{part}"]])
+    return rt.TargetRig(names, parents, np.array(B), np.array(heads)), bm
+
+
+def test_no_flips_on_smooth_motion():
+    body, local, root, pos, wrot = _smooth_source(frames=90, seed=6)
+    src_step = rot.geodesic_angle(wrot[1:], wrot[:-1]).max()
+    rig_x, bm_x, _ = mixamo_rig(body)
+    rig_u, bm_u = _ue_rig(body)
+    # a VRM-like rig without UpperChest and collars: spine3 and collars are folded
+    rig_f, bm_f, _ = mixamo_rig(body, seed=8)
+    bm_f = bmaps.BoneMap("folded", {j: b for j, b in bm_f.bones.items()
+                                     if j not in ("spine3", "left_collar", "right_collar")})
+    src_steps = rot.geodesic_angle(wrot[1:], wrot[:-1])            # (T-1, 22)
+    for rig, bm in ((rig_x, bm_x), (rig_u, bm_u), (rig_f, bm_f)):
+        res = rt.retarget(wrot, pos, body, rig, bm, "scaled")
+        G = res.world_orientations()[:, res.keyed]
+        step = rot.geodesic_angle(G[1:], G[:-1])
+        assert step.max() < np.radians(90)
+        assert step.max() < 2.0 * src_step + 1e-9, (step.max(), src_step)
+        # a mapped bone (not folded) turns between frames exactly as much as its source joint
+        for j in range(sk.NUM_JOINTS):
+            k = res.plan.bone_of[j]
+            if k >= 0 and j not in res.plan.folded and k not in res.plan.twist_main:
+                Gk = res.world_orientations()[:, k]
+                assert np.abs(rot.geodesic_angle(Gk[1:], Gk[:-1]) - src_steps[:, j]).max() < 1e-6
+        q = res.quaternions
+        assert np.sum(q[1:] * q[:-1], -1).min() > 0            # sign-continuous for keying
+        assert np.isfinite(q).all()
+
+
+def test_twist_bones_share_the_twist():
+    body, local, root, pos, wrot = _smooth_source(frames=40, seed=7)
+    rig, bm = _ue_rig(body, version=4)
+    plain = bmaps.BoneMap("no twist", dict(bm.bones))
+    r0 = rt.retarget(wrot, pos, body, rig, plain, "as_is")
+    r1 = rt.retarget(wrot, pos, body, rig, bm, "as_is")
+    i = rig.index
+    ey = np.array([0, 1.0, 0])
+    for main, tw in (("lowerarm_l", "lowerarm_twist_01_l"), ("upperarm_r", "upperarm_twist_01_r"),
+                     ("calf_l", "calf_twist_01_l")):
+        tau = np.unwrap(rot.twist_angle(r0.basis_rot[:, i[main]], ey))
+        assert np.ptp(tau) > 0.2                 # the motion does twist these segments
+        # the main bone keeps half the twist (relative to the parent's unshared orientation)
+        G0m = r0.orientations[:, i[main]]
+        assert np.abs(r1.orientations[:, i[main]] - G0m @ rot.axis_angle_rotation(ey, -tau / 2)).max() < 1e-9
+        # the twist bone sits on the main bone turned by the other half about the bone's axis
+        rel = np.swapaxes(r1.orientations[:, i[main]], -1, -2) @ r1.orientations[:, i[tw]]
+        rest_rel = rig.rest_rot[i[main]].T @ rig.rest_rot[i[tw]]
+        expect = rot.axis_angle_rotation(ey, tau / 2) @ rest_rel
+        assert np.abs(rel - expect).max() < 1e-9
+        # the direction of the main bone is unchanged
+        assert np.abs(r1.orientations[:, i[main], :, 1] - r0.orientations[:, i[main], :, 1]).max() < 1e-9
+        assert r1.keyed[i[tw]] and not r0.keyed[i[tw]]
+    # bones below the segment are unaffected
+    for b in ("hand_l", "foot_l", "hand_r", "head"):
+        assert np.abs(r1.world_orientations()[:, i[b]] - r0.world_orientations()[:, i[b]]).max() < 1e-9
+    # the extra spine bones (UE5) keep identity bases, mapped ones follow the source
+    rig5, bm5 = _ue_rig(body, version=5)
+    r5 = rt.retarget(wrot, pos, body, rig5, bm5, "scaled")
+    for b in ("spine_02", "spine_04", "root"):
+        assert np.abs(r5.quaternions[:, rig5.index[b]] - [1, 0, 0, 0]).max() < 1e-12
+    assert _seg_dirs(r5, rig5, bm5, pos, wrot, body).max() < 1e-7
+
+
+def test_folded_spine_points_at_the_next_mapped_joint():
+    body, local, root, pos, wrot = _smooth_source(frames=30, seed=9)
+    rig, bm, _ = mixamo_rig(body)
+    bm = bmaps.BoneMap("folded", {j: b for j, b in bm.bones.items() if j not in ("spine3", "left_collar")})
+    res = rt.retarget(wrot, pos, body, rig, bm, "as_is")
+    assert set(res.plan.folded) == {J["spine2"]}
+    assert _seg_dirs(res, rig, bm, pos, wrot, body).max() < 1e-7
+    # the neck and the upper arm carry the source's world orientation (the unmapped joints' rest
+    # of rotation is in their local rotation)
+    for j, b in (("neck", "mixamorig:Neck"), ("left_shoulder", "mixamorig:LeftArm")):
+        G = res.world_orientations()[:, rig.index[b]]
+        A = res.plan.align[J[j]]
+        assert np.abs(G - wrot[:, J[j]] @ A).max() < 1e-9
+
+
+# ---------------------------------------------------------------------- (e) save / load
+def test_save_load_round_trip(tmp_path):
+    body, local, root, pos, wrot = _smooth_source(frames=20)
+    rig, bm = _ue_rig(body, version=5)
+    path = tmp_path / "ue5_map.json"
+    bmaps.save_bone_map(path, bm)
+    back = bmaps.load_bone_map(path)
+    assert back.to_dict() == bm.to_dict()
+    r0 = rt.retarget(wrot, pos, body, rig, bm)
+    r1 = rt.retarget(wrot, pos, body, rig, back)
+    assert np.array_equal(r0.quaternions, r1.quaternions)
+    assert np.array_equal(r0.root_location, r1.root_location)
+    # flat dicts are accepted too
+    flat = dict(bm.bones, name="flat", twist=bm.twist)
+    assert bmaps.validate_bone_map(flat).bones == bm.bones
+    (tmp_path / "bad.json").write_text("{not json")
+    with pytest.raises(ValueError, match="not valid JSON"):
+        bmaps.load_bone_map(tmp_path / "bad.json")
+
+
+def test_presets_are_valid():
+    for name in bmaps.PRESETS:
+        bm = bmaps.validate_bone_map(bmaps.preset(name))
+        assert len(bm.bones) == sk.NUM_JOINTS, name
+    assert bmaps.preset("mixamo").bones["left_elbow"] == "mixamorig:LeftForeArm"
+    assert bmaps.preset("rigify").twist["left_shoulder"] == ["DEF-upper_arm.L.001"]
+    assert bmaps.preset("vrm").bones["right_foot"] == "J_Bip_R_ToeBase"
+    assert bmaps.preset("auto_rig_pro").bones["pelvis"] == "root.x"
+    with pytest.raises(ValueError, match="unknown bone map preset"):
+        bmaps.preset("maya")
+
+
+# ---------------------------------------------------------------------- (f) guessing
+def _bones(pairs):
+    return [(n, p, None, None) for n, p in pairs]
+
+
+def _mixamo_bones(prefix="mixamorig:"):
+    out = [("Hips", None), ("Spine", "Hips"), ("Spine1", "Spine"), ("Spine2", "Spine1"), ("Neck", "Spine2"),
+           ("Head", "Neck"), ("HeadTop_End", "Head")]
+    for S in ("Left", "Right"):
+        out += [(f"{S}Shoulder", "Spine2"), (f"{S}Arm", f"{S}Shoulder"), (f"{S}ForeArm", f"{S}Arm"),
+                (f"{S}Hand", f"{S}ForeArm"), (f"{S}HandIndex1", f"{S}Hand"), (f"{S}HandThumb1", f"{S}Hand"),
+                (f"{S}UpLeg", "Hips"), (f"{S}Leg", f"{S}UpLeg"), (f"{S}Foot", f"{S}Leg"),
+                (f"{S}ToeBase", f"{S}Foot"), (f"{S}Toe_End", f"{S}ToeBase")]
+    return _bones([(prefix + n, None if p is None else prefix + p) for n, p in out])
+
+
+def _ue5_bones():
+    out = [("root", None), ("pelvis", "root"), ("spine_01", "pelvis")]
+    out += [(f"spine_0{i}", f"spine_0{i - 1}") for i in range(2, 6)]
+    out += [("neck_01", "spine_05"), ("neck_02", "neck_01"), ("head", "neck_02"),
+            ("ik_foot_root", "root"), ("ik_hand_root", "root"), ("ik_hand_gun", "ik_hand_root")]
+    for s in ("l", "r"):
+        out += [(f"clavicle_{s}", "spine_05"), (f"upperarm_{s}", f"clavicle_{s}"),
+                (f"upperarm_twist_01_{s}", f"upperarm_{s}"), (f"upperarm_twist_02_{s}", f"upperarm_{s}"),
+                (f"upperarm_correctiveRoot_{s}", f"upperarm_{s}"), (f"lowerarm_{s}", f"upperarm_{s}"),
+                (f"lowerarm_twist_01_{s}", f"lowerarm_{s}"), (f"lowerarm_twist_02_{s}", f"lowerarm_{s}"),
+                (f"hand_{s}", f"lowerarm_{s}"), (f"index_metacarpal_{s}", f"hand_{s}"),
+                (f"thigh_{s}", "pelvis"), (f"thigh_twist_01_{s}", f"thigh_{s}"), (f"thigh_twist_02_{s}", f"thigh_{s}"),
+                (f"calf_{s}", f"thigh_{s}"), (f"calf_twist_01_{s}", f"calf_{s}"), (f"calf_twist_02_{s}", f"calf_{s}"),
+                (f"foot_{s}", f"calf_{s}"), (f"ball_{s}", f"foot_{s}"), (f"ik_foot_{s}", "ik_foot_root"),
+                (f"ik_hand_{s}", "ik_hand_gun")]
+    return _bones(out)
+
+
+def _vrm_bones():
+    C = "J_Bip_C_"
+    out = [("Root", None), (C + "Hips", "Root"), (C + "Spine", C + "Hips"), (C + "Chest", C + "Spine"),
+           (C + "UpperChest", C + "Chest"), (C + "Neck", C + "UpperChest"), (C + "Head", C + "Neck"),
+           ("J_Adj_L_FaceEye", C + "Head"), ("J_Sec_Hair1_01", C + "Head")]
+    for s in ("L", "R"):
+        b = f"J_Bip_{s}_"
+        out += [(b + "Shoulder", C + "UpperChest"), (b + "UpperArm", b + "Shoulder"), (b + "LowerArm", b + "UpperArm"),
+                (b + "Hand", b + "LowerArm"), (b + "Index1", b + "Hand"), (b + "Thumb1", b + "Hand"),
+                (b + "UpperLeg", C + "Hips"), (b + "LowerLeg", b + "UpperLeg"), (b + "Foot", b + "LowerLeg"),
+                (b + "ToeBase", b + "Foot")]
+    return _bones(out)
+
+
+def _rigify_bones():
+    out = [("root", None), ("DEF-spine", "root")]
+    out += [(f"DEF-spine.00{i}", "DEF-spine" if i == 1 else f"DEF-spine.00{i - 1}") for i in range(1, 7)]
+    out += [("torso", "root"), ("hips", "torso"), ("chest", "torso"), ("ORG-spine", "root")]
+    for s in ("L", "R"):
+        out += [(f"DEF-pelvis.{s}", "DEF-spine"), (f"DEF-thigh.{s}", "DEF-spine"),
+                (f"DEF-thigh.{s}.001", f"DEF-thigh.{s}"), (f"DEF-shin.{s}", f"DEF-thigh.{s}.001"),
+                (f"DEF-shin.{s}.001", f"DEF-shin.{s}"), (f"DEF-foot.{s}", f"DEF-shin.{s}.001"),
+                (f"DEF-toe.{s}", f"DEF-foot.{s}"), (f"DEF-shoulder.{s}", "DEF-spine.003"),
+                (f"DEF-upper_arm.{s}", f"DEF-shoulder.{s}"), (f"DEF-upper_arm.{s}.001", f"DEF-upper_arm.{s}"),
+                (f"DEF-forearm.{s}", f"DEF-upper_arm.{s}.001"), (f"DEF-forearm.{s}.001", f"DEF-forearm.{s}"),
+                (f"DEF-hand.{s}", f"DEF-forearm.{s}.001"), (f"upper_arm_fk.{s}", "root"),
+                (f"hand_ik.{s}", "root"), (f"MCH-forearm_ik.{s}", "root")]
+    return _bones(out)
+
+
+@pytest.mark.parametrize("style, bones, preset", [
+    ("mixamo", _mixamo_bones(), "mixamo"),
+    ("mixamo1", _mixamo_bones("mixamorig1:"), "mixamo"),
+    ("mixamo_plain", _mixamo_bones(""), "mixamo_plain"),
+    ("ue5", _ue5_bones(), "ue5"),
+    ("vrm", _vrm_bones(), "vrm"),
+    ("rigify", _rigify_bones(), "rigify"),
+])
+def test_guess_bone_map(style, bones, preset):
+    names = [b[0] for b in bones]
+    expect = bmaps.preset(preset)
+    expect_bones = {j: b.split(":")[-1] for j, b in expect.bones.items()}
+    # with presets
+    bm, notes = bmaps.guess_bone_map(bones)
+    assert bm.name == preset
+    assert {j: b.split(":")[-1] for j, b in bm.bones.items()} == expect_bones
+    assert all(b in names for b in bm.target_bones())
+    assert [n.joint for n in notes] == list(JN) and all(n.confidence == 1.0 for n in notes)
+    bmaps.validate_bone_map(bm, names)
+    # from names and hierarchy alone (Rigify's DEF-spine.004.. carry no neck/head names)
+    if style == "rigify":
+        return
+    bm2, notes2 = bmaps.guess_bone_map(bones, use_presets=False)
+    assert bm2.bones == bm.bones, {j: (bm2.bones.get(j), bm.bones.get(j)) for j in JN
+                                   if bm2.bones.get(j) != bm.bones.get(j)}
+    assert all(n.bone is not None and n.confidence >= 0.6 for n in notes2), notes2
+    if style == "ue5":
+        assert sorted(bm2.twist["left_elbow"]) == ["lowerarm_twist_01_l", "lowerarm_twist_02_l"]
+        assert bm2.twist["right_shoulder"] == ["upperarm_twist_01_r", "upperarm_twist_02_r"]
+    bmaps.validate_bone_map(bm2, names)
+
+
+def test_guess_missing_parts_are_reported():
+    bones = [b for b in _mixamo_bones("") if "Toe" not in b[0] and b[0] != "Spine2"]
+    bones = [(n, "Spine1" if p == "Spine2" else p, h, t) for n, p, h, t in bones]
+    bm, notes = bmaps.guess_bone_map(bones, use_presets=False)
+    by = {n.joint: n for n in notes}
+    assert by["left_foot"].bone is None and by["left_foot"].confidence == 0
+    assert by["spine1"].bone == "Spine" and by["spine3"].bone == "Spine1" and by["spine2"].bone is None
+    assert "left_foot" not in bm.bones
+
+
+# ---------------------------------------------------------------------- (g) validation
+def test_validation_errors_are_clear():
+    body = sk.make_body(1.75)
+    rig, bm, _ = mixamo_rig(body)
+    good = bm.to_dict()
+    with pytest.raises(ValueError, match=r"unknown source joint.*'left_elbw'"):
+        bmaps.validate_bone_map(dict(good, bones=dict(good["bones"], left_elbw="x")))
+    dup = dict(good["bones"], right_wrist="mixamorig:LeftHand")
+    with pytest.raises(ValueError, match=r"used more than once: 'mixamorig:LeftHand' \(joints 'left_wrist' and "
+                                         r"'right_wrist'\)"):
+        bmaps.validate_bone_map(dict(good, bones=dup))
+    with pytest.raises(ValueError, match=r"has no bone\(s\) 'mixamorig:Hip' \(pelvis\)"):
+        bmaps.validate_bone_map(dict(good, bones=dict(good["bones"], pelvis="mixamorig:Hip")), rig.names)
+    with pytest.raises(ValueError, match=r"pelvis.*must be mapped"):
+        bmaps.validate_bone_map({j: b for j, b in good["bones"].items() if j != "pelvis"})
+    with pytest.raises(ValueError, match="twist bones given for joint"):
+        bmaps.validate_bone_map({"pelvis": "a", "twist": {"left_elbow": ["t"]}})
+    with pytest.raises(ValueError, match="twist of 'left_elbow'"):
+        bmaps.validate_bone_map({"pelvis": "a", "left_elbow": "b", "twist": {"left_elbow": ["a"]}})
+    with pytest.raises(ValueError, match="empty or non-text"):
+        bmaps.validate_bone_map({"pelvis": ""})
+    # hierarchy that contradicts the body
+    swapped = dict(good["bones"], left_elbow="mixamorig:LeftArm", left_shoulder="mixamorig:LeftForeArm")
+    with pytest.raises(ValueError, match=r"'mixamorig:LeftForeArm' \(left_shoulder\) is under 'mixamorig:LeftArm'"):
+        rt.retarget(np.broadcast_to(np.eye(3), (1, 22, 3, 3)), body.rest_positions()[None], body, rig, swapped)
+    # a twist bone outside its segment
+    with pytest.raises(ValueError, match="not a descendant"):
+        rt.make_plan(body, rig, dict(good["bones"], twist={"left_elbow": ["mixamorig:HeadTop_End"]}))
+    with pytest.raises(ValueError, match="duplicate bone names"):
+        rt.TargetRig(["a", "a"], [-1, 0], np.stack([np.eye(3)] * 2), np.zeros((2, 3)))
+    with pytest.raises(ValueError, match="not a rotation"):
+        rt.TargetRig(["a"], [-1], 2 * np.eye(3)[None], np.zeros((1, 3)))
+    with pytest.raises(ValueError, match="own ancestor"):
+        rt.TargetRig(["a", "b"], [1, 0], np.stack([np.eye(3)] * 2), np.zeros((2, 3)))
+    with pytest.raises(ValueError, match=r"\(T, 22, 3, 3\)"):
+        rt.retarget(np.zeros((2, 21, 3, 3)), np.zeros((2, 21, 3)), body, rig, bm)
