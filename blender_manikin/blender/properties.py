@@ -47,6 +47,18 @@ def _armature_poll(self, obj):
     return obj.type == 'ARMATURE'
 
 
+def _character_poll(self, obj):
+    from .armature import PROP_BODY
+    return obj.type == 'ARMATURE' and PROP_BODY not in obj.keys()
+
+
+def _bone_map_items():
+    from ..core.bone_maps import PRESETS
+    return [('AUTO', "Guess", "From the character's bone names and hierarchy (presets first)")] + \
+        [(p.upper(), p.replace("_", " ").title().replace("Ue", "Unreal UE").replace("Vrm", "VRM"),
+          f"The {p} preset") for p in PRESETS] + [('FILE', "From File", "A saved bone map (JSON)")]
+
+
 class MANIKIN_DeviceSource(PropertyGroup):
     """A scene object (optionally one of its bones) standing in for a tracker device."""
     object: PointerProperty(name="Object", type=bpy.types.Object,
@@ -161,6 +173,22 @@ class MANIKIN_Settings(PropertyGroup):
     armature: PointerProperty(name="Armature", type=bpy.types.Object, poll=_armature_poll,
                               description="Armature of the last solve")
     last_report: StringProperty(name="Last Solve", default="")
+
+    retarget_target: PointerProperty(name="Character", type=bpy.types.Object, poll=_character_poll,
+                                     description="The character's armature the solved motion goes onto")
+    retarget_map: EnumProperty(name="Bone Map", items=_bone_map_items(), default='AUTO',
+                               description="Which of the character's bones each joint drives")
+    retarget_map_file: StringProperty(name="Map File", subtype='FILE_PATH', default="",
+                                      description="A saved bone map (JSON: joint -> bone)")
+    retarget_root: EnumProperty(
+        name="Root Motion", default='SCALED',
+        items=[('SCALED', "Scaled", "The hips travel as the performer's, scaled by the ratio of leg lengths"),
+               ('IN_PLACE', "In Place", "No horizontal travel; the height changes scaled"),
+               ('AS_IS', "As Is", "The performer's travel, unscaled")])
+    retarget_keep_ends: BoolProperty(name="Keep Hands and Feet on Targets", default=False,
+                                     description="Solve the character's arms and legs again on its own limb "
+                                                 "lengths, keeping the swivel, so its hands and feet land where "
+                                                 "the performer's were (scaled with the root motion)")
 
 
 def device_source(settings, device):

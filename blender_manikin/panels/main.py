@@ -156,4 +156,25 @@ class MANIKIN_PT_output(_Base, Panel):
         layout.prop(s, "armature")
 
 
-CLASSES = (MANIKIN_PT_solve, MANIKIN_PT_calibration, MANIKIN_PT_output)
+class MANIKIN_PT_retarget(_Base, Panel):
+    bl_label = "Retarget to Character"
+    bl_parent_id = "MANIKIN_PT_solve"
+    bl_options = {'DEFAULT_CLOSED'}
+
+    def draw(self, context):
+        layout = self.layout
+        s = context.scene.manikin
+        layout.use_property_split = True
+        layout.use_property_decorate = False
+        layout.prop(s, "retarget_target")
+        row = layout.row(align=True)
+        row.prop(s, "retarget_map")
+        row.operator("manikin.save_bone_map", text="", icon='FILE_TICK')
+        if s.retarget_map == 'FILE':
+            layout.prop(s, "retarget_map_file")
+        layout.prop(s, "retarget_root")
+        layout.prop(s, "retarget_keep_ends")
+        layout.operator("manikin.retarget", icon='ARMATURE_DATA')
+
+
+CLASSES = (MANIKIN_PT_solve, MANIKIN_PT_calibration, MANIKIN_PT_output, MANIKIN_PT_retarget)

@@ -1,0 +1,151 @@
+"""Retargeting in Blender: a solved take onto a Mixamo-named character in an A-pose with rolled bones."""
+import numpy as np
+import pytest
+
+bpy = pytest.importorskip("bpy")
+
+import blender_manikin  # noqa: E402
+from blender_manikin.blender import keying, retarget_apply, writer  # noqa: E402
+from blender_manikin.core import bone_maps  # noqa: E402
+from blender_manikin.core import rotations as rot  # noqa: E402
+from blender_manikin.core import skeleton as sk  # noqa: E402
+
+from blender_util import fresh_scene, synthetic_result  # noqa: E402
+
+T = 30
+
+
+@pytest.fixture
+def addon():
+    fresh_scene()
+    blender_manikin.register()
+    yield
+    blender_manikin.unregister()
+
+
+def _mixamo_character(name="Character", stature=1.62, arm_down_deg=45.0, seed=3):
+    """A Mixamo-named armature: the body model's joints at another stature, arms 45° down (an
+    A-pose), every bone rolled by a random angle.  Returns the object."""
+    bmap = bone_maps.preset("mixamo")
+    body = sk.make_body(stature)
+    P = body.rest_positions()
+    for side, sx in (("left", 1.0), ("right", -1.0)):           # the A-pose: arms turned down
+        s = P[sk.J[f"{side}_shoulder"]].copy()
+        R = rot.axis_angle_rotation(np.array([0.0, 1.0, 0.0]), np.radians(sx * arm_down_deg))
+        for j in ("elbow", "wrist"):
+            P[sk.J[f"{side}_{j}"]] = s + R @ (P[sk.J[f"{side}_{j}"]] - s)
+    rng = np.random.default_rng(seed)
+    arm = bpy.data.armatures.new(name)
+    obj = bpy.data.objects.new(name, arm)
+    bpy.context.scene.collection.objects.link(obj)
+    bpy.context.view_layer.objects.active = obj
+    bpy.ops.object.mode_set(mode='EDIT')
+    eb = arm.edit_bones
+    made = {}
+    for j in range(sk.NUM_JOINTS):                               # parents first (SMPL order)
+        joint = sk.JOINT_NAMES[j]
+        b = eb.new(bmap.bones[joint])
+        b.head = P[j]
+        kids = [c for c in sk.CHILDREN[j] if sk.JOINT_NAMES[c] in bmap.bones]
+        if len(kids) == 1 or joint in ("pelvis", "spine3"):
+            c = kids[0] if len(kids) == 1 else sk.J["spine1" if joint == "pelvis" else "neck"]
+            b.tail = P[c]
+        else:                                                    # end bones: along the parent's direction
+            p = sk.PARENTS[j]
+            d = (P[j] - P[p]) / np.linalg.norm(P[j] - P[p])
+            b.tail = P[j] + 0.08 * d
+        b.roll = float(rng.uniform(-np.pi, np.pi))
+        if j:
+            b.parent = made[sk.PARENTS[j]]
+        made[j] = b
+    bpy.ops.object.mode_set(mode='OBJECT')
+    return obj
+
+
+def _source(stature=1.8):
+    res = synthetic_result(T=T, fps=24.0, seed=1, stature=stature)
+    out = writer.write_result(res, writer.WriteOptions(frame_start=1))
+    return res, out.armature
+
+
+def _bone_world(obj, name):
+    pb = obj.pose.bones[name]
+    W = np.array(obj.matrix_world)
+    return (W @ np.append(np.array(pb.head), 1))[:3], (W @ np.append(np.array(pb.tail), 1))[:3]
+
+
+def test_retarget_onto_an_a_pose_mixamo_rig(addon):
+    res, src = _source()
+    char = _mixamo_character(stature=1.95)                     # long enough limbs to reach every target
+    old = bpy.data.actions.new("character_idle")             # the user's own action: kept, untouched
+    keying.assign_action(char, old)
+    keying.key_channels(old, char, [1.0, 10.0], [('pose.bones["mixamorig:Hips"].location', 0, "Hips",
+                                                   [0.0, 0.1])])
+    s = bpy.context.scene.manikin
+    s.armature = src
+    s.retarget_target = char
+    s.retarget_map, s.retarget_root, s.retarget_keep_ends = 'AUTO', 'AS_IS', True
+    bpy.context.view_layer.objects.active = src
+    assert bpy.ops.manikin.retarget() == {'FINISHED'}
+    act = char.animation_data.action
+    assert act != old and act.name.startswith("MANIKIN_retarget_") and old.name in bpy.data.actions
+    assert old.use_fake_user and len(keying.action_fcurves(old, char)) == 1
+    assert all(len(fc.keyframe_points) == T for fc in keying.action_fcurves(act, char))
+    pos, world = res.fk()
+    sc = bpy.context.scene
+    worst_end = 0.0
+    for k in (0, 11, 29):
+        sc.frame_set(1 + k)
+        # hands and feet kept on the performer's (root motion as is): exactly there, though the
+        # character's arms and legs are longer (its limbs re-solved with the swivel)
+        for bone, j in (("mixamorig:LeftHand", "left_wrist"), ("mixamorig:RightFoot", "right_ankle")):
+            h, _ = _bone_world(char, bone)
+            worst_end = max(worst_end, float(np.linalg.norm(h - pos[k, sk.J[j]])))
+    assert worst_end < 1e-4, worst_end
+    assert char.pose.bones["mixamorig:LeftArm"].rotation_mode == 'QUATERNION'
+    # a shorter character cannot reach everywhere: the report says where
+    short = _mixamo_character("Short", stature=1.5)
+    _, out, notes = retarget_apply.retarget_onto(src, short, "mixamo", None, "as_is", True)
+    assert any("out of the character's reach" in n for n in notes), notes
+
+
+def test_retarget_directions_without_keep_ends_and_a_saved_map(addon, tmp_path):
+    res, src = _source()
+    char = _mixamo_character(stature=1.7, arm_down_deg=30.0)
+    bmap, _ = retarget_apply.resolve_bone_map("auto", char)
+    assert bmap.bones["left_elbow"] == "mixamorig:LeftForeArm"
+    path = tmp_path / "map.json"
+    bone_maps.save_bone_map(path, bmap)
+    action, out, notes = retarget_apply.retarget_onto(src, char, "file", str(path), "scaled", False)
+    assert notes == []
+    pos, _ = res.fk()
+    sc = bpy.context.scene
+    for k in (3, 20):
+        sc.frame_set(1 + k)
+        for bone, a, b in (("mixamorig:LeftForeArm", "left_elbow", "left_wrist"),
+                           ("mixamorig:LeftUpLeg", "left_hip", "left_knee"),
+                           ("mixamorig:Spine1", "spine2", "spine3")):
+            h, t = _bone_world(char, bone)
+            d_src = rot.normalize(pos[k, sk.J[b]] - pos[k, sk.J[a]])
+            assert np.degrees(np.arccos(np.clip(np.dot(rot.normalize(t - h), d_src), -1, 1))) < 0.5, (bone, k)
+    with pytest.raises(ValueError, match="choose a target armature other than the solved one"):
+        retarget_apply.retarget_onto(src, src)
+
+
+def test_live_rig_source_is_sampled_by_evaluation(addon):
+    """A live-rig solve (constraints, no FK keys on the limbs) is read by evaluating it: the same
+    joints as the FK solve it came from."""
+    from blender_manikin.blender import live_rig
+    _, src = _source()
+    frames, wr_fk, pos_fk, sw_fk, _ = retarget_apply.sample_source(src)
+    # the rig from the FK keys (their swivel measured from the joints, as "Make Live" does)
+    res, _ = live_rig.result_from_fk_action(src, 24.0)
+    live_rig.build_live_rig(src, res, frames=frames)
+    frames2, wr, pos, sw, body = retarget_apply.sample_source(src)
+    np.testing.assert_allclose(frames2, frames)
+    np.testing.assert_allclose(pos, pos_fk, atol=1e-4)
+    # orientations too, but the elbows': the rig puts the forearm's pronation into the elbow
+    # (within its range) where these FK keys had it in the wrist; the hands agree either way
+    not_elbows = [j for j in range(sk.NUM_JOINTS) if j not in (sk.J["left_elbow"], sk.J["right_elbow"])]
+    assert np.degrees(rot.geodesic_angle(wr[:, not_elbows], wr_fk[:, not_elbows])).max() < 0.05
+    np.testing.assert_allclose(np.angle(np.exp(1j * (sw - sw_fk))), 0.0, atol=1e-4)
