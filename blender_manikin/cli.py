@@ -43,6 +43,9 @@ Options of ``solve`` (they mirror the panel; ``--help`` has them all):
                               and fbx, the numpy core writes them without Blender
 --bvh-units cm|m              BVH length unit (default cm)
 --trackers                    also create (and export) keyed tracker empties
+--retarget FILE.blend[:OBJECT]  also put the motion onto this character (appended); blend and
+                              fbx then carry it (--bone-map auto|PRESET|FILE.json,
+                              --root-motion scaled|in_place|as_is, --keep-ends)
 --no-live-rig                 plain FK keys only (no live swivel rig)
 
 ``convert INPUT... --out DIR`` converts many recordings on Dask (the same solve options, plus
@@ -104,6 +107,40 @@ def _add_solve_options(s):
                    help="write the layout detected in the first wide-layout CSV input, for --layout")
 
 
+def _bone_map_presets():
+    from .core.bone_maps import PRESETS
+    return tuple(PRESETS)
+
+
+def append_character(spec):
+    """The armature object named by ``spec`` (``FILE.blend`` or ``FILE.blend:OBJECT``), appended
+    into the current file with its children (meshes); ``ValueError`` naming the problem."""
+    import bpy
+    path, _, name = str(spec).partition(".blend:")
+    path = path + ".blend" if name or not path.endswith(".blend") else path
+    if not os.path.isfile(path):
+        raise ValueError(f"--retarget: no such file {path!r}")
+    with bpy.data.libraries.load(path, link=False) as (src, dst):
+        dst.objects = list(src.objects)
+    objs = [o for o in dst.objects if o is not None]
+    arms = [o for o in objs if o.type == 'ARMATURE' and (not name or o.name == name)]
+    if len(arms) != 1:
+        have = ", ".join(sorted(o.name for o in objs if o.type == 'ARMATURE')) or "none"
+        for o in objs:
+            bpy.data.objects.remove(o)
+        what = f"no armature named {name!r}" if name else "name the armature, FILE.blend:OBJECT"
+        raise ValueError(f"--retarget {spec}: {what} (armatures in the file: {have})")
+    arm = arms[0]
+    keep = {arm} | {o for o in objs if o.parent == arm}
+    coll = bpy.context.scene.collection
+    for o in objs:
+        if o in keep:
+            coll.objects.link(o)
+        else:
+            bpy.data.objects.remove(o)
+    return arm
+
+
 def _keypoint_layouts():
     from .core.keypoint_layouts import LAYOUTS
     return tuple(LAYOUTS)
@@ -121,6 +158,17 @@ def build_parser():
     s.add_argument("--format", default=",".join(DEFAULT_FORMATS), metavar="LIST",
                    help="comma-separated: " + ",".join(FORMATS))
     s.add_argument("--trackers", action="store_true", help="create keyed tracker empties")
+    s.add_argument("--retarget", default=None, metavar="FILE.blend[:OBJECT]",
+                   help="also put the motion onto this character (an armature appended from a .blend; "
+                        "OBJECT: its name when the file holds several); blend/fbx then carry it")
+    s.add_argument("--bone-map", default="auto", metavar="PRESET|FILE.json",
+                   help="the character's bone map: auto (guessed), a preset (" + ",".join(_bone_map_presets())
+                        + ") or a saved map")
+    s.add_argument("--root-motion", choices=("scaled", "in_place", "as_is"), default="scaled",
+                   help="retarget: the hips' travel scaled by the leg lengths' ratio (default), in place, as is")
+    s.add_argument("--keep-ends", action="store_true",
+                   help="retarget: solve the character's limbs again so its hands and feet land where the "
+                        "performer's were")
     s.add_argument("--no-live-rig", dest="live_rig", action="store_false",
                    help="write plain FK keys only (default: the live swivel rig, whose elbows and knees "
                         "follow the swivel properties)")
@@ -215,11 +263,12 @@ def reset_scene(fps):
 def export_fbx(path, output):
     """FBX of the armature (and tracker empties), animation baked."""
     import bpy
-    objs = [output.armature] + list(output.trackers.values())
+    objs = [output.armature] + [o for o in output.armature.children if o.type == 'MESH'] + \
+        list(output.trackers.values())
     for o in bpy.context.view_layer.objects:
         o.select_set(o in objs)
     bpy.context.view_layer.objects.active = output.armature
-    types = {'ARMATURE'} | ({'EMPTY'} if output.trackers else set())
+    types = {'ARMATURE', 'MESH'} | ({'EMPTY'} if output.trackers else set())
     res = bpy.ops.export_scene.fbx(filepath=path, use_selection=True, object_types=types,
                                    add_leaf_bones=False, bake_anim=True,
                                    bake_anim_use_all_bones=True, bake_anim_use_nla_strips=False,
@@ -260,8 +309,20 @@ def convert_one(path, out_dir, args, formats):
     reset_scene(args.fps)
     job = SolveJob(_config(path, args))
     job.run(bpy.context)
+    export = job.output
+    if getattr(args, "retarget", None):
+        from types import SimpleNamespace
+        from .blender import retarget_apply
+        char = append_character(args.retarget)
+        bone_map, map_path = args.bone_map, None
+        if bone_map.lower().endswith(".json"):
+            bone_map, map_path = "file", args.bone_map
+        _, _, notes = retarget_apply.retarget_onto(job.output.armature, char, bone_map, map_path,
+                                                   args.root_motion, args.keep_ends)
+        job.info.extend(f"retarget: {n}" for n in notes)
+        export = SimpleNamespace(armature=char, trackers={})          # the character is what is exported
     stem = os.path.splitext(os.path.basename(os.path.normpath(path)))[0]
-    blender_writers = {"fbx": lambda dst: export_fbx(dst, job.output),
+    blender_writers = {"fbx": lambda dst: export_fbx(dst, export),
                        "blend": lambda dst: bpy.ops.wm.save_as_mainfile(filepath=dst, copy=True, compress=True)}
     written = []
     for fmt in formats:
@@ -333,13 +394,15 @@ def main(argv=None):
         return 2
     if args.command == "convert":
         return convert_main(args, formats)
-    needs_blender = any(f in BLENDER_FORMATS for f in formats) or args.trackers
+    needs_blender = any(f in BLENDER_FORMATS for f in formats) or args.trackers or bool(args.retarget)
     if needs_blender:
         try:
             with quiet_stdout(to_stderr=True):   # Blender may print warnings as it starts
                 import bpy  # noqa: F401  (availability check)
         except ImportError:
-            print(f"blender_manikin: error: {', '.join(f for f in formats if f in BLENDER_FORMATS) or '--trackers'} "
+            what = [f for f in formats if f in BLENDER_FORMATS] + (["--trackers"] if args.trackers else []) + \
+                (["--retarget"] if args.retarget else [])
+            print(f"blender_manikin: error: {', '.join(what)} "
                   "needs Blender: run with Blender (blender -b --python cli.py -- ...) or install bpy "
                   "(json and bvh are written without it)", file=sys.stderr)
             return 2

@@ -149,3 +149,44 @@ def test_live_rig_source_is_sampled_by_evaluation(addon):
     not_elbows = [j for j in range(sk.NUM_JOINTS) if j not in (sk.J["left_elbow"], sk.J["right_elbow"])]
     assert np.degrees(rot.geodesic_angle(wr[:, not_elbows], wr_fk[:, not_elbows])).max() < 0.05
     np.testing.assert_allclose(np.angle(np.exp(1j * (sw - sw_fk))), 0.0, atol=1e-4)
+
+
+def test_cli_retargets_onto_a_character_from_a_blend_and_the_fbx_round_trip_holds(tmp_path, monkeypatch):
+    """``solve --retarget FILE.blend:Character``: the .blend and the FBX carry the character with
+    its new action; the FBX, imported again, puts the mapped bones where the .blend does."""
+    from blender_manikin import cli
+    from blender_manikin.blender import solve_job
+    from blender_util import stub_solver, write_recording_csv
+    fresh_scene()
+    _mixamo_character("Character", stature=1.7)
+    _mixamo_character("Other", stature=1.5)
+    lib = tmp_path / "characters.blend"
+    bpy.ops.wm.save_as_mainfile(filepath=str(lib), copy=True)
+    rec = write_recording_csv(tmp_path / "take.csv", synthetic_result(T=40, fps=30.0, seed=2))
+    monkeypatch.setattr(solve_job, "run_solver", stub_solver)
+    out = tmp_path / "out"
+    assert cli.main(["solve", str(rec), "--out", str(out), "--format", "blend,fbx", "--fps", "30",
+                     "--height", "1.8", "--retarget", f"{lib}:Character", "--bone-map", "mixamo"]) == 0
+    bpy.ops.wm.open_mainfile(filepath=str(out / "take.blend"))
+    char = bpy.data.objects["Character"]
+    assert "Other" not in bpy.data.objects
+    assert char.animation_data.action.name.startswith("MANIKIN_retarget_")
+    names = ["mixamorig:LeftHand", "mixamorig:RightFoot", "mixamorig:Head", "mixamorig:Hips"]
+    sc = bpy.context.scene
+    sc.frame_set(12)
+    in_blend = np.array([_bone_world(char, n)[0] for n in names])
+    fresh_scene()
+    bpy.context.scene.render.fps = 30
+    # FBX keeps scene frame f at time f / fps; the importer's default anim_offset would add a frame
+    bpy.ops.import_scene.fbx(filepath=str(out / "take.fbx"), automatic_bone_orientation=False, anim_offset=0.0)
+    arm = next(o for o in bpy.data.objects if o.type == 'ARMATURE')
+    bpy.context.scene.frame_set(12)
+    from_fbx = np.array([_bone_world(arm, n)[0] for n in names])
+    np.testing.assert_allclose(from_fbx, in_blend, atol=1e-3)
+    # a file with two armatures and no name, or a wrong name: a clear error
+    fresh_scene()
+    with pytest.raises(ValueError, match="name the armature, FILE.blend:OBJECT "
+                                         "\\(armatures in the file: Character, Other\\)"):
+        cli.append_character(str(lib))
+    with pytest.raises(ValueError, match="no armature named 'Nobody'"):
+        cli.append_character(f"{lib}:Nobody")

@@ -103,7 +103,7 @@ class SolveOutcome:
             parts.append(f"stature {self.body.stature:.2f} m")
         for note in self.info:
             if note.startswith(("calibrated", "arm span", "estimated stature", "no twist information",
-                                "point(s) never seen")):
+                                "point(s) never seen", "retarget:")):
                 parts.append(note)
         if self.report is not None:
             gaps = getattr(self.report, "gaps", [])
