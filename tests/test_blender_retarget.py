@@ -190,3 +190,36 @@ def test_cli_retargets_onto_a_character_from_a_blend_and_the_fbx_round_trip_hold
         cli.append_character(str(lib))
     with pytest.raises(ValueError, match="no armature named 'Nobody'"):
         cli.append_character(f"{lib}:Nobody")
+
+
+def test_retarget_onto_a_rig_generated_by_rigify(addon):
+    """Blender's own Rigify: human metarig, generated; the guess keys its FK controls (with the
+    IK/FK switches keyed to FK in the new action), their bases taken under the rig's evaluated
+    mechanism, and the deforming arms and legs point where the performer's do."""
+    import addon_utils
+    addon_utils.enable("rigify", default_set=True, persistent=True)
+    try:
+        res, src = _source()
+        bpy.ops.object.armature_human_metarig_add()
+        meta = bpy.context.active_object
+        assert bpy.ops.pose.rigify_generate() == {'FINISHED'}
+        rig = next(o for o in bpy.data.objects if o.type == 'ARMATURE' and o not in (meta, src))
+        bmap, _ = retarget_apply.resolve_bone_map("auto", rig)
+        assert bmap.name == "rigify_fk"
+        action, out, notes = retarget_apply.retarget_onto(src, rig, "auto", None, "scaled", False)
+        paths = {fc.data_path for fc in keying.action_fcurves(action, rig)}
+        assert 'pose.bones["upper_arm_parent.L"]["IK_FK"]' in paths
+        assert rig.pose.bones["upper_arm_parent.L"]["IK_FK"] == 0.0 or rig.animation_data.action == action
+        pos, _ = res.fk()
+        sc = bpy.context.scene
+        for k in (5, 25):
+            sc.frame_set(1 + k)
+            for bone, a, b in (("DEF-forearm.L", "left_elbow", "left_wrist"),
+                               ("DEF-shin.R", "right_knee", "right_ankle"),
+                               ("DEF-upper_arm.R", "right_shoulder", "right_elbow")):
+                h, t = _bone_world(rig, bone)
+                d_src = rot.normalize(pos[k, sk.J[b]] - pos[k, sk.J[a]])
+                ang = np.degrees(np.arccos(np.clip(np.dot(rot.normalize(t - h), d_src), -1, 1)))
+                assert ang < 3.0, (bone, k, ang)
+    finally:
+        addon_utils.disable("rigify", default_set=True)

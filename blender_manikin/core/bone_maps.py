@@ -207,8 +207,10 @@ def _rigify(prefix: str, name: str, twist: bool) -> BoneMap:
 
 
 def _rigify_fk() -> BoneMap:
-    center = {"pelvis": "torso", "spine1": "spine_fk.001", "spine2": "spine_fk.002",
-              "spine3": "spine_fk.003", "neck": "neck", "head": "head"}
+    # A generated rig's FK spine pivots at the torso control: spine_fk.001 and spine_fk hang down
+    # from it towards the hips (the thighs' parents), spine_fk.002 and .003 go up to the neck.  So
+    # the pelvis drives the torso control, the chest the upper pair; spine1 is folded into them.
+    center = {"pelvis": "torso", "spine2": "spine_fk.002", "spine3": "spine_fk.003", "neck": "neck", "head": "head"}
     stems = dict(zip(_LIMB_PARTS, ("shoulder", "upper_arm_fk", "forearm_fk", "hand_fk", "thigh_fk", "shin_fk",
                                    "foot_fk", "toe_fk")))
     return _sided(center, stems, lambda s, side: f"{s}.{'L' if side == 'left' else 'R'}", None, "rigify_fk")
