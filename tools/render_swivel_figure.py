@@ -74,8 +74,9 @@ def _material(name, rgb):
     return m
 
 
-def stick_mesh(arm_obj, mats):
-    """A skinned capsule-ish stick figure of the deform bones (cylinders + joint spheres)."""
+def stick_mesh(arm_obj, mats, bones=None):
+    """A skinned capsule-ish stick figure of the deform bones (cylinders + joint spheres); bones:
+    the names to draw (default: every deforming bone but the live rig's)."""
     import bmesh
     from mathutils import Matrix, Vector
 
@@ -84,7 +85,7 @@ def stick_mesh(arm_obj, mats):
     names = []           # vertex group index -> bone name
     limb_bones = {n for r in live_rig.LIMB_RIGS for n in (r.base, r.mid)}
     for b in arm_obj.data.bones:
-        if not b.use_deform or b.name in live_rig.RIG_BONES:
+        if not b.use_deform or b.name in live_rig.RIG_BONES or (bones is not None and b.name not in bones):
             continue
         head, tail = Vector(b.head_local), Vector(b.tail_local)
         length = (tail - head).length
@@ -96,6 +97,8 @@ def stick_mesh(arm_obj, mats):
         verts += bmesh.ops.create_uvsphere(bm, u_segments=12, v_segments=8, radius=radius * 1.25,
                                            matrix=Matrix.Translation(head))["verts"]
         parent = b.parent
+        if bones is not None and parent is not None and parent.name not in bones:
+            parent = None                # a mechanism bone between drawn ones: no bridge
         if parent is not None and not b.use_connect and (head - parent.head_local).length > 1e-3:
             # bridge the gap to an unconnected child (pelvis -> hips, spine3 -> collars)
             a = Vector(parent.head_local)
