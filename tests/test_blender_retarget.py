@@ -23,9 +23,11 @@ def addon():
     blender_manikin.unregister()
 
 
-def _mixamo_character(name="Character", stature=1.62, arm_down_deg=45.0, seed=3):
+def _mixamo_character(name="Character", stature=1.62, arm_down_deg=45.0, seed=3, fbx_cm=False):
     """A Mixamo-named armature: the body model's joints at another stature, arms 45° down (an
-    A-pose), every bone rolled by a random angle.  Returns the object."""
+    A-pose), every bone rolled by a random angle.  fbx_cm: stored as an FBX in centimetres lands
+    in Blender (bones in a +Y-up frame, x100; the object turned 90° about X and scaled 0.01), the
+    character facing +Y.  Returns the object."""
     bmap = bone_maps.preset("mixamo")
     body = sk.make_body(stature)
     P = body.rest_positions()
@@ -34,6 +36,9 @@ def _mixamo_character(name="Character", stature=1.62, arm_down_deg=45.0, seed=3)
         R = rot.axis_angle_rotation(np.array([0.0, 1.0, 0.0]), np.radians(sx * arm_down_deg))
         for j in ("elbow", "wrist"):
             P[sk.J[f"{side}_{j}"]] = s + R @ (P[sk.J[f"{side}_{j}"]] - s)
+    if fbx_cm:     # face +Y (turned 180° about Z), then into the file's +Y-up centimetres
+        P = P * np.array([-1.0, -1.0, 1.0])
+        P = np.stack([P[:, 0], P[:, 2], -P[:, 1]], -1) * 100.0
     rng = np.random.default_rng(seed)
     arm = bpy.data.armatures.new(name)
     obj = bpy.data.objects.new(name, arm)
@@ -53,12 +58,16 @@ def _mixamo_character(name="Character", stature=1.62, arm_down_deg=45.0, seed=3)
         else:                                                    # end bones: along the parent's direction
             p = sk.PARENTS[j]
             d = (P[j] - P[p]) / np.linalg.norm(P[j] - P[p])
-            b.tail = P[j] + 0.08 * d
+            b.tail = P[j] + 0.08 * d * (100.0 if fbx_cm else 1.0)
         b.roll = float(rng.uniform(-np.pi, np.pi))
         if j:
             b.parent = made[sk.PARENTS[j]]
         made[j] = b
     bpy.ops.object.mode_set(mode='OBJECT')
+    if fbx_cm:
+        obj.rotation_euler = (np.pi / 2, 0.0, 0.0)
+        obj.scale = (0.01, 0.01, 0.01)
+        bpy.context.view_layer.update()
     return obj
 
 
@@ -225,3 +234,28 @@ def test_retarget_onto_a_rig_generated_by_rigify(addon):
                 assert ang < 3.0, (bone, k, ang)
     finally:
         addon_utils.disable("rigify", default_set=True)
+
+
+def test_retarget_onto_an_fbx_character_in_centimetres_facing_y(addon):
+    """A character as an FBX in centimetres arrives (+Y up, object turned 90° about X, scale 0.01,
+    facing +Y): the motion turns with it, its segments point where the performer's do turned by
+    the facing, and the hips travel in its own metres."""
+    res, src = _source()
+    char = _mixamo_character("FBXChar", stature=1.7, fbx_cm=True)
+    action, out, notes = retarget_apply.retarget_onto(src, char, "auto", None, "as_is", False)
+    pos, _ = res.fk()
+    turn = np.diag([-1.0, -1.0, 1.0])             # the performer faces -Y, the character +Y
+    sc = bpy.context.scene
+    for k in (4, 26):
+        sc.frame_set(1 + k)
+        for bone, a, b in (("mixamorig:LeftForeArm", "left_elbow", "left_wrist"),
+                           ("mixamorig:RightUpLeg", "right_hip", "right_knee"),
+                           ("mixamorig:Spine1", "spine2", "spine3")):
+            h, t = _bone_world(char, bone)
+            d_src = turn @ rot.normalize(pos[k, sk.J[b]] - pos[k, sk.J[a]])
+            assert np.degrees(np.arccos(np.clip(np.dot(rot.normalize(t - h), d_src), -1, 1))) < 0.5, (bone, k)
+        # as is: the hips move as far as the performer's (metres in the world, not centimetres)
+        hips, _ = _bone_world(char, "mixamorig:Hips")
+        sc.frame_set(1)
+        hips0, _ = _bone_world(char, "mixamorig:Hips")
+        np.testing.assert_allclose(np.linalg.norm(hips - hips0), np.linalg.norm(pos[k, 0] - pos[0, 0]), atol=1e-4)
