@@ -173,3 +173,55 @@ def blender_binary():
     if REQUIRE_BLENDER_BINARY:
         pytest.fail(f"{why} (BLENDER_MANIKIN_REQUIRE_BLENDER_BINARY is set)")
     pytest.skip(why)
+
+
+def mixamo_style_character(name="Character", stature=1.62, arm_down_deg=45.0, seed=3, fbx_cm=False,
+                           arm_scale=1.0):
+    """A Mixamo-named armature (for the retarget tests and tools/render_retarget_figure.py): the
+    body model's joints at ``stature`` metres, arms ``arm_scale`` times as long and turned
+    ``arm_down_deg`` down (an A-pose rest), every bone rolled by a random angle.  fbx_cm: as an
+    FBX in centimetres lands in Blender (bones in a +Y-up frame, x100; the object turned 90°
+    about X and scaled 0.01), the character facing +Y.  Returns the object."""
+    import bpy
+    from blender_manikin.core import bone_maps
+    bmap = bone_maps.preset("mixamo")
+    body = sk.make_body(stature)
+    P = body.rest_positions()
+    for side, sx in (("left", 1.0), ("right", -1.0)):           # the A-pose: arms turned down
+        s = P[sk.J[f"{side}_shoulder"]].copy()
+        R = rot.axis_angle_rotation(np.array([0.0, 1.0, 0.0]), np.radians(sx * arm_down_deg))
+        for j in ("elbow", "wrist"):
+            P[sk.J[f"{side}_{j}"]] = s + arm_scale * (R @ (P[sk.J[f"{side}_{j}"]] - s))
+    if fbx_cm:     # face +Y (turned 180° about Z), then into the file's +Y-up centimetres
+        P = P * np.array([-1.0, -1.0, 1.0])
+        P = np.stack([P[:, 0], P[:, 2], -P[:, 1]], -1) * 100.0
+    rng = np.random.default_rng(seed)
+    arm = bpy.data.armatures.new(name)
+    obj = bpy.data.objects.new(name, arm)
+    bpy.context.scene.collection.objects.link(obj)
+    bpy.context.view_layer.objects.active = obj
+    bpy.ops.object.mode_set(mode='EDIT')
+    eb = arm.edit_bones
+    made = {}
+    for j in range(sk.NUM_JOINTS):                               # parents first (SMPL order)
+        joint = sk.JOINT_NAMES[j]
+        b = eb.new(bmap.bones[joint])
+        b.head = P[j]
+        kids = [c for c in sk.CHILDREN[j] if sk.JOINT_NAMES[c] in bmap.bones]
+        if len(kids) == 1 or joint in ("pelvis", "spine3"):
+            c = kids[0] if len(kids) == 1 else sk.J["spine1" if joint == "pelvis" else "neck"]
+            b.tail = P[c]
+        else:                                                    # end bones: along the parent's direction
+            p = sk.PARENTS[j]
+            d = (P[j] - P[p]) / np.linalg.norm(P[j] - P[p])
+            b.tail = P[j] + 0.08 * d * (100.0 if fbx_cm else 1.0)
+        b.roll = float(rng.uniform(-np.pi, np.pi))
+        if j:
+            b.parent = made[sk.PARENTS[j]]
+        made[j] = b
+    bpy.ops.object.mode_set(mode='OBJECT')
+    if fbx_cm:
+        obj.rotation_euler = (np.pi / 2, 0.0, 0.0)
+        obj.scale = (0.01, 0.01, 0.01)
+        bpy.context.view_layer.update()
+    return obj

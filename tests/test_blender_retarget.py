@@ -10,7 +10,7 @@ from blender_manikin.core import bone_maps  # noqa: E402
 from blender_manikin.core import rotations as rot  # noqa: E402
 from blender_manikin.core import skeleton as sk  # noqa: E402
 
-from blender_util import fresh_scene, synthetic_result  # noqa: E402
+from blender_util import fresh_scene, mixamo_style_character, synthetic_result  # noqa: E402
 
 T = 30
 
@@ -21,54 +21,6 @@ def addon():
     blender_manikin.register()
     yield
     blender_manikin.unregister()
-
-
-def _mixamo_character(name="Character", stature=1.62, arm_down_deg=45.0, seed=3, fbx_cm=False):
-    """A Mixamo-named armature: the body model's joints at another stature, arms 45° down (an
-    A-pose), every bone rolled by a random angle.  fbx_cm: stored as an FBX in centimetres lands
-    in Blender (bones in a +Y-up frame, x100; the object turned 90° about X and scaled 0.01), the
-    character facing +Y.  Returns the object."""
-    bmap = bone_maps.preset("mixamo")
-    body = sk.make_body(stature)
-    P = body.rest_positions()
-    for side, sx in (("left", 1.0), ("right", -1.0)):           # the A-pose: arms turned down
-        s = P[sk.J[f"{side}_shoulder"]].copy()
-        R = rot.axis_angle_rotation(np.array([0.0, 1.0, 0.0]), np.radians(sx * arm_down_deg))
-        for j in ("elbow", "wrist"):
-            P[sk.J[f"{side}_{j}"]] = s + R @ (P[sk.J[f"{side}_{j}"]] - s)
-    if fbx_cm:     # face +Y (turned 180° about Z), then into the file's +Y-up centimetres
-        P = P * np.array([-1.0, -1.0, 1.0])
-        P = np.stack([P[:, 0], P[:, 2], -P[:, 1]], -1) * 100.0
-    rng = np.random.default_rng(seed)
-    arm = bpy.data.armatures.new(name)
-    obj = bpy.data.objects.new(name, arm)
-    bpy.context.scene.collection.objects.link(obj)
-    bpy.context.view_layer.objects.active = obj
-    bpy.ops.object.mode_set(mode='EDIT')
-    eb = arm.edit_bones
-    made = {}
-    for j in range(sk.NUM_JOINTS):                               # parents first (SMPL order)
-        joint = sk.JOINT_NAMES[j]
-        b = eb.new(bmap.bones[joint])
-        b.head = P[j]
-        kids = [c for c in sk.CHILDREN[j] if sk.JOINT_NAMES[c] in bmap.bones]
-        if len(kids) == 1 or joint in ("pelvis", "spine3"):
-            c = kids[0] if len(kids) == 1 else sk.J["spine1" if joint == "pelvis" else "neck"]
-            b.tail = P[c]
-        else:                                                    # end bones: along the parent's direction
-            p = sk.PARENTS[j]
-            d = (P[j] - P[p]) / np.linalg.norm(P[j] - P[p])
-            b.tail = P[j] + 0.08 * d * (100.0 if fbx_cm else 1.0)
-        b.roll = float(rng.uniform(-np.pi, np.pi))
-        if j:
-            b.parent = made[sk.PARENTS[j]]
-        made[j] = b
-    bpy.ops.object.mode_set(mode='OBJECT')
-    if fbx_cm:
-        obj.rotation_euler = (np.pi / 2, 0.0, 0.0)
-        obj.scale = (0.01, 0.01, 0.01)
-        bpy.context.view_layer.update()
-    return obj
 
 
 def _source(stature=1.8):
@@ -85,7 +37,7 @@ def _bone_world(obj, name):
 
 def test_retarget_onto_an_a_pose_mixamo_rig(addon):
     res, src = _source()
-    char = _mixamo_character(stature=1.95)                     # long enough limbs to reach every target
+    char = mixamo_style_character(stature=1.95)                     # long enough limbs to reach every target
     old = bpy.data.actions.new("character_idle")             # the user's own action: kept, untouched
     keying.assign_action(char, old)
     keying.key_channels(old, char, [1.0, 10.0], [('pose.bones["mixamorig:Hips"].location', 0, "Hips",
@@ -113,14 +65,14 @@ def test_retarget_onto_an_a_pose_mixamo_rig(addon):
     assert worst_end < 1e-4, worst_end
     assert char.pose.bones["mixamorig:LeftArm"].rotation_mode == 'QUATERNION'
     # a shorter character cannot reach everywhere: the report says where
-    short = _mixamo_character("Short", stature=1.5)
+    short = mixamo_style_character("Short", stature=1.5)
     _, out, notes = retarget_apply.retarget_onto(src, short, "mixamo", None, "as_is", True)
     assert any("out of the character's reach" in n for n in notes), notes
 
 
 def test_retarget_directions_without_keep_ends_and_a_saved_map(addon, tmp_path):
     res, src = _source()
-    char = _mixamo_character(stature=1.7, arm_down_deg=30.0)
+    char = mixamo_style_character(stature=1.7, arm_down_deg=30.0)
     bmap, _ = retarget_apply.resolve_bone_map("auto", char)
     assert bmap.bones["left_elbow"] == "mixamorig:LeftForeArm"
     path = tmp_path / "map.json"
@@ -167,8 +119,8 @@ def test_cli_retargets_onto_a_character_from_a_blend_and_the_fbx_round_trip_hold
     from blender_manikin.blender import solve_job
     from blender_util import stub_solver, write_recording_csv
     fresh_scene()
-    _mixamo_character("Character", stature=1.7)
-    _mixamo_character("Other", stature=1.5)
+    mixamo_style_character("Character", stature=1.7)
+    mixamo_style_character("Other", stature=1.5)
     lib = tmp_path / "characters.blend"
     bpy.ops.wm.save_as_mainfile(filepath=str(lib), copy=True)
     rec = write_recording_csv(tmp_path / "take.csv", synthetic_result(T=40, fps=30.0, seed=2))
@@ -271,88 +223,12 @@ def test_retarget_onto_a_rig_generated_by_rigify():
         assert ang < 3.0, (bone, ang)
 
 
-def test_cli_retargets_onto_a_character_from_a_blend_and_the_fbx_round_trip_holds(tmp_path, monkeypatch):
-    """``solve --retarget FILE.blend:Character``: the .blend and the FBX carry the character with
-    its new action; the FBX, imported again, puts the mapped bones where the .blend does."""
-    from blender_manikin import cli
-    from blender_manikin.blender import solve_job
-    from blender_util import stub_solver, write_recording_csv
-    fresh_scene()
-    _mixamo_character("Character", stature=1.7)
-    _mixamo_character("Other", stature=1.5)
-    lib = tmp_path / "characters.blend"
-    bpy.ops.wm.save_as_mainfile(filepath=str(lib), copy=True)
-    rec = write_recording_csv(tmp_path / "take.csv", synthetic_result(T=40, fps=30.0, seed=2))
-    monkeypatch.setattr(solve_job, "run_solver", stub_solver)
-    out = tmp_path / "out"
-    assert cli.main(["solve", str(rec), "--out", str(out), "--format", "blend,fbx", "--fps", "30",
-                     "--height", "1.8", "--retarget", f"{lib}:Character", "--bone-map", "mixamo"]) == 0
-    bpy.ops.wm.open_mainfile(filepath=str(out / "take.blend"))
-    char = bpy.data.objects["Character"]
-    assert "Other" not in bpy.data.objects
-    assert char.animation_data.action.name.startswith("MANIKIN_retarget_")
-    names = ["mixamorig:LeftHand", "mixamorig:RightFoot", "mixamorig:Head", "mixamorig:Hips"]
-    sc = bpy.context.scene
-    sc.frame_set(12)
-    in_blend = np.array([_bone_world(char, n)[0] for n in names])
-    fresh_scene()
-    bpy.context.scene.render.fps = 30
-    # FBX keeps scene frame f at time f / fps; the importer's default anim_offset would add a frame
-    bpy.ops.import_scene.fbx(filepath=str(out / "take.fbx"), automatic_bone_orientation=False, anim_offset=0.0)
-    arm = next(o for o in bpy.data.objects if o.type == 'ARMATURE')
-    bpy.context.scene.frame_set(12)
-    from_fbx = np.array([_bone_world(arm, n)[0] for n in names])
-    np.testing.assert_allclose(from_fbx, in_blend, atol=1e-3)
-    # a file with two armatures and no name, or a wrong name: a clear error
-    fresh_scene()
-    with pytest.raises(ValueError, match="name the armature, FILE.blend:OBJECT "
-                                         "\\(armatures in the file: Character, Other\\)"):
-        cli.append_character(str(lib))
-    with pytest.raises(ValueError, match="no armature named 'Nobody'"):
-        cli.append_character(f"{lib}:Nobody")
-
-
-def test_retarget_onto_a_rig_generated_by_rigify(addon):
-    """Blender's own Rigify: human metarig, generated; the guess keys its FK controls (with the
-    IK/FK switches keyed to FK in the new action), their bases taken under the rig's evaluated
-    mechanism, and the deforming arms and legs point where the performer's do."""
-    import addon_utils
-    if "rigify" not in {m.__name__ for m in addon_utils.modules()}:
-        pytest.skip("this Blender build bundles no Rigify")
-    addon_utils.enable("rigify", default_set=True, persistent=True)
-    try:
-        res, src = _source()
-        bpy.ops.object.armature_human_metarig_add()
-        meta = bpy.context.active_object
-        assert bpy.ops.pose.rigify_generate() == {'FINISHED'}
-        rig = next(o for o in bpy.data.objects if o.type == 'ARMATURE' and o not in (meta, src))
-        bmap, _ = retarget_apply.resolve_bone_map("auto", rig)
-        assert bmap.name == "rigify_fk"
-        action, out, notes = retarget_apply.retarget_onto(src, rig, "auto", None, "scaled", False)
-        paths = {fc.data_path for fc in keying.action_fcurves(action, rig)}
-        assert 'pose.bones["upper_arm_parent.L"]["IK_FK"]' in paths
-        assert rig.pose.bones["upper_arm_parent.L"]["IK_FK"] == 0.0 or rig.animation_data.action == action
-        pos, _ = res.fk()
-        sc = bpy.context.scene
-        for k in (5, 25):
-            sc.frame_set(1 + k)
-            for bone, a, b in (("DEF-forearm.L", "left_elbow", "left_wrist"),
-                               ("DEF-shin.R", "right_knee", "right_ankle"),
-                               ("DEF-upper_arm.R", "right_shoulder", "right_elbow")):
-                h, t = _bone_world(rig, bone)
-                d_src = rot.normalize(pos[k, sk.J[b]] - pos[k, sk.J[a]])
-                ang = np.degrees(np.arccos(np.clip(np.dot(rot.normalize(t - h), d_src), -1, 1)))
-                assert ang < 3.0, (bone, k, ang)
-    finally:
-        addon_utils.disable("rigify", default_set=True)
-
-
 def test_retarget_onto_an_fbx_character_in_centimetres_facing_y(addon):
     """A character as an FBX in centimetres arrives (+Y up, object turned 90° about X, scale 0.01,
     facing +Y): the motion turns with it, its segments point where the performer's do turned by
     the facing, and the hips travel in its own metres."""
     res, src = _source()
-    char = _mixamo_character("FBXChar", stature=1.7, fbx_cm=True)
+    char = mixamo_style_character("FBXChar", stature=1.7, fbx_cm=True)
     action, out, notes = retarget_apply.retarget_onto(src, char, "auto", None, "as_is", False)
     pos, _ = res.fk()
     turn = np.diag([-1.0, -1.0, 1.0])             # the performer faces -Y, the character +Y

@@ -25,7 +25,7 @@ import os
 import sys
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-for p in (ROOT, os.path.join(ROOT, "tools")):
+for p in (ROOT, os.path.join(ROOT, "tools"), os.path.join(ROOT, "tests")):
     if p not in sys.path:
         sys.path.insert(0, p)
 
@@ -34,11 +34,9 @@ import numpy as np  # noqa: E402
 import bpy  # noqa: E402
 
 from blender_manikin.blender import retarget_apply, writer  # noqa: E402
-from blender_manikin.core import bone_maps  # noqa: E402
-from blender_manikin.core import rotations as rot  # noqa: E402
-from blender_manikin.core import skeleton as sk  # noqa: E402
 from blender_manikin.core.solve import SolveSettings, solve_recording  # noqa: E402
-from render_swivel_figure import _material, stick_mesh, text  # noqa: E402
+from blender_util import mixamo_style_character  # noqa: E402  (the tests' character)
+from render_swivel_figure import _material, render_still, stick_mesh, text  # noqa: E402
 
 GAP = 1.3            # metres between the figures (world X)
 #: the deforming bones of a generated Rigify rig drawn in the figure (name before the first dot)
@@ -54,41 +52,6 @@ def _args():
     p.add_argument("--width", type=int, default=1200)
     p.add_argument("--height", type=int, default=600)
     return p.parse_args(argv)
-
-
-def mixamo_style_character(name, stature=1.60, arm_scale=1.12, arm_down_deg=40.0, seed=5):
-    """An armature with Mixamo's bone names and hierarchy: the body model's joints at ``stature``,
-    arms ``arm_scale`` longer and turned ``arm_down_deg`` down (an A-pose rest), bones rolled."""
-    bmap = bone_maps.preset("mixamo")
-    P = sk.make_body(stature).rest_positions()
-    for side, sx in (("left", 1.0), ("right", -1.0)):
-        s = P[sk.J[f"{side}_shoulder"]].copy()
-        turn = rot.axis_angle_rotation(np.array([0.0, 1.0, 0.0]), np.radians(sx * arm_down_deg))
-        for j in ("elbow", "wrist"):
-            P[sk.J[f"{side}_{j}"]] = s + arm_scale * (turn @ (P[sk.J[f"{side}_{j}"]] - s))
-    rng = np.random.default_rng(seed)
-    arm = bpy.data.armatures.new(name)
-    obj = bpy.data.objects.new(name, arm)
-    bpy.context.scene.collection.objects.link(obj)
-    bpy.context.view_layer.objects.active = obj
-    bpy.ops.object.mode_set(mode='EDIT')
-    made = {}
-    for j, joint in enumerate(sk.JOINT_NAMES):
-        b = arm.edit_bones.new(bmap.bones[joint])
-        b.head = P[j]
-        kids = sk.CHILDREN[j]
-        to = {"pelvis": "spine1", "spine3": "neck"}.get(joint)
-        if to or len(kids) == 1:
-            b.tail = P[sk.J[to] if to else kids[0]]
-        else:
-            d = P[j] - P[sk.PARENTS[j]]
-            b.tail = P[j] + 0.07 * d / np.linalg.norm(d)
-        b.roll = float(rng.uniform(-math.pi, math.pi))
-        if j:
-            b.parent = made[sk.PARENTS[j]]
-        made[j] = b
-    bpy.ops.object.mode_set(mode='OBJECT')
-    return obj
 
 
 def rigify_character():
@@ -116,7 +79,7 @@ def main():
     mats = {"body": _material("body", (0.72, 0.72, 0.70)), "limb": _material("limb", (0.20, 0.45, 0.85)),
             "text": _material("text", (0.05, 0.05, 0.05))}
     rigify = rigify_character()
-    mixamo = mixamo_style_character("Mixamo_style")
+    mixamo = mixamo_style_character("Mixamo_style", stature=1.60, arm_down_deg=40.0, seed=5, arm_scale=1.12)
     for k, (obj, caption) in enumerate(((src, "MANIKIN solve"), (rigify, "Rigify rig (generated)"),
                                         (mixamo, "Mixamo-style, A-pose rest"))):
         if obj is not src:
@@ -140,23 +103,7 @@ def main():
     cam.location = centre + 6.0 * np.array([math.sin(yaw), -math.cos(yaw), 0.10])
     cam.rotation_euler = (math.radians(84.0), 0.0, yaw)
     scene.camera = cam
-    scene.render.engine = 'BLENDER_WORKBENCH'
-    scene.display.shading.light = 'STUDIO'
-    scene.display.shading.color_type = 'MATERIAL'
-    scene.display.shading.show_object_outline = True
-    if scene.world is None:
-        scene.world = bpy.data.worlds.new("World")
-    scene.world.color = (1.0, 1.0, 1.0)
-    scene.render.resolution_x, scene.render.resolution_y = args.width, args.height
-    scene.render.resolution_percentage = 100
-    scene.render.image_settings.file_format = 'PNG'
-    scene.render.image_settings.color_mode = 'RGB'
-    scene.render.image_settings.compression = 100
-    scene.view_settings.view_transform = 'Standard'
-    out_path = os.path.abspath(args.out)
-    os.makedirs(os.path.dirname(out_path), exist_ok=True)
-    scene.render.filepath = out_path
-    bpy.ops.render.render(write_still=True)
+    out_path = render_still(scene, args.out, args.width, args.height)
     print(f"wrote {out_path} ({os.path.getsize(out_path) // 1024} KB)")
 
 

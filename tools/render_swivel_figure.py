@@ -182,6 +182,30 @@ def guides(res, swivel, offset, mats):
         bpy.context.active_object.data.materials.append(mats["target"])
 
 
+def render_still(scene, out, width, height):
+    """Render ``scene`` with the Workbench engine (studio light, material colours, outlines, white
+    world) to the PNG ``out`` (RGB, ``width`` x ``height``); returns its absolute path."""
+    scene.render.engine = 'BLENDER_WORKBENCH'
+    scene.display.shading.light = 'STUDIO'
+    scene.display.shading.color_type = 'MATERIAL'
+    scene.display.shading.show_object_outline = True
+    scene.display.shading.show_cavity = True
+    if scene.world is None:
+        scene.world = bpy.data.worlds.new("World")
+    scene.world.color = (1.0, 1.0, 1.0)
+    scene.render.resolution_x, scene.render.resolution_y = width, height
+    scene.render.resolution_percentage = 100
+    scene.render.image_settings.file_format = 'PNG'
+    scene.render.image_settings.color_mode = 'RGB'
+    scene.render.image_settings.compression = 100
+    scene.view_settings.view_transform = 'Standard'
+    out_path = os.path.abspath(out)
+    os.makedirs(os.path.dirname(out_path), exist_ok=True)
+    scene.render.filepath = out_path
+    bpy.ops.render.render(write_still=True)
+    return out_path
+
+
 def main():
     args = _args()
     bpy.ops.wm.read_factory_settings(use_empty=True)
@@ -230,24 +254,7 @@ def main():
     cam.rotation_euler = (math.radians(83.0), 0.0, yaw)
     scene.camera = cam
 
-    scene.render.engine = 'BLENDER_WORKBENCH'
-    scene.display.shading.light = 'STUDIO'
-    scene.display.shading.color_type = 'MATERIAL'
-    scene.display.shading.show_object_outline = True
-    scene.display.shading.show_cavity = True
-    if scene.world is None:
-        scene.world = bpy.data.worlds.new("World")
-    scene.world.color = (1.0, 1.0, 1.0)
-    scene.render.resolution_x, scene.render.resolution_y = args.width, args.height
-    scene.render.resolution_percentage = 100
-    scene.render.image_settings.file_format = 'PNG'
-    scene.render.image_settings.color_mode = 'RGB'
-    scene.render.image_settings.compression = 100
-    scene.view_settings.view_transform = 'Standard'
-    out_path = os.path.abspath(args.out)
-    os.makedirs(os.path.dirname(out_path), exist_ok=True)
-    scene.render.filepath = out_path
-    bpy.ops.render.render(write_still=True)
+    out_path = render_still(scene, args.out, args.width, args.height)
     print(f"wrote {out_path} ({os.path.getsize(out_path) // 1024} KB)")
 
 
