@@ -29,3 +29,15 @@ def pytest_collection_modifyitems(config, items):
             item.add_marker(pytest.mark.training)
         if name.startswith(_SLOW):
             item.add_marker(pytest.mark.slow)
+
+
+@pytest.fixture
+def addon():
+    """An empty factory scene with the add-on registered (Blender tests; bpy imported here only).
+    ``test_blender_addon.py`` has its own, with a stand-in solver."""
+    import blender_manikin
+    from blender_util import fresh_scene
+    fresh_scene()
+    blender_manikin.register()
+    yield
+    blender_manikin.unregister()

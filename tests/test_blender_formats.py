@@ -17,7 +17,7 @@ from blender_manikin.core.io_csv import write_csv  # noqa: E402
 from blender_manikin.core.recording import TrackerStream, from_blender  # noqa: E402
 
 from fixtures_recordings import bsor_bytes  # noqa: E402
-from test_blender_pipeline import _check_wrists, _solve, addon, upright_motion  # noqa: E402,F401
+from test_blender_pipeline import _check_wrists, _solve, upright_motion  # noqa: E402
 
 
 def _streams(res, rates, jitter, seed=0):

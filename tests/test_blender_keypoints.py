@@ -6,22 +6,12 @@ import pytest
 
 bpy = pytest.importorskip("bpy")
 
-import blender_manikin  # noqa: E402
 from blender_manikin import cli  # noqa: E402
 from blender_manikin.blender import keying, live_rig  # noqa: E402
 from blender_manikin.core import skeleton as sk  # noqa: E402
 from blender_manikin.core.solve import SolveSettings, solve_recording  # noqa: E402
 
-from blender_util import fresh_scene  # noqa: E402
 from fixtures_keypoints import hinge_motion, write_freemocap, write_layout_npy  # noqa: E402
-
-
-@pytest.fixture
-def addon():
-    fresh_scene()
-    blender_manikin.register()
-    yield
-    blender_manikin.unregister()
 
 
 @pytest.fixture(scope="module")

@@ -13,7 +13,6 @@ import pytest
 
 bpy = pytest.importorskip("bpy")
 
-import blender_manikin  # noqa: E402
 from blender_manikin.core import features, pipeline  # noqa: E402
 from blender_manikin.blender import solve_job  # noqa: E402
 from blender_manikin.core import limb_solver as ls  # noqa: E402
@@ -21,7 +20,7 @@ from blender_manikin.core import rotations as rot  # noqa: E402
 from blender_manikin.core import skeleton as sk  # noqa: E402
 from blender_manikin.core.pose_result import PoseResult, TrackerTargets  # noqa: E402
 
-from blender_util import fresh_scene, write_recording_csv  # noqa: E402
+from blender_util import write_recording_csv  # noqa: E402
 
 
 class NeutralRunner:
@@ -66,14 +65,6 @@ def upright_motion(T=45, fps=30.0, seed=4):
     res.targets = TrackerTargets(fps=fps, pos={d: pos[:, sk.J[j]] for d, j in devs.items()},
                                  rot={d: wr[:, sk.J[j]] for d, j in devs.items()})
     return res
-
-
-@pytest.fixture
-def addon():
-    fresh_scene()
-    blender_manikin.register()
-    yield
-    blender_manikin.unregister()
 
 
 def _solve(path, stature):

@@ -4,7 +4,6 @@ import pytest
 
 bpy = pytest.importorskip("bpy")
 
-import blender_manikin  # noqa: E402
 from blender_manikin.blender import keying, retarget_apply, writer  # noqa: E402
 from blender_manikin.core import bone_maps  # noqa: E402
 from blender_manikin.core import rotations as rot  # noqa: E402
@@ -13,14 +12,6 @@ from blender_manikin.core import skeleton as sk  # noqa: E402
 from blender_util import fresh_scene, mixamo_style_character, synthetic_result  # noqa: E402
 
 T = 30
-
-
-@pytest.fixture
-def addon():
-    fresh_scene()
-    blender_manikin.register()
-    yield
-    blender_manikin.unregister()
 
 
 def _source(stature=1.8):

@@ -146,3 +146,19 @@ def test_vector_norm_matches_linalg_norm_and_feeds_normalize():
         np.testing.assert_array_equal(w, rot.normalize(v))
         assert np.all(rot.normalize(v)[0] == 0.0)
         np.testing.assert_allclose(np.linalg.norm(rot.normalize(v)[1:], axis=-1), 1.0, atol=1e-12)
+
+
+@pytest.mark.parametrize("order", ["xy", "yx", "xz", "zx", "yz", "zy"])
+def test_frame_from_axes_keeps_the_first_axis_and_is_a_rotation(order):
+    rng = np.random.default_rng(5)
+    a, b = rng.normal(size=(40, 3)), rng.normal(size=(40, 3))
+    R = rot.frame_from_axes(a, b, order)
+    i, j = "xyz".index(order[0]), "xyz".index(order[1])
+    np.testing.assert_allclose(R @ np.swapaxes(R, -1, -2), np.broadcast_to(np.eye(3), R.shape), atol=1e-12)
+    np.testing.assert_allclose(np.linalg.det(R), 1.0, atol=1e-12)
+    np.testing.assert_allclose(R[..., i], a / np.linalg.norm(a, axis=-1, keepdims=True), atol=1e-12)
+    # the second axis lies in the plane of a and b, on b's side
+    assert np.all(np.sum(R[..., j] * b, -1) > 0)
+    np.testing.assert_allclose(np.einsum("ti,ti->t", np.cross(a, b), R[..., j]), 0.0, atol=1e-9)
+    with pytest.raises(ValueError, match="names one axis twice"):
+        rot.frame_from_axes(a, b, "xx")

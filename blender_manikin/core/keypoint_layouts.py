@@ -125,24 +125,11 @@ class Body22:
     no_twist: tuple
 
 
-def _frame_from(a, b, order):
-    """``(T, 3, 3)`` rotation whose columns are world axes: ``order`` names the axes ``a`` and
-    ``b`` give (``"xy"``, ``"yz"``, ...); ``a`` is kept exactly (normalised), ``b`` is made
-    orthogonal to it and the third axis completes a right-handed frame."""
-    i, j = "xyz".index(order[0]), "xyz".index(order[1])
-    k = 3 - i - j
-    e = [None, None, None]
-    e[i] = rot.normalize(a)
-    e[j] = rot.normalize(b - np.sum(b * e[i], -1, keepdims=True) * e[i])
-    e[k] = np.cross(e[i], e[j]) if (j - i) % 3 == 1 else np.cross(e[j], e[i])
-    return np.stack(e, axis=-1)
-
-
 def _flat_roll(fwd):
     """``(T, 3, 3)`` frame of a foot pointing along ``fwd`` (its -Y) with no roll: +X horizontal."""
     up = np.broadcast_to([0.0, 0.0, 1.0], np.shape(fwd))
     y = -np.asarray(fwd, np.float64)
-    return _frame_from(y, np.cross(y, up), "yx")
+    return rot.frame_from_axes(y, np.cross(y, up), "yx")
 
 
 def _trunk_up(P):
@@ -215,11 +202,11 @@ def body22_from_keypoints(points, layout) -> Body22:
         P[:, J["head"]] = ears
         left = pt("left_ear") - pt("right_ear")
         fwd = pt("nose") - ears
-        end_rot[J["head"]] = _frame_from(left, -fwd, "xy")     # +X the head's left, +Y its back
+        end_rot[J["head"]] = rot.frame_from_axes(left, -fwd, "xy")     # +X the head's left, +Y its back
     elif "head_top" in lay:
         top = pt("head_top")
         P[:, J["head"]] = neck + _HEAD_ALONG_NECK * (top - neck)
-        end_rot[J["head"]] = _frame_from(top - P[:, J["head"]], -(pt("nose") - P[:, J["head"]]), "zy")
+        end_rot[J["head"]] = rot.frame_from_axes(top - P[:, J["head"]], -(pt("nose") - P[:, J["head"]]), "zy")
     else:
         P[:, J["head"]] = neck + (PROPORTIONS["head_height"] - PROPORTIONS["neck_height"]) * H * up
         no_twist.append("head")
@@ -228,7 +215,7 @@ def body22_from_keypoints(points, layout) -> Body22:
         if f"{side}_index" in lay and f"{side}_pinky" in lay:
             w = pt(f"{side}_wrist")
             idx, pky = pt(f"{side}_index"), pt(f"{side}_pinky")
-            end_rot[J[f"{side}_wrist"]] = _frame_from(sign * (0.5 * (idx + pky) - w), -(idx - pky), "xy")
+            end_rot[J[f"{side}_wrist"]] = rot.frame_from_axes(sign * (0.5 * (idx + pky) - w), -(idx - pky), "xy")
         else:
             no_twist.append(f"{side}_wrist")
     # feet: heel -> toes gives the foot's direction, big -> small toe its roll
@@ -240,7 +227,7 @@ def body22_from_keypoints(points, layout) -> Body22:
             if f"{side}_big_toe" in lay:
                 big, small = pt(f"{side}_big_toe"), pt(f"{side}_small_toe")
                 toe = 0.5 * (big + small)
-                R = _frame_from(-(toe - heel), sign * (small - big), "yx")
+                R = rot.frame_from_axes(-(toe - heel), sign * (small - big), "yx")
             else:
                 toe = pt(f"{side}_foot_index")
                 R = _flat_roll(toe - heel)

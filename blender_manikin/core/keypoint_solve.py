@@ -32,6 +32,7 @@ import numpy as np
 from . import hybrik
 from . import keypoint_layouts as kl
 from . import pipeline
+from . import rotations as rot
 from . import skeleton as sk
 from .pose_result import PoseResult
 from .resample import Gap, GapReport
@@ -167,12 +168,7 @@ def _branch_offsets(P, j, lc, rc, up):
     offsets in a frame of ``j`` (+X from the right child to the left one, +Z towards the trunk
     child, so the trunk child sits straight above), left and right made mirror images.  None
     when the take gives no frame."""
-    x = P[:, lc] - P[:, rc]
-    z = P[:, up] - P[:, j]
-    x = x / np.linalg.norm(x, axis=-1, keepdims=True)
-    z = z - np.sum(z * x, -1, keepdims=True) * x
-    z = z / np.linalg.norm(z, axis=-1, keepdims=True)
-    R = np.stack([x, np.cross(z, x), z], axis=-1)                     # columns: the frame's axes
+    R = rot.frame_from_axes(P[:, lc] - P[:, rc], P[:, up] - P[:, j], "xz")
     rel = np.einsum("tji,tkj->tki", R, P[:, [lc, rc, up]] - P[:, j:j + 1])
     ok = np.isfinite(rel).all(axis=(1, 2))
     if not ok.any():

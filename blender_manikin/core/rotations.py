@@ -233,14 +233,27 @@ def matrix_to_6d(m):
     return np.concatenate([m[..., :, 0], m[..., :, 1]], axis=-1)
 
 
+def frame_from_axes(a, b, order="xy"):
+    """``(..., 3, 3)`` right-handed rotation whose columns are the frame's axes, from two of them.
+
+    ``order`` names the axes ``a`` and ``b`` (``(..., 3)``) stand for: ``"xy"``, ``"yz"``,
+    ``"zx"``, ``"yx"``, ... ``a`` is kept exactly (normalised), ``b`` is made orthogonal to it
+    (Gram-Schmidt) and the third axis completes a right-handed frame."""
+    i, j = "xyz".index(order[0]), "xyz".index(order[1])
+    if i == j:
+        raise ValueError(f"order {order!r} names one axis twice")
+    e = [None, None, None]
+    e[i] = normalize(a)
+    b = _f64(b)
+    e[j] = normalize(b - np.sum(e[i] * b, -1, keepdims=True) * e[i])
+    e[3 - i - j] = np.cross(e[i], e[j]) if (j - i) % 3 == 1 else np.cross(e[j], e[i])
+    return np.stack(e, axis=-1)
+
+
 def sixd_to_matrix(d6):
     """``(..., 6)`` → ``(..., 3, 3)`` by Gram-Schmidt on the two columns."""
     d6 = _f64(d6)
-    a = normalize(d6[..., :3])
-    b = d6[..., 3:] - np.sum(a * d6[..., 3:], -1, keepdims=True) * a
-    b = normalize(b)
-    c = np.cross(a, b)
-    return np.stack([a, b, c], axis=-1)
+    return frame_from_axes(d6[..., :3], d6[..., 3:], "xy")
 
 
 # --------------------------------------------------------------------------

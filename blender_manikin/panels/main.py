@@ -40,19 +40,11 @@ class MANIKIN_PT_solve(_Base, Panel):
             col.prop(s, "keypoint_layout")
             col.prop(s, "keypoint_units")
             col.prop(s, "keypoint_up")
-            row = col.row(heading="Rate")
-            row.prop(s, "use_keypoint_rate", text="")
-            sub = row.row()
-            sub.active = s.use_keypoint_rate
-            sub.prop(s, "keypoint_rate", text="")
+            toggled_row(col, s, "use_keypoint_rate", "keypoint_rate", "Rate")
             col.separator()
             col.prop(s, "smoothing")
             col.prop(s, "ik")
-            row = col.row(heading="Height")
-            row.prop(s, "use_height", text="")
-            sub = row.row()
-            sub.active = s.use_height
-            sub.prop(s, "height", text="")
+            toggled_row(col, s, "use_height", "height", "Height")
         else:
             for d in DEVICES:
                 src = getattr(s, d)
@@ -67,6 +59,16 @@ class MANIKIN_PT_solve(_Base, Panel):
             box = layout.box().column(align=True)
             for i, line in enumerate(wrapped(s.last_report, context)):
                 box.label(text=line, icon='INFO' if i == 0 else 'BLANK1')
+
+
+def toggled_row(layout, s, flag, value, heading, text=""):
+    """A row headed ``heading``: the checkbox ``flag`` and, greyed out while it is off, ``value``
+    (labelled ``text``)."""
+    row = layout.row(heading=heading)
+    row.prop(s, flag, text="")
+    sub = row.row()
+    sub.active = getattr(s, flag)
+    sub.prop(s, value, text=text)
 
 
 def wrapped(text, context, min_chars=24):
@@ -108,11 +110,7 @@ class MANIKIN_PT_calibration(_Base, Panel):
         if s.calibration == 'MEASURE':
             layout.prop(s, "height")
         else:
-            row = layout.row(heading="Height")
-            row.prop(s, "use_height", text="")
-            sub = row.row()
-            sub.active = s.use_height
-            sub.prop(s, "height", text="")
+            toggled_row(layout, s, "use_height", "height", "Height")
         layout.prop(s, "arm_span")
         layout.separator()
         row = layout.row(align=True)
@@ -141,11 +139,7 @@ class MANIKIN_PT_output(_Base, Panel):
         col.active = not s.use_scene_range
         col.prop(s, "frame_start")
         if s.source in ('FILE', 'KEYPOINTS'):
-            row = layout.row(heading="Limit")
-            row.prop(s, "limit_frames", text="")
-            sub = row.row()
-            sub.active = s.limit_frames
-            sub.prop(s, "frame_end", text="End")
+            toggled_row(layout, s, "limit_frames", "frame_end", "Limit", "End")
         else:
             col.prop(s, "frame_end")
         layout.separator()
