@@ -89,6 +89,10 @@ def _add_solve_options(s):
                    help="device-to-joint offsets: a preset name, a JSON file, or auto (default: the "
                         "recording's '# offsets:' metadata, beat_saber for .bsor, else none)")
     s.add_argument("--bvh-units", choices=("cm", "m"), default="cm")
+    s.add_argument("--model", default="auto", metavar="auto|head_hands|pelvis|six|FILE.onnx",
+                   help="the pose network: auto (default: the shipped model for the recording's trackers, "
+                        "head and hands / + pelvis / + pelvis and feet, per stretch when a tracker is lost "
+                        "for long), a shipped model's name, or a model you trained")
     s.add_argument("--layout", default=None, metavar="FILE.json|KEYPOINTS",
                    help="the columns, time, units and axes of wide-layout CSV inputs (default: detected); "
                         "or the layout of keypoint inputs: " + "|".join(_keypoint_layouts()))
@@ -225,7 +229,8 @@ def solve_settings(args):
     st = SolveSettings(axes=args.axes, units=args.units, fps=float(args.fps), offsets=offsets,
                        layout=layout, rate=getattr(args, "rate", None), keypoint_layout=keypoint_layout,
                        up=getattr(args, "up", None), smoothing=float(getattr(args, "smoothing", 0.4)),
-                       ik=getattr(args, "ik", "adaptive"), mapping=getattr(args, "mapping", None))
+                       ik=getattr(args, "ik", "adaptive"), mapping=getattr(args, "mapping", None),
+                       model=getattr(args, "model", None))
     if args.calibration_time is not None:
         st.calibration, st.tpose_time = "TPOSE", float(args.calibration_time)
         st.height, st.arm_span = args.height, args.arm_span

@@ -245,3 +245,10 @@ def test_shoulder_axial_limit_widens_with_elevation():
     assert np.all(hi[1, :2] > hi[0, :2]) and np.all(lo[1, :2] < lo[0, :2])
     assert np.degrees(hi[2, :2]) == pytest.approx([180, 180]) and np.degrees(lo[2, :2]) == pytest.approx([-180, -180])
     assert np.degrees(hi[:, 2:]) == pytest.approx(45.0) and np.degrees(lo[:, 2:]) == pytest.approx(-45.0)
+
+
+def test_hip_axial_limit_widens_past_the_flexion_range():
+    lo, hi = ls.axial_range(np.radians([[100.0] * 4, [150.0] * 4, [170.0] * 4]))
+    assert np.degrees(hi[0, 2:]) == pytest.approx(45.0) and np.degrees(lo[0, 2:]) == pytest.approx(-45.0)
+    assert np.all(hi[1, 2:] > hi[0, 2:]) and np.all(lo[1, 2:] < lo[0, 2:])
+    assert np.degrees(hi[2, 2:]) == pytest.approx(180.0) and np.degrees(lo[2, 2:]) == pytest.approx(-180.0)

@@ -25,6 +25,10 @@ def motion():
     for d, sx in (("left_hand", 1.0), ("right_hand", -1.0)):
         off = np.array([0.25 * sx, -0.35, -0.35])
         pos[d] = head + np.einsum("tij,j->ti", R, off)
+    # six-tracker setups: a waist tracker and two foot trackers
+    pos["pelvis"] = head - np.array([0.0, -0.05, 0.62])
+    pos["left_foot"] = np.stack([0.1 * np.sin(t) + 0.12, 0.05 * t, np.full(T, 0.09)], -1)
+    pos["right_foot"] = np.stack([0.1 * np.sin(t) - 0.12, 0.05 * t + 0.1 * np.sin(3 * t), np.full(T, 0.09)], -1)
     quat = {d: rot.matrix_to_quat(R) for d in pos}
     return t, pos, quat
 
@@ -102,6 +106,15 @@ FAMILIES = {
                                         names={"head": "head", "left_hand": "controller_left",
                                                "right_hand": "controller_right"},
                                         comp=lambda p, k, a: f"{p}_{'pos' if k == 'pos' else 'rot'}_{a}"),
+    "six_trackers_steamvr": dict(axes="openxr", units="m", time_col="time",
+                                 names={"head": "hmd", "left_hand": "left_controller",
+                                        "right_hand": "right_controller", "pelvis": "waist",
+                                        "left_foot": "tracker_left_foot", "right_foot": "foot_r"},
+                                 comp=lambda p, k, a: f"{p}_{'pos' if k == 'pos' else 'rot'}_{a}"),
+    "six_trackers_unity": dict(axes="unity", units="cm", time_col="time",
+                               names={"head": "HMD", "left_hand": "LeftHand", "right_hand": "RightHand",
+                                      "pelvis": "Hip", "left_foot": "FootL", "right_foot": "RightFootTracker"},
+                               comp=lambda p, k, a: f"{p}_{'position' if k == 'pos' else 'rotation'}_{a}"),
     "zup_blender": dict(axes="blender", units="m", time_col="t",
                         names={"head": "head", "left_hand": "hand_l", "right_hand": "hand_r"},
                         comp=lambda p, k, a: f"{p}_{'pos' if k == 'pos' else 'rot'}_{a}"),
@@ -119,7 +132,8 @@ def test_each_family_is_detected_and_reads_back(tmp_path, family):
     assert rec.metadata["axes"] == spec["axes"], line
     assert "head at 1.6" in line
     _, _, quat = motion()
-    for dev in ("head", "left_hand", "right_hand"):
+    assert sorted(rec.streams) == sorted(spec["names"]), line
+    for dev in spec["names"]:
         s = rec.streams[dev]
         assert len(s.time) == T and abs(s.time[1] - 1 / RATE) < 1e-4, line
         assert np.abs(s.pos - truth[dev]).max() < 2e-4, (family, dev)

@@ -146,6 +146,17 @@ class MANIKIN_Settings(PropertyGroup):
     arm_span: FloatProperty(name="Arm Span", default=0.0, min=0.0, max=3.0, unit='LENGTH',
                             description="Wrist-to-wrist distance in a T-pose (0 = from proportions)")
 
+    model: EnumProperty(
+        name="Pose Model", default='AUTO',
+        items=[('AUTO', "Automatic", "The shipped network for the recording's trackers (head and hands; "
+                "+ pelvis; + pelvis and feet), per stretch when a tracker is lost for long"),
+               ('HEAD_HANDS', "Head and Hands", "The three-tracker network, whatever else is tracked "
+                "(a pelvis or foot tracker still drives the pelvis or ankle)"),
+               ('PELVIS', "Head, Hands and Pelvis", "The four-tracker network"),
+               ('SIX', "Six Trackers", "The network for head, hands, pelvis and feet"),
+               ('FILE', "Model File", "A network you trained (.onnx)")])
+    model_file: StringProperty(name="Model File", subtype='FILE_PATH', default="",
+                               description="A pose network trained with blender_manikin.training (.onnx)")
     offsets_preset: EnumProperty(name="Offsets", items=_preset_items,
                                  description="Device-to-joint offsets preset")
     offsets_text: PointerProperty(
@@ -229,6 +240,12 @@ def config_from_settings(context):
                              f"not valid JSON ({exc.msg})") from None
     else:
         cfg.offsets = s.offsets_preset or "none"
+    if s.model == 'FILE':
+        if not s.model_file:
+            raise SolveError("Pose Model is 'Model File' but no file is chosen")
+        cfg.model = bpy.path.abspath(s.model_file)
+    else:
+        cfg.model = s.model.lower()
     cfg.create_trackers = s.create_trackers
     cfg.live_rig = s.live_rig
     cfg.set_scene_range = s.set_scene_range

@@ -21,6 +21,8 @@ after the first tracker sample (what the timeline shows: the solve's frame
 """
 from __future__ import annotations
 
+import functools
+
 import threading
 import time as _time
 from dataclasses import dataclass, field
@@ -83,9 +85,9 @@ def load_source(config: SolveConfig):
     return core_solve.read_recording(config.filepath, config.settings())
 
 
-def run_solver(targets, body, progress=None):
+def run_solver(targets, body, progress=None, model=None):
     """:func:`blender_manikin.core.solve.default_solver` (separate so tests can replace it)."""
-    return core_solve.default_solver(targets, body, progress=progress)
+    return core_solve.default_solver(targets, body, progress=progress, model=model)
 
 
 # --------------------------------------------------------------------------
@@ -173,7 +175,10 @@ class SolveJob:
             from ..core.keypoint_solve import solve_keypoints
             out = solve_keypoints(source, cfg.settings(), progress=progress)
         else:
-            out = core_solve.solve_recording(source, cfg.settings(), solver=run_solver, progress=progress)
+            solver = run_solver
+            if cfg.model and str(cfg.model).strip().lower() != "auto":     # the user's choice of network
+                solver = functools.partial(run_solver, model=cfg.model)
+            out = core_solve.solve_recording(source, cfg.settings(), solver=solver, progress=progress)
         self.outcome = out
         self.recording, self.report, self.targets = out.recording, out.report, out.targets
         self.body, self.offsets, self.info = out.body, out.offsets, out.info

@@ -125,30 +125,22 @@ def is_done(record):
 
 # --------------------------------------------------------------------------
 # one task (runs on a worker)
-_RUNNERS = {}
-
-
-def _runner(model):
-    """The worker's model, loaded once per process."""
-    from .model_runner import ModelRunner
-    key = os.path.abspath(model) if model else None
-    if key not in _RUNNERS:
-        _RUNNERS[key] = ModelRunner(key, threads=1)
-    return _RUNNERS[key]
-
-
 def convert_task(path, out_dir, stem, fmts, settings, model=None, options=None):
     """Convert one recording; returns its manifest record (never raises for a bad file)."""
-    from . import pipeline
+    from . import model_choice, pipeline
     t0 = time.perf_counter()
     rec = {"input": path, "status": "error", "outputs": [], "frames": 0, "seconds": 0.0, "stature": None,
            "notes": [], "error": None}
     try:
-        runner = _runner(model)
-        def solver(targets, body, progress=None):
-            return pipeline.solve(targets, body, runner, progress=progress)
+        st = SolveSettings(**settings)
+        spec = model if model is not None else st.model
 
-        out = solve_recording(path, SolveSettings(**settings), solver=solver)
+        def solver(targets, body, progress=None):
+            # one onnxruntime thread per worker; each worker loads a model once (load_model's cache)
+            plan = model_choice.plan_models(targets, spec, threads=1)
+            return pipeline.solve(targets, body, plan, progress=progress)
+
+        out = solve_recording(path, st, solver=solver)
         for fmt in fmts:
             writer = formats.WRITERS[fmt]
             dst = os.path.join(out_dir, stem + writer.extension)
@@ -157,7 +149,8 @@ def convert_task(path, out_dir, stem, fmts, settings, model=None, options=None):
             os.replace(tmp, dst)
             rec["outputs"].append(dst)
         rec.update(status="ok", frames=int(out.result.num_frames), stature=round(float(out.body.stature), 4),
-                   notes=list(out.result.quality_notes()) + [n for n in out.info if not n.startswith("calibrated")])
+                   notes=list(out.result.notes) + list(out.result.quality_notes())
+                   + [n for n in out.info if not n.startswith("calibrated")])
     except Exception as exc:          # one bad file never stops the others
         rec["error"] = error_message(exc)
     rec["seconds"] = round(time.perf_counter() - t0, 3)

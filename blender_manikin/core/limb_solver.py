@@ -98,6 +98,10 @@ BASE_TWIST_RANGE = np.radians([[70.0, 90.0], [70.0, 90.0], [45.0, 45.0], [45.0, 
 SHOULDER_PASSIVE_MARGIN = np.radians(20.0)
 #: arm elevation (radians) where the shoulder's axial limit starts to widen, and where it is gone
 SHOULDER_FADE_ELEVATION = np.radians([60.0, 120.0])
+#: thigh elevation (radians) where the hip's axial limit starts to widen, and where it is gone:
+#: past the hip's flexion range (a thigh raised towards the chest, legs up while lying down) the
+#: measure nears its singularity (undefined straight up) and turns quickly with small motions
+HIP_FADE_ELEVATION = np.radians([130.0, 165.0])
 #: neutral pose for measuring axial rotation, parent frame: bone hanging down, hinge flexing
 #: the forearm forward (arms) / the shin backward (legs)
 AXIAL_NEUTRAL_BONE = np.array([[0, 0, -1.0]] * 4)
@@ -347,7 +351,8 @@ def axial_rotation(base_local, limb_ids=None):
 def axial_range(elevation, limb_ids=None):
     """Allowed axial rotation ``(lo, hi)`` radians (``(..., L)``, internal positive).
 
-    Hips: AAOS internal / external rotation 45° / 45° at every elevation.
+    Hips: AAOS internal / external rotation 45° / 45°, widening likewise past the hip's
+    flexion range (:data:`HIP_FADE_ELEVATION`).
     Shoulders: AAOS internal 70° / external 90° (measured at 90° abduction)
     widened by :data:`SHOULDER_PASSIVE_MARGIN` (passive range and soft-tissue
     give that active clinical ranges leave out; real motion capture goes
@@ -365,13 +370,13 @@ def axial_range(elevation, limb_ids=None):
     internal = np.broadcast_to(BASE_TWIST_RANGE[ids, 0], elevation.shape)
     external = np.broadcast_to(BASE_TWIST_RANGE[ids, 1], elevation.shape)
     is_arm = ids < 2
-    e0, e1 = SHOULDER_FADE_ELEVATION
+    e0 = np.where(is_arm, SHOULDER_FADE_ELEVATION[0], HIP_FADE_ELEVATION[0])
+    e1 = np.where(is_arm, SHOULDER_FADE_ELEVATION[1], HIP_FADE_ELEVATION[1])
     x = np.clip((elevation - e0) / (e1 - e0), 0.0, 1.0)
     fade = x * x * (3.0 - 2.0 * x)                                 # smoothstep 0 → 1
-    hi = np.where(is_arm, internal + SHOULDER_PASSIVE_MARGIN + fade * (np.pi - internal - SHOULDER_PASSIVE_MARGIN),
-                  internal)
-    lo = -np.where(is_arm, external + SHOULDER_PASSIVE_MARGIN + fade * (np.pi - external - SHOULDER_PASSIVE_MARGIN),
-                   external)
+    margin = np.where(is_arm, SHOULDER_PASSIVE_MARGIN, 0.0)
+    hi = internal + margin + fade * (np.pi - internal - margin)
+    lo = -(external + margin + fade * (np.pi - external - margin))
     return lo, hi
 
 
@@ -423,7 +428,11 @@ def solve_limbs_within_limits(base_pos, end_pos, swivel, lengths, parent_rot, en
             slope = np.where(np.abs(slope) < 0.1, np.sign(slope + 1e-12) * 0.1, slope)
             step = np.clip(np.where(np.abs(err) < 1e-6, 0.0, err / slope), -0.5, 0.5)
             phi = phi - step
-        swivel[bad, k] = np.angle(np.exp(1j * phi))
+        err, _ = excess_at(phi)
+        # where the steps did not reach the limit (near the measure's singularity), keep the
+        # prediction rather than jump to wherever the last step landed
+        ok = np.abs(err) < 1e-3
+        swivel[bad[ok], k] = np.angle(np.exp(1j * phi[ok]))
     if changed:
         sol = solve_limbs(base_pos, end_pos, swivel, lengths, parent_rot, end_rot=end_rot, limb_ids=ids)
     return sol, swivel

@@ -147,9 +147,11 @@ def default_model_path():
     return os.environ.get("BLENDER_MANIKIN_MODEL") or DEFAULT_MODEL
 
 
-def load_model(path=None) -> ModelRunner:
-    """Cached :class:`ModelRunner` for ``path`` (default: :func:`default_model_path`)."""
-    key = os.path.abspath(path or default_model_path())
+def load_model(path=None, threads=None) -> ModelRunner:
+    """Cached :class:`ModelRunner` for ``path`` (default: :func:`default_model_path`) with
+    ``threads`` onnxruntime threads (default: up to 4)."""
+    path = os.path.abspath(path or default_model_path())
+    key = (path, threads)
     if key not in _CACHE:
-        _CACHE[key] = ModelRunner(key)
+        _CACHE[key] = ModelRunner(path, threads=threads)
     return _CACHE[key]

@@ -6,7 +6,8 @@
    cut them into centred windows (stride W/2), batched through onnxruntime;
 2. decode every window from its canonical frame and blend overlapping
    windows (triangular weights; 6D rotations and (cos, sin) averaged, then
-   re-normalised); resample back to the scene frames;
+   re-normalised); filter the rotations and swivel angles in time (Gaussian,
+   :data:`NETWORK_SMOOTH_S`); resample back to the scene frames;
 3. torso FK from the predicted root orientation and torso rotations, placed
    so the head joint lands exactly on its target;
 4. feet: predicted ankle poses lifted so no joint goes below the floor,
@@ -57,6 +58,13 @@ LOCK_AXES = (0, 1)
 #: drifting further is split into successive plants (see :func:`lock_planted_feet`)
 LOCK_MAX_DRIFT = 0.05
 COLLAR_MAX_SWING = np.radians(25.0)
+#: seconds (Gaussian sigma) of the temporal filter on the network's blended predictions
+#: (0.1 s, with the smoothstep easing of plants: HDM05 jitter 1.41 -> 0.98, the ground truth 0.93;
+#: MPJPE +0.01 cm; benchmarks/bench_pose.py)
+NETWORK_SMOOTH_S = 0.1
+#: the network outputs it filters: rotations (6D) and swivel (cos, sin); not the ankle positions
+#: and contact probabilities, whose plants are locked (smoothing them blurs the plants' edges)
+SMOOTHED_OUTPUTS = ("root_rot", "torso_rot", "ankle_rot", "swivel_cs", "local_rot")
 #: network windows built, run and decoded at a time (bounds the network's memory on long takes)
 NETWORK_WINDOWS_PER_BATCH = 1024
 #: scene frames posed at a time by the torso FK, collar and limb stages (bounds their memory);
@@ -83,6 +91,41 @@ class NetworkOutput:
     ankle_rot: np.ndarray | None = None
     swivel: np.ndarray | None = None
     local_rot: np.ndarray | None = None
+    notes: list | None = None          # which model(s) solved which frames (the solve summary)
+
+
+def blend_outputs(outs, weights):
+    """One :class:`NetworkOutput` from several models' outputs for the same frames.
+
+    outs: MANIKIN outputs; weights: ``(T,)`` per output, summing to 1 on every frame (see
+    :func:`.model_choice.plan_models`).  Rotations are averaged as 6D and re-orthonormalised,
+    swivel angles as (cos, sin), positions and contact probabilities linearly."""
+    w = [np.asarray(x, np.float64) for x in weights]
+
+    def mix(values, rotation=False):
+        acc = 0.0
+        for v, wk in zip(values, w):
+            v = rot.matrix_to_6d(v) if rotation else v
+            acc = acc + v * wk.reshape((-1,) + (1,) * (v.ndim - 1))
+        return rot.sixd_to_matrix(acc) if rotation else acc
+
+    cs = mix([np.stack([np.cos(o.swivel), np.sin(o.swivel)], -1) for o in outs])
+    return NetworkOutput(root_rot=mix([o.root_rot for o in outs], True),
+                         contact=mix([o.contact for o in outs]),
+                         torso_rot=mix([o.torso_rot for o in outs], True),
+                         ankle_pos=mix([o.ankle_pos for o in outs]),
+                         ankle_rot=mix([o.ankle_rot for o in outs], True),
+                         swivel=np.arctan2(cs[..., 1], cs[..., 0]))
+
+
+def blend_rotations(a, b, u):
+    """``(T, 3, 3)`` rotations ``a`` → ``b`` by the weight ``u`` ``(T,)`` (slerp; ``a`` at 0, ``b`` at 1)."""
+    u = np.asarray(u, np.float64)
+    if np.all(u >= 1.0):
+        return np.asarray(b, np.float64).copy()
+    if np.all(u <= 0.0):
+        return np.asarray(a, np.float64).copy()
+    return rot.quat_to_matrix(rot.quat_slerp(rot.matrix_to_quat(a), rot.matrix_to_quat(b), u))
 
 
 def _interp_rows(t_new, t_old, values):
@@ -114,7 +157,8 @@ def resample_pose_targets(pos, rotm, fps_in, fps_out):
     return p, rot.quat_to_matrix(qo), t_in, t_out
 
 
-def run_network(targets: TrackerTargets, body: Body, runner, progress=None, stride=None, windows_per_batch=None):
+def run_network(targets: TrackerTargets, body: Body, runner, progress=None, stride=None, windows_per_batch=None,
+                smooth_s=None):
     """Windows → onnxruntime → blended per-frame :class:`NetworkOutput` at the scene fps.
 
     stride: frames between window starts at the model's rate (default
@@ -122,7 +166,8 @@ def run_network(targets: TrackerTargets, body: Body, runner, progress=None, stri
     frame (smoother, slower).  windows_per_batch: windows built, run and
     decoded at a time (default :data:`NETWORK_WINDOWS_PER_BATCH`), which bounds
     the memory on long takes; the windows and the order they are blended in do
-    not depend on it, so neither does the result.
+    not depend on it, so neither does the result.  smooth_s: Gaussian sigma in seconds of a
+    temporal filter on the blended predictions (default :data:`NETWORK_SMOOTH_S`; 0: off).
     """
     c = runner.contract
     W = c.window
@@ -168,6 +213,9 @@ def run_network(targets: TrackerTargets, body: Body, runner, progress=None, stri
             progress(min(b0 + per, len(starts)) / len(starts))
     blended = {k: (a / wsum[:, None]).reshape((N,) + shape[:-2] + (6,) if k.endswith("_rot") else (N,) + shape)
                for k, (a, shape) in acc.items()}
+    sigma = (NETWORK_SMOOTH_S if smooth_s is None else float(smooth_s)) * c.fps
+    if sigma > 0:      # a temporal filter on the predicted rotations and swivel angles
+        blended = {k: (smooth_frames(v, sigma) if k in SMOOTHED_OUTPUTS else v) for k, v in blended.items()}
 
     # back to the scene frame rate
     t_scene = t_in
@@ -220,7 +268,7 @@ def lock_planted_feet(ankle_pos, contact, threshold=CONTACT_THRESHOLD, blend=CON
     ankle_pos ``(T, 2, 3)``; contact ``(T, 2)`` probabilities (planted above
     ``threshold``).  Over each plant the ankle is held, on ``axes`` (0, 1, 2 =
     x, y, z), at the median of its predicted coordinates over the plant;
-    ``blend`` frames on either side ease in and out linearly.  A foot is only ever held where the
+    ``blend`` frames on either side ease in and out (smoothstep).  A foot is only ever held where the
     prediction itself stays put: a run over which the predicted ankle moves
     more than ``max_drift`` metres (default :data:`LOCK_MAX_DRIFT`; a slow
     shuffle the network calls "planted") is split into consecutive plants,
@@ -245,7 +293,8 @@ def lock_planted_feet(ankle_pos, contact, threshold=CONTACT_THRESHOLD, blend=CON
                     w[i - lo] = (i - (pa - blend - 1)) / (blend + 1)
                 for i in range(pb, hi):
                     w[i - lo] = ((pb + blend) - i) / (blend + 1)
-                w = np.clip(w, 0.0, 1.0)[:, None]
+                w = np.clip(w, 0.0, 1.0)
+                w = (w * w * (3.0 - 2.0 * w))[:, None]        # smoothstep: no velocity jump at the edges
                 out[lo:hi, k, ax] = out[lo:hi, k, ax] * (1 - w) + anchor[ax] * w
     return out
 
@@ -280,13 +329,12 @@ def keep_feet_above_floor(ankle_pos, ankle_rot, body: Body, floor=0.0):
     return out
 
 
-def _torso_fk(root_rot, torso_rot, head_rot, head_pos, body: Body, root_pos=None):
+def _torso_fk(root_rot, torso_rot, head_rot, head_pos, body: Body):
     """Torso FK placed so the head joint lands on ``head_pos``.
 
     Returns ``(local (T,22,3,3) with root, torso and head filled, root_pos
     (T,3), pos (T,22,3), world (T,22,3,3))``; limb joints are at rest below
-    their bases until the limb solver replaces them.  ``root_pos`` given
-    (a pelvis tracker) overrides the head anchoring.
+    their bases until the limb solver replaces them.
     """
     T = root_rot.shape[0]
     local = np.broadcast_to(np.eye(3), (T, NUM_JOINTS, 3, 3)).copy()
@@ -297,10 +345,41 @@ def _torso_fk(root_rot, torso_rot, head_rot, head_pos, body: Body, root_pos=None
     neck, head = J["neck"], J["head"]
     local[:, head] = np.swapaxes(world[:, neck], -1, -2) @ head_rot
     world[:, head] = head_rot
-    if root_pos is None:
-        root_pos = head_pos - pos[:, head]
+    root_pos = head_pos - pos[:, head]
     pos += root_pos[:, None]
     return local, root_pos, pos, world
+
+
+#: the joints that bend the spine towards the head tracker when a pelvis tracker roots the body
+SPINE_CHAIN = (J["spine1"], J["spine2"], J["spine3"], J["neck"])
+
+
+def _bend_spine_to_head(local, root_pos, head_pos, head_rot, body: Body, weight):
+    """Bend the spine so the head joint reaches its tracker from a pelvis-tracker root.
+
+    With a pelvis tracker the torso hangs from the pelvis, and the network's torso rotations
+    may leave the head joint off its tracker.  Each joint of :data:`SPINE_CHAIN`, from the
+    bottom, swings the head towards its target by its share of what is left (1/4, 1/3, 1/2,
+    all), scaled by ``weight`` ``(T,)`` (the pelvis tracker's weight), so the bend spreads over
+    the spine and the neck points the head at its target; what stays is the difference in
+    pelvis-to-head distance.  ``local`` ``(T, 22, 3, 3)`` is updated in place (head rotation
+    kept on ``head_rot``).  Returns ``(local, pos, world)``.
+    """
+    n = len(SPINE_CHAIN)
+    head, neck = J["head"], J["neck"]
+    w = np.asarray(weight, np.float64)
+    for k, j in enumerate(SPINE_CHAIN):
+        pos, world = forward_kinematics(local, root_pos, body)
+        pos, world = np.array(pos), np.array(world)
+        full = rot.rotation_between(pos[:, head] - pos[:, j], head_pos - pos[:, j])
+        aa = rot.matrix_to_axis_angle(full) * (w / (n - k))[:, None]
+        new_world = rot.axis_angle_to_matrix(aa) @ world[:, j]
+        local[:, j] = np.swapaxes(world[:, PARENTS[j]], -1, -2) @ new_world
+    pos, world = forward_kinematics(local, root_pos, body)
+    pos, world = np.array(pos), np.array(world)
+    local[:, head] = np.swapaxes(world[:, neck], -1, -2) @ head_rot
+    world[:, head] = head_rot
+    return local, pos, world
 
 
 def _reach_collars(local, pos, world, targets_pos, body: Body, max_swing=COLLAR_MAX_SWING):
@@ -368,14 +447,26 @@ def check_targets(targets: TrackerTargets):
 def predict(targets: TrackerTargets, body: Body, runner=None, progress=None, stride=None) -> NetworkOutput:
     """The network stage of :func:`solve`: checked targets → :class:`NetworkOutput`.
 
-    runner: a MANIKIN :class:`~.model_runner.ModelRunner` (default: the shipped model)."""
-    if runner is None:
-        from .model_runner import load_model
-        runner = load_model()
+    runner: what :func:`.model_choice.plan_models` takes: ``None`` (default: the shipped model
+    for the recording's trackers, per stretch when a tracker is lost for long), a shipped
+    model's name, an ``.onnx`` path, a MANIKIN :class:`~.model_runner.ModelRunner`, or a
+    :class:`.model_choice.ModelPlan`.  The output's ``notes`` say which model solved what."""
+    from . import model_choice
     check_targets(targets)
-    if runner.contract.kind != "manikin":
-        raise ValueError(f"{runner.path}: solve() needs a MANIKIN model, got kind {shown(runner.contract.kind)}")
-    return run_network(targets, body, runner, progress=progress, stride=stride)
+    plan = runner if isinstance(runner, model_choice.ModelPlan) else model_choice.plan_models(targets, runner)
+    for r in plan.runners:
+        if r.contract.kind != "manikin":
+            raise ValueError(f"{r.path}: solve() needs a MANIKIN model, got kind {shown(r.contract.kind)}")
+    n = len(plan.runners)
+    outs = []
+    for k, r in enumerate(plan.runners):
+        def part(x, k=k):
+            if progress is not None:
+                progress((k + float(x)) / n)
+        outs.append(run_network(targets, body, r, progress=part, stride=stride))
+    net = outs[0] if n == 1 else blend_outputs(outs, plan.weights)
+    net.notes = list(plan.notes)
+    return net
 
 
 def plan_feet(targets: TrackerTargets, body: Body, net: NetworkOutput, lock_feet=True):
@@ -383,15 +474,13 @@ def plan_feet(targets: TrackerTargets, body: Body, net: NetworkOutput, lock_feet
 
     Returns ``(ankle_pos (T, 2, 3) metres, ankle_rot (T, 2, 3, 3) world, contacts (T, 2) bool)``.
     Works on the whole take at once (a plant can last the whole take); its arrays are small."""
+    from .model_choice import tracker_weights
     ankle_pos, ankle_rot = net.ankle_pos.copy(), net.ankle_rot.copy()
-    foot_tracked = [d in targets.pos for d in ("left_foot", "right_foot")]
-    for k, d in enumerate(("left_foot", "right_foot")):
-        if foot_tracked[k]:
-            ankle_pos[:, k] = targets.pos[d]
-            ankle_rot[:, k] = targets.rot[d]
+    weights = tracker_weights(targets)
+    u = np.stack([weights.get(d, np.zeros(targets.num_frames)) for d in ("left_foot", "right_foot")], 1)
     contact = net.contact.copy()
     contacts = contact > CONTACT_THRESHOLD
-    if lock_feet:
+    if lock_feet and (u < 1.0).any():
         locked = lock_planted_feet(ankle_pos, contact, axes=LOCK_AXES)
         # ease the blends in and out of each plant (no jerk); planted frames stay exactly put
         planted = contacts[..., None]
@@ -400,10 +489,14 @@ def plan_feet(targets: TrackerTargets, body: Body, net: NetworkOutput, lock_feet
         # eases from one plant to the next, see lock_planted_feet's max_drift)
         step = np.linalg.norm(np.diff(locked[..., :2], axis=0), axis=-1)         # (T-1, 2)
         still_next = np.concatenate([step < 1e-9, np.ones((1, 2), bool)], 0)
-        for k in range(2):
-            if not foot_tracked[k]:
-                ankle_pos[:, k] = locked[:, k]
-                contacts[:, k] &= still_next[:, k]
+        ankle_pos = locked
+        contacts &= still_next | (u >= 1.0)
+    # a foot tracker drives its ankle where it is tracked (weight 1), the network's foot where it
+    # was lost for long (weight 0), cross-faded between
+    for k, d in enumerate(("left_foot", "right_foot")):
+        if (u[:, k] > 0).any():
+            ankle_pos[:, k] = u[:, k, None] * targets.pos[d] + (1 - u[:, k, None]) * ankle_pos[:, k]
+            ankle_rot[:, k] = blend_rotations(ankle_rot[:, k], targets.rot[d], u[:, k])
     return keep_feet_above_floor(ankle_pos, ankle_rot, body), ankle_rot, contacts
 
 
@@ -416,23 +509,35 @@ def assemble(targets: TrackerTargets, body: Body, net: NetworkOutput, progress=N
     chunk_frames: frames posed at a time (default :data:`ASSEMBLY_CHUNK_FRAMES`); each frame
     is posed on its own, so the result does not depend on it, only the peak memory does.
     """
+    from .model_choice import tracker_weights
     check_targets(targets)
     T = targets.num_frames
     t_start = time.perf_counter()
     ankle_pos, ankle_rot, contacts = plan_feet(targets, body, net, lock_feet=lock_feet)
+    weights = tracker_weights(targets)
+    zeros = np.zeros(T)
+    # a foot with no tracker (or a lost one) has no target to miss: the straight leg points at the
+    # prediction, and "out of reach" notes are for trackers the body cannot reach
+    foot_exact = np.stack([weights.get(d, zeros) >= 1.0 for d in ("left_foot", "right_foot")], 1)
+    pelvis_w = weights.get("pelvis")
+    lengths = body.limb_lengths()
+    step = max(int(chunk_frames or ASSEMBLY_CHUNK_FRAMES), 1)
     local = np.empty((T, NUM_JOINTS, 3, 3))
     root_pos = np.empty((T, 3))
     swivel = np.empty((T, 4))
     reach_error = np.empty((T, 4))
-    lengths = body.limb_lengths()
-    untracked_feet = [d not in targets.pos for d in ("left_foot", "right_foot")]
-    step = max(int(chunk_frames or ASSEMBLY_CHUNK_FRAMES), 1)
     for a in range(0, T, step):
         f = slice(a, min(a + step, T))
         tp, tr = ({d: v[f] for d, v in targets.pos.items()}, {d: v[f] for d, v in targets.rot.items()})
-        if "pelvis" in tp:   # six-tracker setting: the pelvis tracker wins
-            loc, root, pos, world = _torso_fk(tr["pelvis"], net.torso_rot[f], tr["head"], tp["head"],
-                                              body, root_pos=tp["pelvis"])
+        if pelvis_w is not None and (pelvis_w[f] > 0).any():
+            # six-tracker setting: the pelvis tracker wins where it is tracked (weight 1); the
+            # head-anchored torso where it was lost for long, cross-faded between; the spine
+            # bends so the head still reaches its tracker
+            uf = pelvis_w[f]
+            root_rot = blend_rotations(net.root_rot[f], tr["pelvis"], uf)
+            loc, root, pos, world = _torso_fk(root_rot, net.torso_rot[f], tr["head"], tp["head"], body)
+            root = root + uf[:, None] * (tp["pelvis"] - root)
+            loc, pos, world = _bend_spine_to_head(loc, root, tp["head"], tr["head"], body, uf)
         else:
             loc, root, pos, world = _torso_fk(net.root_rot[f], net.torso_rot[f], tr["head"], tp["head"], body)
         loc = _reach_collars(loc, pos, world, np.stack([tp["left_hand"], tp["right_hand"]], 0), body)
@@ -445,24 +550,23 @@ def assemble(targets: TrackerTargets, body: Body, net: NetworkOutput, progress=N
         loc[:, ls.LIMB_MID] = sol.mid_local
         loc[:, ls.LIMB_END] = sol.end_local
         local[f], root_pos[f], reach_error[f] = loc, root, sol.reach_error
-        # a foot the network placed (no tracker) has no target to miss: the straight leg points at
-        # the prediction, and "out of reach" notes are for trackers the body cannot reach
-        reach_error[f, 2:][:, untracked_feet] = 0.0
+        reach_error[f, 2:] = np.where(foot_exact[f], reach_error[f, 2:], 0.0)
         del loc, pos, world, sol
         if progress is not None:
             progress(f.stop / T)
+    at_limit = np.abs(np.angle(np.exp(1j * (swivel - net.swivel)))) > 1e-9
     return PoseResult(fps=float(targets.fps), body=body, local_rot=local, root_pos=root_pos,
                       swivel=swivel, contacts=contacts, reach_error=reach_error, targets=targets,
-                      at_limit=np.abs(np.angle(np.exp(1j * (swivel - net.swivel)))) > 1e-9,
-                      timings={"solver": time.perf_counter() - t_start})
+                      at_limit=at_limit,
+                      timings={"solver": time.perf_counter() - t_start}, notes=list(net.notes or []))
 
 
 def solve(targets: TrackerTargets, body: Body, runner=None, progress=None, lock_feet=True,
           fk_runner=None, lower_body="ik", stride=None, chunk_frames=None):
     """Full-body pose for every frame of ``targets``: :func:`predict`, then :func:`assemble`.
 
-    runner: a :class:`~.model_runner.ModelRunner` (default: the shipped model).
-    progress: optional ``callable(fraction)``; raise :class:`SolveCancelled`
+    runner: see :func:`predict` (default: the shipped model for the recording's trackers; the
+    result's ``notes`` say which).  progress: optional ``callable(fraction)``; raise :class:`SolveCancelled`
     (or anything) from it to stop.  lower_body: ``"ik"`` (MANIKIN) or
     ``"fk"`` (ablation: legs from ``fk_runner``'s predicted rotations).
     chunk_frames: see :func:`assemble`.  The result's ``with_body(body)`` re-assembles the

@@ -66,6 +66,7 @@ class PoseResult:
     targets: TrackerTargets | None = None
     t0: float = 0.0
     timings: dict = field(default_factory=dict)      # seconds per stage, e.g. network / solver
+    notes: list = field(default_factory=list)        # which model(s) solved the take (the summary)
     #: ``(body, progress=None) -> PoseResult``: the same network output assembled with another
     #: body (:func:`.pipeline.solve` sets it; None where a re-solve must run the solver again)
     with_body: object = field(default=None, repr=False, compare=False)

@@ -71,6 +71,7 @@ class SolveSettings:
     smoothing: float = 0.4
     ik: str = "adaptive"
     mapping: object = None
+    model: str | None = None          # None / "auto": by the recording's trackers; a shipped name or .onnx
 
 
 @dataclass
@@ -98,12 +99,13 @@ class SolveOutcome:
             parts.append(detected)
         if self.result is not None:
             parts.append(f"{self.result.num_frames} frames at {self.result.fps:g} fps")
+            parts.extend(getattr(self.result, "notes", None) or [])
             parts.extend(self.result.quality_notes())
         if self.body is not None:
             parts.append(f"stature {self.body.stature:.2f} m")
         for note in self.info:
             if note.startswith(("calibrated", "arm span", "estimated stature", "no twist information",
-                                "point(s) never seen", "retarget:")):
+                                "point(s) never seen", "retarget:")) or " tracker offset" in note:
                 parts.append(note)
         if self.report is not None:
             gaps = getattr(self.report, "gaps", [])
@@ -258,10 +260,15 @@ def stature_note(settings: SolveSettings, outcome: SolveOutcome):
     return cal.stature_warning(outcome.body.stature, float(np.nanpercentile(head, 90)), sized_by, units)
 
 
-def default_solver(targets, body, progress=None):
-    """:func:`.pipeline.solve` with the default model (network, torso, feet, limbs)."""
-    from . import pipeline
-    return pipeline.solve(targets, body, progress=progress)
+def default_solver(targets, body, progress=None, model=None):
+    """:func:`.pipeline.solve` (network, torso, feet, limbs) with ``model`` (default: the shipped
+    model for the recording's trackers, :mod:`.model_choice`)."""
+    from . import model_choice, pipeline
+    try:
+        path = model_choice.resolve_model(model)
+    except ValueError as exc:
+        raise SolveError(str(exc)) from exc
+    return pipeline.solve(targets, body, runner=path, progress=progress)
 
 
 def adapt_arms(settings: SolveSettings, outcome: SolveOutcome, result, solver, progress=None):
@@ -310,7 +317,9 @@ def solve_recording(source, settings: SolveSettings | None = None, solver=None, 
     (a cancel) stops the solve.  Returns the :class:`SolveOutcome`; raises :class:`SolveError`
     for what the user can fix."""
     settings = settings or SolveSettings()
-    solver = solver or default_solver
+    if solver is None:
+        def solver(targets, body, progress=None):
+            return default_solver(targets, body, progress=progress, model=settings.model)
     report = progress or (lambda f, stage=None: None)
     if settings.fps is None or not settings.fps > 0:
         raise SolveError("no frame rate: set fps")

@@ -52,6 +52,11 @@ class MANIKIN_PT_solve(_Base, Panel):
                 row.prop(src, "object", text=DEVICE_LABELS[d])
                 if src.object is not None and src.object.type == 'ARMATURE':
                     col.prop_search(src, "bone", src.object.data, "bones", text="Bone")
+        if s.source != 'KEYPOINTS':           # keypoints are solved by HybrIK, no network
+            col.separator()
+            col.prop(s, "model")
+            if s.model == 'FILE':
+                col.prop(s, "model_file")
         row = layout.row()
         row.scale_y = 1.6
         row.operator("manikin.solve_full_body", icon='ARMATURE_DATA')

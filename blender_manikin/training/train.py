@@ -39,6 +39,8 @@ from ..core import features
 from ..core.devices import DEVICES
 
 SIX_TRACKERS = DEVICES
+
+
 def build_parser():
     p = argparse.ArgumentParser(prog="python -m blender_manikin.training.train", description=__doc__.split("\n\n")[0])
     p.add_argument("--bvh", action="append", default=None, metavar="SOURCE",
@@ -69,6 +71,9 @@ def build_parser():
                    help="backbone: posenet (shared Transformer, global + local heads) or dap (Dual Attention "
                         "Poser: global and local paths, cross-attention mixer, gated-MLP decoders)")
     p.add_argument("--six-trackers", action="store_true", help="inputs: head, hands, pelvis and feet")
+    p.add_argument("--devices", default=None, metavar="D1,D2,...",
+                   help="input devices, comma-separated, in any order (head and hands required), e.g. "
+                        "head,left_hand,right_hand,pelvis; default head and hands")
     p.add_argument("--lr", type=float, default=1e-3)
     p.add_argument("--lam", action="append", default=None, metavar="TERM=WEIGHT",
                    help="override a loss weight of losses.LAMBDA, e.g. --lam mid=1.0 (repeatable; "
@@ -95,6 +100,20 @@ def build_parser():
                         "--resume continues it")
     p.add_argument("--quiet", action="store_true")
     return p
+
+
+def parse_devices(text, six_trackers=False):
+    """The model's input devices from ``--devices`` (canonical ``DEVICES`` order)."""
+    if text is None:
+        return SIX_TRACKERS if six_trackers else features.INPUT_DEVICES
+    names = [t.strip() for t in text.split(",") if t.strip()]
+    unknown = [n for n in names if n not in DEVICES]
+    if unknown:
+        raise SystemExit(f"--devices: unknown device(s) {unknown}; known: {', '.join(DEVICES)}")
+    missing = [d for d in features.INPUT_DEVICES if d not in names]
+    if missing:
+        raise SystemExit(f"--devices: {', '.join(missing)} required")
+    return tuple(d for d in DEVICES if d in names)
 
 
 class Progress:
@@ -256,7 +275,7 @@ def main(argv=None):
     lam = parse_lam(args.lam)
     aug = parse_aug(args.aug)
     if ckpt is None:
-        devices = SIX_TRACKERS if args.six_trackers else features.INPUT_DEVICES
+        devices = parse_devices(args.devices, args.six_trackers)
         cfg = ModelConfig(kind=args.kind, devices=devices, window=args.window, d_model=args.d_model,
                           layers=args.layers, heads=args.heads, ff_mult=args.ff_mult,
                           head_hidden=args.head_hidden, dropout=args.dropout, causal=args.causal,
