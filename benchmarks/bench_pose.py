@@ -2,7 +2,8 @@
 the HDM05 validation set (another studio, other people and motions), side by side, in one run.
 
     python benchmarks/bench_pose.py [--datasets bandai,hdm05] [--model M.onnx]
-        [--previous-model P.onnx] [--fk-model F.onnx] [--max-clips N] [--markdown]
+        [--previous-model P.onnx] [--fk-model F.onnx] [--pelvis-model P4.onnx]
+        [--six-model P6.onnx] [--trackers 3,4,6] [--max-clips N] [--markdown]
 
 Ground truth: every clip is mapped onto the 22-joint body and solved by HybrIK into the cache
 the training uses (``training/dataset.py``; HDM05 through ``core/asf_amc.py``), and posed by FK
@@ -25,6 +26,30 @@ position errors (cm), H-PE (hands, cm), Jitter (10^2 m/s^3; GT: the ground truth
 GP (ground penetration, cm), foot skating (cm/s: horizontal speed of a predicted ankle on the
 frames the ground-truth foot is planted), frames/s (the whole method on all the set's frames
 in one call, this machine's CPU; measured, never asserted).
+
+Tracker sets (issue 14; ``--trackers 3,4,6``, default all three, ``''`` or ``none``: no table):
+a second table per dataset and body compares the same pipeline (``core.pipeline.solve``) fed
+by more trackers, each with its own model, in the same pass over the clips:
+
+* 3 trackers (head, hands): the shipped model (``--model``; the row of method (a), not solved
+  twice);
+* 4 trackers (+ pelvis): ``--pelvis-model`` (default ``models/manikin_s_pelvis.onnx``);
+* 6 trackers (+ pelvis, feet): ``--six-model`` (default ``models/manikin_s_six.onnx``).
+
+A model's ONNX contract names the devices it takes (``contract.devices``); its inputs come from
+the ground truth like the three trackers': each device's joint (``core.devices.DEVICE_JOINT``:
+pelvis tracker = pelvis joint, foot trackers = ankle joints) position and world rotation.  The
+pelvis tracker drives the root; the foot trackers are the legs' ankle targets.  A row whose
+model file is absent (or whose contract lists other devices) is skipped, with a message on
+stderr.  Columns: MPJPE, L-PE, knee, ankle (cm), ankle->target (mean and max distance of the
+solved ankle joints to the foot trackers' targets, mm, sets with feet only; with the true
+skeleton it should be ~0, with the calibrated body a leg that cannot reach its tracker leaves a
+gap), skate (cm/s), Jitter, Jitter-GT (10^2 m/s^3) and frames/s, as above.  Under each table:
+the six-tracker MPJPE over the three-tracker MPJPE (issue 14's target on HDM05: <= 0.4).  An
+anchor row quotes SparsePoser's own figures (Ponton et al. 2023, Table 1: six 6-DoF trackers,
+trained on DanceDB, tested on AMASS HUMAN4D; Pos = mean joint position error with the root
+aligned to the ground truth, and Jitter): quoted from the paper, not measured here, on other
+data, so only a scale, not a comparison on equal terms.
 """
 from __future__ import annotations
 
@@ -41,6 +66,7 @@ import numpy as np  # noqa: E402
 
 from blender_manikin.core import baselines, features, metrics, pipeline, rotations as rot  # noqa: E402
 from blender_manikin.core import skeleton as sk  # noqa: E402
+from blender_manikin.core.devices import DEVICE_JOINT, REQUIRED_DEVICES  # noqa: E402
 from blender_manikin.core.model_runner import ModelRunner, MODELS_DIR  # noqa: E402
 from blender_manikin.core.pose_result import TrackerTargets  # noqa: E402
 
@@ -56,6 +82,28 @@ UNITS = {"MPJPE": "cm", "U-PE": "cm", "L-PE": "cm", "knee": "cm", "ankle": "cm",
          "Jitter": "1e2 m/s^3", "Jitter-GT": "1e2 m/s^3", "GP": "cm", "skate": "cm/s", "frames/s": ""}
 KNEES = [sk.J["left_knee"], sk.J["right_knee"]]
 ANKLES = [sk.J["left_ankle"], sk.J["right_ankle"]]
+FOOT_DEVICES = ("left_foot", "right_foot")       # in ANKLES order
+
+# tracker-set table (issue 14): key -> (row name, the devices its model must take)
+TRACKER_SETS = {
+    "3": ("3 trackers (head, hands)", REQUIRED_DEVICES),
+    "4": ("4 trackers (+ pelvis)", REQUIRED_DEVICES + ("pelvis",)),
+    "6": ("6 trackers (+ pelvis, feet)", REQUIRED_DEVICES + ("pelvis", "left_foot", "right_foot")),
+}
+SHIPPED = "(a) MANIKIN, shipped model"
+TRACKER_COLUMNS = ["MPJPE", "L-PE", "knee", "ankle", "ankle→target", "ankle→target max", "skate",
+                   "Jitter", "Jitter-GT", "frames/s"]
+TRACKER_UNITS = {**UNITS, "ankle→target": "mm", "ankle→target max": "mm"}
+MAX_KEYS = {"ankle→target max"}                 # aggregated over clips as a maximum, not a mean
+# quoted from ../shared/papers/sparseposer.md (Ponton et al., ACM TOG 2023), Table 1, HUMAN4D
+# column: "Pos (cm)" (all joints, root aligned to the ground truth) and "Jitter (10^2m/s^3)";
+# Ours-0: no added latency, Ours-7: 7 future frames.  Not measured here; its own data.
+SPARSEPOSER = [
+    ("SparsePoser Ours-0 (paper, Tab. 1, HUMAN4D; its own data, 6 trackers; quoted, not measured)",
+     {"MPJPE": 2.90, "Jitter": 3.30}),
+    ("SparsePoser Ours-7 (paper, Tab. 1, HUMAN4D, 7 future frames; quoted, not measured)",
+     {"MPJPE": 2.49, "Jitter": 2.83}),
+]
 
 
 def load_clip(path):
@@ -76,8 +124,10 @@ def load_clip_with_contacts(path):
     return body, local, pos, world, fps, contacts
 
 
-def targets_from_gt(pos, world, fps):
-    dev = {"head": sk.J["head"], "left_hand": sk.J["left_wrist"], "right_hand": sk.J["right_wrist"]}
+def targets_from_gt(pos, world, fps, devices=REQUIRED_DEVICES):
+    """Tracker targets of ``devices`` (default head and hands) from the ground truth: each
+    device's joint (``DEVICE_JOINT``: head, wrists, pelvis, ankles) position and world rotation."""
+    dev = {d: DEVICE_JOINT[d] for d in devices}
     return TrackerTargets(fps=fps, pos={d: pos[:, j].copy() for d, j in dev.items()},
                           rot={d: world[:, j].copy() for d, j in dev.items()})
 
@@ -91,7 +141,9 @@ def calibrated_body(gt_body):
     return sk.make_body(sk.BodyMeasurements(stature=stature, arm_span=span))
 
 
-def clip_metrics(res, gt_local, gt_pos, fps, contacts):
+def clip_metrics(res, gt_local, gt_pos, fps, contacts, targets=None):
+    """The clip's metrics; with ``targets`` that have foot trackers, also the solved ankles'
+    distance to them (``ankle→target``: mean, ``ankle→target max``: max, mm)."""
     ev = metrics.evaluate(res.positions, res.local_rot, gt_pos, gt_local, fps)
     P = res.positions
     ev["knee"] = float(100 * np.linalg.norm(P[:, KNEES] - gt_pos[:, KNEES], axis=-1).mean())
@@ -101,6 +153,10 @@ def clip_metrics(res, gt_local, gt_pos, fps, contacts):
         speed[1:] = np.linalg.norm(np.diff(P[:, ANKLES, :2], axis=0), axis=-1) * fps
     planted = contacts[:, :2]
     ev["skate"] = float(100 * speed[planted].mean()) if planted.any() else 0.0
+    if targets is not None and all(d in targets.pos for d in FOOT_DEVICES):
+        goal = np.stack([targets.pos[d] for d in FOOT_DEVICES], 1)              # (T, 2, 3)
+        gap = 1000 * np.linalg.norm(P[:, ANKLES] - goal, axis=-1)
+        ev["ankle→target"], ev["ankle→target max"] = float(gap.mean()), float(gap.max())
     return ev
 
 
@@ -115,11 +171,23 @@ def dataset_files(name, max_clips=0):
     return (files[:max_clips] if max_clips else files), source
 
 
+def needs(devices, fn):
+    """``fn`` (``fn(targets, body) -> PoseResult``) marked as taking the trackers ``devices``."""
+    fn.devices = tuple(devices)
+    return fn
+
+
 def run_dataset(name, methods, args, body_mode):
+    """Every method on every clip of ``name``, then each on all the clips at once (speed).
+
+    methods: ``{name: fn(targets, body)}``; ``fn.devices`` (see :func:`needs`; default head
+    and hands) names the trackers it takes: the targets of each device set are built once a clip.
+    """
     files, source = dataset_files(name, args.max_clips)
     if files is None:
         print(f"{name}: {source} not found, skipped", file=sys.stderr)
         return None
+    devs = {m: tuple(getattr(fn, "devices", REQUIRED_DEVICES)) for m, fn in methods.items()}
     sums = {m: {} for m in methods}
     frames, all_targets = 0, []
     for i, f in enumerate(files):
@@ -128,31 +196,88 @@ def run_dataset(name, methods, args, body_mode):
         if T < 4:
             continue
         body = calibrated_body(gt_body) if body_mode == "calibrated" else gt_body
-        tg = targets_from_gt(gt_pos, gt_world, fps)
+        tgs = {d: targets_from_gt(gt_pos, gt_world, fps, d) for d in set(devs.values())}
         frames += T
-        all_targets.append((tg, body))
+        all_targets.append((tgs, body))
         for m, fn in methods.items():
-            ev = clip_metrics(fn(tg, body), gt_local, gt_pos, fps, contacts)
+            tg = tgs[devs[m]]
+            ev = clip_metrics(fn(tg, body), gt_local, gt_pos, fps, contacts, targets=tg)
             for k, v in ev.items():
-                sums[m][k] = sums[m].get(k, 0.0) + v * T
+                sums[m][k] = max(sums[m].get(k, v), v) if k in MAX_KEYS else sums[m].get(k, 0.0) + v * T
         if not args.markdown:
             print(f"\r{name}: {i + 1}/{len(files)} clips, {frames} frames", end="", file=sys.stderr)
     if not args.markdown:
         print(file=sys.stderr)
     # speed: every clip back to back as one sequence, solved in one call
-    big = TrackerTargets(fps=all_targets[0][0].fps,
-                         pos={d: np.concatenate([t.pos[d] for t, _ in all_targets]) for d in all_targets[0][0].pos},
-                         rot={d: np.concatenate([t.rot[d] for t, _ in all_targets]) for d in all_targets[0][0].rot})
+    bigs = {}
+    for d in set(devs.values()):
+        tgs = [t[d] for t, _ in all_targets]
+        bigs[d] = TrackerTargets(fps=tgs[0].fps, pos={k: np.concatenate([t.pos[k] for t in tgs]) for k in d},
+                                 rot={k: np.concatenate([t.rot[k] for t in tgs]) for k in d})
     rows = []
     for m, fn in methods.items():
+        big = bigs[devs[m]]
         fn(TrackerTargets(fps=big.fps, pos={d: v[:200] for d, v in big.pos.items()},
                           rot={d: v[:200] for d, v in big.rot.items()}), all_targets[0][1])     # warm-up
         t = time.perf_counter()
         fn(big, all_targets[0][1])
-        row = {k: v / frames for k, v in sums[m].items()}
+        row = {k: (v if k in MAX_KEYS else v / frames) for k, v in sums[m].items()}
         row["frames/s"] = big.num_frames / max(time.perf_counter() - t, 1e-9)
         rows.append((m, row))
     return dict(name=name, body=body_mode, source=source, clips=len(files), frames=frames, rows=rows)
+
+
+def tracker_set_methods(args):
+    """``({set key: (row label, method name)}, {method name: fn})`` for ``--trackers``: the
+    three-tracker set is method (a) itself; a set whose model is absent, or takes other
+    devices, is skipped with a message on stderr."""
+    keys = [k.strip() for k in (args.trackers or "").split(",") if k.strip()]
+    if keys == ["none"]:
+        keys = []
+    for k in keys:
+        if k not in TRACKER_SETS:
+            raise SystemExit(f"unknown tracker set {k!r}: choose from {', '.join(TRACKER_SETS)} (or none)")
+    paths = {"4": args.pelvis_model, "6": args.six_model}
+    names, methods = {}, {}
+    for k in TRACKER_SETS:
+        if k not in keys:
+            continue
+        label, want = TRACKER_SETS[k]
+        if k == "3":
+            names[k] = (f"{label} ({os.path.basename(args.model)})", SHIPPED)
+            continue
+        if not os.path.isfile(paths[k]):
+            print(f"tracker sets: {label}: no model at {paths[k]}, row skipped", file=sys.stderr)
+            continue
+        runner = ModelRunner(paths[k])
+        if set(runner.contract.devices) != set(want):
+            print(f"tracker sets: {label}: {paths[k]} takes {', '.join(runner.contract.devices)}, "
+                  f"not {', '.join(want)}; row skipped", file=sys.stderr)
+            continue
+        names[k] = (f"{label} ({os.path.basename(paths[k])})", f"{label}: {paths[k]}")
+        methods[names[k][1]] = needs(runner.contract.devices,
+                                     lambda tg, b, runner=runner: pipeline.solve(tg, b, runner))
+    return names, methods
+
+
+def print_tracker_table(r, names, what):
+    """The tracker-set table of result ``r`` (rows of :func:`run_dataset`; ``names`` from
+    :func:`tracker_set_methods`), its ratio line and the SparsePoser anchor."""
+    rows = dict(r["rows"])
+    label = lambda k: f"{k} [{TRACKER_UNITS[k]}]" if TRACKER_UNITS.get(k) else k      # noqa: E731
+    table = [(row_label, {label(c): rows[m].get(c) for c in TRACKER_COLUMNS}) for row_label, m in names.values()]
+    table += [(name, {label(c): v for c, v in row.items()}) for name, row in SPARSEPOSER]
+    fmt = {label(k): v for k, v in {"frames/s": ",.0f", "MPJPE": ".2f", "ankle→target": ".3f",
+                                    "ankle→target max": ".3f"}.items()}
+    print(f"\ntracker sets, {r['name']}, {what}:")
+    print(metrics.format_table(table, [label(c) for c in TRACKER_COLUMNS], name_header="trackers", formats=fmt))
+    if "3" in names and "6" in names:
+        ratio = rows[names["6"][1]]["MPJPE"] / rows[names["3"][1]]["MPJPE"]
+        print(f"\nsix-tracker MPJPE / three-tracker MPJPE: {ratio:.3f} "
+              f"(issue 14's target on HDM05: <= 0.4)")
+    print("\nSparsePoser rows: quoted from the paper, not measured here (Ponton et al. 2023, Table 1, AMASS "
+          "HUMAN4D, their network trained on DanceDB; MPJPE = their 'Pos', all joints, root aligned to the ground "
+          "truth; Jitter: mean jerk at their data's frame rate; on SOMA: Pos 2.72 (Ours-0) / 2.22 (Ours-7) cm)")
 
 
 def main(argv=None):
@@ -162,6 +287,13 @@ def main(argv=None):
     ap.add_argument("--previous-model", default=PREVIOUS, help="the model shipped before (skipped if absent)")
     ap.add_argument("--fk-model", default=os.path.join(ROOT, "benchmarks", "models", "baseline_fk.onnx"),
                     help="the network-only baseline (kind fk; not shipped in the add-on)")
+    ap.add_argument("--pelvis-model", default=os.path.join(MODELS_DIR, "manikin_s_pelvis.onnx"),
+                    help="the four-tracker model (head, hands, pelvis; row skipped if absent)")
+    ap.add_argument("--six-model", default=os.path.join(MODELS_DIR, "manikin_s_six.onnx"),
+                    help="the six-tracker model (head, hands, pelvis, feet; row skipped if absent)")
+    ap.add_argument("--trackers", default="3,4,6",
+                    help="tracker sets compared in the second table, comma-separated from 3,4,6 "
+                         "('' or none: no table)")
     ap.add_argument("--body", default="calibrated,gt",
                     help="bodies to solve with, comma-separated: calibrated (what a T-pose calibration "
                          "builds) and/or gt (the true skeleton)")
@@ -178,6 +310,9 @@ def main(argv=None):
         fk_runner = ModelRunner(args.fk_model)
         methods["(b) network only (FK, AvatarPoser-style)"] = lambda tg, b: baselines.network_only(tg, b, fk_runner)
     methods["(c) classic IK (Blender-style rig)"] = lambda tg, b: baselines.classic_ik(tg, b)
+    main_methods = list(methods)
+    set_names, set_methods = tracker_set_methods(args)
+    methods.update(set_methods)
 
     results = []
     for name in [d.strip() for d in args.datasets.split(",") if d.strip()]:
@@ -197,10 +332,12 @@ def main(argv=None):
         print(f"\n{r['name']}, {what}: {r['clips']} clips, {r['frames']} frames at 30 fps "
               f"({os.path.basename(r['source'])})")
         rows = [(m, {(f"{k} [{UNITS[k]}]" if UNITS.get(k) else k): v for k, v in row.items() if k in UNITS})
-                for m, row in r["rows"]]
+                for m, row in r["rows"] if m in main_methods]
         cols = [f"{k} [{UNITS[k]}]" if UNITS[k] else k for k in COLUMNS]
         f2 = {(f"{k} [{UNITS[k]}]" if UNITS.get(k) else k): v for k, v in fmt.items()}
         print(metrics.format_table(rows, cols, formats=f2))
+        if set_names:
+            print_tracker_table(r, set_names, what)
     return results
 
 
