@@ -39,7 +39,9 @@ by more trackers, each with its own model, in the same pass over the clips:
 A model's ONNX contract names the devices it takes (``contract.devices``); its inputs come from
 the ground truth like the three trackers': each device's joint (``core.devices.DEVICE_JOINT``:
 pelvis tracker = pelvis joint, foot trackers = ankle joints) position and world rotation.  The
-pelvis tracker drives the root; the foot trackers are the legs' ankle targets.  A row whose
+pelvis tracker drives the root; the foot trackers are the legs' ankle targets.  With the
+calibrated body, sets with a pelvis tracker also get the legs a T-pose calibration measures from
+it (``calibrated_body(legs=True)``), as a real six-tracker solve does.  A row whose
 model file is absent (or whose contract lists other devices) is skipped, with a message on
 stderr.  Columns: MPJPE, L-PE, knee, ankle (cm), ankle->target (mean and max distance of the
 solved ankle joints to the foot trackers' targets, mm, sets with feet only; with the true
@@ -132,13 +134,23 @@ def targets_from_gt(pos, world, fps, devices=REQUIRED_DEVICES):
                           rot={d: world[:, j].copy() for d, j in dev.items()})
 
 
-def calibrated_body(gt_body):
+def calibrated_body(gt_body, legs=False):
     """The body a T-pose calibration builds for this performer: the solver's proportions at the
-    performer's stature (the skeleton's head above its ankles / 0.871) and wrist-to-wrist span."""
+    performer's stature (the skeleton's head above its ankles / 0.871) and wrist-to-wrist span.
+    legs: with a pelvis tracker the T-pose also measures the legs from the pelvis joint's height
+    (``calibration._legs_from_pelvis_height``: the skeleton's pelvis above its ankles, plus the
+    model's ankle height, split into thigh and shank by the proportions)."""
+    from blender_manikin.core.calibration import _legs_from_pelvis_height
     stature = float(features.stature_from_offsets(gt_body.offsets))
     rest = gt_body.rest_positions()
     span = float(np.linalg.norm(rest[sk.J["left_wrist"]] - rest[sk.J["right_wrist"]]))
-    return sk.make_body(sk.BodyMeasurements(stature=stature, arm_span=span))
+    m = sk.BodyMeasurements(stature=stature, arm_span=span)
+    if legs:
+        ankle_z = 0.5 * (rest[sk.J["left_ankle"], 2] + rest[sk.J["right_ankle"], 2])
+        pelvis_z = rest[sk.J["pelvis"], 2] - ankle_z + sk.PROPORTIONS["ankle_height"] * stature
+        leg = _legs_from_pelvis_height(pelvis_z, stature)
+        m = sk.BodyMeasurements(stature=stature, arm_span=span, thigh=leg["thigh"], shank=leg["shank"])
+    return sk.make_body(m)
 
 
 def clip_metrics(res, gt_local, gt_pos, fps, contacts, targets=None):
@@ -195,13 +207,15 @@ def run_dataset(name, methods, args, body_mode):
         T = gt_pos.shape[0]
         if T < 4:
             continue
-        body = calibrated_body(gt_body) if body_mode == "calibrated" else gt_body
-        tgs = {d: targets_from_gt(gt_pos, gt_world, fps, d) for d in set(devs.values())}
+        sets = set(devs.values())
+        bodies = {d: (calibrated_body(gt_body, legs="pelvis" in d) if body_mode == "calibrated" else gt_body)
+                  for d in sets}
+        tgs = {d: targets_from_gt(gt_pos, gt_world, fps, d) for d in sets}
         frames += T
-        all_targets.append((tgs, body))
+        all_targets.append((tgs, bodies))
         for m, fn in methods.items():
             tg = tgs[devs[m]]
-            ev = clip_metrics(fn(tg, body), gt_local, gt_pos, fps, contacts, targets=tg)
+            ev = clip_metrics(fn(tg, bodies[devs[m]]), gt_local, gt_pos, fps, contacts, targets=tg)
             for k, v in ev.items():
                 sums[m][k] = max(sums[m].get(k, v), v) if k in MAX_KEYS else sums[m].get(k, 0.0) + v * T
         if not args.markdown:
@@ -217,10 +231,11 @@ def run_dataset(name, methods, args, body_mode):
     rows = []
     for m, fn in methods.items():
         big = bigs[devs[m]]
+        body0 = all_targets[0][1][devs[m]]
         fn(TrackerTargets(fps=big.fps, pos={d: v[:200] for d, v in big.pos.items()},
-                          rot={d: v[:200] for d, v in big.rot.items()}), all_targets[0][1])     # warm-up
+                          rot={d: v[:200] for d, v in big.rot.items()}), body0)     # warm-up
         t = time.perf_counter()
-        fn(big, all_targets[0][1])
+        fn(big, body0)
         row = {k: (v if k in MAX_KEYS else v / frames) for k, v in sums[m].items()}
         row["frames/s"] = big.num_frames / max(time.perf_counter() - t, 1e-9)
         rows.append((m, row))

@@ -42,10 +42,14 @@ Options of ``solve`` (they mirror the panel; ``--help`` has them all):
 --format blend,fbx,bvh,json,npz  one or several (default blend,fbx,json); without blend
                               and fbx, the numpy core writes them without Blender
 --bvh-units cm|m              BVH length unit (default cm)
+--fbx-preset blender|unity|unreal  FBX axes, units and bones for the engine that reads it
+                              (default blender: as before; see blender/fbx_presets.py)
 --trackers                    also create (and export) keyed tracker empties
 --retarget FILE.blend[:OBJECT]  also put the motion onto this character (appended); blend and
                               fbx then carry it (--bone-map auto|PRESET|FILE.json,
-                              --root-motion scaled|in_place|as_is, --keep-ends)
+                              --root-motion scaled|in_place|as_is, --keep-ends,
+                              --live-swivel|--no-live-swivel: swivel rig on the
+                              character, default with --keep-ends)
 --no-live-rig                 plain FK keys only (no live swivel rig)
 
 ``convert INPUT... --out DIR`` converts many recordings on Dask (the same solve options, plus
@@ -116,6 +120,11 @@ def _bone_map_presets():
     return tuple(PRESETS)
 
 
+def _fbx_presets():
+    from .blender.fbx_presets import PRESET_NAMES     # plain data: no bpy needed to list them
+    return PRESET_NAMES
+
+
 def append_character(spec):
     """The armature object named by ``spec`` (``FILE.blend`` or ``FILE.blend:OBJECT``), appended
     into the current file with its children (meshes); ``ValueError`` naming the problem."""
@@ -161,6 +170,10 @@ def build_parser():
     _add_solve_options(s)
     s.add_argument("--format", default=",".join(DEFAULT_FORMATS), metavar="LIST",
                    help="comma-separated: " + ",".join(FORMATS))
+    s.add_argument("--fbx-preset", default="blender", type=str.lower, choices=_fbx_presets(),
+                   help="FBX export settings: blender (default: Blender's axes and units), unity (Y up, "
+                        "metres, deforming bones) or unreal (Z up, centimetres with the skeleton at scale 1, "
+                        "deforming bones)")
     s.add_argument("--trackers", action="store_true", help="create keyed tracker empties")
     s.add_argument("--retarget", default=None, metavar="FILE.blend[:OBJECT]",
                    help="also put the motion onto this character (an armature appended from a .blend; "
@@ -173,6 +186,11 @@ def build_parser():
     s.add_argument("--keep-ends", action="store_true",
                    help="retarget: solve the character's limbs again so its hands and feet land where the "
                         "performer's were")
+    s.add_argument("--live-swivel", dest="live_swivel", action="store_true", default=None,
+                   help="retarget: give the character the keyed swivel properties and a live rig (elbows / "
+                        "knees follow the swivel, hands / feet stay; default with --keep-ends)")
+    s.add_argument("--no-live-swivel", dest="live_swivel", action="store_false",
+                   help="retarget: plain keys on the character, no live swivel rig")
     s.add_argument("--no-live-rig", dest="live_rig", action="store_false",
                    help="write plain FK keys only (default: the live swivel rig, whose elbows and knees "
                         "follow the swivel properties)")
@@ -265,23 +283,11 @@ def reset_scene(fps):
     return scene
 
 
-def export_fbx(path, output):
-    """FBX of the armature (and tracker empties), animation baked."""
-    import bpy
-    objs = [output.armature] + [o for o in output.armature.children if o.type == 'MESH'] + \
-        list(output.trackers.values())
-    for o in bpy.context.view_layer.objects:
-        o.select_set(o in objs)
-    bpy.context.view_layer.objects.active = output.armature
-    types = {'ARMATURE', 'MESH'} | ({'EMPTY'} if output.trackers else set())
-    res = bpy.ops.export_scene.fbx(filepath=path, use_selection=True, object_types=types,
-                                   add_leaf_bones=False, bake_anim=True,
-                                   bake_anim_use_all_bones=True, bake_anim_use_nla_strips=False,
-                                   bake_anim_use_all_actions=False, bake_anim_force_startend_keying=True,
-                                   bake_anim_simplify_factor=0.0, armature_nodetype='NULL',
-                                   primary_bone_axis='Y', secondary_bone_axis='X')
-    if 'FINISHED' not in res:
-        raise RuntimeError(f"FBX export failed ({res})")
+def export_fbx(path, output, preset="blender"):
+    """FBX of the armature (with its meshes, and the tracker empties), animation baked, with the
+    FBX preset ``preset`` (:mod:`.blender.fbx_presets`)."""
+    from .blender import fbx_presets
+    fbx_presets.export_fbx(path, output.armature, preset, extra_objects=list(output.trackers.values()))
 
 
 def convert_one_core(path, out_dir, args, formats):
@@ -323,11 +329,13 @@ def convert_one(path, out_dir, args, formats):
         if bone_map.lower().endswith(".json"):
             bone_map, map_path = "file", args.bone_map
         _, _, notes = retarget_apply.retarget_onto(job.output.armature, char, bone_map, map_path,
-                                                   args.root_motion, args.keep_ends)
+                                                   args.root_motion, args.keep_ends,
+                                                   live_swivel=getattr(args, "live_swivel", None))
         job.info.extend(f"retarget: {n}" for n in notes)
         export = SimpleNamespace(armature=char, trackers={})          # the character is what is exported
     stem = os.path.splitext(os.path.basename(os.path.normpath(path)))[0]
-    blender_writers = {"fbx": lambda dst: export_fbx(dst, export),
+    preset = getattr(args, "fbx_preset", "blender")
+    blender_writers = {"fbx": lambda dst: export_fbx(dst, export, preset),
                        "blend": lambda dst: bpy.ops.wm.save_as_mainfile(filepath=dst, copy=True, compress=True)}
     written = []
     for fmt in formats:

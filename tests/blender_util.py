@@ -175,26 +175,100 @@ def blender_binary():
     pytest.skip(why)
 
 
-def mixamo_style_character(name="Character", stature=1.62, arm_down_deg=45.0, seed=3, fbx_cm=False,
-                           arm_scale=1.0):
-    """A Mixamo-named armature (for the retarget tests and tools/render_retarget_figure.py): the
-    body model's joints at ``stature`` metres, arms ``arm_scale`` times as long and turned
-    ``arm_down_deg`` down (an A-pose rest), every bone rolled by a random angle.  fbx_cm: as an
-    FBX in centimetres lands in Blender (bones in a +Y-up frame, x100; the object turned 90°
-    about X and scaled 0.01), the character facing +Y.  Returns the object."""
-    import bpy
-    from blender_manikin.core import bone_maps
-    bmap = bone_maps.preset("mixamo")
+def humanoid_joints(stature=1.62, arm_down_deg=45.0, arm_scale=1.0, leg_scale=1.0, torso_scale=1.0,
+                    thigh_shank=(1.0, 1.0)):
+    """``(22, 3)`` rest joint positions of a test character, metres, +Z up, facing -Y: the body
+    model at ``stature`` with the torso (pelvis to spine, neck, head, collars, shoulders and hips),
+    the arms (elbows, wrists) and the legs (knees, ankles, balls of the feet) ``torso_scale``,
+    ``arm_scale`` and ``leg_scale`` times as long, the arms turned ``arm_down_deg`` down about the
+    shoulders (an A-pose rest) and the feet on the floor.
+
+    Within each region every segment has the same ratio to the performer's, so a retarget's
+    proportion scaling is predictable: a hand lands on ``pelvis + torso * (shoulder - pelvis) +
+    arm * (wrist - shoulder)`` of a performer of the same stature, and so on -- unless
+    ``thigh_shank`` scales the thighs and shanks further (legs of other proportions)."""
     body = sk.make_body(stature)
-    P = body.rest_positions()
+    scale = np.full(sk.NUM_JOINTS, float(torso_scale))
+    for side in ("left", "right"):
+        for j in ("elbow", "wrist"):
+            scale[sk.J[f"{side}_{j}"]] = arm_scale
+        for j, f in (("knee", thigh_shank[0]), ("ankle", thigh_shank[1]), ("foot", 1.0)):
+            scale[sk.J[f"{side}_{j}"]] = leg_scale * f
+    rest = body.rest_positions()
+    P = np.zeros((sk.NUM_JOINTS, 3))
+    P[0] = body.root_rest
+    for j in range(1, sk.NUM_JOINTS):
+        P[j] = P[sk.PARENTS[j]] + scale[j] * body.offsets[j]
     for side, sx in (("left", 1.0), ("right", -1.0)):           # the A-pose: arms turned down
         s = P[sk.J[f"{side}_shoulder"]].copy()
         R = rot.axis_angle_rotation(np.array([0.0, 1.0, 0.0]), np.radians(sx * arm_down_deg))
         for j in ("elbow", "wrist"):
-            P[sk.J[f"{side}_{j}"]] = s + arm_scale * (R @ (P[sk.J[f"{side}_{j}"]] - s))
-    if fbx_cm:     # face +Y (turned 180° about Z), then into the file's +Y-up centimetres
-        P = P * np.array([-1.0, -1.0, 1.0])
-        P = np.stack([P[:, 0], P[:, 2], -P[:, 1]], -1) * 100.0
+            P[sk.J[f"{side}_{j}"]] = s + R @ (P[sk.J[f"{side}_{j}"]] - s)
+    foot = sk.J["left_foot"]
+    P[:, 2] += leg_scale * rest[foot, 2] - P[foot, 2]           # balls of the feet on the floor
+    return P
+
+
+def humanoid_bones(P, names, twist=None, root=None, end_length=0.08):
+    """Bones ``[(name, parent, head (3,), tail (3,))]`` (parents first, metres, the frame of ``P``)
+    of a character whose joints are ``P`` ``(22, 3)``.
+
+    names: joint -> bone name, or a list of names: a chain of bones splitting the segment from the
+    joint to the next joint of its chain evenly (e.g. UE5's ``spine_01``, ``spine_02`` for
+    ``spine1``); the next chain's bone is parented to the last of them.  Joints not in ``names``
+    have no bone.  Bones reach to the head of the next bone down their chain; end bones (head,
+    hands, toes) go ``end_length`` metres on along their parent segment.  twist: joint ->
+    ``[(name, fraction)]``, leaf bones under the joint's bone starting ``fraction`` of the way
+    along its segment.  root: name of a bone at the origin, above the pelvis bone."""
+    P = np.asarray(P, np.float64)
+    out = []
+    if root is not None:
+        out.append((root, None, np.zeros(3), np.array([0.0, 0.1, 0.0])))
+    last = {}
+    for j in range(sk.NUM_JOINTS):                               # parents first (SMPL order)
+        joint = sk.JOINT_NAMES[j]
+        if joint not in names:
+            continue
+        chain = names[joint] if isinstance(names[joint], (list, tuple)) else [names[joint]]
+        kids = [c for c in sk.CHILDREN[j] if sk.JOINT_NAMES[c] in names]
+        if len(kids) == 1 or joint in ("pelvis", "spine3"):
+            c = kids[0] if len(kids) == 1 else sk.J["spine1" if joint == "pelvis" else "neck"]
+            end = P[c]
+        else:                                                    # end bones: along the parent's direction
+            p = sk.PARENTS[j]
+            d = (P[j] - P[p]) / np.linalg.norm(P[j] - P[p])
+            end = P[j] + end_length * d
+        n = len(chain)
+        parent = last.get(sk.PARENTS[j], root) if j else root
+        for i, b in enumerate(chain):
+            out.append((b, parent, P[j] + (end - P[j]) * i / n, P[j] + (end - P[j]) * (i + 1) / n))
+            parent = b
+        last[j] = chain[-1]
+        for tb, f in (twist or {}).get(joint, ()):
+            h = P[j] + f * (end - P[j])
+            out.append((tb, chain[0], h, h + 0.25 * (end - P[j])))
+    return out
+
+
+def build_armature(name, bones, seed=3, facing="-Y", units=1.0, y_up=False, yaw_deg=0.0, location=(0.0, 0.0, 0.0)):
+    """An armature object ``name`` with ``bones`` ``[(name, parent, head, tail)]`` (metres, +Z up,
+    the character facing -Y, parents first), every bone rolled by a random angle (``seed``).
+
+    As the character lands in Blender from elsewhere: facing="+Y" turns it half-way round;
+    ``units`` (100 for centimetres) stores the bones that many times larger with the object scaled
+    ``1 / units``; ``y_up`` stores them in a +Y-up frame with the object turned 90° about X (an
+    FBX import); ``yaw_deg`` turns the object about Z and ``location`` moves it.  Returns it."""
+    import bpy
+    M = np.eye(3)
+    if facing == "+Y":
+        M = np.diag([-1.0, -1.0, 1.0])
+    elif facing != "-Y":
+        raise ValueError(f"facing must be '-Y' or '+Y', got {facing!r}")
+    if y_up:
+        M = np.array([[1.0, 0, 0], [0, 0, 1.0], [0, -1.0, 0]]) @ M
+
+    def data(p):
+        return (M @ np.asarray(p, np.float64)) * units
     rng = np.random.default_rng(seed)
     arm = bpy.data.armatures.new(name)
     obj = bpy.data.objects.new(name, arm)
@@ -202,26 +276,226 @@ def mixamo_style_character(name="Character", stature=1.62, arm_down_deg=45.0, se
     bpy.context.view_layer.objects.active = obj
     bpy.ops.object.mode_set(mode='EDIT')
     eb = arm.edit_bones
-    made = {}
-    for j in range(sk.NUM_JOINTS):                               # parents first (SMPL order)
-        joint = sk.JOINT_NAMES[j]
-        b = eb.new(bmap.bones[joint])
-        b.head = P[j]
-        kids = [c for c in sk.CHILDREN[j] if sk.JOINT_NAMES[c] in bmap.bones]
-        if len(kids) == 1 or joint in ("pelvis", "spine3"):
-            c = kids[0] if len(kids) == 1 else sk.J["spine1" if joint == "pelvis" else "neck"]
-            b.tail = P[c]
-        else:                                                    # end bones: along the parent's direction
-            p = sk.PARENTS[j]
-            d = (P[j] - P[p]) / np.linalg.norm(P[j] - P[p])
-            b.tail = P[j] + 0.08 * d * (100.0 if fbx_cm else 1.0)
+    for bname, parent, head, tail in bones:
+        b = eb.new(bname)
+        b.head = data(head)
+        b.tail = data(tail)
         b.roll = float(rng.uniform(-np.pi, np.pi))
-        if j:
-            b.parent = made[sk.PARENTS[j]]
-        made[j] = b
+        if parent is not None:
+            b.parent = eb[parent]
     bpy.ops.object.mode_set(mode='OBJECT')
-    if fbx_cm:
-        obj.rotation_euler = (np.pi / 2, 0.0, 0.0)
-        obj.scale = (0.01, 0.01, 0.01)
-        bpy.context.view_layer.update()
+    obj.rotation_euler = (np.pi / 2 if y_up else 0.0, 0.0, np.radians(yaw_deg))
+    obj.scale = (1.0 / units,) * 3
+    obj.location = location
+    bpy.context.view_layer.update()
     return obj
+
+
+def mixamo_style_character(name="Character", stature=1.62, arm_down_deg=45.0, seed=3, fbx_cm=False,
+                           arm_scale=1.0):
+    """A Mixamo-named armature (for the retarget tests and tools/render_retarget_figure.py): the
+    body model's joints at ``stature`` metres, arms ``arm_scale`` times as long and turned
+    ``arm_down_deg`` down (an A-pose rest), every bone rolled by a random angle.  fbx_cm: as an
+    FBX in centimetres lands in Blender (bones in a +Y-up frame, x100; the object turned 90°
+    about X and scaled 0.01), the character facing +Y.  Returns the object."""
+    from blender_manikin.core import bone_maps
+    P = humanoid_joints(stature, arm_down_deg, arm_scale)
+    bones = humanoid_bones(P, bone_maps.preset("mixamo").bones)
+    if fbx_cm:
+        return build_armature(name, bones, seed, facing="+Y", units=100.0, y_up=True)
+    return build_armature(name, bones, seed)
+
+
+def _sided_names(center, limbs, fmt):
+    """joint -> bone name: ``center`` as is, ``limbs`` (part -> stem) on both sides by ``fmt(stem, side)``."""
+    out = dict(center)
+    for side in ("left", "right"):
+        for part, stem in limbs.items():
+            out[f"{side}_{part}"] = fmt(stem, side)
+    return out
+
+
+def _ue_names(version):
+    center = {"pelvis": "pelvis", "spine1": "spine_01", "spine2": "spine_02", "spine3": "spine_03",
+              "neck": "neck_01", "head": "head"}
+    if version == 5:                    # five spine bones and two neck bones
+        center.update(spine1=["spine_01", "spine_02"], spine2=["spine_03", "spine_04"], spine3="spine_05",
+                      neck=["neck_01", "neck_02"])
+    limbs = {"collar": "clavicle", "shoulder": "upperarm", "elbow": "lowerarm", "wrist": "hand", "hip": "thigh",
+             "knee": "calf", "ankle": "foot", "foot": "ball"}
+    return _sided_names(center, limbs, lambda s, side: f"{s}_{side[0]}")
+
+
+# Characters as each tool names and stands them (bone names written out here, not taken from the
+# presets, so a wrong preset name fails).  stature (metres) and the torso / arm / leg scales give
+# each other proportions than the performer's; the rest is how the character lands in Blender.
+RIG_STYLES = {
+    # Unreal Mannequin (UE4): an FBX exported Z-up in centimetres -- object scale 0.01, facing +Y
+    "ue4": dict(names=_ue_names(4), root="root", stature=1.83, torso=0.95, arm=1.06, leg=1.0, arm_down=40.0,
+                twist={"shoulder": [("upperarm_twist_01", 0.25)], "elbow": [("lowerarm_twist_01", 0.75)],
+                       "hip": [("thigh_twist_01", 0.3)], "knee": [("calf_twist_01", 0.5)]},
+                facing="+Y", units=100.0, y_up=False),
+    # UE5 Manny: two twist bones per segment (the lower arm's and calf's _01 next to the wrist /
+    # ankle), an FBX in centimetres and +Y up as Blender imports it (object 90° about X, 0.01)
+    "ue5": dict(names=_ue_names(5), root="root", stature=1.78, torso=0.97, arm=1.0, leg=1.05, arm_down=45.0,
+                twist={"shoulder": [("upperarm_twist_01", 0.25), ("upperarm_twist_02", 0.6)],
+                       "elbow": [("lowerarm_twist_02", 0.35), ("lowerarm_twist_01", 0.75)],
+                       "hip": [("thigh_twist_01", 0.25), ("thigh_twist_02", 0.6)],
+                       "knee": [("calf_twist_02", 0.35), ("calf_twist_01", 0.7)]},
+                facing="+Y", units=100.0, y_up=True),
+    # VRoid / VRM 0.x as the VRM add-on imports it: metres, +Z up, facing -Y; placed off the origin
+    "vrm": dict(names=_sided_names(
+        {"pelvis": "J_Bip_C_Hips", "spine1": "J_Bip_C_Spine", "spine2": "J_Bip_C_Chest",
+         "spine3": "J_Bip_C_UpperChest", "neck": "J_Bip_C_Neck", "head": "J_Bip_C_Head"},
+        {"collar": "Shoulder", "shoulder": "UpperArm", "elbow": "LowerArm", "wrist": "Hand", "hip": "UpperLeg",
+         "knee": "LowerLeg", "ankle": "Foot", "foot": "ToeBase"},
+        lambda s, side: f"J_Bip_{side[0].upper()}_{s}"), root="Root", stature=1.45, torso=1.1, arm=0.95, leg=0.92,
+        arm_down=35.0, twist={}, facing="-Y", units=1.0, y_up=False, location=(0.6, 1.2, 0.0)),
+    # Auto-Rig Pro's deforming bones (as exported): root.x is the hips bone, the limbs' deforming
+    # bones are the *_stretch ones; a Blender rig, the object turned 30° about Z and moved
+    "auto_rig_pro": dict(names=_sided_names(
+        {"pelvis": "root.x", "spine1": "spine_01.x", "spine2": "spine_02.x", "spine3": "spine_03.x",
+         "neck": "neck.x", "head": "head.x"},
+        {"collar": "shoulder", "shoulder": "arm_stretch", "elbow": "forearm_stretch", "wrist": "hand",
+         "hip": "thigh_stretch", "knee": "leg_stretch", "ankle": "foot", "foot": "toes_01"},
+        lambda s, side: f"{s}.{side[0]}"), root="c_traj", stature=1.70, torso=1.03, arm=1.08, leg=0.97,
+        arm_down=50.0, twist={}, facing="-Y", units=1.0, y_up=False, yaw_deg=30.0, location=(1.5, -0.5, 0.0)),
+}
+
+
+def _extra_bones(style, P, names):
+    """Bones no preset maps: fingers, IK targets, props, helpers.  ``[(name, parent, head, tail)]``."""
+    J = sk.J
+    out = []
+
+    def hand_frame(side):
+        w = P[J[f"{side}_wrist"]]
+        d = rot.normalize(w - P[J[f"{side}_elbow"]])
+        return w, d
+
+    def finger(name, parent, start, d, length=0.03):
+        out.append((name, parent, start, start + length * d))
+
+    for side in ("left", "right"):
+        w, d = hand_frame(side)
+        fwd = np.array([0.0, -1.0, 0.0])
+        bone = names[f"{side}_wrist"]
+        s, S = side[0], side[0].upper()
+        if style.startswith("ue"):
+            base = w + 0.09 * d
+            if style == "ue5":
+                finger(f"index_metacarpal_{s}", bone, w + 0.02 * d + 0.02 * fwd, d, 0.06)
+                finger(f"index_01_{s}", f"index_metacarpal_{s}", base + 0.02 * fwd, d)
+                out.append((f"upperarm_correctiveRoot_{s}", names[f"{side}_shoulder"], P[J[f"{side}_shoulder"]],
+                            P[J[f"{side}_shoulder"]] + np.array([0.0, 0.0, 0.05])))
+            else:
+                finger(f"index_01_{s}", bone, base + 0.02 * fwd, d)
+            finger(f"index_02_{s}", f"index_01_{s}", base + 0.02 * fwd + 0.03 * d, d)
+            finger(f"thumb_01_{s}", bone, w + 0.03 * d + 0.04 * fwd, rot.normalize(d + fwd))
+            finger(f"pinky_01_{s}", bone, base - 0.03 * fwd, d)
+        elif style == "vrm":
+            finger(f"J_Bip_{S}_Index1", bone, w + 0.08 * d + 0.02 * fwd, d)
+            finger(f"J_Bip_{S}_Index2", f"J_Bip_{S}_Index1", w + 0.11 * d + 0.02 * fwd, d)
+            finger(f"J_Bip_{S}_Thumb1", bone, w + 0.03 * d + 0.03 * fwd, rot.normalize(d + fwd))
+            bust = P[J["spine3"]] + np.array([0.05 if s == "l" else -0.05, -0.08, 0.0])
+            out.append((f"J_Sec_{S}_Bust1", names["spine3"], bust, bust + 0.06 * fwd))
+        else:
+            finger(f"thumb1.{s}", bone, w + 0.03 * d + 0.03 * fwd, rot.normalize(d + fwd))
+            finger(f"index1_base.{s}", bone, w + 0.02 * d + 0.02 * fwd, d, 0.06)
+            finger(f"index1.{s}", f"index1_base.{s}", w + 0.08 * d + 0.02 * fwd, d)
+            finger(f"c_index2.{s}", f"index1.{s}", w + 0.11 * d + 0.02 * fwd, d)
+    head = P[J["head"]]
+    up = np.array([0.0, 0.0, 1.0])
+    eye = head + np.array([0.03, -0.08, 0.06])
+    if style.startswith("ue"):
+        # IK bones under the root (UE keeps them on the hands and feet of the reference pose)
+        out += [("ik_foot_root", "root", np.zeros(3), up * 0.1), ("ik_hand_root", "root", np.zeros(3), up * 0.1)]
+        for side in ("left", "right"):
+            a = P[J[f"{side}_ankle"]]
+            out.append((f"ik_foot_{side[0]}", "ik_foot_root", a, a + np.array([0.0, -0.1, 0.0])))
+        wr, wl = P[J["right_wrist"]], P[J["left_wrist"]]
+        out += [("ik_hand_gun", "ik_hand_root", wr, wr + up * 0.1), ("ik_hand_r", "ik_hand_gun", wr, wr + up * 0.1),
+                ("ik_hand_l", "ik_hand_gun", wl, wl + up * 0.1)]
+        if style == "ue4":            # a prop carried in the right hand
+            out.append(("weapon_r", names["right_wrist"], wr + np.array([0.0, -0.05, 0.0]),
+                        wr + np.array([0.0, -0.35, 0.0])))
+        else:
+            out += [("interaction", "root", np.zeros(3), up * 0.1), ("center_of_mass", "root", P[0], P[0] + up * 0.1)]
+    elif style == "vrm":
+        hair = head + np.array([0.0, 0.06, 0.15])
+        out += [("J_Adj_L_FaceEye", names["head"], eye, eye - 0.04 * up),
+                ("J_Sec_Hair1_01", names["head"], hair, hair + np.array([0.0, 0.06, -0.1]))]
+    else:
+        out.append(("c_eye.l", names["head"], eye, eye - 0.04 * up))
+    return out
+
+
+def styled_character(style, name=None, seed=7):
+    """A character named and standing as ``style`` of :data:`RIG_STYLES` gives (A-pose rest,
+    randomly rolled bones, its own proportions, the tool's units, up axis and facing), with
+    fingers, IK bones and props no preset maps.  Returns ``(object, spec)``: spec is the style's
+    dict plus ``joints`` ``(22, 3)`` (metres, +Z up, facing -Y, before the object's transform),
+    ``F`` ``(3, 3)`` (the turn from the performer's facing, -Y, to the character's in the world)
+    and ``bones`` (every bone name)."""
+    st = dict(RIG_STYLES[style])
+    P = humanoid_joints(st["stature"], st["arm_down"], st["arm"], st["leg"], st["torso"])
+    twist = {f"{side}_{part}": [(f"{b}_{side[0]}", f) for b, f in v]
+             for part, v in st["twist"].items() for side in ("left", "right")}
+    bones = humanoid_bones(P, st["names"], twist, root=st["root"]) + _extra_bones(style, P, st["names"])
+    obj = build_armature(name or style, bones, seed, facing=st["facing"], units=st["units"], y_up=st["y_up"],
+                         yaw_deg=st.get("yaw_deg", 0.0), location=st.get("location", (0.0, 0.0, 0.0)))
+    yaw = np.radians(st.get("yaw_deg", 0.0)) + (np.pi if st["facing"] == "+Y" else 0.0)
+    st.update(joints=P, F=rot.axis_angle_rotation(np.array([0.0, 0.0, 1.0]), np.array(yaw)),
+              bones=[b[0] for b in bones])
+    return obj, st
+
+
+def planted_feet_result(T=60, fps=24.0, stature=1.8, seed=0, speed=0.5, stride=0.7, stance=0.44):
+    """A :class:`PoseResult` of a walk forward (-Y) with planted feet and ``contacts`` marking them.
+
+    The pelvis goes ``speed`` m/s forward, a little lowered, bobbing, swaying and turning (±0.15
+    rad, as a walking pelvis does); each foot is planted, flat and pointing forward, on anchors a
+    ``stride`` apart while the pelvis is within ``stance / 2`` of them (on the flagged frames the
+    ankle, and so the ball of the foot, stays exactly still), and swings to the next anchor in
+    between, lifted 7 cm.  The legs are solved onto those ankles (knees forward); spine, neck and
+    arms move smoothly."""
+    body = sk.make_body(stature)
+    rest = body.rest_positions()
+    s = np.arange(T) / fps
+    y_p = -speed * s
+    phase = 2 * np.pi * (-y_p) / stride
+    root = np.stack([0.025 * np.sin(phase), y_p, body.root_rest[2] - 0.07 + 0.012 * np.cos(2 * phase)], -1)
+    local = smooth_local_rotations(T, seed, spread=0.3)
+    z = np.array([0.0, 0.0, 1.0])
+    local[:, 0] = rot.axis_angle_rotation(z, 0.15 * np.sin(phase)) @ rot.axis_angle_rotation(
+        np.array([0.0, 1.0, 0.0]), 0.05 * np.sin(phase))
+    h = stance / 2
+    ankles = np.zeros((T, 2, 3))
+    contacts = np.zeros((T, 2), bool)
+    for i, (side, a0) in enumerate((("left", 0.12), ("right", 0.12 - stride / 2))):
+        j = sk.J[f"{side}_ankle"]
+        r_all = a0 + h - y_p
+        k = np.floor(r_all / stride)
+        r = r_all - k * stride
+        a_k = a0 - k * stride
+        planted = r <= 2 * h
+        u = np.clip((r - 2 * h) / (stride - 2 * h), 0.0, 1.0)
+        ankles[:, i, 0] = rest[j, 0] + 0.02 * np.sign(rest[j, 0])
+        ankles[:, i, 1] = np.where(planted, a_k, a_k - stride * (1 - np.cos(np.pi * u)) / 2)
+        ankles[:, i, 2] = rest[j, 2] + np.where(planted, 0.0, 0.07 * np.sin(np.pi * u))
+        contacts[:, i] = planted
+    pos, wr = sk.forward_kinematics(local, root, body)
+    legs = [2, 3]
+    hips = pos[:, [sk.J["left_hip"], sk.J["right_hip"]]]
+    sol = ls.solve_limbs(hips, ankles, np.zeros((T, 2)), body.limb_lengths()[legs], wr[:, [0, 0]],
+                         end_rot=np.broadcast_to(np.eye(3), (T, 2, 3, 3)), limb_ids=legs)
+    assert sol.reach_error.max() < 1e-9, sol.reach_error.max()
+    for i, side in enumerate(("left", "right")):
+        local[:, sk.J[f"{side}_hip"]] = sol.base_local[:, i]
+        local[:, sk.J[f"{side}_knee"]] = sol.mid_local[:, i]
+        local[:, sk.J[f"{side}_ankle"]] = sol.end_local[:, i]
+    pos, wr = sk.forward_kinematics(local, root, body)
+    assert np.abs(pos[:, [sk.J["left_ankle"], sk.J["right_ankle"]]] - ankles).max() < 1e-9
+    swivel = ls.swivel_from_positions(pos[:, ls.LIMB_BASE], pos[:, ls.LIMB_MID], pos[:, ls.LIMB_END],
+                                      wr[:, ls.LIMB_PARENT], base_rot=wr[:, ls.LIMB_BASE])
+    return PoseResult(fps=fps, body=body, local_rot=local, root_pos=root, swivel=swivel, contacts=contacts, t0=0.0)

@@ -173,7 +173,6 @@ W = np.array(rig.matrix_world)
 for k in (5, 25):
     bpy.context.scene.frame_set(1 + k)
     for bone, a, b in (("DEF-forearm.L", "left_elbow", "left_wrist"),
-                       ("DEF-shin.R", "right_knee", "right_ankle"),
                        ("DEF-upper_arm.R", "right_shoulder", "right_elbow")):
         pb = rig.pose.bones[bone]
         h = (W @ np.append(np.array(pb.head), 1))[:3]
@@ -181,15 +180,26 @@ for k in (5, 25):
         d = rot.normalize(pos[k, sk.J[b]] - pos[k, sk.J[a]])
         ang = float(np.degrees(np.arccos(np.clip(np.dot(rot.normalize(t - h), d), -1, 1))))
         worst[bone] = max(worst.get(bone, 0.0), ang)
+# the legs are solved onto the performer's feet scaled by the leg ratio: the foot travels k times
+# as far as the performer's ankle (metres, between two frames)
+feet = []
+for k in (5, 25):
+    bpy.context.scene.frame_set(1 + k)
+    feet.append((W @ np.append(np.array(rig.pose.bones["DEF-foot.R"].head), 1))[:3])
+foot_travel = float(np.linalg.norm(feet[1] - feet[0]))
+ankle_travel = float(out.plan.leg_ratio * np.linalg.norm(pos[25, sk.J["right_ankle"]] - pos[5, sk.J["right_ankle"]]))
 print(json.dumps({"map": bmap.name, "switch_keyed": 'pose.bones["upper_arm_parent.L"]["IK_FK"]' in paths,
-                  "rig_switch": float(rig.pose.bones["upper_arm_parent.L"]["IK_FK"]), "worst": worst}), flush=True)
+                  "rig_switch": float(rig.pose.bones["upper_arm_parent.L"]["IK_FK"]), "worst": worst,
+                  "foot_travel": foot_travel, "ankle_travel": ankle_travel,
+                  "leg_reach_error": float(np.nansum(out.reach_error[[5, 25], 3]))}), flush=True)
 """
 
 
 def test_retarget_onto_a_rig_generated_by_rigify():
     """Blender's own Rigify: human metarig, generated; the guess keys its FK controls (with the
     IK/FK switches keyed to FK in the new action), their bases taken under the rig's evaluated
-    mechanism, and the deforming arms and legs point where the performer's do.
+    mechanism, the deforming arms point where the performer's do and the feet travel as the
+    performer's, scaled by the leg ratio.
 
     In a process of its own: bpy 4.2.23 as a module crashes when the interpreter exits once
     Rigify has been enabled (a Blender bug, seen with nothing but ``addon_utils.enable``), so
@@ -212,6 +222,8 @@ def test_retarget_onto_a_rig_generated_by_rigify():
     assert out["rig_switch"] == 1.0                     # as the new action keys it
     for bone, ang in out["worst"].items():
         assert ang < 3.0, (bone, ang)
+    assert out["ankle_travel"] > 0.05, out
+    assert abs(out["foot_travel"] - out["ankle_travel"]) < 0.01 + out["leg_reach_error"], out
 
 
 def test_retarget_onto_an_fbx_character_in_centimetres_facing_y(addon):

@@ -618,3 +618,72 @@ def test_validation_errors_are_clear():
         rt.TargetRig(["a", "b"], [1, 0], np.stack([np.eye(3)] * 2), np.zeros((2, 3)))
     with pytest.raises(ValueError, match=r"\(T, 22, 3, 3\)"):
         rt.retarget(np.zeros((2, 21, 3, 3)), np.zeros((2, 21, 3)), body, rig, bm)
+
+
+def test_editor_rows_round_trip():
+    """The panel's map editor rows: one per joint in joint order, unmapped joints empty; back to
+    the same map (twist lists kept, also on an unmapped joint, for validation to report)."""
+    ue5 = bmaps.preset("ue5")
+    rows = bmaps.bone_map_rows(ue5)
+    assert [r[0] for r in rows] == list(sk.JOINT_NAMES)
+    assert dict((j, b) for j, b, _ in rows)["spine2"] == "spine_03"
+    assert rows[sk.J["left_elbow"]][2] == ["lowerarm_twist_02_l", "lowerarm_twist_01_l"]
+    back = bmaps.bone_map_from_rows(rows, "ue5")
+    assert back.to_dict() == ue5.to_dict()
+    partial = bmaps.BoneMap("p", {"pelvis": "hips", "left_knee": "knee.L"}, {})
+    rows = bmaps.bone_map_rows(partial)
+    assert sum(1 for _, b, _ in rows if b) == 2 and len(rows) == sk.NUM_JOINTS
+    assert bmaps.bone_map_from_rows(rows, "p").to_dict() == partial.to_dict()
+    orphan = bmaps.bone_map_from_rows([("pelvis", "hips", []), ("left_elbow", " ", ["twist.L"])])
+    assert orphan.bones == {"pelvis": "hips"} and orphan.twist == {"left_elbow": ["twist.L"]}
+    with pytest.raises(ValueError, match="twist bones given for joint\\(s\\) \\['left_elbow'\\]"):
+        bmaps.validate_bone_map(orphan)
+
+
+def test_guess_orders_twist_bones_base_to_tip_and_keeps_them_below_their_segment():
+    """From names alone twist bones are listed base to tip by where their heads lie along the
+    segment (UE5's lowerarm_twist_01 is next to the wrist), whatever order the rig lists them in;
+    a twist-named bone not below the segment's bone (it could not share its twist) is left out."""
+    bones = []
+    for n, p, _, _ in _ue5_bones():
+        bones.append((n, p, None, None))
+    bones.append(("upperarm_twist_03_l", "clavicle_l", None, None))     # beside the arm, not below it
+    at = {"upperarm_l": 0.0, "upperarm_twist_01_l": 0.05, "upperarm_twist_02_l": 0.15, "lowerarm_l": 0.3,
+          "lowerarm_twist_01_l": 0.5, "lowerarm_twist_02_l": 0.4, "thigh_l": 0.0, "thigh_twist_01_l": 0.1,
+          "thigh_twist_02_l": 0.25, "calf_l": 0.45, "calf_twist_01_l": 0.8, "calf_twist_02_l": 0.6}
+    x = np.array([1.0, 0.0, 0.0])
+    placed = [(n, p, (at[n] * x if n in at else None), (at[n] * x + 0.01 * x if n in at else None))
+              for n, p, _, _ in bones]
+    bm, _ = bmaps.guess_bone_map(placed, use_presets=False)
+    ue5 = bmaps.preset("ue5")
+    for j in ("left_shoulder", "left_elbow", "left_hip", "left_knee"):
+        assert bm.twist[j] == ue5.twist[j], (j, bm.twist[j])
+    # without positions: the rig's own order (here 01 before 02), still only bones below the arm
+    bm2, _ = bmaps.guess_bone_map(bones, use_presets=False)
+    assert bm2.twist["left_elbow"] == ["lowerarm_twist_01_l", "lowerarm_twist_02_l"]
+    assert bm2.twist["left_shoulder"] == ["upperarm_twist_01_l", "upperarm_twist_02_l"]
+    body = sk.make_body(1.75)
+    names = [b[0] for b in bones]
+    rig = rt.TargetRig(names, [b[1] for b in bones], np.broadcast_to(np.eye(3), (len(names), 3, 3)),
+                       np.arange(3 * len(names), dtype=float).reshape(-1, 3))
+    rt.make_plan(body, rig, bm2)                                         # a map the retarget accepts
+
+
+def test_auto_rig_pro_preset_names_its_deforming_bones():
+    """Auto-Rig Pro deforms with root.x, spine_0N.x, shoulder.l, arm_stretch.l, forearm_stretch.l,
+    hand.l, thigh_stretch.l, leg_stretch.l, foot.l, toes_01.l (arm.l, forearm.l, thigh.l and leg.l
+    are mechanism bones of the control rig): the preset names those and the guess picks it."""
+    out = [("c_traj", None), ("root.x", "c_traj"), ("spine_01.x", "root.x"), ("spine_02.x", "spine_01.x"),
+           ("spine_03.x", "spine_02.x"), ("neck.x", "spine_03.x"), ("head.x", "neck.x")]
+    for s in ("l", "r"):
+        out += [(f"shoulder.{s}", "spine_03.x"), (f"arm_stretch.{s}", f"shoulder.{s}"),
+                (f"forearm_stretch.{s}", f"arm_stretch.{s}"), (f"hand.{s}", f"forearm_stretch.{s}"),
+                (f"index1.{s}", f"hand.{s}"), (f"thigh_stretch.{s}", "root.x"),
+                (f"leg_stretch.{s}", f"thigh_stretch.{s}"), (f"foot.{s}", f"leg_stretch.{s}"),
+                (f"toes_01.{s}", f"foot.{s}")]
+    bones = _bones(out)
+    arp = bmaps.validate_bone_map(bmaps.preset("auto_rig_pro"), [b[0] for b in bones])
+    assert arp.bones["left_shoulder"] == "arm_stretch.l" and arp.bones["right_knee"] == "leg_stretch.r"
+    bm, notes = bmaps.guess_bone_map(bones)
+    assert bm.name == "auto_rig_pro" and bm.bones == arp.bones
+    assert all(n.confidence == 1.0 for n in notes)

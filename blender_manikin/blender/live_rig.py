@@ -392,6 +392,71 @@ def _flexion_driver(obj, pb, r: LimbRig):
     return fc
 
 
+def setup_swivel_reference(obj, r: LimbRig):
+    """The swivel reference bone ``r.ref``: pose Euler Y = the swivel (driver on
+    ``obj["swivel_<limb>"]``), then a Damped Track (Y) to the control ``r.ctrl``.  Its pole child
+    then sits in the direction the elbow / knee bends towards (module docstring)."""
+    ref = obj.pose.bones[r.ref]
+    ref.rotation_mode = 'XYZ'
+    ref.rotation_euler = (0.0, 0.0, 0.0)
+    ref.location = (0.0, 0.0, 0.0)
+    _swivel_driver(obj, ref, r.limb)
+    c = _constraint(ref, 'DAMPED_TRACK', "swivel track")
+    c.target, c.subtarget, c.track_axis, c.head_tail = obj, r.ctrl, 'TRACK_Y', 0.0
+    return c
+
+
+def setup_ik_chain(obj, r: LimbRig):
+    """The two-bone IK chain ``r.upper`` -> ``r.lower`` (both straight along their local Y at
+    rest, hinge about local X): the lower bone's hinge in ``[0, FLEX_MAX]`` (Y / Z locked), its
+    Euler X pre-set by the flexion driver (:func:`_flexion_driver`, lengths from ``r.base`` /
+    ``r.mid`` / ``r.end``), an IK constraint to ``r.ctrl`` with the pole ``r.pole`` at
+    :data:`POLE_ANGLE`, no stretch.  Returns the IK constraint."""
+    pbs = obj.pose.bones
+    lo = pbs[r.lower]
+    lo.rotation_mode = 'XYZ'
+    lo.rotation_euler = (0.0, 0.0, 0.0)
+    _flexion_driver(obj, lo, r)
+    lo.lock_ik_x, lo.lock_ik_y, lo.lock_ik_z = False, True, True
+    lo.use_ik_limit_x = True
+    lo.ik_min_x, lo.ik_max_x = 0.0, float(ls.FLEX_MAX[r.index])
+    lo.ik_stretch = 0.0
+    pbs[r.upper].ik_stretch = 0.0
+    pbs[r.upper].rotation_quaternion = (1.0, 0.0, 0.0, 0.0)
+    ik = _constraint(lo, 'IK', "IK")
+    ik.target, ik.subtarget = obj, r.ctrl
+    ik.pole_target, ik.pole_subtarget = obj, r.pole
+    ik.pole_angle = POLE_ANGLE
+    ik.chain_count = 2
+    ik.use_tail = True
+    ik.use_stretch = False
+    ik.iterations = IK_ITERATIONS
+    return ik
+
+
+def twist_constraint(obj, pb, name, target, space, from_range, to_range, mix='AFTER'):
+    """A Transformation constraint on pose bone ``pb``: the twist (swing-twist about Y) of bone
+    ``target`` measured in the space of bone ``space``, ``from_range`` (radians, min, max; values
+    outside are clamped) mapped linearly to ``to_range``, applied as a rotation about ``pb``'s own
+    Y in its local space (``mix``: 'AFTER' adds it after the bone's rotation, 'REPLACE' replaces
+    it).  Used for the forearm pronation and for twist bones' shares."""
+    c = _constraint(pb, 'TRANSFORM', name)
+    c.target, c.subtarget = obj, target
+    c.target_space = 'CUSTOM'
+    c.space_object, c.space_subtarget = obj, space
+    c.owner_space = 'LOCAL'
+    c.map_from, c.map_to = 'ROTATION', 'ROTATION'
+    c.from_rotation_mode = 'SWING_TWIST_Y'
+    c.map_to_x_from, c.map_to_y_from, c.map_to_z_from = 'X', 'Y', 'Z'
+    c.from_min_x_rot = c.from_max_x_rot = 0.0
+    c.from_min_z_rot = c.from_max_z_rot = 0.0
+    c.from_min_y_rot, c.from_max_y_rot = float(from_range[0]), float(from_range[1])
+    c.to_min_y_rot, c.to_max_y_rot = float(to_range[0]), float(to_range[1])
+    c.use_motion_extrapolate = False
+    c.mix_mode_rot = mix
+    return c
+
+
 def _setup_constraints(obj):
     _clear_rig_constraints(obj)
     obj.pose.ik_solver = 'LEGACY'
@@ -399,33 +464,8 @@ def _setup_constraints(obj):
     for r in LIMB_RIGS:
         for name in (r.ctrl, r.ref, r.pole, r.upper, r.lower, r.base, r.mid, r.end):
             pbs[name].rotation_mode = 'QUATERNION'
-        # reference: pose Euler Y = swivel (driver), then Damped Track to the control
-        ref = pbs[r.ref]
-        ref.rotation_mode = 'XYZ'
-        ref.rotation_euler = (0.0, 0.0, 0.0)
-        ref.location = (0.0, 0.0, 0.0)
-        _swivel_driver(obj, ref, r.limb)
-        c = _constraint(ref, 'DAMPED_TRACK', "swivel track")
-        c.target, c.subtarget, c.track_axis, c.head_tail = obj, r.ctrl, 'TRACK_Y', 0.0
-        # IK chain: MCH forearm/shin hinge about local X in [0, FLEX_MAX]
-        lo = pbs[r.lower]
-        lo.rotation_mode = 'XYZ'
-        lo.rotation_euler = (0.0, 0.0, 0.0)
-        _flexion_driver(obj, lo, r)
-        lo.lock_ik_x, lo.lock_ik_y, lo.lock_ik_z = False, True, True
-        lo.use_ik_limit_x = True
-        lo.ik_min_x, lo.ik_max_x = 0.0, float(ls.FLEX_MAX[r.index])
-        lo.ik_stretch = 0.0
-        pbs[r.upper].ik_stretch = 0.0
-        pbs[r.upper].rotation_quaternion = (1.0, 0.0, 0.0, 0.0)
-        ik = _constraint(lo, 'IK', "IK")
-        ik.target, ik.subtarget = obj, r.ctrl
-        ik.pole_target, ik.pole_subtarget = obj, r.pole
-        ik.pole_angle = POLE_ANGLE
-        ik.chain_count = 2
-        ik.use_tail = True
-        ik.use_stretch = False
-        ik.iterations = IK_ITERATIONS
+        setup_swivel_reference(obj, r)
+        setup_ik_chain(obj, r)
         # deform bones follow the chain; the hand / foot takes the control's rotation
         for deform, mch in ((r.base, r.upper), (r.mid, r.lower)):
             pb = pbs[deform]
@@ -437,20 +477,7 @@ def _setup_constraints(obj):
         if r.is_arm:
             # forearm pronation tau: swing-twist-Y of the hand control in the MCH forearm frame
             lim = ls.TWIST_RANGE[r.index]
-            c = _constraint(pbs[r.mid], 'TRANSFORM', "pronation")
-            c.target, c.subtarget = obj, r.ctrl
-            c.target_space = 'CUSTOM'
-            c.space_object, c.space_subtarget = obj, r.lower
-            c.owner_space = 'LOCAL'
-            c.map_from, c.map_to = 'ROTATION', 'ROTATION'
-            c.from_rotation_mode = 'SWING_TWIST_Y'
-            c.map_to_x_from, c.map_to_y_from, c.map_to_z_from = 'X', 'Y', 'Z'
-            c.from_min_x_rot = c.from_max_x_rot = 0.0
-            c.from_min_z_rot = c.from_max_z_rot = 0.0
-            c.from_min_y_rot, c.from_max_y_rot = float(lim[0]), float(lim[1])
-            c.to_min_y_rot, c.to_max_y_rot = float(lim[0]), float(lim[1])
-            c.use_motion_extrapolate = False
-            c.mix_mode_rot = 'AFTER'
+            twist_constraint(obj, pbs[r.mid], "pronation", r.ctrl, r.lower, lim, lim, 'AFTER')
         end = pbs[r.end]
         end.rotation_quaternion = (1.0, 0.0, 0.0, 0.0)
         # constrained bones: their own channels do nothing, lock them against accidental keys
@@ -678,6 +705,40 @@ def _pose_matrices(obj_eval, order):
     return np.swapaxes(buf.reshape(len(pbs), 4, 4), -1, -2)[order].astype(np.float64)
 
 
+def sample_pose_matrices(obj, names, frames, context=None):
+    """``(len(frames), len(names), 4, 4)`` armature-space pose matrices of bones ``names`` of
+    ``obj`` as Blender evaluates them (constraints, drivers, IK) on each scene frame of
+    ``frames`` (integers; ``scene.frame_set``, the current frame restored afterwards)."""
+    context = context or bpy.context
+    scene = context.scene
+    order = [obj.pose.bones.find(n) for n in names]
+    M = np.empty((len(frames), len(names), 4, 4))
+    prev = scene.frame_current, scene.frame_subframe
+    try:
+        for t, f in enumerate(frames):
+            scene.frame_set(int(f))
+            M[t] = _pose_matrices(obj.evaluated_get(context.evaluated_depsgraph_get()), order)
+    finally:
+        scene.frame_set(prev[0], subframe=prev[1])
+    return M
+
+
+def pose_basis(rest, rest_parent, pose, pose_parent, has_parent):
+    """Pose-bone basis matrices (what the bones' own channels must hold) reproducing evaluated
+    armature-space ``pose`` matrices, Blender's default inheritance:
+    ``basis = (rest_p⁻¹ rest_k)⁻¹ (pose_p⁻¹ pose_k)``; bones without a parent ``rest_k⁻¹ pose_k``.
+
+    rest, rest_parent: ``(B, 4, 4)`` ``bone.matrix_local`` of each bone and of its parent;
+    pose, pose_parent: ``(T, B, 4, 4)``; has_parent: ``(B,)`` bool.  Returns ``(T, B, 4, 4)``.
+    """
+    eye = np.eye(4)
+    has_parent = np.asarray(has_parent, dtype=bool)
+    rest_p = np.where(has_parent[:, None, None], rest_parent, eye)
+    rel_rest = np.linalg.inv(rest_p) @ rest
+    pose_p = np.where(has_parent[None, :, None, None], pose_parent, eye)
+    return np.linalg.inv(rel_rest)[None] @ (np.linalg.inv(pose_p) @ pose)
+
+
 def deform_bone_names(obj):
     """Bones a bake keeps: deforming bones that are not part of the live rig, parents first."""
     rig = set(RIG_BONES)
@@ -700,7 +761,6 @@ def bake_live_rig(armature_obj, frame_start: int, frame_end: int, name: str | No
     linked to the source's collections.  Returns the new object.
     """
     context = context or bpy.context
-    scene = context.scene
     src = armature_obj
     frame_start, frame_end = int(frame_start), int(frame_end)
     if frame_end < frame_start:
@@ -721,23 +781,10 @@ def bake_live_rig(armature_obj, frame_start: int, frame_end: int, name: str | No
     idx = {n: k for k, n in enumerate(names)}
     has_parent = np.array([p is not None for p in parent])
     par = np.array([idx[p] if p is not None else k for k, p in enumerate(parent)])
-    order = [src.pose.bones.find(n) for n in names]
 
     frames = np.arange(frame_start, frame_end + 1)
-    M = np.empty((len(frames), len(names), 4, 4))
-    prev = scene.frame_current, scene.frame_subframe
-    try:
-        for t, f in enumerate(frames):
-            scene.frame_set(int(f))
-            M[t] = _pose_matrices(src.evaluated_get(context.evaluated_depsgraph_get()), order)
-    finally:
-        scene.frame_set(prev[0], subframe=prev[1])
-    # pose basis = (rest_p^-1 rest_k)^-1 (pose_p^-1 pose_k); parentless bones: rest_k^-1 pose_k
-    eye = np.eye(4)
-    rest_p = np.where(has_parent[:, None, None], rest[par], eye)
-    rel_rest = np.linalg.inv(rest_p) @ rest
-    pose_p = np.where(has_parent[None, :, None, None], M[:, par], eye)
-    basis = np.linalg.inv(rel_rest)[None] @ (np.linalg.inv(pose_p) @ M)
+    M = sample_pose_matrices(src, names, frames, context)
+    basis = pose_basis(rest, rest[par], M, M[:, par], has_parent)
 
     new = _plain_copy(src, names, name or f"{src.name}_baked", context)
     try:

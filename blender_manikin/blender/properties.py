@@ -3,8 +3,8 @@
 import json
 
 import bpy
-from bpy.props import (BoolProperty, EnumProperty, FloatProperty, IntProperty, PointerProperty,
-                       StringProperty)
+from bpy.props import (BoolProperty, CollectionProperty, EnumProperty, FloatProperty, IntProperty,
+                       PointerProperty, StringProperty)
 from bpy.types import PropertyGroup
 
 from ..core import formats
@@ -56,7 +56,28 @@ def _bone_map_items():
     from ..core.bone_maps import PRESETS
     return [('AUTO', "Guess", "From the character's bone names and hierarchy (presets first)")] + \
         [(p.upper(), p.replace("_", " ").title().replace("Ue", "Unreal UE").replace("Vrm", "VRM"),
-          f"The {p} preset") for p in PRESETS] + [('FILE', "From File", "A saved bone map (JSON)")]
+          f"The {p} preset") for p in PRESETS] + [('FILE', "From File", "A saved bone map (JSON)"),
+                                                   ('EDITED', "Edited List", "The bone map list below as "
+                                                    "edited (changing a row chooses this)")]
+
+
+def fbx_preset_items():
+    """Enum items of the FBX export presets (:mod:`.fbx_presets`)."""
+    from .fbx_presets import DESCRIPTIONS, PRESET_NAMES
+    return [(n.upper(), n.title(), DESCRIPTIONS[n]) for n in PRESET_NAMES]
+
+
+def _retarget_inputs_changed(self, context):
+    """The character, the map choice or the map file changed: refill the bone map list unless it
+    holds edits (:func:`.bone_map_list.auto_fill`)."""
+    from . import bone_map_list
+    bone_map_list.auto_fill(self)
+
+
+def _row_edited(self, context):
+    """A bone map row changed (by the user, or by a script): the retarget uses the edited list."""
+    from . import bone_map_list
+    bone_map_list.row_edited(self.id_data.manikin)
 
 
 class MANIKIN_DeviceSource(PropertyGroup):
@@ -65,6 +86,17 @@ class MANIKIN_DeviceSource(PropertyGroup):
                             description="Animated object whose world transform is this device's pose")
     bone: StringProperty(name="Bone", default="",
                          description="Bone of an armature object to use instead of the object itself")
+
+
+class MANIKIN_BoneMapItem(PropertyGroup):
+    """A row of the bone map editor: a source joint (``name``, one of the body model's joints)
+    and the character's bone that follows it."""
+    bone: StringProperty(name="Bone", default="", update=_row_edited,
+                         description="The character's bone that follows this joint (empty: none; the "
+                                     "joint's rotation then goes to its neighbours)")
+    twist: StringProperty(name="Twist Bones", default="", update=_row_edited,
+                          description="Twist bones of this joint's segment, from its base to its tip, "
+                                      "comma-separated; each gets a share of the segment's twist")
 
 
 def _layout_items():
@@ -186,11 +218,28 @@ class MANIKIN_Settings(PropertyGroup):
     last_report: StringProperty(name="Last Solve", default="")
 
     retarget_target: PointerProperty(name="Character", type=bpy.types.Object, poll=_character_poll,
+                                     update=_retarget_inputs_changed,
                                      description="The character's armature the solved motion goes onto")
     retarget_map: EnumProperty(name="Bone Map", items=_bone_map_items(), default='AUTO',
+                               update=_retarget_inputs_changed,
                                description="Which of the character's bones each joint drives")
     retarget_map_file: StringProperty(name="Map File", subtype='FILE_PATH', default="",
+                                      update=_retarget_inputs_changed,
                                       description="A saved bone map (JSON: joint -> bone)")
+    retarget_bone_map: CollectionProperty(type=MANIKIN_BoneMapItem, name="Bone Map Rows",
+                                          description="The bone map editor: each joint and the character's "
+                                                      "bone that follows it")
+    retarget_bone_map_index: IntProperty(name="Active Row", default=0, min=0)
+    retarget_bone_map_name: StringProperty(name="Map Name", default="edited",
+                                           description="The bone map's name (saved in its JSON)")
+    retarget_bone_map_edited: BoolProperty(name="Edited", default=False,
+                                           description="Rows were changed by hand since they were loaded "
+                                                       "(they are then only replaced by Load Map)")
+    retarget_bone_map_source: StringProperty(name="Loaded From", default="",
+                                             description="The map the rows were loaded from")
+    export_fbx_preset: EnumProperty(name="FBX Preset", items=fbx_preset_items(), default='BLENDER',
+                                    description="Axes, units and bones of the exported FBX, for the "
+                                                "application that reads it")
     retarget_root: EnumProperty(
         name="Root Motion", default='SCALED',
         items=[('SCALED', "Scaled", "The hips travel as the performer's, scaled by the ratio of leg lengths"),
@@ -200,6 +249,11 @@ class MANIKIN_Settings(PropertyGroup):
                                      description="Solve the character's arms and legs again on its own limb "
                                                  "lengths, keeping the swivel, so its hands and feet land where "
                                                  "the performer's were (scaled with the root motion)")
+    retarget_live_swivel: BoolProperty(name="Live Swivel on Character", default=True,
+                                       description="With Keep Hands and Feet on Targets: the character gets the "
+                                                   "keyed swivel properties and a live rig, so editing a swivel "
+                                                   "turns its elbow / knee while the hand / foot stays (Bake "
+                                                   "Character to FK for plain keys)")
 
 
 def device_source(settings, device):
@@ -267,4 +321,4 @@ def config_from_settings(context):
     return cfg
 
 
-CLASSES = (MANIKIN_DeviceSource, MANIKIN_Settings)
+CLASSES = (MANIKIN_DeviceSource, MANIKIN_BoneMapItem, MANIKIN_Settings)

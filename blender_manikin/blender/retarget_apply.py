@@ -39,18 +39,25 @@ def target_rig_from_object(obj) -> rt.TargetRig:
     """The :class:`~..core.retarget.TargetRig` of armature object ``obj`` at rest."""
     if obj is None or obj.type != 'ARMATURE':
         raise TypeError("the retarget target must be an armature object")
-    bones = list(obj.data.bones)
+    bones = _own_bones(obj)
     names = [b.name for b in bones]
     parents = [b.parent.name if b.parent is not None else None for b in bones]
     A = np.array([np.array(b.matrix_local, dtype=np.float64) for b in bones]).reshape(len(bones), 4, 4)
     return rt.TargetRig.from_matrices(names, parents, A, np.array(obj.matrix_world, dtype=np.float64))
 
 
+def _own_bones(obj):
+    """The character's own bones: all but those a live swivel rig added
+    (:mod:`.character_swivel`, removed and rebuilt by a new retarget)."""
+    from .character_swivel import PREFIX
+    return [b for b in obj.data.bones if not b.name.startswith(PREFIX)]
+
+
 def bone_list(obj):
     """``[(name, parent, head (3,), tail (3,))]`` of ``obj``'s bones in armature space (for
     :func:`..core.bone_maps.guess_bone_map`)."""
     return [(b.name, b.parent.name if b.parent else None, np.array(b.head_local), np.array(b.tail_local))
-            for b in obj.data.bones]
+            for b in _own_bones(obj)]
 
 
 def resolve_bone_map(choice, target_obj, path=None):
@@ -261,12 +268,20 @@ def key_retarget(target_obj, res: rt.RetargetResult, target: rt.TargetRig, frame
 
 
 def retarget_onto(source_obj, target_obj, bone_map="auto", map_path=None, root_motion="scaled",
-                  keep_ends=False, context=None):
+                  keep_ends=False, context=None, live_swivel=None):
     """Retarget the MANIKIN armature ``source_obj``'s motion onto ``target_obj``: a new action
     ``MANIKIN_retarget_<source action>`` on the target.  Returns ``(action, result, notes)``:
     notes, plain-language lines for the user (the guessed map's doubtful joints, hands / feet out
-    of the target's reach)."""
+    of the target's reach).
+
+    live_swivel: also give the character the keyed swivel properties and the live swivel rig of
+    :mod:`.character_swivel` (its elbows / knees follow the swivel, its hands / feet stay on their
+    targets); None (default): when ``keep_ends`` is on.  A rig an earlier retarget left on the
+    character is removed first either way (its actions are kept)."""
+    from . import character_swivel
     context = context or bpy.context
+    if live_swivel is None:
+        live_swivel = bool(keep_ends)
     if target_obj is None or target_obj == source_obj:
         raise ValueError("choose a target armature other than the solved one")
     target = target_rig_from_object(target_obj)
@@ -274,16 +289,36 @@ def retarget_onto(source_obj, target_obj, bone_map="auto", map_path=None, root_m
     frames, wr, pos, swivel, body = sample_source(source_obj, context)
     res = rt.retarget(wr, pos, body, target, bmap, root_motion)
     notes = [f"{g.joint}: {g.bone or 'no bone'} ({g.why})" for g in guess if g.confidence < 0.5]
-    if keep_ends:
-        res = rt.keep_ends_on_targets(res, wr, pos, swivel, ends="scaled" if root_motion != "as_is" else "source")
-        err = res.reach_error
-        if err is not None:
-            for li, limb in enumerate(sk.LIMB_NAMES):
-                bad = np.isfinite(err[:, li]) & (err[:, li] > 0.005)
-                if bad.any():
-                    notes.append(f"{limb.replace('_', ' ')}: out of the character's reach on {int(bad.sum())} "
-                                 f"frame(s), by up to {100 * float(np.nanmax(err[bad, li])):.1f} cm")
+    # With keep_ends every limb lands on its target; without, the legs still do when the root
+    # motion is scaled or in place: transferred segment directions on a character with other
+    # thigh : shank proportions would make planted feet slide (3-4 cm/s at +-12 %), so the legs
+    # are solved onto the performer's feet scaled like the root motion (a planted foot stays
+    # planted), with the performer's knee swivel.  "As is" root motion keeps the transfer.
+    if keep_ends or root_motion != "as_is":
+        limbs = sk.LIMB_NAMES if keep_ends else ("left_leg", "right_leg")
+        res = rt.keep_ends_on_targets(res, wr, pos, swivel, limbs=limbs,
+                                      ends="scaled" if root_motion != "as_is" else "source")
+    err = res.reach_error
+    if err is not None:
+        for li, limb in enumerate(sk.LIMB_NAMES):
+            bad = np.isfinite(err[:, li]) & (err[:, li] > 0.005)
+            if bad.any():
+                notes.append(f"{limb.replace('_', ' ')}: out of the character's reach on {int(bad.sum())} "
+                             f"frame(s), by up to {100 * float(np.nanmax(err[bad, li])):.1f} cm")
     src_action = source_obj.animation_data.action
+    if character_swivel.has_rig_parts(target_obj):
+        character_swivel.remove_character_rig(target_obj, context)
+    prev = target_obj.animation_data.action if target_obj.animation_data else None
     action = key_retarget(target_obj, res, target, frames, f"MANIKIN_retarget_{src_action.name}",
                           switches=_ik_fk_switches(target_obj, bmap))
+    if live_swivel:
+        try:
+            notes += character_swivel.build_character_rig(target_obj, res, frames, wr, swivel, action, context)
+        except BaseException:
+            if prev is not None:
+                keying.assign_action(target_obj, prev)
+            else:
+                target_obj.animation_data.action = None
+            bpy.data.actions.remove(action)
+            raise
     return action, res, notes

@@ -34,7 +34,7 @@ of a generated rig are driven by constraints, so keying them needs those constra
 ``rigify_fk`` maps the FK controls instead), ``rigify_fk``, ``rigify_metarig``, ``mixamo``
 (``mixamorig:`` prefix), ``mixamo_plain`` (no prefix), ``ue4``, ``ue5`` (Unreal mannequins; UE5's
 five spine bones get spine1/2/3 on ``spine_01/03/05``), ``vrm`` (VRoid / VRM 0.x ``J_Bip_*``),
-``auto_rig_pro`` (ARP's exported deform names).
+``auto_rig_pro`` (ARP's deforming bones, as exported: ``root.x``, ``arm_stretch.l``, ...).
 
 :func:`guess_bone_map` guesses a map for an unknown rig from bone names and hierarchy.
 """
@@ -45,6 +45,8 @@ import re
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Iterable, Mapping, Optional, Sequence
+
+import numpy as np
 
 from .skeleton import JOINT_NAMES, J
 
@@ -99,6 +101,29 @@ class BoneMap:
         tw = {j: [b for b in v if b in have] for j, v in self.twist.items()}
         return BoneMap(self.name, {j: b for j, b in self.bones.items() if b in have},
                        {j: v for j, v in tw.items() if v})
+
+
+def bone_map_rows(bmap) -> list:
+    """The rows of the panel's map editor: one ``(joint, bone, twist)`` per source joint, in
+    :data:`skeleton.JOINT_NAMES` order; ``bone`` is ``""`` for an unmapped joint, ``twist`` the
+    list of its twist bones (base to tip, may be empty)."""
+    bm = as_bone_map(bmap)
+    return [(j, bm.bones.get(j, "") or "", list(bm.twist.get(j, ()))) for j in JOINT_NAMES]
+
+
+def bone_map_from_rows(rows: Iterable, name: str = "edited") -> BoneMap:
+    """The :class:`BoneMap` of editor rows ``(joint, bone, twist)`` (the inverse of
+    :func:`bone_map_rows`): rows with an empty bone are unmapped joints; twist lists are kept even
+    then, so that :func:`validate_bone_map` can say they have no bone.  Not validated."""
+    bones, twist = {}, {}
+    for joint, bone, tw in rows:
+        bone = (bone or "").strip()
+        if bone:
+            bones[joint] = bone
+        tw = [b for b in (tw or ()) if b]
+        if tw:
+            twist[joint] = tw
+    return BoneMap(name or "edited", bones, twist)
 
 
 def as_bone_map(bmap) -> BoneMap:
@@ -249,9 +274,14 @@ def _vrm() -> BoneMap:
 
 
 def _arp() -> BoneMap:
+    # Auto-Rig Pro's deforming bones: root.x is the hips; an arm's and a leg's deforming bones are
+    # the *_stretch ones (arm.l, forearm.l, thigh.l, leg.l are non-deforming mechanism bones of the
+    # control rig, and absent from an exported one).  Its twist bones (arm_twist.l, ...) are not
+    # mapped: they need not hang below the segment's bone, which a twist list requires.
     center = {"pelvis": "root.x", "spine1": "spine_01.x", "spine2": "spine_02.x", "spine3": "spine_03.x",
               "neck": "neck.x", "head": "head.x"}
-    stems = dict(zip(_LIMB_PARTS, ("shoulder", "arm", "forearm", "hand", "thigh", "leg", "foot", "toes_01")))
+    stems = dict(zip(_LIMB_PARTS, ("shoulder", "arm_stretch", "forearm_stretch", "hand", "thigh_stretch",
+                                   "leg_stretch", "foot", "toes_01")))
     return _sided(center, stems, lambda s, side: f"{s}.{'l' if side == 'left' else 'r'}", None, "auto_rig_pro")
 
 
@@ -404,8 +434,9 @@ def guess_bone_map(bones, min_preset_fraction: float = 0.85, use_presets: bool =
     ``Left/Right``, ``L_/R_``) and the hierarchy: each limb part must descend from the previous
     part of its chain, the spine bones are the chain from the hips to the neck (spine1/2/3 spread
     over however many there are), and ties go to the bone nearest the root, then to names without
-    a number.  Bones named twist/roll become twist bones of their segment.  ``use_presets=False``
-    skips the presets (names and hierarchy only).
+    a number.  Bones named twist/roll below a segment's bone become its twist bones, base to
+    tip by where their heads lie along it.  ``use_presets=False`` skips the presets (names and
+    hierarchy only).
 
     Returns ``(BoneMap, notes)``: ``notes`` is a list of :class:`GuessNote`, one per source joint,
     for the user to confirm.
@@ -434,6 +465,17 @@ def guess_bone_map(bones, min_preset_fraction: float = 0.85, use_presets: bool =
             n = parent[n]
             out.append(n)
         return out
+
+    ends = {b[0]: (b[2], b[3]) for b in bones if len(b) >= 4}
+
+    def along(main, n):
+        """How far bone ``n``'s head is along bone ``main`` (0 without head / tail positions)."""
+        h, t = ends.get(main, (None, None))
+        hn = ends.get(n, (None, None))[0]
+        if h is None or t is None or hn is None:
+            return 0.0
+        h, t, hn = (np.asarray(v, np.float64) for v in (h, t, hn))
+        return float(np.dot(hn - h, t - h))
 
     info = {}
     for n in names:
@@ -503,7 +545,11 @@ def guess_bone_map(bones, min_preset_fraction: float = 0.85, use_presets: bool =
         for role in ("upperarm", "forearm", "thigh", "shin"):
             j = f"{side}_{_ROLE_JOINT[role]}"
             if j in bmap:
-                tb = [t for t in cands(role, side, twist=True) if t not in bmap.values()]
+                # only bones below the segment's bone can share its twist (the retarget
+                # requires it), listed base to tip by where they sit along it
+                tb = [t for t in cands(role, side, twist=True) if t not in bmap.values()
+                      and bmap[j] in ancestors(t)]
+                tb.sort(key=lambda t: along(bmap[j], t))
                 if tb:
                     twist[j] = tb
     ordered = [notes[j] for j in JOINT_NAMES]

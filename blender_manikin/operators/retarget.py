@@ -1,7 +1,11 @@
-"""Retarget the solved motion onto the animator's character (``manikin.retarget``,
-``manikin.save_bone_map``).  The math is :mod:`..core.retarget`; the glue
-:mod:`..blender.retarget_apply`.  One Ctrl+Z undoes a retarget."""
+"""Retarget the solved motion onto the animator's character (``manikin.retarget``), and the
+bone map editor's operators (``manikin.load_bone_map``, ``manikin.save_bone_map``).  The math is
+:mod:`..core.retarget`; the glue :mod:`..blender.retarget_apply` and
+:mod:`..blender.bone_map_list`.  One Ctrl+Z undoes a retarget or a Load Map."""
 from __future__ import annotations
+
+import os
+import tempfile
 
 from bpy.props import StringProperty
 from bpy.types import Operator
@@ -34,10 +38,14 @@ class MANIKIN_OT_retarget(Operator):
         s = context.scene.manikin
         src = _source(context)
         try:
-            action, res, notes = retarget_apply.retarget_onto(
-                src, s.retarget_target, s.retarget_map.lower(), bpy.path.abspath(s.retarget_map_file),
-                s.retarget_root.lower(), s.retarget_keep_ends, context)
-        except (ValueError, KeyError, TypeError) as exc:
+            if s.retarget_map == 'EDITED':
+                action, res, notes = _retarget_with_edited_list(src, s, context)
+            else:
+                action, res, notes = retarget_apply.retarget_onto(
+                    src, s.retarget_target, s.retarget_map.lower(), bpy.path.abspath(s.retarget_map_file),
+                    s.retarget_root.lower(), s.retarget_keep_ends, context,
+                    live_swivel=s.retarget_keep_ends and s.retarget_live_swivel)
+        except (ValueError, KeyError, TypeError, OSError) as exc:
             self.report({'ERROR'}, f"retarget: {exc}")
             return {'CANCELLED'}
         msg = f"MANIKIN: {src.name} -> {s.retarget_target.name} / {action.name}"
@@ -45,35 +53,104 @@ class MANIKIN_OT_retarget(Operator):
         return {'FINISHED'}
 
 
-class MANIKIN_OT_save_bone_map(Operator):
-    """Save the bone map the retarget would use (preset or guess) as JSON, to edit and reuse"""
-    bl_idname = "manikin.save_bone_map"
-    bl_label = "Save Bone Map"
-    filepath: StringProperty(subtype='FILE_PATH', default="bone_map.json")
+def _retarget_with_edited_list(src, s, context):
+    """The retarget with the bone map list as edited: checked against the character first (a bone
+    it lacks is an error naming the joint and the bone), then handed to the retarget as a map
+    file (:func:`..core.bone_maps.save_bone_map`, read back by the retarget's own loader)."""
+    from ..blender import bone_map_list, retarget_apply
+    from ..core import bone_maps
+    bmap = bone_map_list.checked_bone_map(s, s.retarget_target)
+    with tempfile.TemporaryDirectory(prefix="manikin_bone_map_") as folder:
+        path = os.path.join(folder, "edited_bone_map.json")
+        bone_maps.save_bone_map(path, bmap)
+        return retarget_apply.retarget_onto(src, s.retarget_target, "file", path, s.retarget_root.lower(),
+                                            s.retarget_keep_ends, context,
+                                            live_swivel=s.retarget_keep_ends and s.retarget_live_swivel)
+
+
+class MANIKIN_OT_load_bone_map(Operator):
+    """Fill the bone map list from the chosen map (Guess, a preset or a saved file) for the
+    chosen character; the list's edits are replaced"""
+    bl_idname = "manikin.load_bone_map"
+    bl_label = "Load Bone Map"
+    bl_options = {'REGISTER', 'UNDO'}
 
     @classmethod
     def poll(cls, context):
         s = getattr(context.scene, "manikin", None)
-        return s is not None and s.retarget_target is not None
+        if s is None or s.retarget_target is None:
+            return False
+        if s.retarget_map == 'EDITED':
+            if hasattr(cls, "poll_message_set"):
+                cls.poll_message_set("Choose Guess, a preset or From File to load the list from")
+            return False
+        return True
+
+    def execute(self, context):
+        from ..blender import bone_map_list
+        s = context.scene.manikin
+        try:
+            bmap, notes = bone_map_list.load_choice(s, s.retarget_target)
+        except (ValueError, OSError, KeyError, TypeError) as exc:
+            self.report({'ERROR'}, f"load bone map: {exc}")
+            return {'CANCELLED'}
+        doubtful = [f"{g.joint}: {g.bone or 'no bone'} ({g.why})" for g in notes if g.confidence < 0.5]
+        msg = f"bone map {bmap.name!r}: {len(bmap.bones)} of {len(s.retarget_bone_map)} joints mapped"
+        self.report({'WARNING'} if doubtful else {'INFO'}, msg + ("; check " + "; ".join(doubtful) if doubtful else ""))
+        return {'FINISHED'}
+
+
+class MANIKIN_OT_save_bone_map(Operator):
+    """Save the bone map list as it is (or, while it is empty, the chosen map) as JSON, to reuse
+    with From File or on the command line (--bone-map FILE.json)"""
+    bl_idname = "manikin.save_bone_map"
+    bl_label = "Save Bone Map"
+    bl_options = {'REGISTER'}                  # writes a file; the scene is not changed
+    filepath: StringProperty(subtype='FILE_PATH', default="",
+                             description="Where to write the map (default: the user's bone map folder)")
+    filter_glob: StringProperty(default="*.json", options={'HIDDEN'})
+
+    @classmethod
+    def poll(cls, context):
+        s = getattr(context.scene, "manikin", None)
+        return s is not None and (len(s.retarget_bone_map) > 0 or s.retarget_target is not None)
+
+    def _default_path(self, context, create):
+        from ..blender import bone_map_list
+        name = _file_name(context.scene.manikin.retarget_bone_map_name or "bone_map")
+        return os.path.join(bone_map_list.user_folder(create=create), name + ".json")
 
     def invoke(self, context, event):
+        if not self.filepath:
+            self.filepath = self._default_path(context, create=True)
         context.window_manager.fileselect_add(self)
         return {'RUNNING_MODAL'}
 
     def execute(self, context):
         import bpy
-        from ..blender import retarget_apply
+        from ..blender import bone_map_list, retarget_apply
         from ..core import bone_maps
         s = context.scene.manikin
         try:
-            bmap, _ = retarget_apply.resolve_bone_map(s.retarget_map.lower(), s.retarget_target,
-                                                      bpy.path.abspath(s.retarget_map_file))
-            bone_maps.save_bone_map(bpy.path.abspath(self.filepath), bmap)
+            path = bpy.path.abspath(self.filepath) if self.filepath else self._default_path(context, create=True)
+            if len(s.retarget_bone_map):
+                bmap = bone_map_list.to_bone_map(s)
+            else:
+                bmap, _ = retarget_apply.resolve_bone_map(s.retarget_map.lower(), s.retarget_target,
+                                                          bpy.path.abspath(s.retarget_map_file))
+            bone_maps.save_bone_map(path, bmap)
         except (ValueError, OSError) as exc:
             self.report({'ERROR'}, f"save bone map: {exc}")
             return {'CANCELLED'}
-        self.report({'INFO'}, f"bone map written to {self.filepath}")
+        self.filepath = path
+        self.report({'INFO'}, f"bone map written to {path}")
         return {'FINISHED'}
 
 
-CLASSES = (MANIKIN_OT_retarget, MANIKIN_OT_save_bone_map)
+def _file_name(name: str) -> str:
+    """``name`` as a file name (letters, digits, ``-``, ``_``, ``.``)."""
+    import re
+    return re.sub(r"[^\w.-]+", "_", str(name)).strip("._") or "bone_map"
+
+
+CLASSES = (MANIKIN_OT_retarget, MANIKIN_OT_load_bone_map, MANIKIN_OT_save_bone_map)

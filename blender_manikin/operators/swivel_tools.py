@@ -1,7 +1,9 @@
 """Swivel tools: make the live rig, key / smooth / reset swivel curves, bake to plain FK.
 
 All operate on the active object, a MANIKIN armature (see
-:mod:`blender_manikin.blender.live_rig`).  Angles are radians in the data
+:mod:`blender_manikin.blender.live_rig`); key / smooth / reset also on a character given the
+live swivel by a retarget, which "Bake Character to FK" bakes in place
+(:mod:`blender_manikin.blender.character_swivel`).  Angles are radians in the data
 (custom properties with subtype ANGLE; the UI shows degrees); frames are
 scene frames.  Every operator has ``bl_options = {'REGISTER', 'UNDO'}``, so
 one Ctrl+Z undoes it.
@@ -30,6 +32,14 @@ def _live_object(context):
     return obj if live_rig.is_live_rig(obj) else None
 
 
+def _swivel_object(context):
+    """The active object when its swivel curves can be edited: a live rig, or a character with
+    the live swivel of a retarget (:mod:`..blender.character_swivel`)."""
+    from ..blender import character_swivel
+    obj = getattr(context, "active_object", None)
+    return obj if _live_object(context) is not None or character_swivel.is_character_rig(obj) else None
+
+
 def _frame_range(op, context):
     scene = context.scene
     if op.use_scene_range:
@@ -44,6 +54,15 @@ class _LivePoll:
     def poll(cls, context):
         if _live_object(context) is None:
             cls.poll_message_set("the active object is not a MANIKIN live rig (use Make Live Rig)")
+            return False
+        return True
+
+
+class _SwivelPoll:
+    @classmethod
+    def poll(cls, context):
+        if _swivel_object(context) is None:
+            cls.poll_message_set("the active object is not a MANIKIN live rig or a character with live swivel")
             return False
         return True
 
@@ -81,7 +100,7 @@ class MANIKIN_OT_make_live_rig(Operator):
         return {'FINISHED'}
 
 
-class MANIKIN_OT_key_swivel(_LivePoll, Operator):
+class MANIKIN_OT_key_swivel(_SwivelPoll, Operator):
     """Key the current swivel value(s) at the current frame (keeps a slider edit)"""
     bl_idname = "manikin.key_swivel"
     bl_label = "Key Swivel"
@@ -91,14 +110,14 @@ class MANIKIN_OT_key_swivel(_LivePoll, Operator):
 
     def execute(self, context):
         from ..blender import live_rig
-        obj = _live_object(context)
+        obj = _swivel_object(context)
         frame = context.scene.frame_current + context.scene.frame_subframe
         n = live_rig.key_swivel(obj, _limbs(self.limb), frame)
         self.report({'INFO'}, f"MANIKIN: keyed {n} swivel value(s) at frame {frame:g}")
         return {'FINISHED'}
 
 
-class MANIKIN_OT_smooth_swivel(_LivePoll, Operator):
+class MANIKIN_OT_smooth_swivel(_SwivelPoll, Operator):
     """Smooth the swivel keys over a frame range (Gaussian or box filter of the unwrapped angles)"""
     bl_idname = "manikin.smooth_swivel"
     bl_label = "Smooth Swivel"
@@ -117,14 +136,14 @@ class MANIKIN_OT_smooth_swivel(_LivePoll, Operator):
 
     def execute(self, context):
         from ..blender import live_rig
-        obj = _live_object(context)
+        obj = _swivel_object(context)
         f0, f1 = _frame_range(self, context)
         n = live_rig.smooth_swivel(obj, _limbs(self.limb), f0, f1, self.sigma, self.method)
         self.report({'INFO'}, f"MANIKIN: smoothed {n} swivel keys in frames {f0}-{f1}")
         return {'FINISHED'}
 
 
-class MANIKIN_OT_reset_swivel(_LivePoll, Operator):
+class MANIKIN_OT_reset_swivel(_SwivelPoll, Operator):
     """Restore the solver's swivel (stored at solve time) on the swivel curves"""
     bl_idname = "manikin.reset_swivel"
     bl_label = "Reset Swivel to Solved"
@@ -138,7 +157,7 @@ class MANIKIN_OT_reset_swivel(_LivePoll, Operator):
 
     def execute(self, context):
         from ..blender import live_rig
-        obj = _live_object(context)
+        obj = _swivel_object(context)
         scene = context.scene
         if self.scope == 'ALL':
             f0 = f1 = None
@@ -181,8 +200,46 @@ class MANIKIN_OT_bake_live_rig(_LivePoll, Operator):
         return {'FINISHED'}
 
 
+class MANIKIN_OT_bake_character_swivel(Operator):
+    """Bake the live swivel of the active character into plain FK keys (a new action, the live one
+    kept) and remove its swivel rig, so the character exports as plain keys"""
+    bl_idname = "manikin.bake_character_swivel"
+    bl_label = "Bake Character to FK"
+    bl_options = {'REGISTER', 'UNDO'}
+
+    use_scene_range: BoolProperty(name="Scene Range", default=False,
+                                  description="Bake the scene's (preview) frame range instead of the action's")
+    frame_start: IntProperty(name="Start", default=1)
+    frame_end: IntProperty(name="End", default=250)
+    remove_rig: BoolProperty(name="Remove Swivel Rig", default=True,
+                             description="Remove the controls and constraints the retarget added "
+                                         "(off: mute them)")
+
+    @classmethod
+    def poll(cls, context):
+        from ..blender import character_swivel
+        if not character_swivel.is_character_rig(getattr(context, "active_object", None)):
+            cls.poll_message_set("the active object is not a character with live swivel (Retarget to Character)")
+            return False
+        return True
+
+    def execute(self, context):
+        from ..blender import character_swivel
+        obj = context.active_object
+        f0 = f1 = None
+        if self.use_scene_range:
+            f0, f1 = _frame_range(self, context)
+        try:
+            action = character_swivel.bake_character_rig(obj, f0, f1, context=context, remove_rig=self.remove_rig)
+        except Exception as exc:
+            self.report({'ERROR'}, f"MANIKIN: {exc}")
+            return {'CANCELLED'}
+        self.report({'INFO'}, f"MANIKIN: baked {obj.name!r} into {action.name!r}")
+        return {'FINISHED'}
+
+
 CLASSES = (MANIKIN_OT_make_live_rig, MANIKIN_OT_key_swivel, MANIKIN_OT_smooth_swivel,
-           MANIKIN_OT_reset_swivel, MANIKIN_OT_bake_live_rig)
+           MANIKIN_OT_reset_swivel, MANIKIN_OT_bake_live_rig, MANIKIN_OT_bake_character_swivel)
 
 
 def register():

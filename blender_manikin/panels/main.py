@@ -1,7 +1,7 @@
 """The MANIKIN tab of the 3D Viewport sidebar: "Solve full body"."""
 from __future__ import annotations
 
-from bpy.types import Panel
+from bpy.types import Panel, UIList
 
 from ..blender.properties import DEVICE_LABELS
 from ..core.pose_result import DEVICES
@@ -155,6 +155,28 @@ class MANIKIN_PT_output(_Base, Panel):
         layout.prop(s, "armature")
 
 
+class MANIKIN_UL_bone_map(UIList):
+    """The bone map editor's rows: a source joint and, searched among the character's bones, the
+    bone that follows it (a red mark: the character has no such bone)."""
+    bl_idname = "MANIKIN_UL_bone_map"
+
+    def draw_item(self, context, layout, data, item, icon, active_data, active_propname, index=0, flt_flag=0):
+        from ..blender.bone_map_list import joint_label
+        target = data.retarget_target
+        bones = target.data if target is not None and target.type == 'ARMATURE' else None
+        split = layout.split(factor=0.4)
+        split.label(text=joint_label(item.name))
+        row = split.row(align=True)
+        missing = bool(item.bone) and bones is not None and item.bone not in bones.bones
+        row.alert = missing
+        if bones is not None:
+            row.prop_search(item, "bone", bones, "bones", text="", icon='ERROR' if missing else 'BONE_DATA')
+        else:
+            row.prop(item, "bone", text="", emboss=True)
+        if item.twist:
+            row.label(text="", icon='FORCE_VORTEX')
+
+
 class MANIKIN_PT_retarget(_Base, Panel):
     bl_label = "Retarget to Character"
     bl_parent_id = "MANIKIN_PT_solve"
@@ -168,12 +190,27 @@ class MANIKIN_PT_retarget(_Base, Panel):
         layout.prop(s, "retarget_target")
         row = layout.row(align=True)
         row.prop(s, "retarget_map")
+        row.operator("manikin.load_bone_map", text="", icon='FILE_REFRESH')
         row.operator("manikin.save_bone_map", text="", icon='FILE_TICK')
         if s.retarget_map == 'FILE':
             layout.prop(s, "retarget_map_file")
+        if s.retarget_target is not None:
+            col = layout.column()
+            col.use_property_split = False
+            col.template_list("MANIKIN_UL_bone_map", "", s, "retarget_bone_map", s, "retarget_bone_map_index",
+                              rows=6)
+            rows = s.retarget_bone_map
+            if 0 <= s.retarget_bone_map_index < len(rows):
+                col.prop(rows[s.retarget_bone_map_index], "twist")
+            if s.retarget_bone_map_source:
+                col.label(text=s.retarget_bone_map_source + (", edited" if s.retarget_bone_map_edited else ""),
+                          icon='INFO')
         layout.prop(s, "retarget_root")
         layout.prop(s, "retarget_keep_ends")
         layout.operator("manikin.retarget", icon='ARMATURE_DATA')
+        layout.separator()
+        layout.prop(s, "export_fbx_preset")
+        layout.operator("manikin.export_fbx", icon='EXPORT')
 
 
-CLASSES = (MANIKIN_PT_solve, MANIKIN_PT_calibration, MANIKIN_PT_output, MANIKIN_PT_retarget)
+CLASSES = (MANIKIN_PT_solve, MANIKIN_PT_calibration, MANIKIN_PT_output, MANIKIN_UL_bone_map, MANIKIN_PT_retarget)

@@ -1,6 +1,7 @@
 """The "Swivel & Posing" section of the MANIKIN sidebar tab (3D Viewport > Sidebar > MANIKIN).
 
-Shows, for the active MANIKIN armature, each limb's swivel angle as a slider
+Shows, for the active MANIKIN armature (or a character given the live swivel by a retarget,
+:mod:`blender_manikin.blender.character_swivel`), each limb's swivel angle as a slider
 (the keyed custom property ``["swivel_<limb>"]``, radians in the data,
 displayed in the scene's rotation unit, degrees by default) with the
 solver's value next to it, and the swivel tools of
@@ -31,14 +32,17 @@ class MANIKIN_PT_swivel(Panel):
     @classmethod
     def poll(cls, context):
         from ..blender import armature as arm_mod
+        from ..blender import character_swivel
         obj = getattr(context, "active_object", None)
-        return obj is not None and obj.type == 'ARMATURE' and arm_mod.PROP_BODY in obj.keys()
+        return obj is not None and obj.type == 'ARMATURE' and (
+            arm_mod.PROP_BODY in obj.keys() or character_swivel.is_character_rig(obj))
 
     def draw(self, context):
-        from ..blender import live_rig, writer
+        from ..blender import character_swivel, live_rig, writer
         layout = self.layout
         obj = context.active_object
-        live = live_rig.is_live_rig(obj)
+        character = character_swivel.is_character_rig(obj)
+        live = live_rig.is_live_rig(obj) or character
         if not live:
             col = layout.column()
             col.label(text="Plain FK solve: make it live to edit", icon='INFO')
@@ -65,6 +69,12 @@ class MANIKIN_PT_swivel(Panel):
         row = layout.row(align=True)
         row.operator("manikin.smooth_swivel", icon='SMOOTHCURVE')
         row.operator("manikin.reset_swivel", text="Reset All", icon='FILE_REFRESH').scope = 'ALL'
+        if character:
+            layout.operator("manikin.bake_character_swivel", icon='ACTION')
+            box = layout.box()
+            box.label(text="Pose mode: grab MANIKIN_ctrl_hand.L/.R", icon='BONE_DATA')
+            box.label(text="and MANIKIN_ctrl_foot.L/.R.")
+            return
         layout.operator("manikin.bake_live_rig", icon='ACTION')
         box = layout.box()
         box.label(text="Pose mode: grab ctrl_hand.L/.R and", icon='BONE_DATA')

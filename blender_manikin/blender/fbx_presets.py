@@ -1,0 +1,275 @@
+"""FBX export presets for Blender, Unity and Unreal, and the one FBX export of the add-on.
+
+Every FBX the add-on writes (``cli.py solve --format fbx``, the panel's **Export FBX**,
+``manikin.export_fbx``) goes through :func:`export_fbx` with one of :data:`PRESETS`: plain dicts
+of ``bpy.ops.export_scene.fbx`` keyword arguments, each choice commented with why.  Keywords a
+Blender version's exporter does not have are left out (:func:`exporter_kwargs`), so the presets
+work from Blender 4.2 to 5.x.
+
+What the engines do with an FBX (the reason for the choices):
+
+* **Unity** (``unity``) reads the file's axis system (``GlobalSettings`` UpAxis / FrontAxis /
+  CoordAxis) and converts it to its own left-handed +Y-up, +Z-forward frame by negating X; it reads
+  ``UnitScaleFactor`` ("1m (File)" in its importer when it is 100) and, with *Convert Units* (on by
+  default), imports an object written at scale 1 at scale 1.  Blender's exporter applies its
+  axis conversion to the root objects' transforms, so the armature arrives in Unity turned -90°
+  about X (Unity 2020.1+ can bake that away with *Bake Axis Conversion*).  These are the settings
+  of Blender's own Unity defaults (``io_scene_fbx.export_fbx_bin.defaults_unity3d``) with the
+  scale written as units instead of on the objects.
+* **Unreal** (``unreal``): UE's FBX importer converts every file to Z-up, -Y-front, right-handed
+  (``FFbxImporter::ConvertScene``, then it flips Y) and only converts units when *Convert Scene
+  Unit* is ticked (off by default): the numbers are read as centimetres.  So the preset writes
+  Blender's own axes (Z up, -Y front: exactly UE's import system, nothing is converted and no
+  rotation is put on the root), the file in centimetres (``UnitScaleFactor`` 1) and the skeleton
+  at scale 1 with its bones in centimetres -- what Epic's *Send to Unreal* add-on does by scaling
+  the rig (its "automatically scale bones").  Blender's exporter cannot put a unit factor into
+  the bones, only onto the armature's node (an armature node at scale 100 becomes a root bone
+  scaled 100 in UE), so :func:`export_fbx` exports a stand-in for the character: a copy of its
+  armature with the bones scaled to centimetres and the object scaled by the inverse, its bones
+  following the character's through Copy Location / Rotation / Scale constraints, baked by the
+  exporter and removed afterwards (the character itself is not changed).
+* **Blender** (``blender``, the default): what the add-on always wrote -- Blender's default axes
+  (-Z forward, Y up) and units (centimetres, the unit scale on the root objects), for
+  re-importing into Blender or any DCC.
+
+All three write one take (the scene's frame range, every frame, every bone keyed), no leaf
+bones, the armature as a plain node, Blender's bone axes, no NLA and no other actions.
+"""
+from __future__ import annotations
+
+#: one take baked from the active action: the same in every preset
+_ANIMATION = {
+    "bake_anim": True,                        # constraints, drivers and the live rig baked to keys
+    "bake_anim_use_all_bones": True,          # a key on every bone each frame: a track per bone
+    "bake_anim_use_nla_strips": False,        # the active action only, not the NLA
+    # one take: the character's previous actions, kept by the retarget with a fake user, would
+    # otherwise go into the file as more takes (clips)
+    "bake_anim_use_all_actions": False,
+    "bake_anim_force_startend_keying": True,  # the first and last frame keyed on every channel
+    "bake_anim_step": 1.0,                    # every scene frame
+    # no key reduction: the simplifier drops keys and lets planted feet slide
+    "bake_anim_simplify_factor": 0.0,
+}
+
+#: exporter keywords of each preset (see the module docstring for what each engine does)
+PRESETS = {
+    "blender": {
+        # Blender's defaults for the axes and units (as the add-on always exported)
+        "axis_forward": '-Z',
+        "axis_up": 'Y',
+        "apply_unit_scale": True,
+        "apply_scale_options": 'FBX_SCALE_NONE',
+        "global_scale": 1.0,
+        "add_leaf_bones": False,              # no "_end" bones: they are not in the character
+        "armature_nodetype": 'NULL',          # the armature object as a plain node
+        "primary_bone_axis": 'Y',             # Blender's own bone axes: the rest as in Blender
+        "secondary_bone_axis": 'X',
+        "use_armature_deform_only": False,    # every bone, as the add-on always did
+        **_ANIMATION,
+    },
+    "unity": {
+        # Unity is +Y up; the character's front (Blender -Y) becomes +Z, Unity's forward (Unity
+        # negates X to go left-handed, keeping Z)
+        "axis_forward": '-Z',
+        "axis_up": 'Y',
+        # the scene's units into UnitScaleFactor (100 = metres) and nothing onto the objects:
+        # Unity imports the armature at scale 1 instead of 100
+        "apply_unit_scale": True,
+        "apply_scale_options": 'FBX_SCALE_ALL',
+        "global_scale": 1.0,
+        # "Apply Transform" would bake the axis turn into the data, but the exporter marks it
+        # experimental and broken with armatures and animation; Unity's own defaults leave it off
+        "bake_space_transform": False,
+        "add_leaf_bones": False,              # Unity would make a Transform of each "_end" bone
+        "armature_nodetype": 'NULL',          # the armature is the root GameObject
+        "primary_bone_axis": 'Y',             # Unity's Humanoid reads positions, not bone axes:
+        "secondary_bone_axis": 'X',           # Blender's own axes keep the rest as it is
+        # the skeleton that skins the mesh (a rig's control and mechanism bones are left out;
+        # their effect is baked into the deforming bones' keys), as Blender's Unity defaults
+        "use_armature_deform_only": True,
+        "mesh_smooth_type": 'FACE',           # smoothing groups from the faces, as Blender's Unity defaults
+        **_ANIMATION,
+    },
+    "unreal": {
+        # Blender's own axes (Z up, -Y front) are UE's import axis system: UE converts nothing
+        # and the character faces +Y in UE, as its mannequin does (Epic's Send to Unreal writes
+        # these too)
+        "axis_forward": 'Y',
+        "axis_up": 'Z',
+        # centimetres, UE's unit: UnitScaleFactor 1.0 so the file reads the same with or without
+        # UE's "Convert Scene Unit"; the skeleton is exported as a stand-in in centimetres (see
+        # RIG_IN_CENTIMETRES) so no scale lands on its root node
+        "apply_unit_scale": True,
+        "apply_scale_options": 'FBX_SCALE_NONE',
+        "global_scale": 1.0,
+        "bake_space_transform": False,        # experimental in the exporter, broken with armatures
+        "add_leaf_bones": False,              # UE would add every "_end" bone to the skeleton
+        "armature_nodetype": 'NULL',          # as Send to Unreal: the armature node is the root
+        "primary_bone_axis": 'Y',             # Blender's own bone axes (Send to Unreal's choice)
+        "secondary_bone_axis": 'X',
+        "use_armature_deform_only": True,     # the deforming skeleton, rig mechanics baked in
+        "mesh_smooth_type": 'FACE',           # UE warns of missing smoothing groups otherwise
+        **_ANIMATION,
+    },
+}
+
+#: presets exported through a stand-in whose bones are in centimetres (see the module docstring)
+RIG_IN_CENTIMETRES = frozenset({"unreal"})
+
+#: preset names, the default first
+PRESET_NAMES = tuple(PRESETS)
+DEFAULT = "blender"
+
+#: one-line descriptions (the panel's and the command line's help)
+DESCRIPTIONS = {
+    "blender": "Blender's default axes and units (-Z forward, Y up, centimetres with the unit scale "
+               "on the root), every bone",
+    "unity": "Unity: Y up, -Z forward, metres in the file's unit and scale 1 on the objects, "
+             "deforming bones only",
+    "unreal": "Unreal Engine: Z up, -Y front (UE's import axes), centimetres with the skeleton at "
+              "scale 1, deforming bones only",
+}
+
+
+def preset_kwargs(name: str) -> dict:
+    """A copy of preset ``name``'s exporter keywords; ``ValueError`` for an unknown name."""
+    key = str(name or DEFAULT).lower()
+    if key not in PRESETS:
+        raise ValueError(f"unknown FBX preset {name!r}; presets: {', '.join(PRESET_NAMES)}")
+    return dict(PRESETS[key])
+
+
+def accepted_keywords() -> set:
+    """The keyword names of this Blender's ``bpy.ops.export_scene.fbx`` (enabling the bundled
+    exporter add-on for this session when it is off)."""
+    import bpy
+    try:
+        rna = bpy.ops.export_scene.fbx.get_rna_type()
+    except (KeyError, AttributeError):
+        import addon_utils
+        addon_utils.enable("io_scene_fbx", default_set=False)
+        rna = bpy.ops.export_scene.fbx.get_rna_type()
+    return {p.identifier for p in rna.properties if p.identifier != "rna_type"}
+
+
+def exporter_kwargs(name: str, accepted=None) -> dict:
+    """Preset ``name``'s keywords that the exporter accepts (``accepted``: keyword names, default
+    this Blender's :func:`accepted_keywords`); keywords of other Blender versions are left out."""
+    kw = preset_kwargs(name)
+    have = set(accepted) if accepted is not None else accepted_keywords()
+    return {k: v for k, v in kw.items() if k in have}
+
+
+def units_to_centimetres(scene) -> float:
+    """Centimetres per Blender unit of ``scene`` (100 for metres; the exporter's own rule)."""
+    us = scene.unit_settings
+    return 100.0 if us.system == 'NONE' else 100.0 * float(us.scale_length)
+
+
+def export_fbx(filepath, armature, preset: str = DEFAULT, extra_objects=(), context=None) -> dict:
+    """Write ``armature`` (with its child meshes, and ``extra_objects`` such as tracker empties)
+    to the FBX ``filepath`` with preset ``preset`` (one of :data:`PRESET_NAMES`).
+
+    The scene's frame range is baked, one take.  The selection, the active object and every
+    object's name are as before afterwards (edit or pose mode is left for object mode, as the
+    exporter itself does); for the ``unreal`` preset the stand-in skeleton (and copies of the
+    meshes skinned to it) exist only during the export.  Tracker empties keep the unit scale on
+    their nodes.  Returns
+    ``{"preset", "kwargs", "objects", "stand_in"}`` (kwargs as passed to the exporter; objects:
+    the names written).  ``RuntimeError`` when the exporter fails.
+    """
+    import bpy
+    context = context or bpy.context
+    key = str(preset or DEFAULT).lower()
+    kwargs = exporter_kwargs(key)
+    if armature is None or armature.type != 'ARMATURE':
+        raise ValueError("choose an armature to export")
+    meshes = [o for o in armature.children if o.type == 'MESH']
+    extra = [o for o in extra_objects if o is not None]
+    types = {'ARMATURE'} | ({'MESH'} if meshes else set()) | {o.type for o in extra}
+    if context.mode != 'OBJECT' and bpy.ops.object.mode_set.poll():
+        bpy.ops.object.mode_set(mode='OBJECT')    # edits flushed to the data (the exporter does it too)
+    view_layer = context.view_layer
+    selected = [o for o in view_layer.objects if o.select_get()]
+    active = view_layer.objects.active
+    factor = units_to_centimetres(context.scene)
+    stand_in = key in RIG_IN_CENTIMETRES and abs(factor - 1.0) > 1e-9
+    made, renamed = [], []
+    try:
+        arm, mesh_objs = armature, meshes
+        if stand_in:
+            arm, mesh_objs = _centimetre_stand_in(armature, meshes, factor, context, made, renamed)
+        objs = [arm] + mesh_objs + extra
+        for o in view_layer.objects:
+            o.select_set(o in objs)
+        view_layer.objects.active = arm
+        res = bpy.ops.export_scene.fbx(filepath=str(filepath), use_selection=True, object_types=types,
+                                       **kwargs)
+        if 'FINISHED' not in res:
+            raise RuntimeError(f"FBX export failed ({res})")
+        names = [o.name for o in objs]
+    finally:
+        for o in reversed(made):
+            data = o.data if o.type == 'ARMATURE' else None
+            bpy.data.objects.remove(o)
+            if data is not None and data.users == 0:
+                bpy.data.armatures.remove(data)
+        for obj, name in renamed:
+            obj.name = name
+        view_layer.update()
+        for o in view_layer.objects:
+            if o is not None:
+                o.select_set(o in selected)
+        view_layer.objects.active = active
+    return {"preset": key, "kwargs": kwargs, "objects": names, "stand_in": stand_in}
+
+
+def _centimetre_stand_in(armature, meshes, factor, context, made, renamed):
+    """A stand-in for ``armature`` in centimetres: a new object with a copy of its armature whose
+    bones are ``factor`` times larger, following the original's world location and rotation
+    (object constraints) at ``1 / factor`` of its scale (the same size in the world), each bone
+    following the original's bone of the same name (Copy Location and Copy Rotation in world
+    space, Copy Scale in local space); and copies of ``meshes`` skinned to it.  The stand-ins take
+    the originals' names (the originals are renamed meanwhile: ``renamed`` lists ``(object,
+    name)`` to restore); ``made`` collects the objects to remove.  Returns ``(stand-in armature,
+    mesh copies)``."""
+    import bpy
+    from mathutils import Matrix
+    coll = context.scene.collection
+    data = armature.data.copy()
+    if data.animation_data is not None:       # drivers of the original's data stay with it
+        data.animation_data_clear()
+    data.transform(Matrix.Scale(factor, 4))
+    obj = bpy.data.objects.new(armature.name + ".stand_in", data)
+    made.append(obj)
+    coll.objects.link(obj)
+    obj.scale = tuple(s / factor for s in armature.matrix_world.to_scale())
+    for kind in ('COPY_LOCATION', 'COPY_ROTATION'):
+        con = obj.constraints.new(kind)
+        con.target = armature
+    context.view_layer.update()               # the pose of the new object
+    for pb in obj.pose.bones:
+        for kind, space in (('COPY_LOCATION', 'WORLD'), ('COPY_ROTATION', 'WORLD'), ('COPY_SCALE', 'LOCAL')):
+            con = pb.constraints.new(kind)
+            con.target, con.subtarget = armature, pb.name
+            con.owner_space = con.target_space = space
+    copies = []
+    scale = Matrix.Scale(factor, 4)
+    for m in meshes:
+        mc = m.copy()                         # shares the mesh data; vertex groups, modifiers copied
+        made.append(mc)
+        coll.objects.link(mc)
+        mc.parent = obj
+        # the stand-in's frame is the original's scaled by 1 / factor: this keeps the mesh in place
+        mc.matrix_parent_inverse = scale @ m.matrix_parent_inverse
+        for mod in mc.modifiers:
+            if mod.type == 'ARMATURE' and mod.object == armature:
+                mod.object = obj
+        copies.append(mc)
+    for orig, copy in [(armature, obj)] + list(zip(meshes, copies)):
+        name = orig.name
+        renamed.append((orig, name))
+        orig.name = name[:40] + ".manikin_export"
+        copy.name = name
+    context.view_layer.update()
+    return obj, copies

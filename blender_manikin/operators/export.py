@@ -1,0 +1,57 @@
+"""Export the character (or the solved armature) with its animation as FBX for Blender, Unity or
+Unreal (``manikin.export_fbx``; the settings are :mod:`..blender.fbx_presets`)."""
+from __future__ import annotations
+
+from bpy.props import EnumProperty, StringProperty
+from bpy.types import Operator
+from bpy_extras.io_utils import ExportHelper
+
+from ..blender.properties import fbx_preset_items
+
+
+def export_object(context):
+    """What Export FBX writes: the retarget's character when one is chosen, else the solved
+    MANIKIN armature (the active one, else the last solve's); None when there is neither."""
+    from .retarget import _source
+    s = getattr(context.scene, "manikin", None)
+    if s is None:
+        return None
+    if s.retarget_target is not None and s.retarget_target.name in context.scene.objects:
+        return s.retarget_target
+    return _source(context)
+
+
+class MANIKIN_OT_export_fbx(Operator, ExportHelper):
+    """Export the character (or, with none chosen, the solved armature) and its animation as FBX,
+    with the axes, units and bones the chosen application expects"""
+    bl_idname = "manikin.export_fbx"
+    bl_label = "Export FBX"
+    bl_options = {'REGISTER', 'UNDO'}
+    filename_ext = ".fbx"
+    filter_glob: StringProperty(default="*.fbx", options={'HIDDEN'})
+    preset: EnumProperty(name="Preset", items=fbx_preset_items(), default='BLENDER',
+                         description="Axes, units and bones of the file, for the application that reads it")
+
+    @classmethod
+    def poll(cls, context):
+        return export_object(context) is not None
+
+    def invoke(self, context, event):
+        if not self.properties.is_property_set("preset"):
+            self.preset = context.scene.manikin.export_fbx_preset
+        return ExportHelper.invoke(self, context, event)
+
+    def execute(self, context):
+        from ..blender import fbx_presets
+        obj = export_object(context)
+        try:
+            info = fbx_presets.export_fbx(self.filepath, obj, self.preset.lower(), context=context)
+        except (ValueError, RuntimeError, OSError) as exc:
+            self.report({'ERROR'}, f"export FBX: {exc}")
+            return {'CANCELLED'}
+        self.report({'INFO'}, f"{obj.name} written to {self.filepath} ({info['preset']} preset, frames "
+                              f"{context.scene.frame_start}-{context.scene.frame_end})")
+        return {'FINISHED'}
+
+
+CLASSES = (MANIKIN_OT_export_fbx,)

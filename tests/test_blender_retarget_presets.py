@@ -1,0 +1,353 @@
+"""Retargeting in Blender onto characters named and standing as the engines and rigging tools
+give them (tests/blender_util.py ``RIG_STYLES``): the Unreal Mannequin (UE4 and UE5, twist bones,
+IK bones, fingers, centimetres, facing +Y), a VRoid / VRM character and an Auto-Rig Pro rig.
+
+Every character has an A-pose rest, randomly rolled bones and proportions of its own: within the
+torso, the arms and the legs every segment has one ratio to the performer's (``humanoid_joints``),
+so where the retarget puts the hands, feet and head is known from the performer's joints alone:
+
+* the root (pelvis) bone: its rest head plus ``k F (pelvis(t) - pelvis_rest)``, ``k`` the leg ratio
+  (target leg length over the performer's: the default ``"scaled"`` root motion of
+  ``core/retarget.py``), ``F`` the turn from the performer's facing (-Y) to the character's;
+* the head and hands: the root plus each segment of the performer (in ``F``) times its region's
+  ratio -- the retarget transfers segment directions, the character keeps its own lengths;
+* the feet: the root plus ``k F (ankle(t) - pelvis(t))``: the legs are solved onto the
+  performer's feet scaled like the root motion, so planted feet stay planted;
+* with "keep hands and feet on the trackers" (``keep_ends``, scaled root motion) the hands and
+  feet are re-solved onto the root plus ``k F (end(t) - pelvis(t))``.
+
+Planted feet: a walk whose feet are planted (``planted_feet_result``, ``contacts``) onto the same
+characters, and onto one whose thighs and shanks have other ratios than the performer's (a transfer
+of directions alone would slide its feet ~3.5 cm/s: the retarget solves the legs onto the scaled
+feet in every mode, so they stay planted).
+"""
+import numpy as np
+import pytest
+
+bpy = pytest.importorskip("bpy")
+
+from blender_manikin.blender import keying, retarget_apply, writer  # noqa: E402
+from blender_manikin.core import bone_maps  # noqa: E402
+from blender_manikin.core import rotations as rot  # noqa: E402
+from blender_manikin.core import skeleton as sk  # noqa: E402
+
+from blender_util import (RIG_STYLES, build_armature, humanoid_bones, humanoid_joints,  # noqa: E402
+                          planted_feet_result, styled_character, synthetic_result)
+
+T = 60
+FPS = 24.0                       # the factory scene's rate: one source frame per scene frame
+SRC_STATURE = 1.8
+FRAMES = np.arange(1, T + 1)
+STYLES = tuple(RIG_STYLES)
+EY = np.array([0.0, 1.0, 0.0])
+ENDS = {"left_wrist": "arm", "right_wrist": "arm", "left_ankle": "leg", "right_ankle": "leg", "head": "torso"}
+LIMB_OF_END = {"left_wrist": ("left_shoulder", "left_elbow"), "right_wrist": ("right_shoulder", "right_elbow"),
+               "left_ankle": ("left_hip", "left_knee"), "right_ankle": ("right_hip", "right_knee")}
+
+
+def _write_source(res):
+    return writer.write_result(res, writer.WriteOptions(frame_start=1)).armature
+
+
+def _rest(obj):
+    """Armature-space rest matrices ``{bone: (4, 4)}``."""
+    return {b.name: np.array(b.matrix_local, dtype=np.float64) for b in obj.data.bones}
+
+
+def _evaluate(obj, frames=FRAMES):
+    """Posed bones after ``frame_set``: ``{bone: (F, 4, 4)}`` armature-space matrices
+    (``pose_bone.matrix``) and ``{bone: (F, 4, 4)}`` ``matrix_basis``."""
+    sc = bpy.context.scene
+    names = [b.name for b in obj.pose.bones]
+    M = np.empty((len(frames), len(names), 4, 4))
+    basis = np.empty_like(M)
+    for t, f in enumerate(frames):
+        sc.frame_set(int(f))
+        for k, pb in enumerate(obj.pose.bones):
+            M[t, k] = np.array(pb.matrix, dtype=np.float64)
+            basis[t, k] = np.array(pb.matrix_basis, dtype=np.float64)
+    return {n: M[:, k] for k, n in enumerate(names)}, {n: basis[:, k] for k, n in enumerate(names)}
+
+
+def _world_heads(obj, M, name):
+    W = np.array(obj.matrix_world, dtype=np.float64)
+    return M[name][:, :3, 3] @ W[:3, :3].T + W[:3, 3]
+
+
+def _predicted(spec, obj, pos, body, root_bone):
+    """Where the character's joints go under the default scaled retarget (module docstring):
+    ``{joint: (T, 3)}`` world metres for the pelvis and the end joints, and ``k``."""
+    c = spec["stature"] / SRC_STATURE
+    ratio = {"torso": c * spec["torso"], "arm": c * spec["arm"], "leg": c * spec["leg"]}
+    k = ratio["leg"]
+    F = spec["F"]
+    W = np.array(obj.matrix_world, dtype=np.float64)
+    root_rest = W[:3, :3] @ np.array(obj.data.bones[root_bone].head_local) + W[:3, 3]
+    P = pos - pos[:, :1]                                   # performer's joints from its pelvis
+    J = sk.J
+    out = {"pelvis": root_rest + k * (pos[:, 0] - body.root_rest) @ F.T}
+    out["head"] = out["pelvis"] + ratio["torso"] * P[:, J["head"]] @ F.T
+    for side in ("left", "right"):
+        sh = J[f"{side}_shoulder"]
+        out[f"{side}_wrist"] = out["pelvis"] + (ratio["torso"] * P[:, sh] + ratio["arm"] * (
+            P[:, J[f"{side}_wrist"]] - P[:, sh])) @ F.T
+        # the legs are solved onto the performer's feet scaled like the root motion
+        out[f"{side}_ankle"] = out["pelvis"] + k * P[:, J[f"{side}_ankle"]] @ F.T
+    return out, k
+
+
+def _guess_differences(guessed, preset):
+    """Readable differences between two maps ('' when they are the same)."""
+    lines = [f"{j}: guessed {guessed.bones.get(j)!r}, preset {preset.bones.get(j)!r}" for j in sk.JOINT_NAMES
+             if guessed.bones.get(j) != preset.bones.get(j)]
+    lines += [f"twist of {j}: guessed {guessed.twist.get(j)}, preset {preset.twist.get(j)}"
+              for j in sk.JOINT_NAMES if list(guessed.twist.get(j, [])) != list(preset.twist.get(j, []))]
+    return "; ".join(lines)
+
+
+def _without_twist(bmap):
+    return bone_maps.BoneMap(bmap.name + "_no_twist", dict(bmap.bones), {})
+
+
+def _same_pose(A, B, units):
+    """Largest rotation-entry and translation (metres) differences of ``(..., 4, 4)`` matrices in
+    armature units."""
+    return (float(np.abs(A[..., :3, :3] - B[..., :3, :3]).max()),
+            float(np.abs(A[..., :3, 3] - B[..., :3, 3]).max()) / units)
+
+
+def _twist_rel(M, rest, parent, child):
+    """``(T, 3, 3)``: ``child``'s armature-space orientation relative to ``parent``'s, taken back by
+    their rest relation (identity when the child is at rest under the parent)."""
+    Bp, Bc = rest[parent][:3, :3], rest[child][:3, :3]
+    Gp, Gc = M[parent][:, :3, :3], M[child][:, :3, :3]
+    return np.swapaxes(Gp @ (Bp.T @ Bc), -1, -2) @ Gc
+
+
+@pytest.mark.parametrize("style", STYLES)
+def test_retarget_onto_an_engine_or_tool_rig(addon, style, tmp_path):
+    """The preset chosen by name (and the same map from the guess): hands, feet and head where
+    the proportion scaling puts them (< 1 cm), within 0.1 mm of their targets with keep_ends, no
+    flips, twist bones with their share of the twist, every other bone untouched."""
+    res = synthetic_result(T=T, fps=FPS, seed=4, stature=SRC_STATURE, with_targets=False)
+    src = _write_source(res)
+    char, spec = styled_character(style)
+    names = [b.name for b in char.data.bones]
+    preset = bone_maps.validate_bone_map(bone_maps.preset(style), names)
+    # every bone the style's table names is what the preset maps (the preset's names are real)
+    assert {j: b for j, b in preset.bones.items()} == {
+        j: (v if isinstance(v, str) else v[0]) for j, v in spec["names"].items()}
+    twist_expect = {f"{side}_{part}": [f"{b}_{side[0]}" for b, _ in v]
+                    for part, v in spec["twist"].items() for side in ("left", "right")}
+    assert preset.twist == twist_expect, preset.twist
+    # the guess ("auto") finds the same map
+    guessed, notes = retarget_apply.resolve_bone_map("auto", char)
+    assert guessed.name == style and _guess_differences(guessed, preset) == "", _guess_differences(guessed, preset)
+
+    pos, _ = res.fk()
+    rest = _rest(char)
+    action, out, notes = retarget_apply.retarget_onto(src, char, style, None, "scaled", False)
+    assert notes == []
+    M, basis = _evaluate(char)
+    expect, k = _predicted(spec, char, pos, res.body, preset.bones["pelvis"])
+    assert abs(out.plan.leg_ratio - k) < 1e-6                     # bones are stored in float32
+    errors = {}
+    for joint in ("pelvis",) + tuple(ENDS):
+        got = _world_heads(char, M, preset.bones[joint])
+        err = np.linalg.norm(got - expect[joint], axis=-1)
+        assert err.max() < 0.01, (joint, err.max())                  # the issue's 1 cm
+        if joint.endswith("ankle"):    # the legs' reach: where the scaled foot is out of it, the
+            li = sk.LIMB_NAMES.index(("left" if joint.startswith("left") else "right") + "_leg")
+            assert np.abs(err - out.reach_error[:, li]).max() < 1e-4, joint    # result says by how much
+            err = err[out.reach_error[:, li] < 1e-6]
+        errors[joint] = float(err.max())
+    assert max(errors.values()) < 1e-4, errors                      # in fact float32 round-off
+
+    # no bone turns more than 90° between frames (flips), none more than twice its source's
+    # fastest joint does
+    src_step = float(rot.geodesic_angle(res.fk()[1][1:], res.fk()[1][:-1]).max())
+    step = {n: float(rot.geodesic_angle(m[1:, :3, :3], m[:-1, :3, :3]).max()) for n, m in M.items()}
+    worst = max(step, key=step.get)
+    assert step[worst] < np.pi / 2, (worst, step[worst])
+    assert step[worst] < 2 * src_step, (worst, step[worst], src_step)
+
+    # bones the map does not name keep their rest pose under their parent and carry no keys
+    driven = set(preset.target_bones())
+    untouched = [n for n in names if n not in driven]
+    assert len(untouched) >= 8
+    keyed_bones = {fc.data_path.split('"')[1] for fc in keying.action_fcurves(action, char)}
+    assert keyed_bones == driven, sorted(keyed_bones ^ driven)
+    u = spec["units"]
+    for n in untouched:
+        assert np.abs(basis[n] - np.eye(4)).max() < 1e-6, n
+        par = char.data.bones[n].parent
+        if par is None:
+            dr, dt = _same_pose(M[n], rest[n], u)
+        else:
+            dr, dt = _same_pose(np.linalg.inv(M[par.name]) @ M[n], np.linalg.inv(rest[par.name]) @ rest[n], u)
+        assert dr < 1e-5 and dt < 1e-5, (n, dr, dt)
+    # the IK bones hang from the unmapped root: they stay where they were, in the world
+    ik = [n for n in untouched if n.startswith("ik_")]
+    for n in ik:
+        dr, dt = _same_pose(M[n], rest[n], u)
+        assert dr < 1e-6 and dt < 1e-6, (n, dr, dt)
+    assert len(ik) == (7 if style.startswith("ue") else 0)
+
+    # twist bones: the mapped bone keeps 1/(n+1) of its segment's twist, twist bone i (base to
+    # tip) (i+2)/(n+1); measured against the same retarget without twist bones (a saved map)
+    if preset.twist:
+        plain = tmp_path / f"{style}_no_twist.json"
+        bone_maps.save_bone_map(plain, _without_twist(preset))
+        retarget_apply.retarget_onto(src, char, "file", str(plain), "scaled", False)
+        M0, _ = _evaluate(char)
+        twisted = 0
+        for joint, tw in preset.twist.items():
+            main = preset.bones[joint]
+            parent = char.data.bones[main].parent.name
+            n = len(tw)
+            tau = np.unwrap(rot.twist_angle(_twist_rel(M0, rest, parent, main), EY))
+            twisted += np.ptp(tau) > 0.2
+            G0, G1 = M0[main][:, :3, :3], M[main][:, :3, :3]
+            # the bone still points where it did; it turned back about itself by n/(n+1) of the twist
+            assert np.abs(G1[:, :, 1] - G0[:, :, 1]).max() < 1e-5, (joint, "direction")
+            share = rot.twist_angle(np.swapaxes(G0, -1, -2) @ G1, EY)
+            assert np.abs(np.angle(np.exp(1j * (share + n * tau / (n + 1))))).max() < 1e-4, joint
+            for i, b in enumerate(tw):
+                rel = _twist_rel(M, rest, main, b)
+                expect_rel = rot.axis_angle_rotation(EY, (i + 1) * tau / (n + 1))
+                assert np.abs(rel[:, :3, :3] - expect_rel).max() < 1e-4, (joint, b)
+        assert twisted >= 4, "the take does not twist the limbs: the check above would prove nothing"
+        # what hangs below the twisted segments does not move
+        for j in ("left_wrist", "right_wrist", "left_ankle", "right_foot", "head"):
+            dr, dt = _same_pose(M[preset.bones[j]], M0[preset.bones[j]], u)
+            assert dr < 1e-5 and dt < 1e-5, (j, dr, dt)
+
+    # keep hands and feet on the trackers: re-solved onto the scaled targets, within 0.1 mm
+    _, out_k, notes_k = retarget_apply.retarget_onto(src, char, style, None, "scaled", True)
+    Mk, _ = _evaluate(char)
+    end_err, reached = {}, {}
+    for j, (base, mid) in LIMB_OF_END.items():
+        target = expect["pelvis"] + k * (pos[:, sk.J[j]] - pos[:, 0]) @ spec["F"].T
+        got = _world_heads(char, Mk, preset.bones[j])
+        # reachable, judged from the character's own limb (base head to target, its two lengths)
+        hb = _world_heads(char, Mk, preset.bones[base])
+        hm = _world_heads(char, Mk, preset.bones[mid])
+        l1 = np.linalg.norm(hm - hb, axis=-1)[0]
+        l2 = np.linalg.norm(got - hm, axis=-1)[0]
+        ok = np.linalg.norm(target - hb, axis=-1) < l1 + l2 - 1e-3
+        reached[j] = float(ok.mean())
+        err = np.linalg.norm(got - target, axis=-1)
+        end_err[j] = float(err[ok].max()) if ok.any() else float("nan")
+        assert reached[j] >= 0.5, (j, reached[j])
+        assert end_err[j] < 1e-4, (j, end_err[j])                  # 0.1 mm
+        # where it is out of reach, the result says by how much and the notes tell the user
+        li = {"left_wrist": 0, "right_wrist": 1, "left_ankle": 2, "right_ankle": 3}[j]
+        assert np.abs(out_k.reach_error[:, li] - err).max() < 1e-4, j
+        limb = sk.LIMB_NAMES[li].replace("_", " ")
+        noted = any(n.startswith(limb) and "out of the character's reach" in n for n in notes_k)
+        assert noted == bool((err > 0.005).any()), (j, notes_k)
+    print(f"\n{style}: k={k:.4f} ends (no keep_ends) {errors}; keep_ends {end_err} reached {reached}; "
+          f"max step {np.degrees(step[worst]):.1f} deg ({worst}), source {np.degrees(src_step):.1f} deg")
+
+
+def _slides(obj, M, bone, contacts):
+    """Horizontal steps (metres) of ``bone``'s head between consecutive frames both planted."""
+    h = _world_heads(obj, M, bone)
+    both = contacts[1:] & contacts[:-1]
+    return np.linalg.norm(np.diff(h[:, :2], axis=0), axis=-1)[both]
+
+
+@pytest.mark.parametrize("style", STYLES)
+def test_planted_feet_stay_planted_on_the_character(addon, style):
+    """A walk whose feet are planted (``result.contacts``): the character's foot and toe bones do
+    not slide on those frames, with the default scaled root motion and with keep_ends.
+
+    Thresholds: foot skate shows when a planted foot drifts more than a few millimetres over a
+    step; 1 cm/s mean is under 1 cm over a whole stance (here ~0.9 s), 1 mm a frame is 2.4 cm/s
+    at 24 fps, below a visible jitter.  The performer's own planted feet (the reference level) are
+    still to float round-off; the legs are solved onto the planted feet (scaled with the root
+    motion) in both modes, so the character's are too (a transfer of directions alone left
+    2-6 mm/s here: the pelvis turning ±0.15 rad a hip offset scaled by the torso's ratio)."""
+    res = planted_feet_result(T=T, fps=FPS, stature=SRC_STATURE)
+    src = _write_source(res)
+    char, spec = styled_character(style)
+    preset = bone_maps.preset(style)
+    Ms, _ = _evaluate(src)
+    report = {}
+    ref = {}
+    for i, side in enumerate(("left", "right")):
+        for j in ("ankle", "foot"):
+            ref[f"{side}_{j}"] = _slides(src, Ms, f"{side}_{j}", res.contacts[:, i])
+    ref_max = max(float(v.max()) for v in ref.values())
+    assert ref_max < 1e-5, ref_max                          # the performer's feet are planted
+    assert min(len(v) for v in ref.values()) >= 20          # and for long enough to tell
+    for keep in (False, True):
+        retarget_apply.retarget_onto(src, char, style, None, "scaled", keep)
+        M, _ = _evaluate(char)
+        for i, side in enumerate(("left", "right")):
+            for j in ("ankle", "foot"):
+                d = _slides(char, M, preset.bones[f"{side}_{j}"], res.contacts[:, i])
+                mean_speed, step = float(d.mean() * FPS), float(d.max())
+                report[(keep, f"{side}_{j}")] = (mean_speed, step)
+                assert mean_speed < 0.01, (style, keep, side, j, mean_speed)        # < 1 cm/s
+                assert step < 0.001, (style, keep, side, j, step)                   # < 1 mm a frame
+                assert step < 1e-5, (style, keep, side, step)       # the legs are re-solved: still
+    print(f"\n{style}: reference max step {ref_max:.2e} m; " + "; ".join(
+        f"{'keep_ends' if kp else 'scaled'} {b}: {1000 * v[0]:.2f} mm/s mean, {1000 * v[1]:.3f} mm max"
+        for (kp, b), v in report.items()))
+
+
+def test_planted_feet_of_legs_of_other_proportions_stay_put(addon):
+    """Thighs 12 % longer and shanks 12 % shorter than the performer's (same leg length): a
+    transfer of the leg segments' directions would move the foot on as the knee bends (~3.5 cm/s
+    measured before the legs were re-solved in every mode); with and without keep_ends the legs
+    are solved onto the planted feet and they stay put."""
+    res = planted_feet_result(T=T, fps=FPS, stature=SRC_STATURE)
+    src = _write_source(res)
+    bmap = bone_maps.preset("mixamo")
+    P = humanoid_joints(1.7, 40.0, thigh_shank=(1.12, 0.88))
+    char = build_armature("LongThighs", humanoid_bones(P, bmap.bones), seed=11)
+    slides = {}
+    for keep in (False, True):
+        retarget_apply.retarget_onto(src, char, "mixamo", None, "scaled", keep)
+        M, _ = _evaluate(char)
+        for i, side in enumerate(("left", "right")):
+            for j in ("ankle", "foot"):
+                d = _slides(char, M, bmap.bones[f"{side}_{j}"], res.contacts[:, i])
+                slides[(keep, f"{side}_{j}")] = (float(d.mean() * FPS), float(d.max()))
+                assert d.max() < 1e-5, (keep, side, j, d.max())
+    print("\nlong thighs: " + "; ".join(f"{'keep_ends' if kp else 'scaled'} {b}: {1000 * v[0]:.2f} mm/s mean, "
+                                         f"{1000 * v[1]:.3f} mm max" for (kp, b), v in slides.items()))
+
+
+def test_a_saved_and_reloaded_ue5_map_gives_the_same_keys(addon, tmp_path):
+    """The UE5 map, guessed, saved as JSON and loaded again (twist lists in their base-to-tip
+    order), keys the character exactly as the preset chosen by name does."""
+    res = synthetic_result(T=T, fps=FPS, seed=5, stature=SRC_STATURE, with_targets=False)
+    src = _write_source(res)
+    char, _ = styled_character("ue5")
+    guessed, _ = retarget_apply.resolve_bone_map("auto", char)
+    path = tmp_path / "my_character.json"
+    bone_maps.save_bone_map(path, guessed)
+    back = bone_maps.load_bone_map(path)
+    assert back.to_dict() == guessed.to_dict()
+    assert back.twist["left_elbow"] == ["lowerarm_twist_02_l", "lowerarm_twist_01_l"]
+
+    def keys(action):
+        out = {}
+        for fc in keying.action_fcurves(action, char):
+            co = np.empty(2 * len(fc.keyframe_points), dtype=np.float32)
+            fc.keyframe_points.foreach_get("co", co)
+            out[(fc.data_path, fc.array_index)] = co
+        return out
+    a_preset, _, _ = retarget_apply.retarget_onto(src, char, "ue5", None, "scaled", True)
+    M_preset, _ = _evaluate(char)
+    a_file, _, _ = retarget_apply.retarget_onto(src, char, "file", str(path), "scaled", True)
+    M_file, _ = _evaluate(char)
+    assert a_file != a_preset
+    k_preset, k_file = keys(a_preset), keys(a_file)
+    assert set(k_preset) == set(k_file) and len(k_preset) > 100
+    for ch in k_preset:
+        np.testing.assert_array_equal(k_file[ch], k_preset[ch], err_msg=str(ch))
+    for n in M_preset:
+        np.testing.assert_array_equal(M_file[n], M_preset[n], err_msg=n)
