@@ -499,3 +499,47 @@ def planted_feet_result(T=60, fps=24.0, stature=1.8, seed=0, speed=0.5, stride=0
     swivel = ls.swivel_from_positions(pos[:, ls.LIMB_BASE], pos[:, ls.LIMB_MID], pos[:, ls.LIMB_END],
                                       wr[:, ls.LIMB_PARENT], base_rot=wr[:, ls.LIMB_BASE])
     return PoseResult(fps=fps, body=body, local_rot=local, root_pos=root, swivel=swivel, contacts=contacts, t0=0.0)
+
+
+class PanelLayout:
+    """A stand-in for a panel's ``layout`` (no UI in background mode; bpy imported by the caller):
+    records what ``draw()`` draws, ``(kind, name)`` in ``log``, and checks every drawn property,
+    operator and list exists."""
+
+    def __init__(self, log):
+        self.log = log
+        self.use_property_split = self.use_property_decorate = False
+        self.active, self.alert, self.scale_y = True, False, 1.0
+
+    def _child(self, *a, **k):
+        child = PanelLayout(self.log)
+        self.log.append(("child", child))
+        return child
+    row = column = box = split = _child
+
+    def prop(self, data, name, **k):
+        assert name in data.bl_rna.properties, f"no property {name!r} on {data}"
+        self.log.append(("prop", name))
+
+    def prop_search(self, data, name, search_data, search_name, **k):
+        assert name in data.bl_rna.properties and search_name in search_data.bl_rna.properties
+        self.log.append(("prop_search", name))
+        self.log.append(("icon", k.get("icon")))
+
+    def operator(self, idname, **k):
+        import bpy
+        mod, name = idname.split(".")
+        assert hasattr(getattr(bpy.ops, mod), name), idname
+        self.log.append(("operator", idname))
+
+    def template_list(self, listtype, list_id, data, propname, active_data, active_propname, **k):
+        import bpy
+        assert listtype in dir(bpy.types), listtype
+        assert propname in data.bl_rna.properties and active_propname in active_data.bl_rna.properties
+        self.log.append(("template_list", propname))
+
+    def label(self, **k):
+        self.log.append(("label", k.get("text")))
+
+    def separator(self, **k):
+        pass

@@ -11,7 +11,7 @@ import blender_manikin  # noqa: E402
 from blender_manikin.blender import keying, solve_job  # noqa: E402
 from blender_manikin.core import skeleton as sk  # noqa: E402
 
-from blender_util import fresh_scene, stub_solver, synthetic_result, write_recording_csv  # noqa: E402
+from blender_util import PanelLayout, fresh_scene, stub_solver, synthetic_result, write_recording_csv  # noqa: E402
 
 
 @pytest.fixture
@@ -254,39 +254,6 @@ def test_find_tpose_and_offsets_preset(addon, tmp_path):
         bpy.ops.manikin.solve_full_body()
 
 
-class _Layout:
-    """Records panel drawing and checks every drawn property / operator exists."""
-
-    def __init__(self, log):
-        self.log = log
-        self.use_property_split = self.use_property_decorate = False
-        self.active = True
-        self.scale_y = 1.0
-
-    def _child(self, *a, **k):
-        return _Layout(self.log)
-    row = column = box = _child
-
-    def prop(self, data, name, **k):
-        assert name in data.bl_rna.properties, f"no property {name!r} on {data}"
-        self.log.append(("prop", name))
-
-    def prop_search(self, data, name, search_data, search_name, **k):
-        assert name in data.bl_rna.properties and search_name in search_data.bl_rna.properties
-        self.log.append(("prop_search", name))
-
-    def operator(self, idname, **k):
-        mod, name = idname.split(".")
-        assert hasattr(getattr(bpy.ops, mod), name), idname
-        self.log.append(("operator", idname))
-
-    def label(self, **k):
-        self.log.append(("label", k.get("text")))
-
-    def separator(self, **k):
-        pass
-
-
 def test_panels_draw(addon):
     from blender_manikin.panels import main as panels
     from types import SimpleNamespace
@@ -302,11 +269,11 @@ def test_panels_draw(addon):
             for cls in (panels.MANIKIN_PT_solve, panels.MANIKIN_PT_calibration, panels.MANIKIN_PT_output):
                 assert cls.poll(bpy.context)
                 log = []
-                cls.draw(SimpleNamespace(layout=_Layout(log)), bpy.context)
+                cls.draw(SimpleNamespace(layout=PanelLayout(log)), bpy.context)
                 assert log
     log = []
     s.source = 'FILE'
-    panels.MANIKIN_PT_solve.draw(SimpleNamespace(layout=_Layout(log)), bpy.context)
+    panels.MANIKIN_PT_solve.draw(SimpleNamespace(layout=PanelLayout(log)), bpy.context)
     assert ("operator", "manikin.solve_full_body") in log and ("prop", "filepath") in log
 
 

@@ -14,7 +14,7 @@ from blender_manikin.core import bone_maps  # noqa: E402
 from blender_manikin.core import rotations as rot  # noqa: E402
 from blender_manikin.core import skeleton as sk  # noqa: E402
 
-from blender_util import mixamo_style_character, synthetic_result  # noqa: E402
+from blender_util import PanelLayout, mixamo_style_character, synthetic_result  # noqa: E402
 
 T = 24
 ALT = "alt_forearm.L"          # a second left forearm on the character, not in any preset
@@ -160,58 +160,16 @@ def test_a_bad_bone_name_is_an_error_naming_the_joint_and_the_bone(addon):
         bpy.ops.manikin.retarget()
 
 
-class _ListLayout:
-    """A stand-in for a panel's ``layout`` (no UI in background mode), as in test_blender_addon.py,
-    with what the retarget sub-panel and its list use: records what ``draw()`` draws and checks
-    every drawn property, operator and list exists."""
-
-    def __init__(self, log):
-        self.log = log
-        self.use_property_split = self.use_property_decorate = False
-        self.active, self.alert, self.scale_y = True, False, 1.0
-
-    def _child(self, *a, **k):
-        child = _ListLayout(self.log)
-        self.log.append(("child", child))
-        return child
-    row = column = box = split = _child
-
-    def prop(self, data, name, **k):
-        assert name in data.bl_rna.properties, f"no property {name!r} on {data}"
-        self.log.append(("prop", name))
-
-    def prop_search(self, data, name, search_data, search_name, **k):
-        assert name in data.bl_rna.properties and search_name in search_data.bl_rna.properties
-        self.log.append(("prop_search", name))
-        self.log.append(("icon", k.get("icon")))
-
-    def operator(self, idname, **k):
-        mod, name = idname.split(".")
-        assert hasattr(getattr(bpy.ops, mod), name), idname
-        self.log.append(("operator", idname))
-
-    def template_list(self, listtype, list_id, data, propname, active_data, active_propname, **k):
-        assert listtype in dir(bpy.types), listtype
-        assert propname in data.bl_rna.properties and active_propname in active_data.bl_rna.properties
-        self.log.append(("template_list", propname))
-
-    def label(self, **k):
-        self.log.append(("label", k.get("text")))
-
-    def separator(self, **k):
-        pass
-
-
 def test_retarget_panel_and_bone_map_list_draw(addon):
     from blender_manikin.panels import main as panels
     _, src, char, s = _scene(alt=False)
     log = []
-    panels.MANIKIN_PT_retarget.draw(SimpleNamespace(layout=_ListLayout(log)), bpy.context)
+    panels.MANIKIN_PT_retarget.draw(SimpleNamespace(layout=PanelLayout(log)), bpy.context)
     assert ("template_list", "retarget_bone_map") not in log           # no character: no list
     s.retarget_target = char
     s.retarget_map = 'FILE'
     log = []
-    panels.MANIKIN_PT_retarget.draw(SimpleNamespace(layout=_ListLayout(log)), bpy.context)
+    panels.MANIKIN_PT_retarget.draw(SimpleNamespace(layout=PanelLayout(log)), bpy.context)
     for entry in (("template_list", "retarget_bone_map"), ("operator", "manikin.load_bone_map"),
                   ("operator", "manikin.save_bone_map"), ("operator", "manikin.retarget"),
                   ("operator", "manikin.export_fbx"), ("prop", "export_fbx_preset"), ("prop", "retarget_map_file"),
@@ -222,7 +180,7 @@ def test_retarget_panel_and_bone_map_list_draw(addon):
     for bone, icon in (("mixamorig:LeftForeArm", 'BONE_DATA'), ("nope", 'ERROR')):
         item.bone = bone
         log = []
-        panels.MANIKIN_UL_bone_map.draw_item(None, bpy.context, _ListLayout(log), s, item, 0, s,
+        panels.MANIKIN_UL_bone_map.draw_item(None, bpy.context, PanelLayout(log), s, item, 0, s,
                                              "retarget_bone_map_index", 0)
         assert ("label", "Left Elbow") in log and ("prop_search", "bone") in log and ("icon", icon) in log
         rows = [c for kind, c in log if kind == "child"]
