@@ -56,6 +56,22 @@ def test_model_file_and_contract_match_the_code(runner):
     assert y.shape == (2, c.window, c.output_dim) and np.isfinite(y).all()
 
 
+@pytest.mark.parametrize("name", ["pelvis", "six"])
+def test_tracker_set_models_are_shipped_with_their_devices(name):
+    """The four- and six-tracker networks: same contract as the three-tracker one, their devices
+    listed (issue 14), within the same size budget."""
+    from blender_manikin.core import model_choice
+    path = model_choice.shipped_model_path(name)
+    assert os.path.isfile(path), f"the {name} model must be committed"
+    assert os.path.getsize(path) <= 10 * 1024 * 1024
+    r = ModelRunner(path)
+    c = r.contract
+    assert c.kind == "manikin" and c.devices == model_choice.SHIPPED_MODELS[name][1]
+    assert c.body and c.input_dim == features.input_dim(c.devices, body=True)
+    assert "CC BY-NC-ND" in c.raw["licence"] and 0 < r.num_parameters <= 2_000_000
+    assert c.window == ModelRunner(DEFAULT_MODEL).contract.window
+
+
 def test_inference_hands_on_trackers_and_feet_above_floor(runner, example):
     targets, body, offsets = example
     res = pipeline.solve(targets, body, runner)
