@@ -143,3 +143,20 @@ def test_the_solve_summary_says_which_model_solved(tmp_path):
     assert "model manikin_s_pelvis (head, left hand, right hand, pelvis, chosen)" in out.summary()
     with pytest.raises(cs.SolveError, match="model 'nope.onnx': not a file"):
         cs.solve_recording(path, cs.SolveSettings(fps=30.0, model="nope.onnx"))
+
+
+def test_a_model_you_trained_stands_in_for_the_shipped_one_of_its_devices(monkeypatch):
+    """``$BLENDER_MANIKIN_MODEL`` replaces the shipped model that takes the same trackers (here
+    the six-tracker file under another name), not the three-tracker one."""
+    import shutil
+    import tempfile
+    d = tempfile.mkdtemp()
+    mine = os.path.join(d, "my_six.onnx")
+    shutil.copy(mc.shipped_model_path("six"), mine)
+    monkeypatch.setenv("BLENDER_MANIKIN_MODEL", mine)
+    paths = {name: path for name, path, _ in mc.installed_models()}
+    assert paths["six"] == mine and paths["head_hands"] == mc.shipped_model_path("head_hands")
+    tg, _ = targets_for()
+    plan = mc.plan_models(tg)
+    assert plan.runners[0].path == os.path.abspath(mine) and "my_six.onnx" in plan.notes[0]
+    shutil.rmtree(d)

@@ -25,7 +25,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .devices import DEVICES, EXTRA_DEVICES, LABELS, REQUIRED_DEVICES
-from .model_runner import MODELS_DIR, ModelError, default_model_path, load_model
+from .model_runner import MODELS_DIR, ModelError, load_model
 
 #: name → (file in ``models/``, input devices), smallest set first; the sets are nested
 SHIPPED_MODELS = {
@@ -63,14 +63,15 @@ def shipped_model_path(name):
 def installed_models():
     """``[(name, path, devices), ...]`` of the shipped models present, smallest set first.
 
-    ``$BLENDER_MANIKIN_MODEL`` (a model you trained) stands in for the shipped model of its
-    device set."""
-    out = []
+    ``$BLENDER_MANIKIN_MODEL`` (a model you trained) stands in for the shipped model whose
+    devices its contract lists."""
+    custom_devices = None
     custom = os.environ.get("BLENDER_MANIKIN_MODEL")
+    if custom:
+        custom_devices = tuple(load_model(custom).contract.devices)
+    out = []
     for name, (fname, devices) in SHIPPED_MODELS.items():
-        path = os.path.join(MODELS_DIR, fname)
-        if custom and name == "head_hands":
-            path = default_model_path()
+        path = custom if custom_devices == tuple(devices) else os.path.join(MODELS_DIR, fname)
         if os.path.isfile(path):
             out.append((name, path, devices))
     return out
