@@ -543,24 +543,14 @@ def bake_character_rig(obj, frame_start=None, frame_end=None, context=None, remo
         f0, f1 = live.frame_range
         frame_start = int(np.floor(f0)) if frame_start is None else frame_start
         frame_end = int(np.ceil(f1)) if frame_end is None else frame_end
-    frame_start, frame_end = int(frame_start), int(frame_end)
-    if frame_end < frame_start:
-        raise ValueError(f"frame range {frame_start}..{frame_end} is empty")
+    frame_start, frame_end = live_rig.check_frame_range(frame_start, frame_end)
     names = rig_driven_bones(obj)
     if not names:
         raise ValueError(f"{obj.name!r}: no bone follows the rig")
     bones = obj.data.bones
     parents = [bones[n].parent.name if bones[n].parent is not None else None for n in names]
-    sampled = list(dict.fromkeys(names + [p for p in parents if p is not None]))
-    idx = {n: k for k, n in enumerate(sampled)}
     frames = np.arange(frame_start, frame_end + 1)
-    M = live_rig.sample_pose_matrices(obj, sampled, frames, context)
-    rest = np.array([np.array(bones[n].matrix_local, dtype=np.float64) for n in sampled])
-    own = [idx[n] for n in names]
-    par = [idx[p] if p is not None else idx[n] for n, p in zip(names, parents)]
-    has_parent = np.array([p is not None for p in parents])
-    basis = live_rig.pose_basis(rest[own], rest[par], M[:, own], M[:, par], has_parent)
-    q = rot.quat_continuous(rot.matrix_to_quat(rot.orthonormalize(basis[..., :3, :3])), axis=0)
+    ch = live_rig.fk_key_channels(obj, names, parents, frames, context)
 
     action = live.copy()
     action.name = f"{live.name}_baked"
@@ -570,14 +560,8 @@ def bake_character_rig(obj, frame_start=None, frame_end=None, context=None, remo
     try:
         keying.assign_action(obj, action)
         _remove_fcurves(action, obj, _rig_path)
-        ch = []
-        for k, n in enumerate(names):
+        for n in names:
             obj.pose.bones[n].rotation_mode = 'QUATERNION'
-            for i in range(4):
-                ch.append((f'pose.bones["{n}"].rotation_quaternion', i, n, q[:, k, i]))
-            if parents[k] is None or np.max(np.abs(basis[:, k, :3, 3])) > 1e-6:
-                for i in range(3):
-                    ch.append((f'pose.bones["{n}"].location', i, n, basis[:, k, i, 3]))
         keying.key_channels(action, obj, frames.astype(np.float64), ch, interpolation)
     except BaseException:
         keying.assign_action(obj, live)

@@ -739,6 +739,41 @@ def pose_basis(rest, rest_parent, pose, pose_parent, has_parent):
     return np.linalg.inv(rel_rest)[None] @ (np.linalg.inv(pose_p) @ pose)
 
 
+def check_frame_range(frame_start, frame_end):
+    """``(int start, int end)``; ValueError when the range is empty."""
+    frame_start, frame_end = int(frame_start), int(frame_end)
+    if frame_end < frame_start:
+        raise ValueError(f"frame range {frame_start}..{frame_end} is empty")
+    return frame_start, frame_end
+
+
+def fk_key_channels(obj, names, parents, frames, context=None):
+    """Keying channels (:func:`.keying.key_channels`) that reproduce, as plain FK, the pose Blender
+    evaluates for bones ``names`` of ``obj`` on the scene frames ``frames``.
+
+    parents: per bone, the bone its keys are relative to (its parent in the armature the keys go
+    to; None: none).  ``rotation_quaternion`` (w, x, y, z, sign-continuous) for every bone,
+    ``location`` (bone rest frame) for bones without a parent or moved off their rest offset."""
+    bones = obj.data.bones
+    sampled = list(dict.fromkeys(list(names) + [p for p in parents if p is not None]))
+    idx = {n: k for k, n in enumerate(sampled)}
+    M = sample_pose_matrices(obj, sampled, frames, context)
+    rest = np.array([np.array(bones[n].matrix_local, dtype=np.float64) for n in sampled])
+    own = [idx[n] for n in names]
+    par = [idx[p] if p is not None else idx[n] for n, p in zip(names, parents)]
+    has_parent = np.array([p is not None for p in parents])
+    basis = pose_basis(rest[own], rest[par], M[:, own], M[:, par], has_parent)
+    q = rot.quat_continuous(rot.matrix_to_quat(rot.orthonormalize(basis[..., :3, :3])), axis=0)
+    ch = []
+    for k, n in enumerate(names):
+        for i in range(4):
+            ch.append((f'pose.bones["{n}"].rotation_quaternion', i, n, q[:, k, i]))
+        if parents[k] is None or np.max(np.abs(basis[:, k, :3, 3])) > 1e-6:
+            for i in range(3):
+                ch.append((f'pose.bones["{n}"].location', i, n, basis[:, k, i, 3]))
+    return ch
+
+
 def deform_bone_names(obj):
     """Bones a bake keeps: deforming bones that are not part of the live rig, parents first."""
     rig = set(RIG_BONES)
@@ -762,9 +797,7 @@ def bake_live_rig(armature_obj, frame_start: int, frame_end: int, name: str | No
     """
     context = context or bpy.context
     src = armature_obj
-    frame_start, frame_end = int(frame_start), int(frame_end)
-    if frame_end < frame_start:
-        raise ValueError(f"frame range {frame_start}..{frame_end} is empty")
+    frame_start, frame_end = check_frame_range(frame_start, frame_end)
     names = deform_bone_names(src)
     if not names:
         raise ValueError(f"{src.name!r} has no deforming bones to bake")
@@ -777,25 +810,10 @@ def bake_live_rig(armature_obj, frame_start: int, frame_end: int, name: str | No
         while p is not None and p.name not in keep:
             p = p.parent
         parent[k] = p.name if p is not None else None
-    rest = np.array([np.array(bones[n].matrix_local, dtype=np.float64) for n in names])
-    idx = {n: k for k, n in enumerate(names)}
-    has_parent = np.array([p is not None for p in parent])
-    par = np.array([idx[p] if p is not None else k for k, p in enumerate(parent)])
-
     frames = np.arange(frame_start, frame_end + 1)
-    M = sample_pose_matrices(src, names, frames, context)
-    basis = pose_basis(rest, rest[par], M, M[:, par], has_parent)
-
+    ch = fk_key_channels(src, names, parent, frames, context)
     new = _plain_copy(src, names, name or f"{src.name}_baked", context)
     try:
-        q = rot.quat_continuous(rot.matrix_to_quat(rot.orthonormalize(basis[..., :3, :3])), axis=0)
-        ch = []
-        for k, n in enumerate(names):
-            for i in range(4):
-                ch.append((f'pose.bones["{n}"].rotation_quaternion', i, n, q[:, k, i]))
-            if parent[k] is None or np.max(np.abs(basis[:, k, :3, 3])) > 1e-6:
-                for i in range(3):
-                    ch.append((f'pose.bones["{n}"].location', i, n, basis[:, k, i, 3]))
         action = keying.new_action(f"{new.name}_action")
         keying.assign_action(new, action)
         keying.key_channels(action, new, frames.astype(np.float64), ch, interpolation)

@@ -63,7 +63,10 @@ def bone_list(obj):
 def resolve_bone_map(choice, target_obj, path=None):
     """``(BoneMap, notes)`` for the panel's / command line's choice: ``"auto"`` (guessed from the
     target's bone names and hierarchy: notes list each joint's bone and why), a preset name of
-    :data:`..core.bone_maps.PRESETS`, or ``"file"`` with ``path`` (a saved map, JSON)."""
+    :data:`..core.bone_maps.PRESETS`, ``"file"`` with ``path`` (a saved map, JSON), or a
+    :class:`..core.bone_maps.BoneMap` (the panel's edited list), used as it is."""
+    if isinstance(choice, bone_maps.BoneMap):
+        return choice, []
     key = str(choice or "auto").lower()
     if key == "auto":
         bmap, notes = bone_maps.guess_bone_map(bone_list(target_obj))

@@ -5,7 +5,6 @@ bone map editor's operators (``manikin.load_bone_map``, ``manikin.save_bone_map`
 from __future__ import annotations
 
 import os
-import tempfile
 
 from bpy.props import StringProperty
 from bpy.types import Operator
@@ -54,18 +53,13 @@ class MANIKIN_OT_retarget(Operator):
 
 
 def _retarget_with_edited_list(src, s, context):
-    """The retarget with the bone map list as edited: checked against the character first (a bone
-    it lacks is an error naming the joint and the bone), then handed to the retarget as a map
-    file (:func:`..core.bone_maps.save_bone_map`, read back by the retarget's own loader)."""
+    """The retarget with the bone map list as edited, checked against the character first (a bone
+    it lacks is an error naming the joint and the bone)."""
     from ..blender import bone_map_list, retarget_apply
-    from ..core import bone_maps
     bmap = bone_map_list.checked_bone_map(s, s.retarget_target)
-    with tempfile.TemporaryDirectory(prefix="manikin_bone_map_") as folder:
-        path = os.path.join(folder, "edited_bone_map.json")
-        bone_maps.save_bone_map(path, bmap)
-        return retarget_apply.retarget_onto(src, s.retarget_target, "file", path, s.retarget_root.lower(),
-                                            s.retarget_keep_ends, context,
-                                            live_swivel=s.retarget_keep_ends and s.retarget_live_swivel)
+    return retarget_apply.retarget_onto(src, s.retarget_target, bmap, None, s.retarget_root.lower(),
+                                        s.retarget_keep_ends, context,
+                                        live_swivel=s.retarget_keep_ends and s.retarget_live_swivel)
 
 
 class MANIKIN_OT_load_bone_map(Operator):
