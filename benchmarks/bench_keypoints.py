@@ -4,7 +4,7 @@ made from mocap, side by side, in one run.
 
     python benchmarks/bench_keypoints.py [--datasets bandai,hdm05]
         [--layouts coco17,mediapipe33,h36m17,body25,smpl24] [--noise 0,1,2,4] [--drop 0.05]
-        [--max-clips 20] [--max-frames 600] [--smoothing S] [--target-noise 2] [--seed 0] [--markdown]
+        [--max-clips 20] [--max-frames 600] [--smoothing auto|S] [--target-noise 2] [--seed 0] [--markdown]
 
 Data: the clips of ``bench_pose.py`` (Bandai Namco held-out takes, HDM05 validation clips; the
 training cache, mapped onto the 22-joint body), each posed by FK on its own skeleton at its own
@@ -24,10 +24,13 @@ Methods, each on the same noisy input, as a ``KeypointRecording`` (no axis conve
 the clip's frame rate, so the solve's frames are the clip's frames):
 
 * ``adaptive``: ``solve_keypoints`` as shipped (``SolveSettings`` defaults: adaptive HybrIK,
-  the default Savitzky-Golay smoothing window, or ``--smoothing`` seconds; feet locked);
+  the default smoothing, ``auto``: each point's Savitzky-Golay filter chosen from its measured
+  noise, ``keypoint_solve.smooth_auto``; or ``--smoothing`` seconds; feet locked);
 * ``naive``: the same with ``ik="naive"`` (each bone aims from the *input* joint);
 * ``damped-track``: what a Blender rig of Damped Track constraints does, on the solve's own
   gap bridging, smoothing, sizing and floor (:func:`damped_track_baseline`);
+* ``adaptive, 0.4 s window``: one quadratic Savitzky-Golay window of 0.4 s for every point (the
+  fixed filter the automatic choice replaced), to show what the choice gains;
 * ``adaptive, no smoothing`` / ``naive, no smoothing``: ``smoothing=0``, to show the filter's part.
 
 The header line states the smoothing window used.
@@ -94,6 +97,7 @@ from blender_manikin.core.pose_result import PoseResult  # noqa: E402
 from blender_manikin.core.solve import SolveError, SolveSettings  # noqa: E402
 
 DEFAULT_SMOOTHING = SolveSettings().smoothing
+FIXED_WINDOW = 0.4
 COLUMNS = ["JPE", "GT-JPE", "bone drift", "input drift", "Jitter", "Jitter-GT", "skate", "skate-GT",
            "elbow out", "knee out", "axial out", "frames/s"]
 UNITS = {"JPE": "cm", "GT-JPE": "cm", "bone drift": "mm", "input drift": "mm", "Jitter": "1e2 m/s^3",
@@ -114,12 +118,18 @@ HINGE_TOLERANCE = np.radians(1.0)
 AXIAL_TOLERANCE = 1e-3
 
 
+def describe_smoothing(smoothing):
+    return ("auto (per point, Savitzky-Golay chosen by SURE)" if smoothing == "auto"
+            else f"{smoothing:g} s (Savitzky-Golay)")
+
+
 def make_methods(smoothing=DEFAULT_SMOOTHING):
-    """method name -> ``(kind, adaptive, smoothing seconds)``, in table order."""
+    """method name -> ``(kind, adaptive, smoothing: "auto" or seconds)``, in table order."""
     return {
         "adaptive": ("solve", True, smoothing),
         "naive": ("solve", False, smoothing),
         "damped-track": ("damped", None, smoothing),
+        f"adaptive, {FIXED_WINDOW:g} s window": ("solve", True, FIXED_WINDOW),
         "naive, no smoothing": ("solve", False, 0.0),
         "adaptive, no smoothing": ("solve", True, 0.0),
     }
@@ -371,8 +381,8 @@ def main(argv=None):
     ap.add_argument("--drop", type=float, default=0.05, help="fraction of the points set missing (NaN)")
     ap.add_argument("--max-clips", type=int, default=20, help="clips per dataset (0: all)")
     ap.add_argument("--max-frames", type=int, default=600, help="frames per clip (0: all)")
-    ap.add_argument("--smoothing", type=float, default=DEFAULT_SMOOTHING,
-                    help="Savitzky-Golay window (s) of the smoothed methods (default: SolveSettings')")
+    ap.add_argument("--smoothing", type=ks.parse_smoothing, default=DEFAULT_SMOOTHING,
+                    help="smoothed methods: auto or a Savitzky-Golay window in seconds (default: SolveSettings')")
     ap.add_argument("--target-noise", type=float, default=2.0,
                     help="σ (cm per coordinate, one of --noise) where the target line is checked")
     ap.add_argument("--seed", type=int, default=0)
@@ -398,7 +408,7 @@ def main(argv=None):
     print(f"noise: Gaussian, σ per coordinate in cm (a point's mean 3D error is 1.60 σ; the same draw scaled "
           f"for every σ), seed {args.seed}; "
           f"then {100 * args.drop:g} % of the points missing (NaN: half in runs of 3-10 frames, half single); "
-          f"smoothing {args.smoothing:g} s (Savitzky-Golay) unless 'no smoothing'")
+          f"smoothing {describe_smoothing(args.smoothing)} unless the method says otherwise")
     cols = [f"{c} [{UNITS[c]}]" if UNITS[c] else c for c in COLUMNS]
     fmt = {(f"{c} [{UNITS[c]}]" if UNITS[c] else c): v for c, v in FORMATS.items()}
     for r in results:

@@ -35,7 +35,8 @@ Options of ``solve`` (they mirror the panel; ``--help`` has them all):
 --rate HZ                     samples per second of a wide-layout CSV or keypoints
                               with no times
 --up +x|-x|+y|-y|+z|-z        keypoints: the file's up axis (default: detected)
---smoothing SECONDS           keypoints: Savitzky-Golay window (default 0.4; 0: off)
+--smoothing auto|SECONDS      keypoints: auto (default: each point's filter from its noise) or a
+                              Savitzky-Golay window in seconds (0: off)
 --ik adaptive|naive           keypoints: HybrIK adaptive (default) or naive IK
 --mapping FILE.json           keypoints: a CSV's column names for the layout's points
 --save-layout FILE.json       write the layout detected in the first wide CSV
@@ -104,8 +105,9 @@ def _add_solve_options(s):
                    help="samples per second of wide-layout CSV or keypoint inputs without times")
     s.add_argument("--up", default=None, choices=("+x", "-x", "+y", "-y", "+z", "-z"),
                    help="keypoints: the file's up axis (default: told from the body)")
-    s.add_argument("--smoothing", type=float, default=0.4, metavar="SECONDS",
-                   help="keypoints: Savitzky-Golay window in seconds (default 0.4; 0: off)")
+    s.add_argument("--smoothing", type=_smoothing_arg, default="auto", metavar="auto|SECONDS",
+                   help="keypoints: 'auto' (default: each point gets the Savitzky-Golay filter its measured "
+                        "noise calls for) or one window in seconds for all (0: off)")
     s.add_argument("--ik", choices=("adaptive", "naive"), default="adaptive",
                    help="keypoints: HybrIK adaptive (default) or naive twist-and-swing IK")
     s.add_argument("--mapping", default=None, metavar="FILE.json",
@@ -152,6 +154,16 @@ def append_character(spec):
         else:
             bpy.data.objects.remove(o)
     return arm
+
+
+def _smoothing_arg(text):
+    """argparse type of ``--smoothing``: ``auto`` or seconds >= 0."""
+    from .core.keypoint_solve import parse_smoothing
+    from .core.solve import SolveError
+    try:
+        return parse_smoothing(text)
+    except SolveError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
 
 
 def _keypoint_layouts():
@@ -246,7 +258,7 @@ def solve_settings(args):
         layout, keypoint_layout = None, layout.strip().lower()
     st = SolveSettings(axes=args.axes, units=args.units, fps=float(args.fps), offsets=offsets,
                        layout=layout, rate=getattr(args, "rate", None), keypoint_layout=keypoint_layout,
-                       up=getattr(args, "up", None), smoothing=float(getattr(args, "smoothing", 0.4)),
+                       up=getattr(args, "up", None), smoothing=getattr(args, "smoothing", "auto"),
                        ik=getattr(args, "ik", "adaptive"), mapping=getattr(args, "mapping", None),
                        model=getattr(args, "model", None))
     if args.calibration_time is not None:

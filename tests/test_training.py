@@ -384,3 +384,42 @@ def test_aug_overrides_and_their_checks():
                      ("arm_mix=1,2", "one number")):
         with pytest.raises(SystemExit, match=msg):
             train.parse_aug([bad])
+
+
+def test_init_fine_tunes_from_a_checkpoint_or_an_exported_model(cache, bvh_dir, tmp_path):
+    """--init starts a new run from trained weights: a checkpoint, or an .onnx read back exactly
+    (its contract gives the architecture); the run's first weights are those weights."""
+    from blender_manikin.training import train, export
+    from blender_manikin.training.init_weights import load_initial_weights
+    root, _ = cache
+    common = ["--bvh", bvh_dir, "--cache-dir", root, "--window", "16"] + TINY
+    first = train.main(common + ["--steps", "3", "--out", str(tmp_path / "a")])
+    onnx_path = tmp_path / "a.onnx"
+    export.export(first["checkpoint"], str(onnx_path), quiet=True)
+    ck = torch.load(first["checkpoint"], weights_only=False)
+    for src in (first["checkpoint"], str(onnx_path)):
+        cfg, state = load_initial_weights(src)
+        assert cfg.d_model == 32 and cfg.layers == 1 and tuple(cfg.devices) == features.INPUT_DEVICES
+        for k, v in ck["model"].items():
+            assert torch.allclose(state[k], v, atol=1e-7), (src, k)
+    # a fine-tuning run: zero steps keeps the weights, a few steps change them; the contract says so
+    same = train.main(common + ["--steps", "0", "--init", str(onnx_path), "--out", str(tmp_path / "b")])
+    kept = torch.load(same["checkpoint"], weights_only=False)
+    for k, v in ck["model"].items():
+        assert torch.allclose(kept["model"][k], v, atol=1e-7), k
+    tuned = train.main(common + ["--steps", "2", "--init", str(onnx_path), "--out", str(tmp_path / "c"),
+                                 "--aug", "lying=0.5"])
+    t = torch.load(tuned["checkpoint"], weights_only=False)
+    assert any(not torch.allclose(t["model"][k], v) for k, v in ck["model"].items())
+    c, _ = export.export(tuned["checkpoint"], str(tmp_path / "c.onnx"), quiet=True)
+    assert c["training"]["init"] == "a.onnx" and c["training_data"]["augmentation"]["lying"] == 0.5
+    # wrong files are refused with the reason, before any training
+    with pytest.raises(SystemExit, match="no such file"):
+        train.main(common + ["--steps", "1", "--init", str(tmp_path / "none.onnx"), "--out", str(tmp_path / "d")])
+    with pytest.raises(SystemExit, match="takes head, left_hand, right_hand"):
+        train.main(common + ["--steps", "1", "--init", str(onnx_path), "--devices", "head,left_hand,right_hand,pelvis",
+                             "--out", str(tmp_path / "e")])
+    bad = tmp_path / "bad.pt"
+    torch.save({"weights": 1}, bad)
+    with pytest.raises(SystemExit, match="not a training checkpoint"):
+        train.main(common + ["--steps", "1", "--init", str(bad), "--out", str(tmp_path / "f")])

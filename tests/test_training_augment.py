@@ -178,3 +178,36 @@ def test_tracking_gaps_are_bridged_or_frozen():
         frozen = np.allclose(seg[:-1], seg[0])
         linear = np.allclose(np.diff(seg, 2, axis=0), 0.0, atol=1e-12)
         assert frozen or linear
+
+
+def test_lying_lays_whole_bodies_on_the_floor_and_only_when_asked():
+    """Augment.lying: the body lies on the floor (trunk low and near horizontal, no joint under
+    the floor), its limbs keep their motion, contacts are measured again; with lying=0 the
+    batches are exactly those of before (no extra random draws)."""
+    cs = _moving_clipset(n=3)
+    off = dict(speed=(1, 1), stature=None, segment=0.0, floor=0.0, mirror=0.0, pos_noise=0.0, rot_noise_deg=0.0,
+               hand_offset_deg=0.0, head_offset=0.0, edge_prob=0.0, calibration=0.0, dropout=0.0, arm_mix=0.0)
+    plain = ds.WindowSampler(cs, window=20, augment=ds.Augment(lying=0.0, **off), seed=0)
+    lying = ds.WindowSampler(cs, window=20, augment=ds.Augment(lying=1.0, **off), seed=0)
+    a, b = plain.sample(24, np.random.default_rng(7)), lying.sample(24, np.random.default_rng(7))
+    P, Q = a["pos"].astype(np.float64), b["pos"].astype(np.float64)       # canonical, statures, z up
+    # standing: head high; lying: head and pelvis low, every joint on or above the floor
+    assert np.median(P[..., J["head"], 2]) > 0.8
+    assert np.median(Q[..., J["head"], 2]) < 0.45 and np.median(Q[..., J["pelvis"], 2]) < 0.35
+    assert Q[..., 2].min() >= ds.LYING_CLEARANCE - 1e-4
+    trunk_low = Q[:, :, ds.LYING_TRUNK, 2].min(-1)
+    assert trunk_low.min() >= ds.LYING_TRUNK_CLEARANCE - 1e-4
+    axis = Q[..., J["neck"], :] - Q[..., J["pelvis"], :]
+    tilt = np.degrees(np.arccos(np.clip(axis[..., 2] / np.linalg.norm(axis, axis=-1), -1, 1)))
+    assert np.percentile(tilt, 5) > 55 and np.percentile(tilt, 95) < 110      # lying, not standing
+    # the limbs keep their motion relative to the pelvis (a rigid turn of the whole body)
+    def rel(X, j):
+        return np.linalg.norm(X[..., j, :] - X[..., J["pelvis"], :], axis=-1)
+    for j in (J["left_wrist"], J["right_ankle"], J["head"]):
+        assert np.allclose(rel(P, j), rel(Q, j), atol=1e-4)
+    # contacts come from the new motion (the targets' contact block) and are 0/1
+    sl = features.output_slices()["contact"]
+    assert set(np.unique(b["y"][..., sl])) <= {0.0, 1.0}
+    # lying=0 draws nothing: the same batch as a sampler without the field
+    again = ds.WindowSampler(cs, window=20, augment=ds.Augment(**off), seed=0).sample(24, np.random.default_rng(7))
+    assert np.array_equal(again["x"], a["x"]) and np.array_equal(again["y"], a["y"])

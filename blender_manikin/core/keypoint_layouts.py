@@ -81,6 +81,11 @@ class KeypointLayout:
     def __contains__(self, point) -> bool:
         return point in self.points
 
+    @property
+    def has_spine(self) -> bool:
+        """The layout has the spine joints as points (SMPL); others leave them to be guessed."""
+        return "spine1" in self.points
+
 
 LAYOUTS = {f.name: f for f in (
     KeypointLayout("mediapipe33", "MediaPipe / BlazePose 33 (FreeMoCap)", _MP33),
@@ -139,6 +144,15 @@ def _trunk_up(P):
     return rot.normalize(mid_sh - mid_hip), mid_hip, mid_sh
 
 
+def _square_to(up, line):
+    """``(T, 3)`` unit: ``up`` less its component along ``line`` (``up`` itself where the two are
+    parallel or ``line`` is zero)."""
+    d = rot.normalize(line)
+    sq = up - np.sum(up * d, -1, keepdims=True) * d
+    n = np.linalg.norm(sq, axis=-1, keepdims=True)
+    return np.where(n > 1e-6, sq / np.maximum(n, 1e-12), up)
+
+
 def body22_from_keypoints(points, layout) -> Body22:
     """The 22 body joints (and the orientations the layout shows) from keypoints.
 
@@ -169,17 +183,22 @@ def body22_from_keypoints(points, layout) -> Body22:
     # hips, neck above the shoulders): the median shoulder-to-hip distance / its rest fraction
     trunk = np.nanmedian(np.linalg.norm(mid_sh - mid_hip, axis=-1))
     H = trunk / (PROPORTIONS["shoulder_height"] - PROPORTIONS["hip_height"]) if np.isfinite(trunk) else 1.7
+    # the pelvis above the hips' midpoint and the neck above the shoulders' along the trunk's up
+    # made square to the hip line / the shoulder line: the derived joint stays equidistant from
+    # the two measured ones, so the hips and shoulders fit a rigid body however the trunk bends
+    up_hips = _square_to(up, P[:, J["left_hip"]] - P[:, J["right_hip"]])
+    up_sh = _square_to(up, P[:, J["left_shoulder"]] - P[:, J["right_shoulder"]])
     pelvis = pt("pelvis") if "pelvis" in lay else \
-        (pt("mid_hip") if "mid_hip" in lay else mid_hip) + PROPORTIONS["pelvis_above_hips"] * H * up
+        (pt("mid_hip") if "mid_hip" in lay else mid_hip) + PROPORTIONS["pelvis_above_hips"] * H * up_hips
     if "pelvis" in lay:       # H36M's pelvis is the hips' midpoint; ours sits a little above it
-        pelvis = pelvis + PROPORTIONS["pelvis_above_hips"] * H * up
+        pelvis = pelvis + PROPORTIONS["pelvis_above_hips"] * H * up_hips
     neck_above = (PROPORTIONS["neck_height"] - PROPORTIONS["shoulder_height"]) * H
     if "thorax" in lay:
         neck = pt("thorax")
     elif "neck" in lay:
-        neck = pt("neck") + neck_above * up
+        neck = pt("neck") + neck_above * up_sh
     else:
-        neck = mid_sh + neck_above * up
+        neck = mid_sh + neck_above * up_sh
     P[:, J["pelvis"]] = pelvis
     P[:, J["neck"]] = neck
     if "spine" in lay:
@@ -193,7 +212,7 @@ def body22_from_keypoints(points, layout) -> Body22:
     b = (PROPORTIONS["collar_height"] - PROPORTIONS["neck_height"]
          - a * (PROPORTIONS["shoulder_height"] - PROPORTIONS["neck_height"])) * H
     for side in ("left", "right"):
-        P[:, J[f"{side}_collar"]] = neck + a * (P[:, J[f"{side}_shoulder"]] - neck) + b * up
+        P[:, J[f"{side}_collar"]] = neck + a * (P[:, J[f"{side}_shoulder"]] - neck) + b * up_sh
 
     no_twist = []
     # head: the skull base between the ears, oriented by the face

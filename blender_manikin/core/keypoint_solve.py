@@ -1,7 +1,7 @@
 """3D keypoints → an animated 22-joint body, by HybrIK twist-and-swing IK.  No bpy.
 
     from blender_manikin.core.solve import SolveSettings, solve_recording
-    outcome = solve_recording("take/output_data", SolveSettings(fps=30.0, smoothing=0.2))
+    outcome = solve_recording("take/output_data", SolveSettings(fps=30.0, smoothing="auto"))
     outcome.result          # PoseResult, as a tracker solve gives (same writers, same armature)
 
 Stages (each a function, for tests and benchmarks):
@@ -9,16 +9,20 @@ Stages (each a function, for tests and benchmarks):
 1. read (:func:`.io_keypoints.read_keypoints`): metres, Blender axes, NaN = missing;
 2. :func:`bridge_gaps`: every point's missing stretches filled by linear interpolation in
    time (held at the ends), reported as :class:`.resample.Gap` s;
-3. :func:`smooth`: a Savitzky-Golay filter (quadratic, zero lag) over ``smoothing`` seconds;
+3. smoothing: by default (``smoothing="auto"``) :func:`smooth_auto`: each point's own
+   Savitzky-Golay filter, chosen by Stein's unbiased risk estimate from the noise measured on
+   it; or :func:`smooth`, one quadratic Savitzky-Golay window of ``smoothing`` seconds (zero lag);
 4. resampling to the solve's frame rate (linear in time);
 5. :func:`.keypoint_layouts.body22_from_keypoints`: the 22 joints and the orientations the
    layout shows;
 6. :func:`size_body`: bone lengths from the median over the take, left and right averaged, on
-   the rest directions of :func:`.skeleton.make_body`, so bones never stretch;
+   the rest directions of :func:`.skeleton.make_body`, so bones never stretch (a spine the
+   layout does not measure: to the straight trunk's length);
 7. :func:`estimate_floor`: the floor height from the lowest foot points; the take is moved so
    the floor is ``z = 0``;
 8. IK (:func:`.hybrik.ik_from_positions`, adaptive by default: each bone aims at its keypoint
-   from where the chain actually is): limbs through the analytic limb solver, so elbows and
+   from where the chain actually is; a trunk the layout does not measure is first fitted to the
+   hips and shoulders, :func:`rigid_trunk`): limbs through the analytic limb solver, so elbows and
    knees are hinges within their limits and the swivel angles become the usual keyed
    properties; feet contacts (:func:`foot_contacts`) hold planted ankles still and the feet are
    kept above the floor, then the limbs are solved again onto those ankle targets.
@@ -107,6 +111,73 @@ def smooth(x, fps, seconds, order=2):
     return out
 
 
+#: the filters :func:`smooth_auto` chooses from: (window seconds, polynomial order); (0, 0) is none
+AUTO_FILTERS = ((0.0, 0),) + tuple((w, 2) for w in (0.2, 0.3, 0.4, 0.5, 0.6, 0.8)) \
+    + tuple((w, 4) for w in (0.6, 0.8, 1.0, 1.2, 1.6))
+#: frames of the local cubic fit whose residual measures a track's noise
+NOISE_WINDOW = 7
+
+
+def savgol_trace(T, window, order=2):
+    """Trace of the ``(T, T)`` matrix :func:`smooth` applies (its degrees of freedom)."""
+    if window < order + 2 or window > T:
+        return float(T)
+    h = window // 2
+    W = savgol_weights(window, order)
+    return float((T - 2 * h) * W[h, h] + np.trace(W[:h, :h]) + sum(W[h + 1 + i, window - h + i] for i in range(h)))
+
+
+def track_noise(x):
+    """``(K,)`` noise standard deviation (the input's units) of each track of ``x`` ``(T, K, 3)``:
+    from the residual of a local cubic fit over :data:`NOISE_WINDOW` frames, robustly (the
+    median squared residual, so fast moves and filled gaps count little), assuming white noise
+    of the same size on the three axes.  NaN for a track with missing samples (bridge them first)."""
+    x = np.asarray(x, np.float64)
+    w = NOISE_WINDOW
+    if x.shape[0] < 3 * w:
+        return np.full(x.shape[1], np.nan)
+    h = w // 2
+    r = (x - smooth(x, 1.0, w, order=3))[h:-h]          # fps 1: the window is in frames
+    c = savgol_weights(w, 3)[h, h]
+    # median of a chi-square(1) variable is 0.455 of its mean; a fitted residual keeps 1 - c of it
+    out = np.full(x.shape[1], np.nan)
+    ok = np.isfinite(r).all(axis=(0, 2))
+    out[ok] = np.sqrt(np.median(r[:, ok] ** 2, axis=(0, 2)) / 0.4549 / (1.0 - c))
+    return out
+
+
+def smooth_auto(x, fps, filters=AUTO_FILTERS):
+    """Each track of ``x`` ``(T, K, 3)`` smoothed by the filter of ``filters`` that Stein's
+    unbiased risk estimate says brings it closest to the noise-free motion.
+
+    For a linear smoother ``y = S x`` of a track with white noise σ (:func:`track_noise`) the
+    expected squared error to the true motion is estimated, without knowing it, as
+    ``|x - y|² - n σ² + 2 σ² tr(S)`` (n samples; Stein 1981): a longer window removes more
+    noise but bends fast motion more, and the estimate weighs the two on the track's own data.
+    So a wrist in a fast throw keeps a short window while a hip of the same take gets a long
+    one, and clean input is left nearly as it is.  fps: the samples' rate (windows are in
+    seconds).  Returns ``(smoothed (T, K, 3), choice (K,) index into filters)``."""
+    x = np.asarray(x, np.float64)
+    T, K = x.shape[:2]
+    sig2 = track_noise(x) ** 2
+    best = np.zeros(K, np.int64)
+    out = x.copy()
+    risk_best = np.full(K, np.inf)
+    ok = np.isfinite(sig2)
+    for i, (seconds, order) in enumerate(filters):
+        y = smooth(x, fps, seconds, order) if seconds > 0 else x
+        w = int(round(seconds * fps)) | 1 if seconds > 0 else 1
+        if w > T:
+            w = T if T % 2 else T - 1
+        tr = savgol_trace(T, w, order) if seconds > 0 else float(T)
+        risk = np.nansum((x - y) ** 2, axis=(0, 2)) + 3.0 * sig2 * (2.0 * tr - T)
+        better = ok & (risk < risk_best)
+        out[:, better] = y[:, better]
+        best[better] = i
+        risk_best[better] = risk[better]
+    return out, best
+
+
 def resample_points(time, X, fps, t0=None):
     """``(times (N,), X (N, ...))``: ``X`` ``(T, ...)`` linearly interpolated onto a grid at ``fps``
     from ``t0`` (default the first time) to the last time."""
@@ -121,15 +192,28 @@ def resample_points(time, X, fps, t0=None):
     return grid, out.reshape((n,) + np.shape(X)[1:])
 
 
-def size_body(P, height=None) -> sk.Body:
+#: the spine bones pelvis → spine1 → spine2 → spine3 → neck
+_SPINE = [sk.J["spine1"], sk.J["spine2"], sk.J["spine3"], sk.J["neck"]]
+#: percentile of the pelvis-to-neck distance a derived spine is sized to (see :func:`size_body`)
+SPINE_PERCENTILE = 90
+
+
+def size_body(P, height=None, derived_spine=False) -> sk.Body:
     """A :class:`.skeleton.Body` with the bone lengths of ``P`` ``(T, 22, 3)`` metres.
 
     Each bone's length is its median over the frames, left and right averaged; directions and
     the rest pose are those of :func:`.skeleton.make_body` (limbs straight along the axes, feet
     on the floor), so the limb solver's hinge axes hold.  height: scales the body to that
-    stature (metres; the head joint 0.871 statures above the ankles)."""
+    stature (metres; the head joint 0.871 statures above the ankles).
+
+    derived_spine: the spine joints are guesses on the line from the pelvis to the neck (layouts
+    with no spine points): that line shortens when the trunk bends and never grows longer than
+    the straight spine, so the spine bones are scaled together to the
+    :data:`SPINE_PERCENTILE` th percentile of the pelvis-to-neck distance (a median would size
+    the spine of a take spent bending over too short for its upright frames)."""
     L = np.linalg.norm(P[:, 1:] - P[:, sk.PARENTS[1:]], axis=-1)
     L = np.concatenate([[0.0], np.nanmedian(L, axis=0)])
+
     for a, b in _PAIRS:
         L[a] = L[b] = 0.5 * (L[a] + L[b])
     if not np.all(np.isfinite(L[1:])) or np.any(L[1:] <= 1e-4):
@@ -144,6 +228,12 @@ def size_body(P, height=None) -> sk.Body:
         if measured is not None:
             for c, o in measured.items():
                 off[c] = o
+    if derived_spine:
+        chord = np.linalg.norm(P[:, sk.J["neck"]] - P[:, sk.J["pelvis"]], axis=-1)
+        straight = np.nanpercentile(chord, SPINE_PERCENTILE)
+        now = np.linalg.norm(off[_SPINE], axis=-1).sum()
+        if np.isfinite(straight) and now > 0:
+            off[_SPINE] *= straight / now
     rel = np.zeros((sk.NUM_JOINTS, 3))
     for j in range(1, sk.NUM_JOINTS):
         rel[j] = rel[sk.PARENTS[j]] + off[j]
@@ -216,9 +306,86 @@ def _finite_orientations(b22: kl.Body22):
     return b22
 
 
-def fit_keypoints(P, end_rot, body: sk.Body, fps, adaptive=True, lock_feet=True):
+#: weight of the spine's direction against the two hips' in the pelvis fit of :func:`rigid_trunk`
+#: (the hips are measured; the spine is the trunk's line, only its tilt about the hip axis counts)
+SPINE_WEIGHT = 0.05
+
+
+def _procrustes(rest, target, w):
+    """Rigid ``(R (T, 3, 3), p (T, 3))`` minimising ``Σ_i w_i |p + R rest_i - target_i|²``.
+
+    rest ``(K, 3)``, target ``(T, K, 3)``, w ``(K,)``."""
+    w = np.asarray(w, np.float64) / np.sum(w)
+    rc = w @ rest                                                   # (3,)
+    tc = np.einsum("k,tki->ti", w, target)                          # (T, 3)
+    H = np.einsum("tki,kj,k->tij", target - tc[:, None], rest - rc, w)
+    U, _, Vt = np.linalg.svd(H)
+    D = np.ones(U.shape[:-1])
+    D[:, -1] = np.linalg.det(U @ Vt)
+    R = (U * D[:, None, :]) @ Vt
+    return R, tc - np.einsum("tij,j->ti", R, rc)
+
+
+def rigid_trunk(P, body: sk.Body):
+    """Trunk targets a rigid trunk of ``body`` can meet, for layouts that measure the hips and the
+    shoulders but not the spine (COCO, MediaPipe, OpenPose, Human3.6M).
+
+    The spine, neck and collar joints :func:`.keypoint_layouts.body22_from_keypoints` places
+    are guesses along the trunk's line, and the distances between them change as the trunk
+    bends, which no rigid skeleton follows: aiming each bone at them leaves the shoulders
+    1-2 cm off.  Instead the trunk is fitted to the measured points:
+
+    1. the pelvis turns so the hips land on theirs (the spine's direction, weighted
+       :data:`SPINE_WEIGHT`, only sets the tilt about the hip axis);
+    2. the chest (spine3 with the collars at rest) is the rigid fit (Procrustes) of the two
+       shoulders and the neck point to the body's rest shoulders and neck;
+    3. spine2 is placed so the two spine bones from spine1 (where the pelvis puts it) reach the
+       chest: on their circle, bent towards the back (a trunk bending forwards curves the back);
+       a chest further than the straight spine reaches leaves it straight.
+
+    P ``(T, 22, 3)`` metres; returns ``(P', pelvis world rotation (T, 3, 3))``: P with spine2,
+    spine3, the neck and the collars moved (the hips, shoulders, head and limbs untouched).
+    The IK then meets the hips exactly and the shoulders within what a rigid chest and the
+    collars' swing allow."""
+    J = sk.J
+    off = body.offsets
+    P = np.array(P, np.float64, copy=True)
+    pel, s1, s2, s3 = J["pelvis"], J["spine1"], J["spine2"], J["spine3"]
+    hips = [J["left_hip"], J["right_hip"]]
+    R0 = hybrik.kabsch(off[hips + [s1]], P[:, hips + [s1]] - P[:, pel:pel + 1], weights=[1.0, 1.0, SPINE_WEIGHT])
+    # the chest: spine3 and what hangs from it at rest (collars straight, so the shoulders are
+    # collar + shoulder offsets away)
+    chest = [J["left_shoulder"], J["right_shoulder"], J["neck"]]
+    rest = np.stack([off[J["left_collar"]] + off[J["left_shoulder"]],
+                     off[J["right_collar"]] + off[J["right_shoulder"]], off[J["neck"]]])
+    R3, p3 = _procrustes(rest, P[:, chest], [1.0, 1.0, 1.0])
+    # the spine: spine1 where the pelvis puts it, spine2 on the circle of the two bones to spine3
+    a1 = P[:, pel] + np.einsum("tij,j->ti", R0, off[s1])
+    l2, l3 = np.linalg.norm(off[s2]), np.linalg.norm(off[s3])
+    d = p3 - a1
+    dn = np.maximum(np.linalg.norm(d, axis=-1), 1e-9)
+    u = d / dn[:, None]
+    along = np.clip((l2 * l2 - l3 * l3 + dn * dn) / (2.0 * dn), -l2, l2)
+    radius = np.sqrt(np.maximum(l2 * l2 - along * along, 0.0))
+    reach = dn < l2 + l3
+    back = np.einsum("tij,j->ti", R0 + R3, [0.0, 1.0, 0.0])        # the body's back (+Y at rest)
+    back = rot.normalize(back - np.sum(back * u, -1, keepdims=True) * u)
+    P[:, s2] = a1 + np.where(reach[:, None], along[:, None] * u + radius[:, None] * back, l2 * u)
+    P[:, s3] = p3
+    P[:, J["neck"]] = p3 + np.einsum("tij,j->ti", R3, off[J["neck"]])
+    for c in ("left_collar", "right_collar"):
+        P[:, J[c]] = p3 + np.einsum("tij,j->ti", R3, off[J[c]])
+    return P, R0
+
+
+def fit_keypoints(P, end_rot, body: sk.Body, fps, adaptive=True, lock_feet=True, derived_spine=False):
     """IK of the 22 joints ``P`` ``(T, 22, 3)`` (floor at ``z = 0``) onto ``body``: a
-    :class:`PoseResult` with contacts and the ankles kept above the floor."""
+    :class:`PoseResult` with contacts and the ankles kept above the floor.  derived_spine: the
+    layout has no spine points (:func:`rigid_trunk` fits the trunk to the hips and shoulders)."""
+    if derived_spine:
+        P, pelvis_rot = rigid_trunk(P, body)
+        end_rot = dict(end_rot)
+        end_rot.setdefault(sk.J["pelvis"], pelvis_rot)
     ik = hybrik.ik_from_positions(P, body, end_rot=end_rot, adaptive=adaptive, aim_chain=True,
                                   within_limits=True)
     ank = [sk.J["left_ankle"], sk.J["right_ankle"]]
@@ -252,7 +419,10 @@ class PreparedKeypoints:
     times ``(T,)`` seconds on the solve's grid; P ``(T, 22, 3)`` metres, Blender axes, the floor
     moved to z = 0; b22: the :class:`.keypoint_layouts.Body22` (orientations, joints without
     twist); body: the sized :class:`.skeleton.Body`; floor: the floor height found in the
-    keypoints (metres); gaps: the bridged :class:`.resample.Gap` s; never: points never seen."""
+    keypoints (metres); gaps: the bridged :class:`.resample.Gap` s; never: points never seen;
+    derived_spine: the layout has no spine points (:func:`rigid_trunk` applies); windows: with
+    ``smoothing="auto"``, the window (seconds, 0: none) :func:`smooth_auto` chose for each point
+    seen, else None."""
     times: np.ndarray
     P: np.ndarray
     b22: kl.Body22
@@ -260,18 +430,46 @@ class PreparedKeypoints:
     floor: float
     gaps: list
     never: list
+    derived_spine: bool = False
+    windows: list = None
+
+
+def parse_smoothing(value):
+    """``"auto"`` or a window in seconds (float >= 0) from a setting (``"auto"``, a number or a
+    numeric string); :class:`.solve.SolveError` otherwise."""
+    if isinstance(value, str):
+        v = value.strip().lower()
+        if v == "auto":
+            return "auto"
+        try:
+            value = float(v)
+        except ValueError:
+            raise SolveError(f"smoothing {value!r}: expected 'auto' or a window in seconds") from None
+    if value is None:
+        return 0.0
+    value = float(value)
+    if not np.isfinite(value) or value < 0:
+        raise SolveError(f"smoothing {value!r}: expected 'auto' or a window in seconds >= 0")
+    return value
 
 
 def prepare_keypoints(rec, fps, smoothing, height=None, max_frames=None) -> PreparedKeypoints:
     """Stages 2-7 of the module docstring on a :class:`.io_keypoints.KeypointRecording`: gaps
-    bridged, smoothed over ``smoothing`` seconds, resampled to ``fps``, the 22 joints placed, the
+    bridged, smoothed (``smoothing``: ``"auto"`` for :func:`smooth_auto`, else a Savitzky-Golay
+    window in seconds, 0: none), resampled to ``fps``, the 22 joints placed, the
     body sized (scaled to ``height`` metres when given) and the floor moved to z = 0.  Raises
     :class:`.solve.SolveError` when a joint cannot be placed (a point it needs was never seen)."""
     lay = kl.LAYOUTS[rec.layout]
     X, gaps = bridge_gaps(rec.time, rec.points, lay.points)
     never = [lay.points[k] for k in range(X.shape[1]) if not np.isfinite(X[:, k]).any()]
     rate = 1.0 / float(np.median(np.diff(rec.time)))
-    X = smooth(X, rate, smoothing) if smoothing else X
+    smoothing = parse_smoothing(smoothing)
+    chosen = None
+    if smoothing == "auto":
+        X, choice = smooth_auto(X, rate)
+        chosen = [AUTO_FILTERS[c][0] for k, c in enumerate(choice) if lay.points[k] not in never]
+    elif smoothing:
+        X = smooth(X, rate, smoothing)
     times, X = resample_points(rec.time, X, fps)
     if max_frames and len(times) > max_frames:
         times, X = times[:max_frames], X[:max_frames]
@@ -281,9 +479,11 @@ def prepare_keypoints(rec, fps, smoothing, height=None, max_frames=None) -> Prep
     if bad:
         raise SolveError(f"{rec.source}: joint(s) {', '.join(bad)} cannot be placed: point(s) "
                          f"{', '.join(never) or '?'} never seen")
-    body = size_body(P, height)
+    derived_spine = not lay.has_spine
+    body = size_body(P, height, derived_spine=derived_spine)
     floor = estimate_floor(P, body)
-    return PreparedKeypoints(times, P - np.array([0.0, 0.0, floor]), b22, body, floor, gaps, never)
+    return PreparedKeypoints(times, P - np.array([0.0, 0.0, floor]), b22, body, floor, gaps, never, derived_spine,
+                             chosen)
 
 
 def solve_keypoints(source, settings: SolveSettings | None = None, progress=None) -> SolveOutcome:
@@ -293,7 +493,8 @@ def solve_keypoints(source, settings: SolveSettings | None = None, progress=None
     information, the floor and the smoothing.
 
     settings (:class:`.solve.SolveSettings`): fps (None: the file's rate), keypoint_layout,
-    units, up, rate, mapping (see :func:`.io_keypoints.read_keypoints`), smoothing (seconds),
+    units, up, rate, mapping (see :func:`.io_keypoints.read_keypoints`), smoothing (``"auto"`` or
+    a window in seconds, see :func:`prepare_keypoints`),
     ik (``adaptive`` / ``naive``), height (scales the measured body to this stature, metres),
     max_frames.  Tracker options (axes, offsets, calibration) do not apply.
     progress: ``(fraction, stage)`` callback; an exception raised from it stops the solve."""
@@ -316,7 +517,8 @@ def solve_keypoints(source, settings: SolveSettings | None = None, progress=None
     t = _time.perf_counter()
     report(0.1, "preparing keypoints")
     fps = float(s.fps) if s.fps else 1.0 / float(np.median(np.diff(rec.time)))
-    prep = prepare_keypoints(rec, fps, float(s.smoothing or 0.0), height=s.height, max_frames=s.max_frames)
+    smoothing = parse_smoothing(s.smoothing)
+    prep = prepare_keypoints(rec, fps, smoothing, height=s.height, max_frames=s.max_frames)
     lay, b22, never = kl.LAYOUTS[rec.layout], prep.b22, prep.never
     out.report = GapReport(fps=fps, t0=float(prep.times[0]), t_end=float(prep.times[-1]),
                            num_frames=len(prep.times), devices=lay.points, gaps=prep.gaps)
@@ -324,12 +526,18 @@ def solve_keypoints(source, settings: SolveSettings | None = None, progress=None
     out.timings["prepare"] = _time.perf_counter() - t
     report(0.4, "solving")
     t = _time.perf_counter()
-    result = fit_keypoints(prep.P, b22.end_rot, prep.body, fps, adaptive=adaptive)
+    result = fit_keypoints(prep.P, b22.end_rot, prep.body, fps, adaptive=adaptive, derived_spine=prep.derived_spine)
     result.t0 = float(prep.times[0])
     out.result = result
     out.timings["solve"] = _time.perf_counter() - t
+    if smoothing == "auto":
+        w = np.asarray(prep.windows or [0.0])
+        told = (f"smoothing auto (per point, from its measured noise): windows {w.min():g}-{w.max():g} s, "
+                f"median {np.median(w):g} s")
+    else:
+        told = f"smoothing {smoothing:g} s" if smoothing else "no smoothing"
     out.info.append(f"keypoints: {'adaptive' if adaptive else 'naive'} HybrIK, floor at {prep.floor:+.3f} m "
-                    f"moved to 0, smoothing {s.smoothing:g} s")
+                    f"moved to 0, {told}")
     if b22.no_twist:
         out.info.append(f"no twist information: {', '.join(b22.no_twist)} (rest twist)")
     if never:

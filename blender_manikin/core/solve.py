@@ -52,7 +52,8 @@ class SolveSettings:
 
     Keypoint inputs (:mod:`.keypoint_solve`) also use: keypoint_layout (a
     :mod:`.keypoint_layouts` name; None: told from the file), up (the file's up axis, ``+y``
-    ...; None: told from the body), smoothing (Savitzky-Golay window in seconds, 0: off), ik
+    ...; None: told from the body), smoothing (``"auto"``: a filter per point chosen from its
+    measured noise; or a Savitzky-Golay window in seconds, 0: off), ik
     (``"adaptive"`` or ``"naive"`` HybrIK) and mapping (a keypoint CSV's column mapping file).
     """
     axes: str | None = None
@@ -68,7 +69,7 @@ class SolveSettings:
     rate: float | None = None
     keypoint_layout: str | None = None
     up: str | None = None
-    smoothing: float = 0.4
+    smoothing: object = "auto"        # keypoints: "auto" or a window in seconds
     ik: str = "adaptive"
     mapping: object = None
     model: str | None = None          # None / "auto": by the recording's trackers; a shipped name or .onnx

@@ -42,7 +42,9 @@ class MANIKIN_PT_solve(_Base, Panel):
             col.prop(s, "keypoint_up")
             toggled_row(col, s, "use_keypoint_rate", "keypoint_rate", "Rate")
             col.separator()
-            col.prop(s, "smoothing")
+            col.prop(s, "smoothing_mode")
+            if s.smoothing_mode == 'WINDOW':
+                col.prop(s, "smoothing")
             col.prop(s, "ik")
             toggled_row(col, s, "use_height", "height", "Height")
         else:

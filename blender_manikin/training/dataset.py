@@ -565,7 +565,10 @@ class Augment:
     window's, so the legs cannot be guessed from what the arms do (a saber
     swing says nothing about the knees).  dropout: probability, per hand,
     of a 0.1-0.5 s tracking gap in the input, bridged as the resampler
-    bridges real gaps (linear / slerp) or frozen at the last pose.
+    bridges real gaps (linear / slerp) or frozen at the last pose.  lying:
+    probability that the window's whole body is laid down on the floor
+    (:meth:`WindowSampler._lay_down`: on the back, the front or a side, as
+    people lie on the floor; the source motion's limbs keep moving).
     """
     speed: tuple = (0.8, 1.25)
     stature: tuple | None = (1.45, 2.05)
@@ -580,12 +583,13 @@ class Augment:
     calibration: float = 0.1
     arm_mix: float = 0.3
     dropout: float = 0.1
+    lying: float = 0.0
 
     @classmethod
     def off(cls):
         return cls(speed=(1.0, 1.0), stature=None, segment=0.0, floor=0.0, mirror=0.0, pos_noise=0.0,
                    rot_noise_deg=0.0, hand_offset_deg=0.0, head_offset=0.0, edge_prob=0.0, calibration=0.0,
-                   arm_mix=0.0, dropout=0.0)
+                   arm_mix=0.0, dropout=0.0, lying=0.0)
 
 
 @dataclass
@@ -717,6 +721,15 @@ def calibration_pose(rng, B):
     aa[:, J["left_hip"], 1] = -spread
     aa[:, J["right_hip"], 1] = spread
     return rot.matrix_to_quat(rot.axis_angle_to_matrix(aa))
+
+
+#: a body lying on the floor (``Augment.lying``): its trunk joints' lowest point this many statures
+#: up (the joint centres of a supine adult's pelvis and back are 8-11 cm above the floor), and no
+#: joint lower than LYING_CLEARANCE statures (a heel or wrist on the floor)
+LYING_TRUNK_CLEARANCE = 0.055
+LYING_CLEARANCE = 0.02
+LYING_TRUNK = np.array([J[n] for n in ("pelvis", "spine1", "spine2", "spine3", "neck", "head", "left_hip", "right_hip",
+                                      "left_collar", "right_collar", "left_shoulder", "right_shoulder")])
 
 
 #: the joints whose local rotations the arm mix exchanges (collars down to the wrists)
@@ -874,6 +887,52 @@ class WindowSampler:
         contacts[pick] = np.where(wgt[..., None] > 0.5, 1.0, contacts[pick])
         return q, root, contacts
 
+    def _lay_down(self, rng, local, root, contacts, offsets, stature):
+        """Lay the whole body of a share (``Augment.lying``) of the windows down on the floor.
+
+        The body turns about a random horizontal axis by 70-95° (so it lies on its back, its
+        front or a side, depending on the axis against its heading), drifting by up to ±10°
+        over the window; its horizontal path is the source motion's turned the same way and
+        projected on the floor (a walking window lies in place, kicking), and on every frame
+        it rests on the floor: the lowest trunk joint (pelvis, spine, neck, head, hips,
+        collars, shoulders) :data:`LYING_TRUNK_CLEARANCE` statures up, no joint below
+        :data:`LYING_CLEARANCE` statures.  The contacts are measured again on the new motion
+        (:func:`foot_contacts`).  Real recordings have this when a player lies down or rolls on
+        the floor; the Bandai takes have no floor work.
+
+        local ``(B, W, 22, 3, 3)``, root ``(B, W, 3)`` metres, contacts ``(B, W, 2)``, offsets
+        ``(B, 22, 3)`` metres, stature ``(B,)`` metres.  Returns new ``(local, root, contacts)``.
+        """
+        B, W = root.shape[:2]
+        pick = np.nonzero(rng.uniform(size=B) < self.aug.lying)[0]
+        if pick.size == 0:
+            return local, root, contacts
+        n = pick.size
+        yaw = rng.uniform(0.0, 2.0 * np.pi, n)
+        axis = np.stack([np.cos(yaw), np.sin(yaw), np.zeros(n)], -1)                 # (n, 3)
+        tilt = rng.uniform(np.radians(70.0), np.radians(95.0), n)
+        drift = rng.uniform(-np.radians(10.0), np.radians(10.0), n)
+        angle = tilt[:, None] + drift[:, None] * (np.arange(W) / max(W - 1, 1) - 0.5)[None]   # (n, W)
+        G = rot.axis_angle_to_matrix(axis[:, None] * angle[..., None])                     # (n, W, 3, 3)
+        local, root, contacts = local.copy(), root.copy(), contacts.copy()
+        lp = local[pick]
+        lp[:, :, 0] = G @ lp[:, :, 0]
+        c = root[pick, W // 2][:, None]
+        moved = np.einsum("nwij,nwj->nwi", G, root[pick] - c) + c
+        rp = np.concatenate([moved[..., :2], np.zeros((n, W, 1))], -1)
+        P, _ = forward_kinematics(lp.reshape(n * W, NUM_JOINTS, 3, 3), rp.reshape(n * W, 3), None,
+                                  offsets=np.repeat(offsets[pick], W, 0))
+        P = P.reshape(n, W, NUM_JOINTS, 3)
+        s = stature[pick][:, None]
+        lift = np.maximum(LYING_TRUNK_CLEARANCE * s - P[:, :, LYING_TRUNK, 2].min(-1),
+                          LYING_CLEARANCE * s - P[..., 2].min(-1))                        # (n, W)
+        rp[..., 2] = lift
+        P[..., 2] += lift[..., None]
+        local[pick], root[pick] = lp, rp
+        for i, b in enumerate(pick):
+            contacts[b] = foot_contacts(P[i], self.fps)
+        return local, root, contacts
+
     def sample(self, B, rng=None):
         rng = self.rng if rng is None else rng
         W, a, cs = self.window, self.aug, self.clips
@@ -924,6 +983,9 @@ class WindowSampler:
         # as on the body the solver builds (skeleton.make_body); then the floor augmentation.
         offsets = new_off
         root[..., 2] += above0 - above1 - (lowest * k)[:, None] + (FOOT_CLEARANCE * stature)[:, None]
+        if a.lying > 0:
+            local, root, contacts = self._lay_down(rng, local, root, contacts, offsets, stature)
+            loc_flat = local.reshape(N, NUM_JOINTS, 3, 3)
         if a.floor > 0:
             root[..., 2] += rng.uniform(-a.floor, a.floor, B)[:, None]
         P, Rw = forward_kinematics(loc_flat, root.reshape(N, 3), None, offsets=np.repeat(offsets, W, 0))

@@ -86,7 +86,9 @@ def build_contract(ckpt, num_parameters):
         "licence": data.get("licence", "see training data"),
         "code_version": __version__,
         "training": {"steps": int(ckpt.get("step", 0)), "minutes": round(float(ckpt.get("elapsed", 0.0)) / 60, 2),
-                     "batch": ckpt.get("args", {}).get("batch"), "seed": ckpt.get("args", {}).get("seed")},
+                     "batch": ckpt.get("args", {}).get("batch"), "seed": ckpt.get("args", {}).get("seed"),
+                     "init": (os.path.basename(ckpt["args"]["init"]) if ckpt.get("args", {}).get("init")
+                              else None)},
         "validation": {k: v for k, v in val.items()} if val else {},
     }
 

@@ -58,6 +58,9 @@ def build_parser():
     p.add_argument("--resume", action="store_true",
                    help="continue OUT/checkpoint.pt with its model, data, seed, batch and optimizer settings "
                         "(--steps / --minutes may extend the plan)")
+    p.add_argument("--init", default=None, metavar="PATH",
+                   help="start a new run from these weights (a checkpoint .pt or an exported .onnx; its "
+                        "architecture and devices replace --arch, --d-model, --devices...): fine-tuning")
     p.add_argument("--overwrite", action="store_true", help="start afresh even if OUT/checkpoint.pt exists")
     p.add_argument("--threads", type=int, default=2)
     p.add_argument("--d-model", type=int, default=160)
@@ -274,7 +277,16 @@ def main(argv=None):
         raise SystemExit("--bvh SOURCE or --sources FILE.json is required")
     lam = parse_lam(args.lam)
     aug = parse_aug(args.aug)
-    if ckpt is None:
+    init_state = None
+    if ckpt is None and args.init:
+        from .init_weights import load_initial_weights
+        try:
+            cfg, init_state = load_initial_weights(args.init)
+        except (OSError, ValueError) as exc:
+            raise SystemExit(str(exc)) from None
+        if args.devices is not None and parse_devices(args.devices, args.six_trackers) != tuple(cfg.devices):
+            raise SystemExit(f"--devices {args.devices}: --init {args.init} takes {', '.join(cfg.devices)}")
+    elif ckpt is None:
         devices = parse_devices(args.devices, args.six_trackers)
         cfg = ModelConfig(kind=args.kind, devices=devices, window=args.window, d_model=args.d_model,
                           layers=args.layers, heads=args.heads, ff_mult=args.ff_mult,
@@ -347,6 +359,9 @@ def main(argv=None):
         step, elapsed, history = int(ckpt["step"]), float(ckpt["elapsed"]), list(ckpt.get("history", []))
         torch.set_rng_state(ckpt["torch_rng"])
         say(f"resumed {ckpt_path} at step {step} ({elapsed / 60:.1f} min trained)")
+    elif init_state is not None:
+        model.load_state_dict(init_state)
+        say(f"initial weights from {args.init}")
     nparams = count_parameters(model)
     say(f"model: {cfg.kind}, {cfg.arch}, d_model {cfg.d_model}, {cfg.layers} layers, {cfg.heads} heads, window "
         f"{cfg.window}, inputs {list(cfg.devices)}: {nparams:,} parameters; batch {args.batch}, "
@@ -408,7 +423,7 @@ def main(argv=None):
     try:
         while True:
             elapsed = time.time() - t_start
-            if (args.steps and step >= args.steps) or (args.minutes and elapsed >= args.minutes * 60.0):
+            if (args.steps is not None and step >= args.steps) or (args.minutes and elapsed >= args.minutes * 60.0):
                 break
             if args.stop_at is not None and step >= args.stop_at:
                 break
@@ -435,7 +450,7 @@ def main(argv=None):
             elapsed = now - t_start
             if rate > 0:
                 left = []
-                if args.steps:
+                if args.steps is not None:
                     left.append((args.steps - step) / rate)
                 if args.minutes:
                     left.append(args.minutes * 60.0 - elapsed)
