@@ -182,24 +182,27 @@ def test_tracking_gaps_are_bridged_or_frozen():
 
 def test_lying_lays_whole_bodies_on_the_floor_and_only_when_asked():
     """Augment.lying: the body lies on the floor (trunk low and near horizontal, no joint under
-    the floor), its limbs keep their motion, contacts are measured again; with lying=0 the
-    batches are exactly those of before (no extra random draws)."""
-    cs = _moving_clipset(n=3)
+    the floor, not propped up by its limbs), its limbs keep their motion, contacts are measured
+    again; with lying=0 the batches are exactly those of before (no extra random draws)."""
+    cs = _standing_clipset(bodies=(1.6, 1.75, 1.9))
     off = dict(speed=(1, 1), stature=None, segment=0.0, floor=0.0, mirror=0.0, pos_noise=0.0, rot_noise_deg=0.0,
                hand_offset_deg=0.0, head_offset=0.0, edge_prob=0.0, calibration=0.0, dropout=0.0, arm_mix=0.0)
     plain = ds.WindowSampler(cs, window=20, augment=ds.Augment(lying=0.0, **off), seed=0)
     lying = ds.WindowSampler(cs, window=20, augment=ds.Augment(lying=1.0, **off), seed=0)
-    a, b = plain.sample(24, np.random.default_rng(7)), lying.sample(24, np.random.default_rng(7))
+    a, b = plain.sample(48, np.random.default_rng(7)), lying.sample(48, np.random.default_rng(7))
     P, Q = a["pos"].astype(np.float64), b["pos"].astype(np.float64)       # canonical, statures, z up
-    # standing: head high; lying: head and pelvis low, every joint on or above the floor
-    assert np.median(P[..., J["head"], 2]) > 0.8
-    assert np.median(Q[..., J["head"], 2]) < 0.45 and np.median(Q[..., J["pelvis"], 2]) < 0.35
+    assert np.percentile(P[..., J["head"], 2], 5) > 0.75                   # standing: head high
+    laid = np.median(Q[..., J["pelvis"], 2], axis=1) < 0.3
+    assert laid.mean() > 0.25, laid.mean()                                # a window may stay upright, not most
+    Q, P = Q[laid], P[laid]
+    assert Q[..., J["head"], 2].max() < 0.35                                # flat on the floor, not propped up
     assert Q[..., 2].min() >= ds.LYING_CLEARANCE - 1e-4
     trunk_low = Q[:, :, ds.LYING_TRUNK, 2].min(-1)
     assert trunk_low.min() >= ds.LYING_TRUNK_CLEARANCE - 1e-4
+    assert trunk_low.max() <= ds.LYING_TRUNK_CLEARANCE + ds.LYING_MAX_PROP + 1e-4
     axis = Q[..., J["neck"], :] - Q[..., J["pelvis"], :]
     tilt = np.degrees(np.arccos(np.clip(axis[..., 2] / np.linalg.norm(axis, axis=-1), -1, 1)))
-    assert np.percentile(tilt, 5) > 55 and np.percentile(tilt, 95) < 110      # lying, not standing
+    assert np.percentile(tilt, 5) > 60 and np.percentile(tilt, 95) < 110     # lying, not standing
     # the limbs keep their motion relative to the pelvis (a rigid turn of the whole body)
     def rel(X, j):
         return np.linalg.norm(X[..., j, :] - X[..., J["pelvis"], :], axis=-1)
@@ -209,5 +212,7 @@ def test_lying_lays_whole_bodies_on_the_floor_and_only_when_asked():
     sl = features.output_slices()["contact"]
     assert set(np.unique(b["y"][..., sl])) <= {0.0, 1.0}
     # lying=0 draws nothing: the same batch as a sampler without the field
-    again = ds.WindowSampler(cs, window=20, augment=ds.Augment(**off), seed=0).sample(24, np.random.default_rng(7))
+    moving = _moving_clipset(n=3)
+    a = ds.WindowSampler(moving, window=20, augment=ds.Augment(lying=0.0), seed=0).sample(16, np.random.default_rng(7))
+    again = ds.WindowSampler(moving, window=20, augment=ds.Augment(), seed=0).sample(16, np.random.default_rng(7))
     assert np.array_equal(again["x"], a["x"]) and np.array_equal(again["y"], a["y"])

@@ -188,17 +188,17 @@ def body22_from_keypoints(points, layout) -> Body22:
     # the two measured ones, so the hips and shoulders fit a rigid body however the trunk bends
     up_hips = _square_to(up, P[:, J["left_hip"]] - P[:, J["right_hip"]])
     up_sh = _square_to(up, P[:, J["left_shoulder"]] - P[:, J["right_shoulder"]])
-    pelvis = pt("pelvis") if "pelvis" in lay else \
-        (pt("mid_hip") if "mid_hip" in lay else mid_hip) + PROPORTIONS["pelvis_above_hips"] * H * up_hips
-    if "pelvis" in lay:       # H36M's pelvis is the hips' midpoint; ours sits a little above it
-        pelvis = pelvis + PROPORTIONS["pelvis_above_hips"] * H * up_hips
+    # H36M's pelvis and OpenPose's mid-hip are the hips' midpoint, OpenPose's neck the shoulders':
+    # a third measurement of the same point, averaged with the two it lies between (each
+    # point's noise then counts a third); ours sit a little above them
+    for name in ("pelvis", "mid_hip"):
+        if name in lay:
+            mid_hip = (pt(name) + 2.0 * mid_hip) / 3.0
+    pelvis = mid_hip + PROPORTIONS["pelvis_above_hips"] * H * up_hips
     neck_above = (PROPORTIONS["neck_height"] - PROPORTIONS["shoulder_height"]) * H
-    if "thorax" in lay:
-        neck = pt("thorax")
-    elif "neck" in lay:
-        neck = pt("neck") + neck_above * up_sh
-    else:
-        neck = mid_sh + neck_above * up_sh
+    if "neck" in lay:
+        mid_sh = (pt("neck") + 2.0 * mid_sh) / 3.0
+    neck = pt("thorax") if "thorax" in lay else mid_sh + neck_above * up_sh
     P[:, J["pelvis"]] = pelvis
     P[:, J["neck"]] = neck
     if "spine" in lay:
@@ -211,8 +211,11 @@ def body22_from_keypoints(points, layout) -> Body22:
     a = PROPORTIONS["collar_out"] / (0.5 * PROPORTIONS["shoulder_width"])
     b = (PROPORTIONS["collar_height"] - PROPORTIONS["neck_height"]
          - a * (PROPORTIONS["shoulder_height"] - PROPORTIONS["neck_height"])) * H
+    # (from the neck above the shoulders, also where the layout measures a neck that moves
+    # against the shoulders as they shrug: a collar then keeps its length)
+    above_sh = mid_sh + neck_above * up_sh
     for side in ("left", "right"):
-        P[:, J[f"{side}_collar"]] = neck + a * (P[:, J[f"{side}_shoulder"]] - neck) + b * up_sh
+        P[:, J[f"{side}_collar"]] = above_sh + a * (P[:, J[f"{side}_shoulder"]] - above_sh) + b * up_sh
 
     no_twist = []
     # head: the skull base between the ears, oriented by the face

@@ -48,6 +48,11 @@ _PAIRS = [(sk.J[f"left_{n}"], sk.J[f"right_{n}"]) for n in
 #: an ankle slower than this (m/s) and lower than its rest height plus CONTACT_HEIGHT is planted
 CONTACT_SPEED = 0.25
 CONTACT_HEIGHT = 0.05
+#: metres a planted ankle may be held from where its keypoints put it (horizontally, as the
+#: tracker solve locks, :data:`.pipeline.LOCK_AXES`); a plant drifting further (a foot rolling
+#: onto its toes) is split into successive holds.  Keypoints are measurements: a lock that moved
+#: ankles further would trade their accuracy for less sliding than the real foot had
+LOCK_MAX_DRIFT = 0.02
 
 
 # --------------------------------------------------------------------------
@@ -392,7 +397,8 @@ def fit_keypoints(P, end_rot, body: sk.Body, fps, adaptive=True, lock_feet=True,
     contacts = foot_contacts(ik.positions[:, ank], body, fps)
     targets = ik.positions[:, ank]
     if lock_feet:
-        targets = pipeline.lock_planted_feet(targets, contacts, threshold=0.5)
+        targets = pipeline.lock_planted_feet(targets, contacts, threshold=0.5, axes=pipeline.LOCK_AXES,
+                                             max_drift=LOCK_MAX_DRIFT)
     targets = pipeline.keep_feet_above_floor(targets, ik.world_rot[:, ank], body)
     # the limbs reach the chain the keypoints give (aim_chain): the first pass's reach error is
     # what the summary reports; a planted or lifted ankle the leg misses by a few millimetres

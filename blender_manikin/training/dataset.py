@@ -568,7 +568,8 @@ class Augment:
     bridges real gaps (linear / slerp) or frozen at the last pose.  lying:
     probability that the window's whole body is laid down on the floor
     (:meth:`WindowSampler._lay_down`: on the back, the front or a side, as
-    people lie on the floor; the source motion's limbs keep moving).
+    people lie on the floor; the source motion's limbs keep moving), where its
+    limbs let it lie flat (about half the Bandai windows do).
     """
     speed: tuple = (0.8, 1.25)
     stature: tuple | None = (1.45, 2.05)
@@ -728,6 +729,10 @@ def calibration_pose(rng, B):
 #: joint lower than LYING_CLEARANCE statures (a heel or wrist on the floor)
 LYING_TRUNK_CLEARANCE = 0.055
 LYING_CLEARANCE = 0.02
+#: statures a lying body's limbs may prop its trunk above the floor (else the window stays upright)
+LYING_MAX_PROP = 0.05
+#: ways of lying down tried per window (on the back, the front and either side)
+LYING_TRIES = 4
 LYING_TRUNK = np.array([J[n] for n in ("pelvis", "spine1", "spine2", "spine3", "neck", "head", "left_hip", "right_hip",
                                       "left_collar", "right_collar", "left_shoulder", "right_shoulder")])
 
@@ -890,15 +895,17 @@ class WindowSampler:
     def _lay_down(self, rng, local, root, contacts, offsets, stature):
         """Lay the whole body of a share (``Augment.lying``) of the windows down on the floor.
 
-        The body turns about a random horizontal axis by 70-95° (so it lies on its back, its
-        front or a side, depending on the axis against its heading), drifting by up to ±10°
+        The body turns about a horizontal axis by 84-96° (on its back, its front or a side,
+        depending on the axis against its heading: of :data:`LYING_TRIES` axes a quarter turn
+        apart from a random start, the one whose limbs prop the trunk least), drifting by up to ±6°
         over the window; its horizontal path is the source motion's turned the same way and
         projected on the floor (a walking window lies in place, kicking), and on every frame
         it rests on the floor: the lowest trunk joint (pelvis, spine, neck, head, hips,
         collars, shoulders) :data:`LYING_TRUNK_CLEARANCE` statures up, no joint below
-        :data:`LYING_CLEARANCE` statures.  The contacts are measured again on the new motion
-        (:func:`foot_contacts`).  Real recordings have this when a player lies down or rolls on
-        the floor; the Bandai takes have no floor work.
+        :data:`LYING_CLEARANCE` statures.  A window whose limbs would prop the trunk more than
+        :data:`LYING_MAX_PROP` statures off the floor stays upright.  The contacts are measured
+        again on the new motion (:func:`foot_contacts`).  Real recordings have this when a player
+        lies down or rolls on the floor; the Bandai takes have no floor work.
 
         local ``(B, W, 22, 3, 3)``, root ``(B, W, 3)`` metres, contacts ``(B, W, 2)``, offsets
         ``(B, 22, 3)`` metres, stature ``(B,)`` metres.  Returns new ``(local, root, contacts)``.
@@ -907,25 +914,36 @@ class WindowSampler:
         pick = np.nonzero(rng.uniform(size=B) < self.aug.lying)[0]
         if pick.size == 0:
             return local, root, contacts
-        n = pick.size
-        yaw = rng.uniform(0.0, 2.0 * np.pi, n)
-        axis = np.stack([np.cos(yaw), np.sin(yaw), np.zeros(n)], -1)                 # (n, 3)
-        tilt = rng.uniform(np.radians(70.0), np.radians(95.0), n)
-        drift = rng.uniform(-np.radians(10.0), np.radians(10.0), n)
-        angle = tilt[:, None] + drift[:, None] * (np.arange(W) / max(W - 1, 1) - 0.5)[None]   # (n, W)
-        G = rot.axis_angle_to_matrix(axis[:, None] * angle[..., None])                     # (n, W, 3, 3)
-        local, root, contacts = local.copy(), root.copy(), contacts.copy()
-        lp = local[pick]
+        n, K = pick.size, LYING_TRIES
+        # K ways to lie down per window (axes a quarter turn apart, from a random start); the one
+        # whose limbs prop the trunk least is kept
+        yaw = rng.uniform(0.0, 2.0 * np.pi, n)[:, None] + 0.5 * np.pi * np.arange(K)[None]    # (n, K)
+        axis = np.stack([np.cos(yaw), np.sin(yaw), np.zeros((n, K))], -1).reshape(n * K, 3)
+        tilt = np.repeat(rng.uniform(np.radians(84.0), np.radians(96.0), n), K)
+        drift = np.repeat(rng.uniform(-np.radians(6.0), np.radians(6.0), n), K)
+        angle = tilt[:, None] + drift[:, None] * (np.arange(W) / max(W - 1, 1) - 0.5)[None]   # (nK, W)
+        G = rot.axis_angle_to_matrix(axis[:, None] * angle[..., None])                     # (nK, W, 3, 3)
+        src = np.repeat(pick, K)
+        lp = local[src]
         lp[:, :, 0] = G @ lp[:, :, 0]
-        c = root[pick, W // 2][:, None]
-        moved = np.einsum("nwij,nwj->nwi", G, root[pick] - c) + c
-        rp = np.concatenate([moved[..., :2], np.zeros((n, W, 1))], -1)
-        P, _ = forward_kinematics(lp.reshape(n * W, NUM_JOINTS, 3, 3), rp.reshape(n * W, 3), None,
-                                  offsets=np.repeat(offsets[pick], W, 0))
-        P = P.reshape(n, W, NUM_JOINTS, 3)
-        s = stature[pick][:, None]
-        lift = np.maximum(LYING_TRUNK_CLEARANCE * s - P[:, :, LYING_TRUNK, 2].min(-1),
-                          LYING_CLEARANCE * s - P[..., 2].min(-1))                        # (n, W)
+        c = root[src, W // 2][:, None]
+        moved = np.einsum("nwij,nwj->nwi", G, root[src] - c) + c
+        rp = np.concatenate([moved[..., :2], np.zeros((n * K, W, 1))], -1)
+        P, _ = forward_kinematics(lp.reshape(n * K * W, NUM_JOINTS, 3, 3), rp.reshape(n * K * W, 3), None,
+                                  offsets=np.repeat(offsets[src], W, 0))
+        P = P.reshape(n * K, W, NUM_JOINTS, 3)
+        s = stature[src][:, None]
+        trunk = LYING_TRUNK_CLEARANCE * s - P[:, :, LYING_TRUNK, 2].min(-1)               # (nK, W)
+        lift = np.maximum(trunk, LYING_CLEARANCE * s - P[..., 2].min(-1))
+        # a window whose limbs would hold the trunk up off the floor (arms reaching forward with
+        # the body face down) is not laid down that way: such a body would float, and its head
+        # would be as low as a crouching performer's
+        prop = ((lift - trunk).max(-1) / s[:, 0]).reshape(n, K)
+        best = prop.argmin(-1)
+        keep = prop[np.arange(n), best] <= LYING_MAX_PROP
+        sel = (np.arange(n) * K + best)[keep]
+        pick, lp, rp, P, lift = pick[keep], lp[sel], rp[sel], P[sel], lift[sel]
+        local, root, contacts = local.copy(), root.copy(), contacts.copy()
         rp[..., 2] = lift
         P[..., 2] += lift[..., None]
         local[pick], root[pick] = lp, rp
