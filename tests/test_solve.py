@@ -83,3 +83,15 @@ def test_cli_writes_json_and_bvh_without_blender(tmp_path):
     code = code.replace("'json,bvh'", "'json,blend'")
     p = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env, cwd=ROOT, timeout=300)
     assert p.returncode == 2 and "blend needs Blender" in p.stderr and p.stdout == ""
+
+
+@pytest.mark.parametrize("stride", [40, 33, 100])
+def test_network_windows_cover_every_frame_at_any_stride(stride):
+    """run_network's stride (frames between windows) up to a whole window, and above it
+    clamped to one: every frame gets a prediction."""
+    from blender_manikin.core import pipeline
+    out = cs.solve_recording(EXAMPLE, cs.SolveSettings(fps=30.0))
+    from blender_manikin.core.model_runner import load_model
+    net = pipeline.run_network(out.targets, out.body, load_model(), stride=stride)
+    assert np.isfinite(net.ankle_pos).all() and np.isfinite(net.swivel).all()
+    assert net.ankle_pos.shape[0] == out.targets.num_frames

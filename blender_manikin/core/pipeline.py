@@ -162,7 +162,7 @@ def run_network(targets: TrackerTargets, body: Body, runner, progress=None, stri
     """Windows → onnxruntime → blended per-frame :class:`NetworkOutput` at the scene fps.
 
     stride: frames between window starts at the model's rate (default
-    :data:`WINDOW_STRIDE` × window); smaller strides average more windows per
+    :data:`WINDOW_STRIDE` × window, at most one window); smaller strides average more windows per
     frame (smoother, slower).  windows_per_batch: windows built, run and
     decoded at a time (default :data:`NETWORK_WINDOWS_PER_BATCH`), which bounds
     the memory on long takes; the windows and the order they are blended in do
@@ -178,9 +178,11 @@ def run_network(targets: TrackerTargets, body: Body, runner, progress=None, stri
             raise ValueError(f"the pose model needs a '{d}' tracker; the recording has {list(targets.pos)}")
         pos_m[d], rot_m[d], t_in, t_out = resample_pose_targets(targets.pos[d], targets.rot[d], fps, c.fps)
     N = t_out.shape[0]
-    stride = max(int(stride or round(WINDOW_STRIDE * W)), 1)
+    stride = min(max(int(stride or round(WINDOW_STRIDE * W)), 1), W)     # no frame between two windows
     pad = W // 2
     starts = np.arange(-pad, max(N - pad, 1), stride)
+    if starts[-1] + W < N:               # a stride over half a window: one more window reaches the last frame
+        starts = np.append(starts, N - pad)
     # Body-conditioned models were trained with the stature defined from the skeleton (head joint
     # 0.871 statures above the ankles, as make_body builds); older ones with the body's own.
     s_net = float(features.stature_from_offsets(body.offsets)) if c.body else body.stature
