@@ -133,3 +133,23 @@ def test_plant_pieces_match_the_plain_greedy_split():
         path = np.cumsum(rng.normal(scale=0.004, size=(n, 2)), 0)
         for a, b in ((0, n), (n // 3, n)):
             assert pl._plant_pieces(path, a, b, 0.05) == plain(path, a, b, 0.05), (n, a, b)
+
+
+def test_settle_planted_feet_puts_hovering_planted_feet_down():
+    """A planted foot the network leaves 2 cm up comes down onto the floor (eased, no jump);
+    a foot held higher than SETTLE_MAX, or not planted, is left where it is."""
+    body = sk.make_body(1.75)
+    T, fps = 90, 30.0
+    rest = body.rest_positions()[[sk.J["left_ankle"], sk.J["right_ankle"]], 2]
+    ankle = np.zeros((T, 2, 3))
+    ankle[:, :, 2] = rest + np.array([0.02, pl.SETTLE_MAX + 0.03])      # left hovers, right is high
+    R = np.broadcast_to(np.eye(3), (T, 2, 3, 3))
+    contacts = np.zeros((T, 2), bool)
+    contacts[20:70] = True
+    out = pl.settle_planted_feet(ankle, R, contacts, body, fps)
+    assert np.allclose(out[35:55, 0, 2], rest[0], atol=1e-3)           # on the floor mid-plant
+    assert np.allclose(out[:5, 0, 2], ankle[:5, 0, 2])                  # untouched well before
+    assert np.allclose(out[:, 1], ankle[:, 1])                          # too high: left alone
+    assert np.abs(np.diff(out[:, 0, 2])).max() < 0.004                   # eased in and out
+    assert (out[..., 2] >= rest - 1e-9).all()                            # never into the floor
+    assert np.allclose(out[..., :2], ankle[..., :2])                     # height only

@@ -54,6 +54,11 @@ WINDOW_STRIDE = 0.5
 #: away from the height the network predicted with the hips and bent the knees wrongly
 #: (knees 2.4 cm with z locked, 2.1 cm without, on 60 held-out takes of the benchmark's split)
 LOCK_AXES = (0, 1)
+#: metres above the floor a planted foot the network leaves hovering is put down from
+#: (:func:`settle_planted_feet`; 0: off)
+SETTLE_MAX = 0.05
+#: seconds (Gaussian sigma) over which the settling is eased, so it adds no jerk
+SETTLE_SMOOTH_S = 0.1
 #: metres a planted ankle may be held away from where the network puts it; a contact run
 #: drifting further is split into successive plants (see :func:`lock_planted_feet`)
 LOCK_MAX_DRIFT = 0.05
@@ -316,6 +321,27 @@ def smooth_frames(x, sigma):
     return out
 
 
+def settle_planted_feet(ankle_pos, ankle_rot, contacts, body: Body, fps, floor=0.0, max_lift=None):
+    """Put planted feet down on the floor: on frames a foot is planted (``contacts`` ``(T, 2)``
+    bool) and its ankle hovers at most ``max_lift`` (default :data:`SETTLE_MAX`) metres above
+    where the foot stands on ``floor`` (:func:`keep_feet_above_floor`'s lowest height, at least
+    the rest ankle height), the ankle comes down to it; the drop is smoothed over
+    :data:`SETTLE_SMOOTH_S` so it eases in and out.  A planted foot held higher than that (on a step, the network
+    unsure) is left.  ``ankle_pos`` ``(T, 2, 3)`` metres; returns a new array."""
+    lift = SETTLE_MAX if max_lift is None else float(max_lift)
+    out = np.array(ankle_pos, np.float64, copy=True)
+    foot_off = body.offsets[[J["left_foot"], J["right_foot"]]]
+    ball_dz = np.einsum("tkij,kj->tki", ankle_rot, foot_off)[..., 2]
+    rest = body.rest_positions()[[J["left_ankle"], J["right_ankle"]], 2]
+    stand = np.maximum(floor - ball_dz, floor + rest[None])                     # (T, 2)
+    above = out[..., 2] - stand
+    drop = np.where(contacts & (above > 0) & (above <= lift), above, 0.0)
+    if out.shape[0] > 1:
+        drop = smooth_frames(drop, SETTLE_SMOOTH_S * fps)
+    out[..., 2] -= drop
+    return out
+
+
 def keep_feet_above_floor(ankle_pos, ankle_rot, body: Body, floor=0.0):
     """Lift ankle targets so the ankle and the foot (ball) joint stay above ``floor``.
 
@@ -511,6 +537,8 @@ def plan_feet(targets: TrackerTargets, body: Body, net: NetworkOutput, lock_feet
         still_next = np.concatenate([step < 1e-9, np.ones((1, 2), bool)], 0)
         ankle_pos = locked
         contacts &= still_next | (u >= 1.0)
+        if SETTLE_MAX > 0:
+            ankle_pos = settle_planted_feet(ankle_pos, ankle_rot, contacts, body, targets.fps)
     # a foot tracker drives its ankle where it is tracked (weight 1), the network's foot where it
     # was lost for long (weight 0), cross-faded between
     for k, d in enumerate(("left_foot", "right_foot")):
