@@ -32,6 +32,7 @@ def test_panel_keypoints_source_keys_a_live_rig_that_follows_the_solve(addon, tm
     sc.render.fps, sc.render.fps_base = 30, 1.0
     s = sc.manikin
     s.source, s.keypoint_path = 'KEYPOINTS', npy
+    assert s.smoothing_mode == 'AUTO'            # the default: each point's filter from its noise
     s.smoothing_mode, s.smoothing, s.ik = 'WINDOW', 0.3, 'ADAPTIVE'
     assert bpy.ops.manikin.solve_full_body() == {'FINISHED'}
     obj = s.armature

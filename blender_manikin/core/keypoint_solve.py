@@ -543,7 +543,8 @@ def solve_keypoints(source, settings: SolveSettings | None = None, progress=None
     else:
         told = f"smoothing {smoothing:g} s" if smoothing else "no smoothing"
     out.info.append(f"keypoints: {'adaptive' if adaptive else 'naive'} HybrIK, floor at {prep.floor:+.3f} m "
-                    f"moved to 0, {told}")
+                    f"moved to 0")
+    out.info.append(told)
     if b22.no_twist:
         out.info.append(f"no twist information: {', '.join(b22.no_twist)} (rest twist)")
     if never:

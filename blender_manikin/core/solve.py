@@ -106,7 +106,8 @@ class SolveOutcome:
             parts.append(f"stature {self.body.stature:.2f} m")
         for note in self.info:
             if note.startswith(("calibrated", "arm span", "estimated stature", "no twist information",
-                                "point(s) never seen", "retarget:")) or " tracker offset" in note:
+                                "point(s) never seen", "retarget:", "smoothing", "no smoothing")) \
+                    or " tracker offset" in note:
                 parts.append(note)
         if self.report is not None:
             gaps = getattr(self.report, "gaps", [])
