@@ -216,3 +216,37 @@ def test_lying_lays_whole_bodies_on_the_floor_and_only_when_asked():
     a = ds.WindowSampler(moving, window=20, augment=ds.Augment(lying=0.0), seed=0).sample(16, np.random.default_rng(7))
     again = ds.WindowSampler(moving, window=20, augment=ds.Augment(), seed=0).sample(16, np.random.default_rng(7))
     assert np.array_equal(again["x"], a["x"]) and np.array_equal(again["y"], a["y"])
+
+
+def test_crouch_sinks_the_pelvis_onto_planted_feet():
+    """Augment.crouch: the pelvis sinks (and the trunk leans forward), the legs fold as hinges
+    onto the feet where they were; nothing changes with crouch=0."""
+    cs = _standing_clipset(bodies=(1.6, 1.75, 1.9), T=60)
+    smp = ds.WindowSampler(cs, window=40, augment=ds.Augment(crouch=1.0), seed=0)
+    rng = np.random.default_rng(2)
+    B, W = 3, 40
+    local = np.broadcast_to(np.eye(3), (B, W, sk.NUM_JOINTS, 3, 3)).copy()
+    bodies = [sk.make_body(s) for s in (1.6, 1.75, 1.9)]
+    offsets = np.stack([b.offsets for b in bodies])
+    root = np.stack([np.tile(b.root_rest, (W, 1)) for b in bodies])
+    stature = np.array([1.6, 1.75, 1.9])
+    loc2, root2 = smp._crouch(rng, local, root, offsets, stature)
+    rep = np.repeat(offsets, W, 0)
+    P0, _ = sk.forward_kinematics(local.reshape(-1, 22, 3, 3), root.reshape(-1, 3), None, offsets=rep)
+    P1, _ = sk.forward_kinematics(loc2.reshape(-1, 22, 3, 3), root2.reshape(-1, 3), None, offsets=rep)
+    P0, P1 = P0.reshape(B, W, 22, 3), P1.reshape(B, W, 22, 3)
+    drop = (P0[..., 0, 2] - P1[..., 0, 2]) / stature[:, None]
+    assert drop.max() > 0.07 and drop.max() <= ds.CROUCH_DEPTH[1] + 1e-9 and drop.min() >= -1e-9
+    ankles = [J["left_ankle"], J["right_ankle"]]
+    assert np.abs(P1[:, :, ankles] - P0[:, :, ankles]).max() < 1e-6          # feet stay planted
+    deep = drop > 0.05
+    knee = np.degrees(rot.geodesic_angle(loc2[:, :, J["left_knee"]], np.eye(3)))
+    assert (knee[deep] > 20).all()                                           # the legs fold ...
+    from blender_manikin.core import limb_solver as ls
+    R = loc2[:, :, J["left_knee"]]
+    b = R @ ls.A0[2]
+    assert np.abs(b @ ls.H0[2]).max() < 1e-9                                  # ... as hinges
+    lean = P1[..., J["neck"], 1] - P1[..., 0, 1]                              # neck ahead (-Y) of the pelvis
+    assert (lean[deep] < -0.01).all()
+    plain = ds.WindowSampler(cs, window=40, augment=ds.Augment(crouch=0.0), seed=0)
+    assert plain._crouch(rng, local, root, offsets, stature)[0] is local

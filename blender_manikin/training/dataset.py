@@ -569,7 +569,9 @@ class Augment:
     probability that the window's whole body is laid down on the floor
     (:meth:`WindowSampler._lay_down`: on the back, the front or a side, as
     people lie on the floor; the source motion's limbs keep moving), where its
-    limbs let it lie flat (about half the Bandai windows do).
+    limbs let it lie flat (about half the Bandai windows do).  crouch:
+    probability that the window crouches (:meth:`WindowSampler._crouch`: the
+    pelvis sinks and the legs fold onto the planted feet).
     """
     speed: tuple = (0.8, 1.25)
     stature: tuple | None = (1.45, 2.05)
@@ -585,12 +587,13 @@ class Augment:
     arm_mix: float = 0.3
     dropout: float = 0.1
     lying: float = 0.0
+    crouch: float = 0.0
 
     @classmethod
     def off(cls):
         return cls(speed=(1.0, 1.0), stature=None, segment=0.0, floor=0.0, mirror=0.0, pos_noise=0.0,
                    rot_noise_deg=0.0, hand_offset_deg=0.0, head_offset=0.0, edge_prob=0.0, calibration=0.0,
-                   arm_mix=0.0, dropout=0.0, lying=0.0)
+                   arm_mix=0.0, dropout=0.0, lying=0.0, crouch=0.0)
 
 
 @dataclass
@@ -733,6 +736,10 @@ LYING_CLEARANCE = 0.02
 LYING_MAX_PROP = 0.05
 #: ways of lying down tried per window (on the back, the front and either side)
 LYING_TRIES = 4
+#: how far a crouching window's pelvis sinks, statures (uniform; a deep squat sinks ~0.3)
+CROUCH_DEPTH = (0.08, 0.32)
+#: forward lean of a crouching trunk, radians per stature of depth (0.3 statures: ~20°)
+CROUCH_LEAN = 1.2
 LYING_TRUNK = np.array([J[n] for n in ("pelvis", "spine1", "spine2", "spine3", "neck", "head", "left_hip", "right_hip",
                                       "left_collar", "right_collar", "left_shoulder", "right_shoulder")])
 
@@ -892,6 +899,64 @@ class WindowSampler:
         contacts[pick] = np.where(wgt[..., None] > 0.5, 1.0, contacts[pick])
         return q, root, contacts
 
+    def _crouch(self, rng, local, root, offsets, stature):
+        """Crouch a share (``Augment.crouch``) of the windows: the pelvis sinks by up to
+        :data:`CROUCH_DEPTH` statures (held 0.5-2 s, eased in and out over 0.3-0.8 s) and a
+        quarter of that back, the trunk leans forward with it (:data:`CROUCH_LEAN` radians per
+        stature of depth), and the legs are solved again (:func:`.limb_solver.solve_limbs`)
+        onto the feet where they were, each knee keeping its swivel: a squat, a duck under a
+        wall, a reach to the floor, with the feet planted as before.  The arms and head move with
+        the trunk.  The Bandai takes hold few deep crouches, and a network that has not seen
+        them takes a low head for a body lying down.
+
+        local ``(B, W, 22, 3, 3)``, root ``(B, W, 3)`` metres, offsets ``(B, 22, 3)``, stature
+        ``(B,)``.  Returns new ``(local, root)``."""
+        B, W = root.shape[:2]
+        pick = np.nonzero(rng.uniform(size=B) < self.aug.crouch)[0]
+        if pick.size == 0:
+            return local, root
+        n = pick.size
+        s = stature[pick]
+        depth = rng.uniform(CROUCH_DEPTH[0], CROUCH_DEPTH[1], n) * s
+        hold = rng.uniform(0.5, 2.0, n) * self.fps
+        ramp = rng.uniform(0.3, 0.8, n) * self.fps
+        start = rng.uniform(-hold, W, n)
+        t = np.arange(W)[None]
+        wgt = (_smoothstep((t - start[:, None] + ramp[:, None]) / ramp[:, None])
+               * _smoothstep((start[:, None] + hold[:, None] + ramp[:, None] - t) / ramp[:, None]))
+        d = depth[:, None] * wgt                                                          # (n, W)
+        loc = local[pick].copy()
+        rt = root[pick].copy()
+        off = np.repeat(offsets[pick], W, 0)
+        P, Rw = forward_kinematics(loc.reshape(n * W, NUM_JOINTS, 3, 3), rt.reshape(n * W, 3), None, offsets=off)
+        R0 = loc[:, :, 0]
+        side = R0[..., :, 0].copy()                                                       # the pelvis' +X (left)
+        side[..., 2] = 0.0
+        side = rot.normalize(side)
+        back = np.cross(np.broadcast_to([0.0, 0.0, 1.0], side.shape), side)            # +Y of a body facing -Y
+        lean = CROUCH_LEAN * d / s[:, None]
+        loc[:, :, 0] = rot.axis_angle_to_matrix(side * lean[..., None]) @ R0
+        rt = rt - d[..., None] * np.array([0.0, 0.0, 1.0]) + 0.25 * d[..., None] * back
+        legs = [2, 3]
+        hips = [b for _, b, _, _ in (LIMBS[i] for i in legs)]
+        knees = [m for _, _, m, _ in (LIMBS[i] for i in legs)]
+        ankles = [e for _, _, _, e in (LIMBS[i] for i in legs)]
+        P, Rw = P.reshape(n, W, NUM_JOINTS, 3), Rw.reshape(n, W, NUM_JOINTS, 3, 3)
+        swivel = ls.swivel_from_positions(P[:, :, hips], P[:, :, knees], P[:, :, ankles], Rw[:, :, [0, 0]], legs,
+                                          base_rot=Rw[:, :, hips])
+        P2, Rw2 = forward_kinematics(loc.reshape(n * W, NUM_JOINTS, 3, 3), rt.reshape(n * W, 3), None, offsets=off)
+        P2, Rw2 = P2.reshape(n, W, NUM_JOINTS, 3), Rw2.reshape(n, W, NUM_JOINTS, 3, 3)
+        lengths = np.stack([np.linalg.norm(offsets[pick][:, knees], axis=-1),
+                            np.linalg.norm(offsets[pick][:, ankles], axis=-1)], -1)             # (n, 2, 2)
+        sol = ls.solve_limbs(P2[:, :, hips], P[:, :, ankles], swivel, np.broadcast_to(lengths[:, None], (n, W, 2, 2)),
+                             Rw2[:, :, [0, 0]], end_rot=Rw[:, :, ankles], limb_ids=legs)
+        loc[:, :, hips] = sol.base_local
+        loc[:, :, knees] = sol.mid_local
+        loc[:, :, ankles] = sol.end_local
+        local, root = local.copy(), root.copy()
+        local[pick], root[pick] = loc, rt
+        return local, root
+
     def _lay_down(self, rng, local, root, contacts, offsets, stature):
         """Lay the whole body of a share (``Augment.lying``) of the windows down on the floor.
 
@@ -1001,6 +1066,9 @@ class WindowSampler:
         # as on the body the solver builds (skeleton.make_body); then the floor augmentation.
         offsets = new_off
         root[..., 2] += above0 - above1 - (lowest * k)[:, None] + (FOOT_CLEARANCE * stature)[:, None]
+        if a.crouch > 0:
+            local, root = self._crouch(rng, local, root, offsets, stature)
+            loc_flat = local.reshape(N, NUM_JOINTS, 3, 3)
         if a.lying > 0:
             local, root, contacts = self._lay_down(rng, local, root, contacts, offsets, stature)
             loc_flat = local.reshape(N, NUM_JOINTS, 3, 3)
