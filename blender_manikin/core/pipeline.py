@@ -67,11 +67,14 @@ COLLAR_MAX_SWING = np.radians(25.0)
 #: (0.1 s, with the smoothstep easing of plants: HDM05 jitter 1.41 -> 0.98, the ground truth 0.93;
 #: MPJPE +0.01 cm; benchmarks/bench_pose.py)
 NETWORK_SMOOTH_S = 0.1
-#: the network outputs it filters: rotations (6D), swivel (cos, sin) and the ankle positions
-#: (before the plants are locked and settled: HDM05 jitter 0.98 -> 0.91, ground truth 0.93; foot
-#: skating 26.1 -> 24.0 cm/s; MPJPE +0.02 cm); not the contact probabilities, whose edges
-#: decide where plants begin and end
-SMOOTHED_OUTPUTS = ("root_rot", "torso_rot", "ankle_rot", "ankle_pos", "swivel_cs", "local_rot")
+#: the network outputs it filters with NETWORK_SMOOTH_S: rotations (6D) and swivel (cos, sin);
+#: not the contact probabilities, whose edges decide where plants begin and end
+SMOOTHED_OUTPUTS = ("root_rot", "torso_rot", "ankle_rot", "swivel_cs", "local_rot")
+#: seconds (Gaussian sigma) of the filter on the predicted ankle positions, before the plants
+#: are locked and settled: a trade between jitter and foot skating (shipped model, calibrated
+#: body; none / 0.05 / 0.1 s: Bandai held-out skate 7.1 / 8.4 / 12.9 cm/s, jitter 0.91 / 0.88 /
+#: 0.84 (ground truth 0.80); HDM05 jitter 1.02 (0.03 s) / 0.99 / 0.96 (0.93))
+ANKLE_SMOOTH_S = 0.05
 #: network windows built, run and decoded at a time (bounds the network's memory on long takes)
 NETWORK_WINDOWS_PER_BATCH = 1024
 #: scene frames posed at a time by the torso FK, collar and limb stages (bounds their memory);
@@ -225,6 +228,8 @@ def run_network(targets: TrackerTargets, body: Body, runner, progress=None, stri
     sigma = (NETWORK_SMOOTH_S if smooth_s is None else float(smooth_s)) * c.fps
     if sigma > 0:      # a temporal filter on the predicted rotations and swivel angles
         blended = {k: (smooth_frames(v, sigma) if k in SMOOTHED_OUTPUTS else v) for k, v in blended.items()}
+    if ANKLE_SMOOTH_S > 0 and "ankle_pos" in blended:
+        blended["ankle_pos"] = smooth_frames(blended["ankle_pos"], ANKLE_SMOOTH_S * c.fps)
 
     # back to the scene frame rate
     t_scene = t_in
