@@ -177,7 +177,8 @@ def run_network(targets: TrackerTargets, body: Body, runner, progress=None, stri
     decoded at a time (default :data:`NETWORK_WINDOWS_PER_BATCH`), which bounds
     the memory on long takes; the windows and the order they are blended in do
     not depend on it, so neither does the result.  smooth_s: Gaussian sigma in seconds of a
-    temporal filter on the blended predictions (default :data:`NETWORK_SMOOTH_S`; 0: off).
+    temporal filter on the blended predictions (default :data:`NETWORK_SMOOTH_S`, the ankle
+    positions :data:`ANKLE_SMOOTH_S`; 0: both off).
     """
     c = runner.contract
     W = c.window
@@ -228,7 +229,7 @@ def run_network(targets: TrackerTargets, body: Body, runner, progress=None, stri
     sigma = (NETWORK_SMOOTH_S if smooth_s is None else float(smooth_s)) * c.fps
     if sigma > 0:      # a temporal filter on the predicted rotations and swivel angles
         blended = {k: (smooth_frames(v, sigma) if k in SMOOTHED_OUTPUTS else v) for k, v in blended.items()}
-    if ANKLE_SMOOTH_S > 0 and "ankle_pos" in blended:
+    if sigma > 0 and ANKLE_SMOOTH_S > 0 and "ankle_pos" in blended:     # smooth_s=0: no filter at all
         blended["ankle_pos"] = smooth_frames(blended["ankle_pos"], ANKLE_SMOOTH_S * c.fps)
 
     # back to the scene frame rate
@@ -333,8 +334,9 @@ def settle_planted_feet(ankle_pos, ankle_rot, contacts, body: Body, fps, floor=0
     bool) and its ankle hovers at most ``max_lift`` (default :data:`SETTLE_MAX`) metres above
     where the foot stands on ``floor`` (:func:`keep_feet_above_floor`'s lowest height, at least
     the rest ankle height), the ankle comes down to it; the drop is smoothed over
-    :data:`SETTLE_SMOOTH_S` so it eases in and out.  A planted foot held higher than that (on a step, the network
-    unsure) is left.  ``ankle_pos`` ``(T, 2, 3)`` metres; returns a new array."""
+    :data:`SETTLE_SMOOTH_S` so it eases in and out (:func:`keep_feet_above_floor` runs after it).
+    A planted foot held higher than that (on a step, the network unsure) is left.
+    ``ankle_pos`` ``(T, 2, 3)`` metres; returns a new array."""
     lift = SETTLE_MAX if max_lift is None else float(max_lift)
     out = np.array(ankle_pos, np.float64, copy=True)
     foot_off = body.offsets[[J["left_foot"], J["right_foot"]]]
