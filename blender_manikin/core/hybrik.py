@@ -53,14 +53,17 @@ class IKResult:
     world_rot: np.ndarray
 
 
-def kabsch(rest_vecs, target_vecs, weights=None):
+def kabsch(rest_vecs, target_vecs, weights=None, directions=True):
     """Rotations ``R`` ``(T, 3, 3)`` minimising ``Σ w |R r_i - t_i|²``.
 
     rest_vecs: ``(K, 3)`` or ``(T, K, 3)``; target_vecs: ``(T, K, 3)``.
-    Vectors are normalised first, so only directions count.
+    directions: normalise the vectors first, so only directions count (False: lengths weigh
+    too, as for centred point sets).
     """
-    t = rot.normalize(target_vecs)
-    r = rot.normalize(np.broadcast_to(rest_vecs, t.shape))
+    t = np.asarray(target_vecs, np.float64)
+    r = np.broadcast_to(rest_vecs, t.shape)
+    if directions:
+        t, r = rot.normalize(t), rot.normalize(r)
     w = np.ones(t.shape[-2]) if weights is None else np.asarray(weights, np.float64)
     H = np.einsum("tki,tkj,k->tij", t, r, w)           # sum w t r^T
     U, _, Vt = np.linalg.svd(H)

@@ -93,15 +93,19 @@ def savgol_weights(window: int, order: int = 2):
     return A @ np.linalg.pinv(A)
 
 
+def savgol_window(seconds, fps, T):
+    """Frames (odd, at most ``T``) of a Savitzky-Golay window of ``seconds`` at ``fps``."""
+    w = int(round(seconds * fps)) | 1
+    return w if w <= T else (T if T % 2 else T - 1)
+
+
 def smooth(x, fps, seconds, order=2):
     """Savitzky-Golay filter along axis 0 over ``seconds`` (an odd number of frames, at least
     ``order + 2``; else unchanged): zero lag, and polynomials of degree ``order`` pass through
     unchanged, ends included (the first and last half-windows take the polynomial fitted to the
     first and last whole window).  ``x``: ``(T, ...)``; returns a new array."""
     x = np.asarray(x, np.float64)
-    w = int(round(seconds * fps)) | 1
-    if w > x.shape[0]:
-        w = x.shape[0] if x.shape[0] % 2 else x.shape[0] - 1
+    w = savgol_window(seconds, fps, x.shape[0])
     if seconds <= 0 or w < order + 2:
         return x.copy()
     h = w // 2
@@ -171,10 +175,7 @@ def smooth_auto(x, fps, filters=AUTO_FILTERS):
     ok = np.isfinite(sig2)
     for i, (seconds, order) in enumerate(filters):
         y = smooth(x, fps, seconds, order) if seconds > 0 else x
-        w = int(round(seconds * fps)) | 1 if seconds > 0 else 1
-        if w > T:
-            w = T if T % 2 else T - 1
-        tr = savgol_trace(T, w, order) if seconds > 0 else float(T)
+        tr = savgol_trace(T, savgol_window(seconds, fps, T), order) if seconds > 0 else float(T)
         risk = np.nansum((x - y) ** 2, axis=(0, 2)) + 3.0 * sig2 * (2.0 * tr - T)
         better = ok & (risk < risk_best)
         out[:, better] = y[:, better]
@@ -218,7 +219,6 @@ def size_body(P, height=None, derived_spine=False) -> sk.Body:
     the spine of a take spent bending over too short for its upright frames)."""
     L = np.linalg.norm(P[:, 1:] - P[:, sk.PARENTS[1:]], axis=-1)
     L = np.concatenate([[0.0], np.nanmedian(L, axis=0)])
-
     for a, b in _PAIRS:
         L[a] = L[b] = 0.5 * (L[a] + L[b])
     if not np.all(np.isfinite(L[1:])) or np.any(L[1:] <= 1e-4):
@@ -323,11 +323,7 @@ def _procrustes(rest, target, w):
     w = np.asarray(w, np.float64) / np.sum(w)
     rc = w @ rest                                                   # (3,)
     tc = np.einsum("k,tki->ti", w, target)                          # (T, 3)
-    H = np.einsum("tki,kj,k->tij", target - tc[:, None], rest - rc, w)
-    U, _, Vt = np.linalg.svd(H)
-    D = np.ones(U.shape[:-1])
-    D[:, -1] = np.linalg.det(U @ Vt)
-    R = (U * D[:, None, :]) @ Vt
+    R = hybrik.kabsch(rest - rc, target - tc[:, None], w, directions=False)
     return R, tc - np.einsum("tij,j->ti", R, rc)
 
 

@@ -736,12 +736,13 @@ LYING_CLEARANCE = 0.02
 LYING_MAX_PROP = 0.05
 #: ways of lying down tried per window (on the back, the front and either side)
 LYING_TRIES = 4
+#: the trunk joints a lying body rests on
+LYING_TRUNK = np.array([J[n] for n in ("pelvis", "spine1", "spine2", "spine3", "neck", "head", "left_hip", "right_hip",
+                                      "left_collar", "right_collar", "left_shoulder", "right_shoulder")])
 #: how far a crouching window's pelvis sinks, statures (uniform; a deep squat sinks ~0.3)
 CROUCH_DEPTH = (0.08, 0.32)
 #: forward lean of a crouching trunk, radians per stature of depth (0.3 statures: ~20°)
 CROUCH_LEAN = 1.2
-LYING_TRUNK = np.array([J[n] for n in ("pelvis", "spine1", "spine2", "spine3", "neck", "head", "left_hip", "right_hip",
-                                      "left_collar", "right_collar", "left_shoulder", "right_shoulder")])
 
 
 #: the joints whose local rotations the arm mix exchanges (collars down to the wrists)
@@ -773,6 +774,16 @@ def tracking_gaps(rng, pos, R, prob, fps, seconds=(0.1, 0.5)):
 def _smoothstep(x):
     x = np.clip(x, 0.0, 1.0)
     return x * x * (3.0 - 2.0 * x)
+
+
+def _hold_weights(W, start, hold, ramp):
+    """``(n, W)`` weights of a hold: 1 over frames ``[start, start + hold]``, eased in and out
+    by a smoothstep over ``ramp`` frames on either side, 0 elsewhere.  start, hold ``(n,)``
+    frames; ramp a scalar or ``(n,)`` frames."""
+    t = np.arange(W)[None]
+    start, hold = np.asarray(start)[:, None], np.asarray(hold)[:, None]
+    ramp = np.broadcast_to(np.asarray(ramp, np.float64), start.shape[:1])[:, None]
+    return _smoothstep((t - start + ramp) / ramp) * _smoothstep((start + hold + ramp - t) / ramp)
 
 
 def _small_rotations(rng, shape, sigma_rad):
@@ -890,9 +901,7 @@ class WindowSampler:
         hold = rng.uniform(0.5, 2.0, n) * self.fps
         ramp = 0.3 * self.fps
         start = rng.uniform(-hold, W, n)
-        t = np.arange(W)[None]
-        wgt = (_smoothstep((t - start[:, None] + ramp) / ramp)
-               * _smoothstep((start[:, None] + hold[:, None] + ramp - t) / ramp))
+        wgt = _hold_weights(W, start, hold, ramp)
         q, root, contacts = q.copy(), root.copy(), contacts.copy()
         q[pick] = rot.quat_slerp(q[pick], np.broadcast_to(pose[:, None], q[pick].shape), wgt[..., None])
         root[pick] = root[pick] * (1 - wgt[..., None]) + stand[:, None] * wgt[..., None]
@@ -921,9 +930,7 @@ class WindowSampler:
         hold = rng.uniform(0.5, 2.0, n) * self.fps
         ramp = rng.uniform(0.3, 0.8, n) * self.fps
         start = rng.uniform(-hold, W, n)
-        t = np.arange(W)[None]
-        wgt = (_smoothstep((t - start[:, None] + ramp[:, None]) / ramp[:, None])
-               * _smoothstep((start[:, None] + hold[:, None] + ramp[:, None] - t) / ramp[:, None]))
+        wgt = _hold_weights(W, start, hold, ramp)
         d = depth[:, None] * wgt                                                          # (n, W)
         loc = local[pick].copy()
         rt = root[pick].copy()
