@@ -26,7 +26,8 @@ def test_lock_planted_feet_holds_position_during_contact():
     contact[20:40, 0] = 0.9
     out = pl.lock_planted_feet(ankle, contact, max_drift=1.0)
     assert np.ptp(out[20:40, 0, 0]) == 0.0               # no slide while planted
-    assert np.allclose(out[:15, 0], ankle[:15, 0])        # untouched away from the contact
+    ease = round(pl.CONTACT_BLEND_S * 30)
+    assert np.allclose(out[:20 - ease, 0], ankle[:20 - ease, 0])    # untouched away from the contact
     assert np.allclose(out[:, 1], ankle[:, 1])            # other foot never planted
     step = np.abs(np.diff(out[:, 0, 0]))
     assert step.max() < 0.05                             # eased in and out, no pop
@@ -64,6 +65,65 @@ def test_lock_planted_feet_horizontal_only_keeps_the_predicted_height():
     assert pl.LOCK_AXES == (0, 1)
     assert np.ptp(out[20:40, 0, 0]) == 0.0 and np.ptp(out[20:40, 0, 1]) == 0.0
     assert np.allclose(out[:, 0, 2], ankle[:, 0, 2])
+
+
+def test_lock_eases_last_a_time_and_never_overlap_between_close_plants():
+    """The ease into and out of a plant lasts CONTACT_BLEND_S seconds whatever the frame rate, and
+    two plants a short swing apart share the swing: the foot moves one way, without a fold."""
+    def ease_frames(fps):
+        T = int(2 * fps)
+        ankle = np.zeros((T, 2, 3))
+        ankle[:, 0, 0] = np.linspace(0, 0.5, T)
+        contact = np.zeros((T, 2))
+        contact[T // 2:, 0] = 0.9
+        out = pl.lock_planted_feet(ankle, contact, max_drift=1.0, fps=fps)
+        return int((np.abs(out[:T // 2, 0, 0] - ankle[:T // 2, 0, 0]) > 1e-12).sum())
+    assert ease_frames(30.0) == round(pl.CONTACT_BLEND_S * 30)
+    assert ease_frames(60.0) == round(pl.CONTACT_BLEND_S * 60)
+    # two plants 4 frames apart, the foot stepping 10 cm forward between them
+    T = 60
+    ankle = np.zeros((T, 2, 3))
+    ankle[:, 0, 0] = np.clip((np.arange(T) - 28) / 4.0, 0, 1) * 0.1
+    contact = np.zeros((T, 2))
+    contact[10:28, 0] = contact[32:50, 0] = 0.9
+    out = pl.lock_planted_feet(ankle, contact, max_drift=0.2, blend=6)
+    x = out[:, 0, 0]
+    assert np.ptp(x[10:28]) == 0.0 and np.ptp(x[32:50]) == 0.0
+    assert np.isclose(x[20], 0.0) and np.isclose(x[40], 0.1)
+    assert (np.diff(x) >= -1e-12).all()                  # forward only: the eases did not overlap
+
+
+def _knee_flexion(d, thigh, shank):
+    """Knee flexion (radians) of a two-bone leg whose hip and ankle are ``d`` apart."""
+    d = np.minimum(d, thigh + shank)
+    return np.pi - np.arccos(np.clip((thigh ** 2 + shank ** 2 - d ** 2) / (2 * thigh * shank), -1, 1))
+
+
+def test_soften_leg_reach_keeps_a_knee_at_full_stretch_from_popping():
+    """An ankle target that hovers around the leg's reach (5 mm noise) flickers the knee between
+    straight and 10-15 degrees bent; the softened target keeps the knee's frame-to-frame change
+    small, stays within reach, keeps the direction from the hip and moves a bent leg little."""
+    rng = np.random.default_rng(3)
+    T, thigh, shank = 90, 0.45, 0.43
+    L = thigh + shank
+    hips = np.zeros((T, 2, 3))
+    hips[:, :, 2] = 0.95
+    hips[:, 1, 0] = 0.2
+    direction = rot.normalize(np.stack([np.full(T, 0.1), np.zeros(T), -np.ones(T)], -1))
+    d = np.stack([L + rng.normal(scale=0.005, size=T),                   # left: at full stretch
+                  0.8 + 0.02 * np.sin(np.linspace(0, 3, T))], 1)        # right: bent, smooth
+    ankles = hips + d[..., None] * direction[:, None]
+    sigma = pl.LEG_REACH_SMOOTH_S * 30.0
+    soft = pl.soften_leg_reach(hips, ankles, np.array([L, L]), sigma)
+    v = soft - hips
+    ds = np.linalg.norm(v, axis=-1)
+    assert ds.max() <= L + 1e-12
+    assert np.allclose(rot.normalize(v), direction[:, None].repeat(2, 1))
+    raw_pop = np.abs(np.diff(_knee_flexion(d[:, 0], thigh, shank))).max()
+    soft_pop = np.abs(np.diff(_knee_flexion(ds[:, 0], thigh, shank))).max()
+    assert np.degrees(raw_pop) > 8.0 and soft_pop < 0.5 * raw_pop
+    assert np.abs(ds[:, 1] - d[:, 1]).max() < 1e-3                      # a smooth bent leg: as it was
+    assert np.array_equal(pl.soften_leg_reach(hips, ankles, np.array([L, L]), 0.0), ankles)
 
 
 def test_keep_feet_above_floor():
