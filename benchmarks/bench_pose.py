@@ -27,6 +27,10 @@ GP (ground penetration, cm), foot skating (cm/s: horizontal speed of a predicted
 frames the ground-truth foot is planted), frames/s (the whole method on all the set's frames
 in one call, this machine's CPU; measured, never asserted).
 
+``--per-class``: under each table, MPJPE and L-PE per motion class (read from the clip's
+file name: HDM05 ``HDM_bd_squat1Reps_001_120.amc`` -> squat, Bandai ``dataset-1_walk_...`` ->
+walk) for the shipped and the previous model, frame-weighted within each class.
+
 Tracker sets (issue 14; ``--trackers 3,4,6``, default all three, ``''`` or ``none``: no table):
 a second table per dataset and body compares the same pipeline (``core.pipeline.solve``) fed
 by more trackers, each with its own model, in the same pass over the clips:
@@ -58,6 +62,7 @@ from __future__ import annotations
 import argparse
 import os
 import platform
+import re
 import sys
 import time
 
@@ -172,6 +177,23 @@ def clip_metrics(res, gt_local, gt_pos, fps, contacts, targets=None):
     return ev
 
 
+#: motion class patterns of the clip file names: HDM05 (``HDM_<actor>_<class><digits>...``) and
+#: the Bandai Namco takes (``dataset-<n>_<class>_<style>_<nnn>``)
+CLASS_PATTERNS = (re.compile(r"HDM_[a-z]+_([A-Za-z]+)"), re.compile(r"dataset-\d+_([a-z-]+)_"))
+PER_CLASS_METHODS = (SHIPPED, "(p) MANIKIN, previous model")
+PER_CLASS_COLUMNS = ("MPJPE", "L-PE")
+
+
+def motion_class(path):
+    """The motion class in a cache clip's file name (``"squat"``, ``"walk"``), or ``"other"``."""
+    name = os.path.basename(path)
+    for pat in CLASS_PATTERNS:
+        m = pat.search(name)
+        if m:
+            return m.group(1)
+    return "other"
+
+
 def dataset_files(name, max_clips=0):
     from blender_manikin.training import dataset   # the training cache (numpy only here)
     source, part = DATASETS[name]
@@ -201,6 +223,7 @@ def run_dataset(name, methods, args, body_mode):
         return None
     devs = {m: tuple(getattr(fn, "devices", REQUIRED_DEVICES)) for m, fn in methods.items()}
     sums = {m: {} for m in methods}
+    by_class = {}           # class -> {"clips", "frames", (method, column): frame-weighted sum}
     frames, all_targets = 0, []
     for i, f in enumerate(files):
         gt_body, gt_local, gt_pos, gt_world, fps, contacts = load_clip_with_contacts(f)
@@ -218,6 +241,13 @@ def run_dataset(name, methods, args, body_mode):
             ev = clip_metrics(fn(tg, bodies[devs[m]]), gt_local, gt_pos, fps, contacts, targets=tg)
             for k, v in ev.items():
                 sums[m][k] = max(sums[m].get(k, v), v) if k in MAX_KEYS else sums[m].get(k, 0.0) + v * T
+            if m in PER_CLASS_METHODS:
+                c = by_class.setdefault(motion_class(f), {"clips": 0, "frames": 0})
+                for k in PER_CLASS_COLUMNS:
+                    c[m, k] = c.get((m, k), 0.0) + ev[k] * T
+        c = by_class.setdefault(motion_class(f), {"clips": 0, "frames": 0})
+        c["clips"] += 1
+        c["frames"] += T
         if not args.markdown:
             print(f"\r{name}: {i + 1}/{len(files)} clips, {frames} frames", end="", file=sys.stderr)
     if not args.markdown:
@@ -239,7 +269,28 @@ def run_dataset(name, methods, args, body_mode):
         row = {k: (v if k in MAX_KEYS else v / frames) for k, v in sums[m].items()}
         row["frames/s"] = big.num_frames / max(time.perf_counter() - t, 1e-9)
         rows.append((m, row))
-    return dict(name=name, body=body_mode, source=source, clips=len(files), frames=frames, rows=rows)
+    return dict(name=name, body=body_mode, source=source, clips=len(files), frames=frames, rows=rows,
+                by_class=by_class)
+
+
+def print_class_table(r):
+    """MPJPE and L-PE per motion class of result ``r`` (:func:`run_dataset`), for the shipped and
+    the previous model, classes sorted by the shipped model's MPJPE, worst first."""
+    cls = r["by_class"]
+    methods = [m for m in PER_CLASS_METHODS if any((m, "MPJPE") in c for c in cls.values())]
+    short = {SHIPPED: "(a)", "(p) MANIKIN, previous model": "(p)"}
+    cols = ["clips", "frames"] + [f"{short[m]} {k} [cm]" for m in methods for k in PER_CLASS_COLUMNS]
+    rows = []
+    for name, c in cls.items():
+        row = {"clips": c["clips"], "frames": c["frames"]}
+        for m in methods:
+            for k in PER_CLASS_COLUMNS:
+                row[f"{short[m]} {k} [cm]"] = c[m, k] / max(c["frames"], 1)
+        rows.append((name, row))
+    if methods:
+        rows.sort(key=lambda nr: -nr[1][f"{short[methods[0]]} MPJPE [cm]"])
+    print(f"\nper motion class, {r['name']}, {r['body']} body:")
+    print(metrics.format_table(rows, cols, name_header="class"))
 
 
 def tracker_set_methods(args):
@@ -314,6 +365,8 @@ def main(argv=None):
                          "builds) and/or gt (the true skeleton)")
     ap.add_argument("--max-clips", type=int, default=0, help="limit the clips per dataset (0: all)")
     ap.add_argument("--markdown", action="store_true", help="print only the tables")
+    ap.add_argument("--per-class", action="store_true",
+                    help="also MPJPE and L-PE per motion class (shipped and previous model)")
     args = ap.parse_args(argv)
 
     runner = ModelRunner(args.model)
@@ -351,6 +404,8 @@ def main(argv=None):
         cols = [f"{k} [{UNITS[k]}]" if UNITS[k] else k for k in COLUMNS]
         f2 = {(f"{k} [{UNITS[k]}]" if UNITS.get(k) else k): v for k, v in fmt.items()}
         print(metrics.format_table(rows, cols, formats=f2))
+        if args.per_class:
+            print_class_table(r)
         if set_names:
             print_tracker_table(r, set_names, what)
     return results
