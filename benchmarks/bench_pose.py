@@ -188,9 +188,9 @@ def motion_class(path):
     """The motion class in a cache clip's file name (``"squat"``, ``"walk"``), or ``"other"``."""
     name = os.path.basename(path)
     for pat in CLASS_PATTERNS:
-        m = pat.search(name)
-        if m:
-            return m.group(1)
+        found = pat.findall(name)
+        if found:
+            return found[-1]          # Bandai names hold the folder "dataset-1_data_" first
     return "other"
 
 
