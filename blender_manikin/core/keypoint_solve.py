@@ -53,6 +53,12 @@ CONTACT_HEIGHT = 0.05
 #: onto its toes) is split into successive holds.  Keypoints are measurements: a lock that moved
 #: ankles further would trade their accuracy for less sliding than the real foot had
 LOCK_MAX_DRIFT = 0.02
+#: seconds a held ankle eases into and out of each plant.  Shorter than the tracker solve's
+#: (:data:`.pipeline.CONTACT_BLEND_S`, 0.2 s, which hides the network's ankle noise): keypoints
+#: are measurements, and a longer ease holds the ankle off them longer (coco17, 15 clips, clean
+#: keypoints, benchmarks/bench_keypoints.py: 0.133 / 0.2 s: Bandai JPE 0.26 / 0.35 cm, jitter
+#: 1.01 / 1.08; HDM05 JPE 0.37 / 0.41 cm)
+CONTACT_BLEND_S = 4 / 30
 
 
 # --------------------------------------------------------------------------
@@ -393,7 +399,8 @@ def fit_keypoints(P, end_rot, body: sk.Body, fps, adaptive=True, lock_feet=True,
     contacts = foot_contacts(ik.positions[:, ank], body, fps)
     targets = ik.positions[:, ank]
     if lock_feet:
-        targets = pipeline.lock_planted_feet(targets, contacts, threshold=0.5, axes=pipeline.LOCK_AXES, fps=fps,
+        targets = pipeline.lock_planted_feet(targets, contacts, threshold=0.5, axes=pipeline.LOCK_AXES,
+                                             blend=max(int(round(CONTACT_BLEND_S * fps)), 1),
                                              max_drift=LOCK_MAX_DRIFT)
     targets = pipeline.keep_feet_above_floor(targets, ik.world_rot[:, ank], body)
     # the limbs reach the chain the keypoints give (aim_chain): the first pass's reach error is
