@@ -47,7 +47,7 @@ CONTACT_THRESHOLD = 0.8
 #: seconds over which a held ankle eases into and out of each plant (smoothstep; capped at half
 #: the swing between two plants).  0.13 / 0.2 / 0.3 s (4 / 6 / 9 frames at 30 fps), with
 #: LEG_REACH_SMOOTH_S: HDM05 jitter 0.96 / 0.91 / 0.88 (ground truth 0.93), skate 26.3 / 25.2 /
-#: 23.9 cm/s, MPJPE 11.76 for all; Bandai held-out MPJPE 5.07 / 5.05 / 5.10 cm, jitter 0.79 /
+#: 23.9 cm/s, MPJPE 11.76 / 11.76 / 11.77; Bandai held-out MPJPE 5.07 / 5.05 / 5.10 cm, jitter 0.79 /
 #: 0.77 / 0.78 (0.80), skate 8.6 / 6.7 / 5.2 cm/s: 0.2 s is the most accurate
 CONTACT_BLEND_S = 0.2
 #: seconds (Gaussian sigma) of smoothing of the locked ankle paths, so locking adds no jerk
@@ -606,7 +606,7 @@ def soften_leg_reach(hips, ankles, leg_length, sigma):
     hips, ankles ``(T, 2, 3)`` metres (left, right); leg_length ``(2,)`` thigh + shank, metres.
     Where a predicted ankle hovers around the leg's full reach, the two-bone solve straightens
     and re-bends the knee within a frame or two (a pop: on the Bandai held-out takes 61 % of the
-    leg frames were at full reach, and the knees' jerk was 1.5x the ground truth's).  Filtering
+    leg frames were at full reach, and the knees' jerk was 1.3-1.8x the ground truth's).  Filtering
     the hip-ankle distance, clamped to the reach, turns those pops into a smooth stretch; the
     direction from the hip is kept.  ``sigma`` 0: the ankles, unchanged.  Returns a new array.
     """
