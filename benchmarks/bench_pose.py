@@ -236,18 +236,17 @@ def run_dataset(name, methods, args, body_mode):
         tgs = {d: targets_from_gt(gt_pos, gt_world, fps, d) for d in sets}
         frames += T
         all_targets.append((tgs, bodies))
+        cls = by_class.setdefault(motion_class(f), {"clips": 0, "frames": 0})
+        cls["clips"] += 1
+        cls["frames"] += T
         for m, fn in methods.items():
             tg = tgs[devs[m]]
             ev = clip_metrics(fn(tg, bodies[devs[m]]), gt_local, gt_pos, fps, contacts, targets=tg)
             for k, v in ev.items():
                 sums[m][k] = max(sums[m].get(k, v), v) if k in MAX_KEYS else sums[m].get(k, 0.0) + v * T
             if m in PER_CLASS_METHODS:
-                c = by_class.setdefault(motion_class(f), {"clips": 0, "frames": 0})
                 for k in PER_CLASS_COLUMNS:
-                    c[m, k] = c.get((m, k), 0.0) + ev[k] * T
-        c = by_class.setdefault(motion_class(f), {"clips": 0, "frames": 0})
-        c["clips"] += 1
-        c["frames"] += T
+                    cls[m, k] = cls.get((m, k), 0.0) + ev[k] * T
         if not args.markdown:
             print(f"\r{name}: {i + 1}/{len(files)} clips, {frames} frames", end="", file=sys.stderr)
     if not args.markdown:

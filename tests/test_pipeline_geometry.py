@@ -86,7 +86,7 @@ def test_lock_eases_last_a_time_and_never_overlap_between_close_plants():
     ankle[:, 0, 0] = np.clip((np.arange(T) - 28) / 4.0, 0, 1) * 0.1
     contact = np.zeros((T, 2))
     contact[10:28, 0] = contact[32:50, 0] = 0.9
-    out = pl.lock_planted_feet(ankle, contact, max_drift=0.2, blend=6)
+    out = pl.lock_planted_feet(ankle, contact, max_drift=0.2, blend_s=0.2, fps=30.0)   # 6 frames
     x = out[:, 0, 0]
     assert np.ptp(x[10:28]) == 0.0 and np.ptp(x[32:50]) == 0.0
     assert np.isclose(x[20], 0.0) and np.isclose(x[40], 0.1)

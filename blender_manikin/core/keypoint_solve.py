@@ -400,7 +400,7 @@ def fit_keypoints(P, end_rot, body: sk.Body, fps, adaptive=True, lock_feet=True,
     targets = ik.positions[:, ank]
     if lock_feet:
         targets = pipeline.lock_planted_feet(targets, contacts, threshold=0.5, axes=pipeline.LOCK_AXES,
-                                             blend=max(int(round(CONTACT_BLEND_S * fps)), 1),
+                                             blend_s=CONTACT_BLEND_S, fps=fps,
                                              max_drift=LOCK_MAX_DRIFT)
     targets = pipeline.keep_feet_above_floor(targets, ik.world_rot[:, ank], body)
     # the limbs reach the chain the keypoints give (aim_chain): the first pass's reach error is

@@ -287,15 +287,15 @@ def _plant_pieces(path, a, b, tol):
     return pieces
 
 
-def lock_planted_feet(ankle_pos, contact, threshold=CONTACT_THRESHOLD, blend=None,
+def lock_planted_feet(ankle_pos, contact, threshold=CONTACT_THRESHOLD, blend_s=None,
                       axes=(0, 1, 2), max_drift=None, fps=30.0):
     """Hold each ankle still while its foot is planted.
 
     ankle_pos ``(T, 2, 3)``; contact ``(T, 2)`` probabilities (planted above
     ``threshold``).  Over each plant the ankle is held, on ``axes`` (0, 1, 2 =
     x, y, z), at the median of its predicted coordinates over the plant;
-    ``blend`` frames on either side (default :data:`CONTACT_BLEND_S` at ``fps`` frames per
-    second) ease in and out (smoothstep), each ease at most half the gap to the foot's
+    ``blend_s`` seconds (default :data:`CONTACT_BLEND_S`; at least a frame at ``fps`` frames
+    per second) on either side ease in and out (smoothstep), each at most half the gap to the foot's
     neighbouring plant so two eases never overlap.  A foot is only ever held where the
     prediction itself stays put: a run over which the predicted ankle moves
     more than ``max_drift`` metres (default :data:`LOCK_MAX_DRIFT`; a slow
@@ -304,7 +304,7 @@ def lock_planted_feet(ankle_pos, contact, threshold=CONTACT_THRESHOLD, blend=Non
     Returns a new array.
     """
     max_drift = LOCK_MAX_DRIFT if max_drift is None else float(max_drift)
-    blend = max(int(round(CONTACT_BLEND_S * fps)), 1) if blend is None else int(blend)
+    blend = max(int(round((CONTACT_BLEND_S if blend_s is None else blend_s) * fps)), 1)
     src = np.array(ankle_pos, np.float64, copy=True)
     out = src.copy()
     T = out.shape[0]
@@ -326,13 +326,8 @@ def lock_planted_feet(ankle_pos, contact, threshold=CONTACT_THRESHOLD, blend=Non
             b_out = blend if (i + 1 < len(pieces) and pieces[i + 1][2]) else min(blend, (after - pb) // 2)
             anchor = np.median(src[pa:pb, k], axis=0)
             lo, hi = max(pa - b_in, 0), min(pb + b_out, T)
-            w = np.zeros(hi - lo)
-            w[pa - lo:pb - lo] = 1.0
-            for t in range(lo, pa):
-                w[t - lo] = (t - (pa - b_in - 1)) / (b_in + 1)
-            for t in range(pb, hi):
-                w[t - lo] = ((pb + b_out) - t) / (b_out + 1)
-            w = np.clip(w, 0.0, 1.0)
+            t = np.arange(lo, hi)
+            w = np.clip(np.minimum((t - (pa - b_in - 1)) / (b_in + 1), ((pb + b_out) - t) / (b_out + 1)), 0.0, 1.0)
             w = (w * w * (3.0 - 2.0 * w))[:, None]        # smoothstep: no velocity jump at the edges
             out[lo:hi, k, ax] = out[lo:hi, k, ax] * (1 - w) + anchor[ax] * w
     return out
