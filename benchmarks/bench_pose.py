@@ -141,12 +141,14 @@ def targets_from_gt(pos, world, fps, devices=REQUIRED_DEVICES):
 
 def calibrated_body(gt_body, legs=False):
     """The body a T-pose calibration builds for this performer: the solver's proportions at the
-    performer's stature (the skeleton's head above its ankles / 0.871) and wrist-to-wrist span.
+    performer's stature (the skeleton's head joint above its ankles by the body model's proportions,
+    :func:`~blender_manikin.core.skeleton.stature_from_head_above_ankles`, as the calibration
+    sizes a body from the head's height) and wrist-to-wrist span.
     legs: with a pelvis tracker the T-pose also measures the legs from the pelvis joint's height
     (``calibration._legs_from_pelvis_height``: the skeleton's pelvis above its ankles, plus the
     model's ankle height, split into thigh and shank by the proportions)."""
     from blender_manikin.core.calibration import _legs_from_pelvis_height
-    stature = float(features.stature_from_offsets(gt_body.offsets))
+    stature = float(sk.stature_from_head_above_ankles(features.head_above_ankles(gt_body.offsets)))
     rest = gt_body.rest_positions()
     span = float(np.linalg.norm(rest[sk.J["left_wrist"]] - rest[sk.J["right_wrist"]]))
     m = sk.BodyMeasurements(stature=stature, arm_span=span)

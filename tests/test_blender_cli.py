@@ -141,7 +141,7 @@ def test_implausible_stature_is_flagged_in_the_summary(tmp_path, capsys, monkeyp
     rec = write_recording_csv(tmp_path / "low.csv", synthetic_result(T=30, fps=30.0, stature=1.2))
     assert cli.main(["solve", str(rec), "--out", str(tmp_path / "o"), "--format", "json"]) == 0
     line = capsys.readouterr().out.strip()
-    assert "estimated stature 1.19 m is outside 1.40-2.10 m" in line and "floor" in line, line
+    assert "estimated stature 1.20 m is outside 1.40-2.10 m" in line and "floor" in line, line
     # a plausible one says nothing
     rec = write_recording_csv(tmp_path / "ok.csv", synthetic_result(T=30, fps=30.0, stature=1.75))
     assert cli.main(["solve", str(rec), "--out", str(tmp_path / "o"), "--format", "json"]) == 0

@@ -13,6 +13,7 @@ from blender_manikin.core.device_offsets import (
     to_targets, validate_offsets,
 )
 from blender_manikin.core.pose_result import TrackerTargets
+from blender_manikin.core import skeleton as sk
 from blender_manikin.core.formats import load_recording
 from blender_manikin.core.recording import from_blender
 from blender_manikin.core.resample import resample
@@ -110,11 +111,11 @@ def test_presets_are_editable_copies_and_json_round_trip(tmp_path):
 
 def test_head_offset_is_behind_and_below_the_eyes():
     e = get_preset("openxr_generic")["devices"]["head"]
-    np.testing.assert_allclose(e["pos"], [0.0, 0.08, -0.045])
+    np.testing.assert_allclose(e["pos"], [0.0, 0.08, -0.115])
     np.testing.assert_allclose(e["rot"], [1, 0, 0, 0])
     # HMD turned 90 deg left: the head joint is then 8 cm to the HMD's right (+Y rotated to -X)
     p, R = apply_offsets(np.array([0, 0, 1.6]), rz(90.0), e)
-    np.testing.assert_allclose(p, [-0.08, 0, 1.555], atol=1e-12)
+    np.testing.assert_allclose(p, [-0.08, 0, 1.485], atol=1e-12)
 
 
 @pytest.mark.parametrize("side", ["left", "right"])
@@ -163,7 +164,7 @@ def test_to_targets():
     t = to_targets(times, pos, quat, {"head": np.arange(10) > 2}, "openxr_generic")
     assert isinstance(t, TrackerTargets) and t.fps == pytest.approx(30)
     assert t.devices == ("head", "left_hand") and t.num_frames == 10
-    np.testing.assert_allclose(t.pos["head"][0], [0, 0.08, 1.555])
+    np.testing.assert_allclose(t.pos["head"][0], [0, 0.08, 1.485])
     assert t.rot["left_hand"].shape == (10, 3, 3)
     assert t.valid["head"].sum() == 7 and t.valid["left_hand"].all()
     assert validate_offsets(None)["devices"]["head"]["pos"] == [0.0, 0.0, 0.0]
@@ -322,12 +323,12 @@ def test_beat_saber_preset_puts_wrists_within_reach_on_real_data():
     def reach_ratio(preset):
         tg = to_targets(times, pos, quat, valid, preset)
         head = tg.pos["head"]
-        H = np.median(head[:, 2]) / 0.910
+        H = np.median(head[:, 2]) / sk.PROPORTIONS["head_height"]
         yaw_fwd = tg.rot["head"][:, :, 1] * [1, 1, 0]                   # backward axis, horizontal
         left = np.cross(yaw_fwd / np.linalg.norm(yaw_fwd, axis=1, keepdims=True), [0, 0, 1.0])
         out = []
         for d, s in (("left_hand", 1.0), ("right_hand", -1.0)):
-            shoulder = head + s * left * 0.1045 * H - [0, 0, (0.910 - 0.818) * H]
+            shoulder = head + s * left * 0.1045 * H - [0, 0, (sk.PROPORTIONS["head_height"] - 0.818) * H]
             dist = np.linalg.norm(tg.pos[d] - shoulder, axis=1)
             out.append(np.percentile(dist, 99) / (0.332 * H))
         return max(out)

@@ -79,11 +79,13 @@ def test_rest_pose_gives_identity():
 
 
 @pytest.mark.parametrize("adaptive", [True, False])
-def test_aimed_chain_reproduces_exact_positions_and_keeps_axial_limits(adaptive):
+@pytest.mark.parametrize("seed", [1, 2, 5])
+def test_aimed_chain_reproduces_exact_positions_and_keeps_axial_limits(adaptive, seed):
     """Keypoint IK (aim_chain, within_limits): exact positions still give the pose back, noisy
-    ones never turn a shoulder or hip about its own axis past its range."""
+    ones never turn a shoulder or hip about its own axis past its range (seeds 2 and 5 have
+    frames where the secant steps alone missed the limit by up to 70°)."""
     from blender_manikin.core import limb_solver as ls
-    rng, body, loc, pos, wr = _pose(1)
+    rng, body, loc, pos, wr = _pose(seed)
     ends = {j: wr[:, j] for j in ENDS}
     res = hybrik.ik_from_positions(pos, body, end_rot=ends, adaptive=adaptive, aim_chain=True)
     assert np.abs(res.positions - pos).max() < 1e-6

@@ -14,7 +14,8 @@ def test_topology_matches_smpl_body():
 def test_body_proportions_scale_with_stature(H):
     body = sk.make_body(H)
     rest = body.rest_positions()
-    assert np.isclose(rest[sk.J["head"], 2], 0.910 * H)
+    assert np.isclose(rest[sk.J["head"], 2], 0.870 * H)
+    assert np.isclose(rest[sk.J["neck"], 2], 0.830 * H)
     assert np.isclose(rest[sk.J["left_ankle"], 2], 0.039 * H)
     assert np.isclose(rest[sk.J["left_shoulder"], 2], 0.818 * H)
     assert rest[:, 2].min() >= 0.0                         # nothing below the floor

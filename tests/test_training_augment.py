@@ -45,16 +45,32 @@ def _moving_clipset(n=3, T=120, seed=0):
     return cs
 
 
-def test_body_features_are_zero_for_the_solvers_bodies_and_track_proportions():
+def test_body_features_are_the_same_for_every_stature_and_track_proportions():
+    default = (ds.SOLVER_MEASURES - features.BODY_REFERENCE) * features.BODY_SCALE
     for s in (1.5, 1.75, 2.0):
         b = sk.make_body(s)
-        assert np.abs(features.body_features(b.offsets, s)).max() < 1e-6
-        assert features.stature_from_offsets(b.offsets) == pytest.approx(s, abs=1e-9)
+        s_net = features.stature_from_offsets(b.offsets)
+        head_above = sk.PROPORTIONS["head_height"] - sk.PROPORTIONS["ankle_height"]
+        assert s_net == pytest.approx(s * head_above / features.HEAD_ABOVE_ANKLES, abs=1e-9)
+        assert np.abs(features.body_features(b.offsets, s_net) - default).max() < 1e-6
     long_legs = sk.make_body(sk.BodyMeasurements(stature=1.75, thigh=0.245 * 1.75 * 1.1))
-    f = features.body_features(long_legs.offsets, 1.75)
+    s_net = features.stature_from_offsets(long_legs.offsets)
+    f = features.body_features(long_legs.offsets, s_net) - default
     k = features.BODY_FEATURES.index("thigh")
-    assert f[k] == pytest.approx(features.BODY_SCALE * 0.1 * 0.245, rel=1e-6)
+    assert f[k] == pytest.approx(features.BODY_SCALE * 0.1 * 0.245 * 1.75 / s_net, rel=1e-5)
     assert np.abs(np.delete(f, [k, features.BODY_FEATURES.index("torso")])).max() < 1e-6
+
+
+def test_body_reference_is_the_body_model_the_networks_were_trained_with(monkeypatch):
+    """The contract's reference and length unit are the body model's proportions of the training
+    time (head joint at 0.910, neck at 0.840): such a body has zero features and its network
+    stature is its stature."""
+    monkeypatch.setitem(sk.PROPORTIONS, "head_height", 0.910)
+    monkeypatch.setitem(sk.PROPORTIONS, "neck_height", 0.840)
+    for s in (1.5, 1.75, 2.0):
+        b = sk.make_body(s)
+        assert features.stature_from_offsets(b.offsets) == pytest.approx(s, abs=1e-9)
+        assert np.abs(features.body_features(b.offsets, s)).max() < 1e-6
 
 
 def test_random_bodies_stand_on_the_floor_with_the_stature_asked_for():
@@ -80,8 +96,8 @@ def test_random_bodies_stand_on_the_floor_with_the_stature_asked_for():
 
 
 def test_random_bodies_span_the_reference_proportions():
-    """Bodies are drawn between the source skeleton's proportions and the solver's reference, so
-    the bodies the solver builds at run time (features 0) are inside the training range."""
+    """Bodies are drawn between the source skeleton's proportions and the solver's default body,
+    so the bodies the solver builds at run time are inside the training range."""
     cs = _standing_clipset()
     cs.offsets = cs.offsets * 1.0
     cs.offsets[:, [J["left_knee"], J["right_knee"]]] *= 1.15       # a source with long thighs
@@ -90,7 +106,8 @@ def test_random_bodies_span_the_reference_proportions():
     smp = ds.WindowSampler(cs, window=4, seed=0)
     bf = smp.sample(400)["x"][:, 0, features.input_dim():]
     lo, hi = np.percentile(bf, 2, axis=0), np.percentile(bf, 98, axis=0)
-    assert (lo < 0).all() and (hi > 0).all(), (lo, hi)
+    default = (ds.SOLVER_MEASURES - features.BODY_REFERENCE) * features.BODY_SCALE
+    assert (lo < default).all() and (hi > default).all(), (lo, default, hi)
 
 
 def test_mirror_is_a_reflection_with_sides_swapped():

@@ -7,13 +7,14 @@ after Walk-In-Avatar, Ponton et al. 2022): the performer stands still in a
 T-pose (or A-pose) for a moment; from the joint targets averaged over a short
 window (default ±0.25 s) we measure
 
-* stature ``H`` = head joint height / 0.910 (the body model puts the skull
-  base at 0.910 H, :data:`.skeleton.PROPORTIONS`; from a raw HMD eye height
-  use :func:`stature_from_eye_height`, eyes at ~0.936 H);
+* stature ``H`` = head joint height / 0.870 (the body model puts its head
+  joint, the top of the neck, at 0.870 H, :data:`.skeleton.PROPORTIONS`;
+  from a raw HMD eye height use :func:`stature_from_eye_height`, eyes at
+  ~0.936 H);
 * arm span (wrist to wrist, what :class:`.skeleton.BodyMeasurements` calls
   ``arm_span``): the wrist distance in a T-pose; in an A-pose the shoulder
   breadth (0.209 H) plus both shoulder-to-wrist distances, the shoulders
-  placed 0.818 H - 0.910 H below the head joint;
+  placed 0.870 H - 0.818 H below the head joint;
 * the constant rotation between each device and its joint: in the pose the
   joint orientation is known - head, pelvis and ankles face the body heading
   (identity rotated by the heading yaw), a wrist's rest orientation (hand
@@ -90,7 +91,7 @@ from .rotations import geodesic_angle, matrix_to_quat, normalize, orthonormalize
 from .skeleton import J, PROPORTIONS, BodyMeasurements, make_body
 
 #: eye (HMD) height as a fraction of stature (Drillis & Contini, Winter 2009 Fig. 4.1)
-EYE_HEIGHT = 0.936
+EYE_HEIGHT = PROPORTIONS["eye_height"]
 HEAD_HEIGHT = PROPORTIONS["head_height"]
 SHOULDER_HEIGHT = PROPORTIONS["shoulder_height"]
 SHOULDER_WIDTH = PROPORTIONS["shoulder_width"]
@@ -124,7 +125,7 @@ class CalibrationError(ValueError):
 
 
 def stature_from_head_height(z):
-    """Stature (m) from the head joint (skull base) height above the floor (m)."""
+    """Stature (m) from the head joint (top of the neck) height above the floor (m)."""
     return float(z) / HEAD_HEIGHT
 
 

@@ -35,10 +35,10 @@ All values are approximate physical measurements; :mod:`.calibration`
 refines the rotations from a T-pose.
 
 *Head* (all presets except ``none``): the HMD pose is the point between the
-eyes looking forward; the head joint (skull base, :mod:`.skeleton` places it
-at 0.910 of stature, the eyes are at ~0.936) is ``HEAD_BACK`` = 8 cm behind
-and ``HEAD_DOWN`` = 4.5 cm below the eyes (0.026 H for H = 1.75 m), no
-rotation.
+eyes looking forward; the head joint (the head's pivot at the top of the
+neck, :mod:`.skeleton` places it at 0.870 of stature, the eyes are at
+~0.936) is ``HEAD_BACK`` = 8 cm behind and ``HEAD_DOWN`` = 11.5 cm below
+the eyes (0.066 H for H = 1.75 m), no rotation.
 
 *Hands*, from the OpenXR grip pose (OpenXR 1.0 spec, "Standard pose
 identifiers"): the grip position is the palm centroid; -Z runs through the
@@ -106,7 +106,7 @@ from .rotations import (
 JOINT_OF_DEVICE = DEVICE_JOINT_NAMES
 
 HEAD_BACK = 0.08
-HEAD_DOWN = 0.045
+HEAD_DOWN = 0.115
 GRIP_PROXIMAL = 0.06
 GRIP_DORSAL = 0.02
 GRIP_TILT_DEG = 15.0

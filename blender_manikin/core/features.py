@@ -22,9 +22,10 @@ in ``INPUT_DEVICES`` order: canonical position (3), canonical orientation
 6D (6), velocity (3, canonical, in statures per second / 10); then, for
 body-conditioned models (SparsePoser's "static encoder" idea), the same
 :data:`BODY_FEATURES` on every frame of the window: the performer's segment
-lengths in statures, minus those of the reference body (Drillis & Contini
-proportions), times :data:`BODY_SCALE`.  So one model adapts to long legs,
-short arms or a low head joint instead of assuming the training actors'
+lengths in statures, minus those of the reference body (:data:`BODY_REFERENCE`,
+the body model's Drillis & Contini proportions when the networks were
+trained), times :data:`BODY_SCALE`.  So one model adapts to long legs, short
+arms or a low head joint instead of assuming the training actors'
 proportions.
 
 Outputs (MANIKIN) ``y`` : ``(B, W, F_out)`` float32 with the blocks of
@@ -43,7 +44,7 @@ import numpy as np
 
 from . import rotations as rot
 from .devices import DEVICE_JOINT, REQUIRED_DEVICES  # noqa: F401  (DEVICE_JOINT: used by training)
-from .skeleton import J, NUM_JOINTS, make_body
+from .skeleton import J, NUM_JOINTS
 
 INPUT_DEVICES = REQUIRED_DEVICES
 PER_DEVICE = 12
@@ -84,10 +85,12 @@ def head_above_ankles(offsets):
 
 
 def stature_from_offsets(offsets):
-    """``(...)`` metres: the stature the network's features are normalised by, from rest
-    offsets ``(..., 22, 3)``.  It is defined as on the bodies the solver builds
-    (:func:`~.skeleton.make_body`, whose head joint stands 0.871 statures above its ankles),
-    so it does not depend on a source skeleton's floor convention or head-joint placement."""
+    """``(...)`` metres: the stature the network's features are normalised by (its length unit),
+    from rest offsets ``(..., 22, 3)``: the head joint above the ankles / :data:`HEAD_ABOVE_ANKLES`
+    (0.871), as the body model built bodies when the networks were trained.  It does not depend
+    on a source skeleton's floor convention.  (The body model's own stature of a body,
+    :func:`~.skeleton.stature_from_head_above_ankles`, is 0.871 / 0.831 = 1.048 times it since its
+    head joint moved down to 0.870.)"""
     return head_above_ankles(offsets) / HEAD_ABOVE_ANKLES
 
 
@@ -119,16 +122,21 @@ def body_measures(offsets, stature):
     return m / s[..., None]
 
 
-_REFERENCE_BODY = make_body(1.0)
-#: statures between the head joint and the ankles of the reference body (0.871)
-HEAD_ABOVE_ANKLES = float(head_above_ankles(_REFERENCE_BODY.offsets))
-BODY_REFERENCE = body_measures(_REFERENCE_BODY.offsets, 1.0)
+#: statures between the head joint and the ankles on the bodies the networks were trained with
+#: (the body model's proportions of that time: head joint 0.910, ankles 0.039).  A constant of the
+#: network contract (its length unit), not of the body model: ``make_body`` now puts the head
+#: joint lower (:mod:`.skeleton`), and a network sees the body's head above its ankles / 0.871.
+HEAD_ABOVE_ANKLES = 0.871
+#: body measures (statures, :data:`BODY_FEATURES` order) the body features are taken relative to:
+#: the body model's proportions when the networks were trained.  Recorded in each model's contract
+#: (``body_normalisation.reference``) and checked against it when a model is loaded.
+BODY_REFERENCE = np.array([0.245, 0.246, 0.027, 0.280, 0.070, 0.100, 0.209, 0.186, 0.146])
 
 
 def body_features(offsets, stature):
     """Network body features ``(..., K)`` float32 (see module doc) from rest
-    offsets ``(..., 22, 3)`` metres and stature ``(...)`` metres; zero for the
-    reference (Drillis & Contini) body of any stature."""
+    offsets ``(..., 22, 3)`` metres and stature ``(...)`` metres (:func:`stature_from_offsets`);
+    zero for a body with the proportions of :data:`BODY_REFERENCE`."""
     return ((body_measures(offsets, stature) - BODY_REFERENCE) * BODY_SCALE).astype(np.float32)
 
 

@@ -152,12 +152,13 @@ straight up, arms along +-X, legs along -Z, the foot flat along
 offsets (in a chest frame built from spine3->neck and the collar line) and
 shoulder directions are the clip's mean vectors, mirrored and averaged so the
 body is left-right symmetric.  The pelvis height puts the rest balls of the
-feet at 0.012 of stature with stature = head height / 0.910, the rules of
+feet at 0.012 of stature with stature = head height / 0.870, the rules of
 ``skeleton.make_body`` and ``Body.from_offsets``.  For a body made by
 ``make_body`` and posed by FK this reproduces its offsets exactly.  (The
-Bandai ``Head`` joint is at the top of the neck, about 0.83 of stature, so
-the head-based stature of the Bandai skeleton, 1.53 m, is low; its leg
-length suggests about 1.63 m.)
+Bandai ``Head`` joint is at the top of the neck, as the body model's head
+joint now is; measured with the body model's old skull-base head, 0.910 of
+stature, the head-based stature of the Bandai skeleton came out 1.53 m, low
+for legs that suggest about 1.63 m.)
 """
 from __future__ import annotations
 

@@ -11,8 +11,9 @@ names its K points in file order.  :func:`body22_from_keypoints` places the 22 b
   along the trunk, the neck base ``neck_height - shoulder_height`` above the shoulders'
   midpoint (or is the layout's neck / thorax), spine1-3 are spaced between them (through the
   Human3.6M spine point where there is one), the collars sit where the rest body puts them
-  relative to the neck and shoulders, and the head joint (skull base) lies between the ears,
-  or 0.44 of the way from the neck to the head top;
+  relative to the neck and shoulders, and the head joint (the top of the neck) lies 0.04
+  statures below the midpoint of the ears (along the head's up axis, the face giving the
+  head's frame), or 0.24 of the way from the neck to the head top;
 * the toes / ball of the foot (the ``foot`` joints) come from the layout's toe points, else
   flat ahead of the ankle, facing the way the hips face.
 
@@ -64,8 +65,10 @@ _BODY25 = (
 )
 
 
-#: the head joint (skull base) lies this far from the neck base to the head top
+#: the head joint (top of the neck) lies this far from the neck base to the head top
 _HEAD_ALONG_NECK = (PROPORTIONS["head_height"] - PROPORTIONS["neck_height"]) / (1.0 - PROPORTIONS["neck_height"])
+#: statures the ears (the skull base) stand above the head joint, along the head's up axis
+_EARS_ABOVE_HEAD = PROPORTIONS["ear_height"] - PROPORTIONS["head_height"]
 
 
 @dataclass(frozen=True)
@@ -218,13 +221,13 @@ def body22_from_keypoints(points, layout) -> Body22:
         P[:, J[f"{side}_collar"]] = above_sh + a * (P[:, J[f"{side}_shoulder"]] - above_sh) + b * up_sh
 
     no_twist = []
-    # head: the skull base between the ears, oriented by the face
+    # head: below the skull base between the ears, oriented by the face
     if "left_ear" in lay:
         ears = 0.5 * (pt("left_ear") + pt("right_ear"))
-        P[:, J["head"]] = ears
         left = pt("left_ear") - pt("right_ear")
         fwd = pt("nose") - ears
         end_rot[J["head"]] = rot.frame_from_axes(left, -fwd, "xy")     # +X the head's left, +Y its back
+        P[:, J["head"]] = ears - _EARS_ABOVE_HEAD * H * end_rot[J["head"]][..., 2]
     elif "head_top" in lay:
         top = pt("head_top")
         P[:, J["head"]] = neck + _HEAD_ALONG_NECK * (top - neck)
@@ -292,15 +295,16 @@ def keypoints_from_body22(positions, world_rot, layout, body_stature=1.7):
         return P[:, j] + R[:, j] @ (np.asarray(offset, np.float64) * H)
 
     mid_hip = 0.5 * (P[:, J["left_hip"]] + P[:, J["right_hip"]])
+    e = _EARS_ABOVE_HEAD                      # the face stands this far above the head joint
     pts = {}
     for side, sx in (("left", 1.0), ("right", -1.0)):
         for j in ("hip", "knee", "ankle", "shoulder", "elbow", "wrist"):
             pts[f"{side}_{j}"] = P[:, J[f"{side}_{j}"]]
-        pts[f"{side}_ear"] = at("head", [sx * 0.045, 0.0, 0.0])
-        pts[f"{side}_eye"] = at("head", [sx * 0.018, -0.05, 0.02])
-        pts[f"{side}_eye_inner"] = at("head", [sx * 0.010, -0.05, 0.02])
-        pts[f"{side}_eye_outer"] = at("head", [sx * 0.026, -0.048, 0.02])
-        pts[f"mouth_{side}"] = at("head", [sx * 0.014, -0.052, -0.03])
+        pts[f"{side}_ear"] = at("head", [sx * 0.045, 0.0, e])
+        pts[f"{side}_eye"] = at("head", [sx * 0.018, -0.05, e + 0.02])
+        pts[f"{side}_eye_inner"] = at("head", [sx * 0.010, -0.05, e + 0.02])
+        pts[f"{side}_eye_outer"] = at("head", [sx * 0.026, -0.048, e + 0.02])
+        pts[f"mouth_{side}"] = at("head", [sx * 0.014, -0.052, e - 0.03])
         pts[f"{side}_index"] = at(f"{side}_wrist", [sx * 0.055, -0.012, 0.0])
         pts[f"{side}_pinky"] = at(f"{side}_wrist", [sx * 0.055, 0.012, 0.0])
         pts[f"{side}_thumb"] = at(f"{side}_wrist", [sx * 0.03, -0.025, -0.005])
@@ -309,7 +313,7 @@ def keypoints_from_body22(positions, world_rot, layout, body_stature=1.7):
         pts[f"{side}_big_toe"] = at(f"{side}_ankle", [-sx * 0.015, -0.11, -0.027])
         pts[f"{side}_small_toe"] = at(f"{side}_ankle", [sx * 0.015, -0.10, -0.027])
         pts[f"{side}_hand"] = at(f"{side}_wrist", [sx * 0.05, 0.0, 0.0])
-    pts["nose"] = at("head", [0.0, -0.06, 0.0])
+    pts["nose"] = at("head", [0.0, -0.06, e])
     pts["head_top"] = P[:, J["neck"]] + (P[:, J["head"]] - P[:, J["neck"]]) / _HEAD_ALONG_NECK
     pts["thorax"] = P[:, J["neck"]]
     pts["spine"] = P[:, J["spine2"]]

@@ -216,7 +216,7 @@ def size_body(P, height=None, derived_spine=False) -> sk.Body:
     Each bone's length is its median over the frames, left and right averaged; directions and
     the rest pose are those of :func:`.skeleton.make_body` (limbs straight along the axes, feet
     on the floor), so the limb solver's hinge axes hold.  height: scales the body to that
-    stature (metres; the head joint 0.871 statures above the ankles).
+    stature (metres; the head joint 0.831 statures above the ankles, :data:`.skeleton.PROPORTIONS`).
 
     derived_spine: the spine joints are guesses on the line from the pelvis to the neck (layouts
     with no spine points): that line shortens when the trunk bends and never grows longer than
@@ -250,7 +250,7 @@ def size_body(P, height=None, derived_spine=False) -> sk.Body:
         rel[j] = rel[sk.PARENTS[j]] + off[j]
     ankle = min(rel[sk.J["left_ankle"], 2], rel[sk.J["right_ankle"], 2])
     head_above_ankle = rel[sk.J["head"], 2] - ankle
-    H = head_above_ankle / (sk.PROPORTIONS["head_height"] - sk.PROPORTIONS["ankle_height"])
+    H = float(sk.stature_from_head_above_ankles(head_above_ankle))
     if height:
         s = float(height) / H
         off, rel, ankle, H = off * s, rel * s, ankle * s, float(height)

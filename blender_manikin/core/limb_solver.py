@@ -410,14 +410,17 @@ def solve_limbs_within_limits(base_pos, end_pos, swivel, lengths, parent_rot, en
         rest = dict(lengths=lengths[bad, k:k + 1], parent_rot=parent_rot[bad, k:k + 1],
                     end_rot=None if end_rot is None else np.asarray(end_rot)[bad, k:k + 1], limb_ids=[li])
 
-        def excess_at(phi):
-            """Signed angle beyond the nearest limit (0 inside), and the rotation."""
-            s_ = solve_limbs(*args, phi[:, None], **rest)
+        def excess_at(phi, sel=slice(None)):
+            """Signed angle beyond the nearest limit (0 inside), and the rotation, of the frames
+            ``bad[sel]`` at swivels ``phi``."""
+            s_ = solve_limbs(args[0][sel], args[1][sel], phi[:, None],
+                             **{n: (v[sel] if isinstance(v, np.ndarray) else v) for n, v in rest.items()})
             r, e = axial_rotation(s_.base_local, [li])
             lo_, hi_ = axial_range(e, [li])
             return (r - np.clip(r, lo_, hi_))[:, 0], r[:, 0]
 
-        phi = swivel[bad, k]
+        phi0 = swivel[bad, k]
+        phi = phi0.copy()
         for _ in range(iterations):
             err, r = excess_at(phi)
             if np.all(np.abs(err) < 1e-6):
@@ -429,13 +432,41 @@ def solve_limbs_within_limits(base_pos, end_pos, swivel, lengths, parent_rot, en
             step = np.clip(np.where(np.abs(err) < 1e-6, 0.0, err / slope), -0.5, 0.5)
             phi = phi - step
         err, _ = excess_at(phi)
-        # where the steps did not reach the limit (near the measure's singularity), keep the
-        # prediction rather than jump to wherever the last step landed
         ok = np.abs(err) < 1e-3
-        swivel[bad[ok], k] = np.angle(np.exp(1j * phi[ok]))
+        if not ok.all():
+            # near the measure's singularity the steps can miss: search the swivel circle instead
+            sel = np.nonzero(~ok)[0]
+            phi[sel] = _nearest_swivel_within(lambda f: excess_at(f, sel)[0], phi0[sel])
+        swivel[bad, k] = np.angle(np.exp(1j * phi))
     if changed:
         sol = solve_limbs(base_pos, end_pos, swivel, lengths, parent_rot, end_rot=end_rot, limb_ids=ids)
     return sol, swivel
+
+
+def _nearest_swivel_within(excess, phi0, samples=72, bisections=24):
+    """``(n,)`` swivels (radians) nearest ``phi0`` ``(n,)`` whose ``excess(phi)`` ``(n,)`` (angle
+    beyond a limit, 0 inside) is zero: the circle sampled every 360/``samples`` degrees, then the
+    edge between the nearest sample inside and its outside neighbour towards ``phi0`` bisected.
+    Where no sample is inside, the sample with the least excess."""
+    steps = np.arange(samples) * (2 * np.pi / samples)
+    # samples ordered by angular distance from phi0: 0, +d, -d, +2d, -2d, ...
+    order = np.concatenate([[0.0], np.stack([steps[1:samples // 2 + 1], -steps[1:samples // 2 + 1]], 1).ravel()])
+    cand = phi0[:, None] + order[None]                                        # (n, S)
+    ex = np.stack([np.abs(excess(cand[:, i])) for i in range(cand.shape[1])], 1)
+    inside = ex < 1e-9
+    first = np.where(inside.any(1), inside.argmax(1), ex.argmin(1))
+    rows = np.arange(phi0.size)
+    out = cand[rows, first]
+    # bisect towards phi0 between the inside sample and the one a step nearer phi0 (outside)
+    step = np.where(order[first] > 0, -1.0, 1.0) * (2 * np.pi / samples)
+    edge = inside.any(1) & (first > 0)
+    a, b = out.copy(), out + step                                             # a inside, b outside
+    for _ in range(bisections):
+        m = 0.5 * (a + b)
+        inn = np.abs(excess(m)) < 1e-9
+        a = np.where(inn, m, a)
+        b = np.where(inn, b, m)
+    return np.where(edge, a, out)
 
 
 def limit_report(solution: LimbSolution, limb_ids=None):

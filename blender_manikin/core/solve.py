@@ -165,7 +165,7 @@ def make_targets(times, pos, quat, valid, fps, offsets="none"):
 
 def body_from_head_height(targets: TrackerTargets, height=None, arm_span=None) -> sk.Body:
     """A body when no calibration pose is available: stature = ``height`` (metres) if given,
-    else the 90th percentile of the head joint height / 0.910 (standing), clipped to 1.0-2.3 m."""
+    else the 90th percentile of the head joint height / 0.870 (standing), clipped to 1.0-2.3 m."""
     if height is None:
         head_z = np.asarray(targets.pos["head"])[:, 2]
         height = float(np.clip(np.nanpercentile(head_z, 90) / sk.PROPORTIONS["head_height"], 1.0, 2.3))

@@ -81,7 +81,7 @@ from ..core.devices import HAND_DEVICES
 from ..core import hybrik
 from ..core import limb_solver as ls
 from ..core import rotations as rot
-from ..core.skeleton import PROPORTIONS, Body, J, JOINT_NAMES, LIMBS, NUM_JOINTS, forward_kinematics
+from ..core.skeleton import PROPORTIONS, Body, J, JOINT_NAMES, LIMBS, NUM_JOINTS, forward_kinematics, make_body
 
 #: bump when the stored ground truth changes meaning
 PREPROCESS_VERSION = 1
@@ -687,6 +687,10 @@ def lowest_foot_height(local, root, offsets):
             if j in _FOOT_JOINTS:
                 low = p[:, 2] if low is None else np.minimum(low, p[:, 2])
     return low
+#: the body measures (:data:`features.BODY_FEATURES`, in the network's statures) of the body the
+#: solver builds by default (:func:`~..core.skeleton.make_body`), that random bodies move towards
+_DEFAULT_OFFSETS = make_body(1.0).offsets
+SOLVER_MEASURES = features.body_measures(_DEFAULT_OFFSETS, features.stature_from_offsets(_DEFAULT_OFFSETS))
 #: statures between the floor and the lowest foot joint of a standing foot (make_body's ball)
 FOOT_CLEARANCE = PROPORTIONS["foot_height"]
 
@@ -852,19 +856,19 @@ class WindowSampler:
         """A new body for each window: ``(offsets (B, 22, 3), stature (B,), k (B,))``.
 
         Every segment group is scaled by its own factor (see :class:`Augment`), then the whole
-        body so the stature lands in ``Augment.stature``.  The stature is defined as on the
-        bodies the solver builds (:func:`features.stature_from_offsets`: the head joint 0.871
-        statures above the ankles standing straight), whatever the source skeleton's head joint
-        or floor convention.  ``k``: new stature / the source body's stature."""
+        body so the stature lands in ``Augment.stature``.  The stature is the network's length
+        unit (:func:`features.stature_from_offsets`: the head joint above the ankles standing
+        straight / 0.871), whatever the source skeleton's floor convention.  ``k``: new
+        stature / the source body's stature."""
         a, B = self.aug, offsets.shape[0]
         s0 = features.stature_from_offsets(offsets)
         out = offsets.copy()
         if a.segment > 0:
             lo, hi = np.log(1 - a.segment), np.log(1 + a.segment)
             # Each group moves a random part of the way from the source skeleton's proportion to
-            # the reference body's (the solver's default), then by up to ±segment: so the
-            # training bodies span both, and every body the solver builds is inside that range.
-            to_ref = np.log(features.BODY_REFERENCE / features.body_measures(offsets, s0))      # (B, K)
+            # the solver's default body's, then by up to ±segment: so the training bodies span
+            # both, and every body the solver builds is inside that range.
+            to_ref = np.log(SOLVER_MEASURES / features.body_measures(offsets, s0))             # (B, K)
             g = {}
             for name, idx in GROUP_MEASURE.items():
                 r = to_ref[:, list(idx)].mean(-1)
@@ -1198,7 +1202,6 @@ def synthetic_motion(rng, T=120, stature=1.75, fps=MODEL_FPS, take_id="synthetic
     """Smooth random motion posed by FK: sums of sinusoids per joint (elbows and
     knees bend as hinges within limits), the pelvis drifting over the floor and
     lowered so the lowest foot joint touches z = 0."""
-    from ..core.skeleton import make_body
     body = make_body(float(stature))
     t = np.arange(T) / fps
     freq = rng.uniform(0.2, 1.5, (3, NUM_JOINTS, 3))
