@@ -436,36 +436,43 @@ def solve_limbs_within_limits(base_pos, end_pos, swivel, lengths, parent_rot, en
         if not ok.all():
             # near the measure's singularity the steps can miss: search the swivel circle instead
             sel = np.nonzero(~ok)[0]
-            phi[sel] = _nearest_swivel_within(lambda f: excess_at(f, sel)[0], phi0[sel])
+
+            def excess_grid(f):
+                """Excess ``(n, m)`` of the frames ``bad[sel]`` at swivels ``f`` ``(n, m)``."""
+                return excess_at(f.ravel(), np.repeat(sel, f.shape[1]))[0].reshape(f.shape)
+            phi[sel] = _nearest_swivel_within(excess_grid, phi0[sel])
         swivel[bad, k] = np.angle(np.exp(1j * phi))
     if changed:
         sol = solve_limbs(base_pos, end_pos, swivel, lengths, parent_rot, end_rot=end_rot, limb_ids=ids)
     return sol, swivel
 
 
-def _nearest_swivel_within(excess, phi0, samples=72, bisections=24):
-    """``(n,)`` swivels (radians) nearest ``phi0`` ``(n,)`` whose ``excess(phi)`` ``(n,)`` (angle
-    beyond a limit, 0 inside) is zero: the circle sampled every 360/``samples`` degrees, then the
-    edge between the nearest sample inside and its outside neighbour towards ``phi0`` bisected.
-    Where no sample is inside, the sample with the least excess."""
-    steps = np.arange(samples) * (2 * np.pi / samples)
+def _nearest_swivel_within(excess, phi0, samples=72, splits=8, levels=3):
+    """``(n,)`` swivels (radians) nearest ``phi0`` ``(n,)`` whose excess (angle beyond a limit,
+    0 inside) is zero: the circle sampled every 360/``samples`` degrees, then the edge between
+    the nearest sample inside and its outside neighbour towards ``phi0`` cut ``levels`` times
+    into ``splits`` (to 5° / 512, 0.01°).
+    Where no sample is inside, the sample with the least excess.  ``excess(phi)`` maps swivels
+    ``(n, m)`` to their excess ``(n, m)``, one batched solve."""
+    steps = np.arange(1, samples // 2 + 1) * (2 * np.pi / samples)
     # samples ordered by angular distance from phi0: 0, +d, -d, +2d, -2d, ...
-    order = np.concatenate([[0.0], np.stack([steps[1:samples // 2 + 1], -steps[1:samples // 2 + 1]], 1).ravel()])
+    order = np.concatenate([[0.0], np.stack([steps, -steps], 1).ravel()])
     cand = phi0[:, None] + order[None]                                        # (n, S)
-    ex = np.stack([np.abs(excess(cand[:, i])) for i in range(cand.shape[1])], 1)
+    ex = np.abs(excess(cand))
     inside = ex < 1e-9
     first = np.where(inside.any(1), inside.argmax(1), ex.argmin(1))
-    rows = np.arange(phi0.size)
-    out = cand[rows, first]
+    out = cand[np.arange(phi0.size), first]
     # bisect towards phi0 between the inside sample and the one a step nearer phi0 (outside)
     step = np.where(order[first] > 0, -1.0, 1.0) * (2 * np.pi / samples)
     edge = inside.any(1) & (first > 0)
     a, b = out.copy(), out + step                                             # a inside, b outside
-    for _ in range(bisections):
-        m = 0.5 * (a + b)
-        inn = np.abs(excess(m)) < 1e-9
-        a = np.where(inn, m, a)
-        b = np.where(inn, b, m)
+    frac = np.arange(1, splits + 1) / splits
+    for _ in range(levels):
+        pts = a[:, None] + (b - a)[:, None] * frac[None]                       # (n, splits)
+        inn = np.abs(excess(pts)) < 1e-9
+        j = np.where(inn.all(1), splits - 1, (~inn).argmax(1))                  # first outside
+        rows = np.arange(a.size)
+        a, b = np.where(j > 0, pts[rows, np.maximum(j - 1, 0)], a), pts[rows, j]
     return np.where(edge, a, out)
 
 
