@@ -462,7 +462,7 @@ def _nearest_swivel_within(excess, phi0, samples=72, splits=8, levels=3):
     inside = ex < 1e-9
     first = np.where(inside.any(1), inside.argmax(1), ex.argmin(1))
     out = cand[np.arange(phi0.size), first]
-    # bisect towards phi0 between the inside sample and the one a step nearer phi0 (outside)
+    # refine towards phi0 between the inside sample and the one a step nearer phi0 (outside)
     step = np.where(order[first] > 0, -1.0, 1.0) * (2 * np.pi / samples)
     edge = inside.any(1) & (first > 0)
     a, b = out.copy(), out + step                                             # a inside, b outside
