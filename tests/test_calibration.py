@@ -328,7 +328,8 @@ def test_beat_saber_preset_puts_wrists_within_reach_on_real_data():
         left = np.cross(yaw_fwd / np.linalg.norm(yaw_fwd, axis=1, keepdims=True), [0, 0, 1.0])
         out = []
         for d, s in (("left_hand", 1.0), ("right_hand", -1.0)):
-            shoulder = head + s * left * 0.1045 * H - [0, 0, (sk.PROPORTIONS["head_height"] - 0.818) * H]
+            below = (sk.PROPORTIONS["head_height"] - sk.PROPORTIONS["shoulder_height"]) * H
+            shoulder = head + s * left * 0.1045 * H - np.array([0.0, 0.0, below])
             dist = np.linalg.norm(tg.pos[d] - shoulder, axis=1)
             out.append(np.percentile(dist, 99) / (0.332 * H))
         return max(out)

@@ -86,6 +86,10 @@ def test_random_bodies_stand_on_the_floor_with_the_stature_asked_for():
     P = b["pos"].astype(np.float64)                                      # canonical, statures
     low = P[:, :, [J["left_ankle"], J["right_ankle"], J["left_foot"], J["right_foot"]], 2].min(-1)
     assert np.abs(low - ds.FOOT_CLEARANCE).max() < 1e-5
+    # ... which is where the body the solver builds stands its balls of the feet
+    made = sk.make_body(1.75)
+    ball = made.rest_positions()[J["left_foot"], 2] / features.stature_from_offsets(made.offsets)
+    assert ds.FOOT_CLEARANCE == pytest.approx(ball, abs=1e-9)
     # the network's stature is the skeleton's (head 0.871 statures above the ankles)
     head_above = P[:, :, J["head"], 2] - P[:, :, [J["left_ankle"], J["right_ankle"]], 2].mean(-1)
     assert np.abs(head_above - features.HEAD_ABOVE_ANKLES).max() < 1e-5

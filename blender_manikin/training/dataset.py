@@ -687,12 +687,16 @@ def lowest_foot_height(local, root, offsets):
             if j in _FOOT_JOINTS:
                 low = p[:, 2] if low is None else np.minimum(low, p[:, 2])
     return low
+
+
 #: the body measures (:data:`features.BODY_FEATURES`, in the network's statures) of the body the
 #: solver builds by default (:func:`~..core.skeleton.make_body`), that random bodies move towards
 _DEFAULT_OFFSETS = make_body(1.0).offsets
 SOLVER_MEASURES = features.body_measures(_DEFAULT_OFFSETS, features.stature_from_offsets(_DEFAULT_OFFSETS))
-#: statures between the floor and the lowest foot joint of a standing foot (make_body's ball)
-FOOT_CLEARANCE = PROPORTIONS["foot_height"]
+#: the network's statures (:func:`features.stature_from_offsets`) between the floor and the lowest
+#: foot joint of a standing foot: make_body's ball of the foot, foot_height of the body model's
+#: stature, which is 0.871 / 0.831 network statures
+FOOT_CLEARANCE = PROPORTIONS["foot_height"] / float(features.stature_from_offsets(_DEFAULT_OFFSETS))
 
 
 def mirror_motion(local, root, offsets, contacts):
