@@ -154,7 +154,7 @@ def calibrated_body(gt_body, legs=False):
     m = sk.BodyMeasurements(stature=stature, arm_span=span)
     if legs:
         ankle_z = 0.5 * (rest[sk.J["left_ankle"], 2] + rest[sk.J["right_ankle"], 2])
-        pelvis_z = rest[sk.J["pelvis"], 2] - ankle_z + sk.PROPORTIONS["ankle_height"] * stature
+        pelvis_z = rest[sk.J["pelvis"], 2] - ankle_z + sk.PROPORTIONS["ankle_height"] * stature + sk.SOLE
         leg = _legs_from_pelvis_height(pelvis_z, stature)
         m = sk.BodyMeasurements(stature=stature, arm_span=span, thigh=leg["thigh"], shank=leg["shank"])
     return sk.make_body(m)

@@ -31,7 +31,7 @@ def bandai_like_body(stature=1.70):
     rest = sk.Body(off, body.root_rest, body.measurements).rest_positions()
     lowest = rest[[J["left_foot"], J["right_foot"]], 2].min()
     root = body.root_rest.copy()
-    root[2] += sk.PROPORTIONS["foot_height"] * H - lowest
+    root[2] += sk.PROPORTIONS["foot_height"] * H + body.sole - lowest
     return sk.Body(off, root, body.measurements)
 
 

@@ -26,6 +26,7 @@ Options of ``solve`` (they mirror the panel; ``--help`` has them all):
                               overrides the measured stature; alone it is the
                               body measurement)
 --arm-span METRES             wrist-to-wrist span (with --height)
+--sole METRES                 the performer's shoe soles (default 0.03; 0 barefoot)
 --offsets auto|none|PRESET|FILE  device offsets: auto (the file's metadata or its
                               format's default), a preset name or a JSON file
 --layout FILE.json            the columns, time, units, axes and Euler order of
@@ -90,6 +91,9 @@ def _add_solve_options(s):
     s.add_argument("--height", type=float, default=None, metavar="METRES", help="performer's stature")
     s.add_argument("--arm-span", type=float, default=None, metavar="METRES",
                    help="wrist-to-wrist distance in a T-pose")
+    s.add_argument("--sole", type=float, default=None, metavar="METRES",
+                   help="thickness of the performer's shoe soles: the feet stand this far above the floor "
+                        "(default 0.03; 0 barefoot)")
     s.add_argument("--offsets", default="auto", metavar="auto|none|PRESET|FILE",
                    help="device-to-joint offsets: a preset name, a JSON file, or auto (default: the "
                         "recording's '# offsets:' metadata, beat_saber for .bsor, else none)")
@@ -260,7 +264,7 @@ def solve_settings(args):
                        layout=layout, rate=getattr(args, "rate", None), keypoint_layout=keypoint_layout,
                        up=getattr(args, "up", None), smoothing=getattr(args, "smoothing", "auto"),
                        ik=getattr(args, "ik", "adaptive"), mapping=getattr(args, "mapping", None),
-                       model=getattr(args, "model", None))
+                       model=getattr(args, "model", None), sole=getattr(args, "sole", None))
     if args.calibration_time is not None:
         st.calibration, st.tpose_time = "TPOSE", float(args.calibration_time)
         st.height, st.arm_span = args.height, args.arm_span

@@ -87,7 +87,9 @@ def synthetic_motion(body: Optional[skeleton.Body] = None, frames: int = 90, fps
     above their standing height.  Returns ``(body, local_rot (T,22,3,3),
     root_pos (T,3), positions (T,22,3), world_rot (T,22,3,3))``.
     """
-    body = body or skeleton.make_body(1.75)
+    # barefoot by default: a mocap file's floor, estimated from its feet (joint_maps'
+    # floor="auto"), puts the ball of the foot at the body model's barefoot height
+    body = body or skeleton.make_body(skeleton.BodyMeasurements(stature=1.75, sole=0.0))
     rng = np.random.default_rng(seed)
     t = np.arange(frames) / fps
     freq = rng.uniform(0.3, 1.2, size=(22, 3))

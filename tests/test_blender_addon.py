@@ -243,7 +243,7 @@ def test_find_tpose_and_offsets_preset(addon, tmp_path):
     assert s.calibration == 'TPOSE' and 26 / 24 - 1e-6 <= s.tpose_time <= 44 / 24 + 1e-6
     assert bpy.ops.manikin.solve_full_body() == {'FINISHED'}
     assert s.armature["manikin_body"] is not None
-    stature = s.armature.data.bones["head"].head_local[2] / sk.PROPORTIONS["head_height"]
+    stature = (s.armature.data.bones["head"].head_local[2] - sk.SOLE) / sk.PROPORTIONS["head_height"]
     assert abs(stature - 1.8) < 0.02
     s.offsets_preset = 'quest_touch'
     assert bpy.ops.manikin.load_offsets_preset() == {'FINISHED'}

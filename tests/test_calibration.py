@@ -295,7 +295,13 @@ def test_example_recording_calibrates_to_its_body():
 
 
 def test_stature_from_eye_height():
-    assert stature_from_eye_height(1.638) == pytest.approx(1.75, abs=0.001)
+    """Eyes at 0.936 of the barefoot stature, lifted by the shoe soles (3 cm unless given)."""
+    assert sk.SOLE == 0.03
+    assert stature_from_eye_height(1.668) == pytest.approx(1.75, abs=0.001)
+    assert stature_from_eye_height(1.638, sole=0.0) == pytest.approx(1.75, abs=0.001)
+    body = make_body(1.75)
+    eyes = body.rest_positions()[J["head"], 2] + (sk.PROPORTIONS["eye_height"] - sk.PROPORTIONS["head_height"]) * 1.75
+    assert stature_from_eye_height(eyes) == pytest.approx(1.75, abs=1e-9)
 
 
 def test_apply_offsets_with_a_whole_offsets_set():

@@ -11,13 +11,18 @@ def test_topology_matches_smpl_body():
 
 
 @pytest.mark.parametrize("H", [1.5, 1.75, 2.0])
-def test_body_proportions_scale_with_stature(H):
-    body = sk.make_body(H)
+@pytest.mark.parametrize("sole", [None, 0.0, 0.05])
+def test_body_proportions_scale_with_stature(H, sole):
+    """Barefoot proportions of the stature, every joint lifted by the soles (3 cm unless given)."""
+    body = sk.make_body(sk.BodyMeasurements(stature=H, sole=sole))
+    s = 0.03 if sole is None else sole
+    assert body.sole == s and body.stature == H
     rest = body.rest_positions()
-    assert np.isclose(rest[sk.J["head"], 2], 0.870 * H)
-    assert np.isclose(rest[sk.J["neck"], 2], 0.830 * H)
-    assert np.isclose(rest[sk.J["left_ankle"], 2], 0.039 * H)
-    assert np.isclose(rest[sk.J["left_shoulder"], 2], 0.818 * H)
+    assert np.isclose(rest[sk.J["head"], 2], 0.870 * H + s)
+    assert np.isclose(rest[sk.J["neck"], 2], 0.830 * H + s)
+    assert np.isclose(rest[sk.J["left_ankle"], 2], 0.039 * H + s)
+    assert np.isclose(rest[sk.J["left_shoulder"], 2], 0.818 * H + s)
+    assert np.isclose(rest[sk.J["left_foot"], 2], 0.012 * H + s)  # the ball of the foot on its sole
     assert rest[:, 2].min() >= 0.0                         # nothing below the floor
     assert rest[sk.J["left_wrist"], 0] > 0 > rest[sk.J["right_wrist"], 0]   # left is +X
     assert rest[sk.J["left_foot"], 1] < rest[sk.J["left_ankle"], 1]          # faces -Y
@@ -68,3 +73,19 @@ def test_fk_rest_and_vectorised_against_loop():
     # bone lengths are preserved by FK
     L = np.linalg.norm(pos[:, 1:] - pos[:, sk.PARENTS[1:]], axis=-1)
     assert np.allclose(L, body.bone_lengths()[1:])
+
+
+@pytest.mark.parametrize("sole", [-0.01, 0.25, float("nan")])
+def test_implausible_soles_are_refused(sole):
+    with pytest.raises(ValueError, match="sole"):
+        sk.make_body(sk.BodyMeasurements(stature=1.75, sole=sole))
+
+
+def test_body_from_offsets_stands_where_its_root_says():
+    """from_offsets keeps the feet where the root puts them; its stature discounts the soles."""
+    made = sk.make_body(1.80)
+    b = sk.Body.from_offsets(made.offsets, made.root_rest, sole=made.sole)
+    assert b.sole == made.sole and b.stature == pytest.approx(1.80, abs=1e-9)
+    np.testing.assert_allclose(b.rest_positions(), made.rest_positions())
+    bare = sk.Body.from_offsets(made.offsets, made.root_rest - [0, 0, made.sole])
+    assert bare.sole == 0.0 and bare.stature == pytest.approx(1.80, abs=1e-9)

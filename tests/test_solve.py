@@ -37,6 +37,33 @@ def test_a_recording_object_is_solved_the_same_as_its_file():
     assert np.array_equal(a.result.local_rot, b.result.local_rot)
 
 
+def test_the_soles_lift_the_body_and_leave_the_barefoot_stature():
+    """The example's performer (1.75 m barefoot) stands on 3 cm soles: calibrated with the
+    default soles the stature is 1.75 m; told barefoot, the same head height is a taller body;
+    the solved balls of the feet never go through the soles; a typed height stays as typed."""
+    rec = load_recording(EXAMPLE)
+    shod = cs.solve_recording(rec, cs.SolveSettings(fps=30.0))
+    bare = cs.solve_recording(rec, cs.SolveSettings(fps=30.0, sole=0.0))
+    thick = cs.solve_recording(rec, cs.SolveSettings(fps=30.0, sole=0.06))
+    assert shod.body.sole == 0.03 and bare.body.sole == 0.0 and thick.body.sole == 0.06
+    assert shod.body.stature == pytest.approx(1.75, abs=0.01)
+    assert bare.body.stature - shod.body.stature == pytest.approx(0.03 / 0.870, abs=2e-3)
+    assert shod.body.stature - thick.body.stature == pytest.approx(0.03 / 0.870, abs=2e-3)
+    for out in (shod, bare, thick):
+        ball = out.result.positions[:, [10, 11], 2]           # balls of the feet
+        assert ball.min() >= out.body.sole - 0.003               # (the solved foot turns a little)
+    typed = cs.solve_recording(rec, cs.SolveSettings(fps=30.0, calibration="MEASURE", height=1.8, sole=0.05))
+    assert typed.body.stature == 1.8 and typed.body.sole == 0.05
+    assert typed.body.rest_positions()[10, 2] == pytest.approx(0.012 * 1.8 + 0.05, abs=1e-9)
+    # without a calibration pose: the stature from the standing head height, less the soles
+    head_z = np.nanpercentile(shod.targets.pos["head"][:, 2], 90)
+    for sole in (None, 0.0):
+        b = cs.body_from_head_height(shod.targets, sole=sole)
+        assert b.stature == pytest.approx((head_z - (0.03 if sole is None else sole)) / 0.870, abs=1e-9)
+    with pytest.raises(cs.SolveError, match="sole"):
+        cs.solve_recording(rec, cs.SolveSettings(fps=30.0, sole=0.5))
+
+
 def test_settings_errors_are_solve_errors():
     with pytest.raises(cs.SolveError, match="no frame rate"):
         cs.solve_recording(EXAMPLE, cs.SolveSettings(fps=None))

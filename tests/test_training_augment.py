@@ -85,11 +85,12 @@ def test_random_bodies_stand_on_the_floor_with_the_stature_asked_for():
     assert 1.45 <= s.min() and s.max() <= 2.05 and s.max() - s.min() > 0.3
     P = b["pos"].astype(np.float64)                                      # canonical, statures
     low = P[:, :, [J["left_ankle"], J["right_ankle"], J["left_foot"], J["right_foot"]], 2].min(-1)
-    assert np.abs(low - ds.FOOT_CLEARANCE).max() < 1e-5
-    # ... which is where the body the solver builds stands its balls of the feet
+    assert np.abs(low - (ds.FOOT_CLEARANCE + sk.SOLE / s[:, None])).max() < 1e-5
+    # ... which is where the body the solver builds stands its balls of the feet, on its soles
     made = sk.make_body(1.75)
-    ball = made.rest_positions()[J["left_foot"], 2] / features.stature_from_offsets(made.offsets)
-    assert ds.FOOT_CLEARANCE == pytest.approx(ball, abs=1e-9)
+    s_made = features.stature_from_offsets(made.offsets)
+    ball = made.rest_positions()[J["left_foot"], 2] / s_made
+    assert ds.FOOT_CLEARANCE + sk.SOLE / s_made == pytest.approx(ball, abs=1e-9)
     # the network's stature is the skeleton's (head 0.871 statures above the ankles)
     head_above = P[:, :, J["head"], 2] - P[:, :, [J["left_ankle"], J["right_ankle"]], 2].mean(-1)
     assert np.abs(head_above - features.HEAD_ABOVE_ANKLES).max() < 1e-5
@@ -152,7 +153,8 @@ def test_calibration_holds_stand_straight_on_both_feet():
     held = (contact.min(-1) > 0.5) & (knee < 5.0)
     assert held.any(axis=1).mean() > 0.8, "most windows must contain a held calibration pose"
     low = P[..., [J["left_foot"], J["right_foot"]], 2]
-    assert np.abs(low[held] - ds.FOOT_CLEARANCE).max() < 0.01        # both balls on the floor
+    on_soles = ds.FOOT_CLEARANCE + sk.SOLE / b["stature"].astype(np.float64)[:, None, None]
+    assert np.abs((low - on_soles)[held]).max() < 0.01               # both balls on the floor
     # arms: T-pose (near horizontal) or A-pose (30-50 degrees down)
     arm = P[..., J["left_elbow"], :] - P[..., J["left_shoulder"], :]
     elev = np.degrees(np.arcsin(arm[..., 2] / np.linalg.norm(arm, axis=-1)))[held]

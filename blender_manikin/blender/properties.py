@@ -183,6 +183,10 @@ class MANIKIN_Settings(PropertyGroup):
                              description="Use the typed height instead of the measured stature")
     arm_span: FloatProperty(name="Arm Span", default=0.0, min=0.0, max=3.0, unit='LENGTH',
                             description="Wrist-to-wrist distance in a T-pose (0 = from proportions)")
+    sole: FloatProperty(name="Shoe Soles", default=0.03, min=0.0, max=0.2, unit='LENGTH',
+                        description="Thickness of the performer's shoe soles: the feet stand this far "
+                                    "above the floor, and the height measured from the headset is "
+                                    "the barefoot one (0 = barefoot)")
 
     model: EnumProperty(
         name="Pose Model", default='AUTO',
@@ -292,6 +296,7 @@ def config_from_settings(context):
     if s.use_height or (s.calibration == 'MEASURE' and s.source != 'KEYPOINTS'):
         cfg.height = float(s.height)
     cfg.arm_span = float(s.arm_span) if s.arm_span > 0 else None
+    cfg.sole = float(s.sole)
     if s.offsets_text is not None:
         try:
             cfg.offsets = json.loads(s.offsets_text.as_string())

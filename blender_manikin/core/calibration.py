@@ -7,10 +7,11 @@ after Walk-In-Avatar, Ponton et al. 2022): the performer stands still in a
 T-pose (or A-pose) for a moment; from the joint targets averaged over a short
 window (default ±0.25 s) we measure
 
-* stature ``H`` = head joint height / 0.870 (the body model puts its head
-  joint, the top of the neck, at 0.870 H, :data:`.skeleton.PROPORTIONS`;
-  from a raw HMD eye height use :func:`stature_from_eye_height`, eyes at
-  ~0.936 H);
+* stature ``H`` = (head joint height - sole) / 0.870 (the body model puts
+  its head joint, the top of the neck, at 0.870 H, :data:`.skeleton.PROPORTIONS`,
+  standing on shoe soles :data:`.skeleton.SOLE` = 3 cm thick unless the
+  measurements give ``sole``); from a raw HMD eye height use
+  :func:`stature_from_eye_height`, eyes at ~0.936 H;
 * arm span (wrist to wrist, what :class:`.skeleton.BodyMeasurements` calls
   ``arm_span``): the wrist distance in a T-pose; in an A-pose the shoulder
   breadth (0.209 H) plus both shoulder-to-wrist distances, the shoulders
@@ -88,7 +89,7 @@ from .plain import shown
 from .devices import EXTRA_DEVICES, HAND_DEVICES, REQUIRED_DEVICES
 from .pose_result import TrackerTargets
 from .rotations import geodesic_angle, matrix_to_quat, normalize, orthonormalize, quat_to_matrix, rotation_between
-from .skeleton import J, PROPORTIONS, BodyMeasurements, make_body
+from .skeleton import J, PROPORTIONS, SOLE, BodyMeasurements, make_body
 
 #: eye (HMD) height as a fraction of stature (Drillis & Contini, Winter 2009 Fig. 4.1)
 EYE_HEIGHT = PROPORTIONS["eye_height"]
@@ -124,14 +125,26 @@ class CalibrationError(ValueError):
     """Raised by :func:`calibrate` with ``strict=True`` when the pose is implausible."""
 
 
-def stature_from_head_height(z):
-    """Stature (m) from the head joint (top of the neck) height above the floor (m)."""
-    return float(z) / HEAD_HEIGHT
+def stature_from_head_height(z, sole=SOLE):
+    """Barefoot stature (m) from the head joint (top of the neck) height above the floor (m) of a
+    performer standing on ``sole`` metres of shoe sole."""
+    return (float(z) - float(sole)) / HEAD_HEIGHT
 
 
-def stature_from_eye_height(z):
-    """Stature (m) from the HMD (eye) height above the floor (m)."""
-    return float(z) / EYE_HEIGHT
+def stature_from_eye_height(z, sole=SOLE):
+    """Barefoot stature (m) from the HMD (eye) height above the floor (m) of a performer standing
+    on ``sole`` metres of shoe sole."""
+    return (float(z) - float(sole)) / EYE_HEIGHT
+
+
+def _sole_of(measurements):
+    """The soles' thickness (m) ``measurements`` (a :class:`BodyMeasurements`, a dict or None)
+    give, :data:`.skeleton.SOLE` when they do not."""
+    if isinstance(measurements, BodyMeasurements):
+        return measurements.sole_height
+    if isinstance(measurements, dict) and measurements.get("sole") is not None:
+        return float(measurements["sole"])
+    return SOLE
 
 
 #: statures (metres) outside which the solve summary warns (see :func:`stature_warning`)
@@ -263,7 +276,7 @@ def find_tpose(targets: TrackerTargets, window=0.25, t0=0.0) -> TPoseCandidate:
     head = targets.pos["head"]
     wl = targets.pos["left_hand"]
     wr = targets.pos["right_hand"]
-    H = np.maximum(head[:, 2] / HEAD_HEIGHT, 0.3)
+    H = np.maximum((head[:, 2] - SOLE) / HEAD_HEIGHT, 0.3)
     shoulder_z = head[:, 2] - (HEAD_HEIGHT - SHOULDER_HEIGHT) * H
     span_ratio = np.linalg.norm(wl - wr, axis=-1) / (TPOSE_WRIST_DISTANCE * H)
     height_err = 0.5 * (np.abs(wl[:, 2] - shoulder_z) + np.abs(wr[:, 2] - shoulder_z))
@@ -317,15 +330,17 @@ def typed_tracker_offsets(offsets) -> tuple:
     return tuple(d for d in EXTRA_DEVICES if d in devs and not _is_identity(devs[d]))
 
 
-def _legs_from_pelvis_height(pelvis_z, stature):
-    """Leg measurements (metres) from the pelvis joint height ``pelvis_z`` above the floor (m).
+def _legs_from_pelvis_height(pelvis_z, stature, sole=SOLE):
+    """Leg measurements (metres) from the pelvis joint height ``pelvis_z`` above the floor (m) of a
+    performer standing on ``sole`` metres of shoe sole.
 
     hip height = pelvis height - ``pelvis_above_hips`` H; leg (hip to ankle) = hip height - ankle
-    height (0.039 H, the body model's); thigh : shank as the proportions (0.245 : 0.246).
-    Returns a dict of ``pelvis_height``, ``hip_height``, ``leg_length``, ``thigh``, ``shank``."""
+    height (0.039 H, the body model's, + the sole); thigh : shank as the proportions (0.245 : 0.246).
+    Returns a dict of ``pelvis_height``, ``hip_height`` (above the floor), ``leg_length``,
+    ``thigh``, ``shank``."""
     H = float(stature)
     hip = float(pelvis_z) - PROPORTIONS["pelvis_above_hips"] * H
-    leg = hip - PROPORTIONS["ankle_height"] * H
+    leg = hip - PROPORTIONS["ankle_height"] * H - float(sole)
     k = PROPORTIONS["thigh"] / (PROPORTIONS["thigh"] + PROPORTIONS["shank"])
     return dict(pelvis_height=float(pelvis_z), hip_height=hip, leg_length=leg, thigh=leg * k, shank=leg * (1 - k))
 
@@ -445,7 +460,8 @@ def calibrate(targets: TrackerTargets, time=None, offsets=None, window=0.25, pos
 
     head = mean_pos["head"]
     wl, wr = mean_pos["left_hand"], mean_pos["right_hand"]
-    H_meas = stature_from_head_height(head[2])
+    sole = _sole_of(measurements)
+    H_meas = stature_from_head_height(head[2], sole)
     H = H_meas
     if isinstance(measurements, BodyMeasurements):
         H = float(measurements.stature)
@@ -537,11 +553,11 @@ def calibrate(targets: TrackerTargets, time=None, offsets=None, window=0.25, pos
         z_pelvis = float(mean_pos["pelvis"][2]) if from_typed else \
             float(dev_pos["pelvis"][2]) - PELVIS_TRACKER_ABOVE_JOINT
         legs = {"source": "typed pelvis offset" if from_typed else "pelvis tracker",
-                **_legs_from_pelvis_height(z_pelvis, H)}
-        dev = legs["hip_height"] / H - PROPORTIONAL_HIP_HEIGHT
+                **_legs_from_pelvis_height(z_pelvis, H, sole)}
+        dev = (legs["hip_height"] - sole) / H - PROPORTIONAL_HIP_HEIGHT
         legs["used"] = bool(abs(dev) <= HIP_HEIGHT_LIMIT and legs["leg_length"] > 0.1 * H)
         if abs(dev) > HIP_HEIGHT_NOTE or not legs["used"]:
-            expect = PROPORTIONAL_HIP_HEIGHT * H
+            expect = PROPORTIONAL_HIP_HEIGHT * H + sole
             if from_typed:
                 text = (f"with the typed pelvis offset the hips are at {legs['hip_height']:.2f} m, the proportions "
                         f"put them at {expect:.2f} m: check the pelvis offset")

@@ -210,13 +210,14 @@ _SPINE = [sk.J["spine1"], sk.J["spine2"], sk.J["spine3"], sk.J["neck"]]
 SPINE_PERCENTILE = 90
 
 
-def size_body(P, height=None, derived_spine=False) -> sk.Body:
+def size_body(P, height=None, derived_spine=False, sole=None) -> sk.Body:
     """A :class:`.skeleton.Body` with the bone lengths of ``P`` ``(T, 22, 3)`` metres.
 
     Each bone's length is its median over the frames, left and right averaged; directions and
     the rest pose are those of :func:`.skeleton.make_body` (limbs straight along the axes, feet
     on the floor), so the limb solver's hinge axes hold.  height: scales the body to that
     stature (metres; the head joint 0.831 statures above the ankles, :data:`.skeleton.PROPORTIONS`).
+    sole: metres of shoe sole the feet stand on (None: :data:`.skeleton.SOLE`).
 
     derived_spine: the spine joints are guesses on the line from the pelvis to the neck (layouts
     with no spine points): that line shortens when the trunk bends and never grows longer than
@@ -254,8 +255,9 @@ def size_body(P, height=None, derived_spine=False) -> sk.Body:
     if height:
         s = float(height) / H
         off, rel, ankle, H = off * s, rel * s, ankle * s, float(height)
-    root = np.array([0.0, 0.0, -ankle + sk.PROPORTIONS["ankle_height"] * H])
-    body = sk.Body.from_offsets(off, root, stature=H)
+    sole = sk.SOLE if sole is None else float(sole)
+    root = np.array([0.0, 0.0, -ankle + sk.PROPORTIONS["ankle_height"] * H + sole])
+    body = sk.Body.from_offsets(off, root, stature=H, sole=sole)
     return body
 
 
@@ -462,11 +464,12 @@ def parse_smoothing(value):
     return value
 
 
-def prepare_keypoints(rec, fps, smoothing, height=None, max_frames=None) -> PreparedKeypoints:
+def prepare_keypoints(rec, fps, smoothing, height=None, max_frames=None, sole=None) -> PreparedKeypoints:
     """Stages 2-7 of the module docstring on a :class:`.io_keypoints.KeypointRecording`: gaps
     bridged, smoothed (``smoothing``: ``"auto"`` for :func:`smooth_auto`, else a Savitzky-Golay
     window in seconds, 0: none), resampled to ``fps``, the 22 joints placed, the
-    body sized (scaled to ``height`` metres when given) and the floor moved to z = 0.  Raises
+    body sized (scaled to ``height`` metres when given, on ``sole`` metres of shoe sole, None:
+    :data:`.skeleton.SOLE`) and the floor moved to z = 0.  Raises
     :class:`.solve.SolveError` when a joint cannot be placed (a point it needs was never seen)."""
     lay = kl.LAYOUTS[rec.layout]
     X, gaps = bridge_gaps(rec.time, rec.points, lay.points)
@@ -489,7 +492,7 @@ def prepare_keypoints(rec, fps, smoothing, height=None, max_frames=None) -> Prep
         raise SolveError(f"{rec.source}: joint(s) {', '.join(bad)} cannot be placed: point(s) "
                          f"{', '.join(never) or '?'} never seen")
     derived_spine = not lay.has_spine
-    body = size_body(P, height, derived_spine=derived_spine)
+    body = size_body(P, height, derived_spine=derived_spine, sole=sole)
     floor = estimate_floor(P, body)
     return PreparedKeypoints(times, P - np.array([0.0, 0.0, floor]), b22, body, floor, gaps, never, derived_spine,
                              chosen)
@@ -527,7 +530,7 @@ def solve_keypoints(source, settings: SolveSettings | None = None, progress=None
     report(0.1, "preparing keypoints")
     fps = float(s.fps) if s.fps else 1.0 / float(np.median(np.diff(rec.time)))
     smoothing = parse_smoothing(s.smoothing)
-    prep = prepare_keypoints(rec, fps, smoothing, height=s.height, max_frames=s.max_frames)
+    prep = prepare_keypoints(rec, fps, smoothing, height=s.height, max_frames=s.max_frames, sole=s.sole)
     lay, b22, never = kl.LAYOUTS[rec.layout], prep.b22, prep.never
     out.report = GapReport(fps=fps, t0=float(prep.times[0]), t_end=float(prep.times[-1]),
                            num_frames=len(prep.times), devices=lay.points, gaps=prep.gaps)

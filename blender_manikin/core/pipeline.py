@@ -351,8 +351,8 @@ def smooth_frames(x, sigma):
 def settle_planted_feet(ankle_pos, ankle_rot, contacts, body: Body, fps, floor=0.0, max_lift=None):
     """Put planted feet down on the floor: on frames a foot is planted (``contacts`` ``(T, 2)``
     bool) and its ankle hovers at most ``max_lift`` (default :data:`SETTLE_MAX`) metres above
-    where the foot stands on ``floor`` (:func:`keep_feet_above_floor`'s lowest height, at least
-    the rest ankle height), the ankle comes down to it; the drop is smoothed over
+    where the foot stands on ``floor`` (the ball of the foot on its sole, :attr:`.Body.sole` above
+    the floor, and the ankle at least at its rest height), the ankle comes down to it; the drop is smoothed over
     :data:`SETTLE_SMOOTH_S` so it eases in and out (:func:`keep_feet_above_floor` runs after it).
     A planted foot held higher than that (on a step, the network unsure) is left.
     ``ankle_pos`` ``(T, 2, 3)`` metres; returns a new array."""
@@ -361,7 +361,7 @@ def settle_planted_feet(ankle_pos, ankle_rot, contacts, body: Body, fps, floor=0
     foot_off = body.offsets[[J["left_foot"], J["right_foot"]]]
     ball_dz = np.einsum("tkij,kj->tki", ankle_rot, foot_off)[..., 2]
     rest = body.rest_positions()[[J["left_ankle"], J["right_ankle"]], 2]
-    stand = np.maximum(floor - ball_dz, floor + rest[None])                     # (T, 2)
+    stand = np.maximum(floor + body.sole - ball_dz, floor + rest[None])         # (T, 2)
     above = out[..., 2] - stand
     drop = np.where(contacts & (above > 0) & (above <= lift), above, 0.0)
     if out.shape[0] > 1:
@@ -374,13 +374,14 @@ def keep_feet_above_floor(ankle_pos, ankle_rot, body: Body, floor=0.0):
     """Lift ankle targets so the ankle and the foot (ball) joint stay above ``floor``.
 
     ankle_pos ``(T, 2, 3)``, ankle_rot ``(T, 2, 3, 3)`` world.  The ankle keeps
-    at least half its rest height; the ball of the foot at least ``floor``.
+    at least half its rest height; the ball of the foot stays on its sole, at least
+    :attr:`.Body.sole` above ``floor``.
     """
     out = np.array(ankle_pos, np.float64, copy=True)
     foot_off = body.offsets[[J["left_foot"], J["right_foot"]]]                 # (2, 3)
     ball_dz = np.einsum("tkij,kj->tki", ankle_rot, foot_off)[..., 2]
     min_ankle = 0.5 * body.rest_positions()[[J["left_ankle"], J["right_ankle"]], 2]
-    need = np.maximum(floor - ball_dz, floor + min_ankle[None])
+    need = np.maximum(floor + body.sole - ball_dz, floor + min_ankle[None])
     out[..., 2] = np.maximum(out[..., 2], need)
     return out
 

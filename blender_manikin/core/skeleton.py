@@ -55,6 +55,19 @@ the head at 0.87, the neck at 0.84 / 0.83 / 0.82 H gave 3.72 / 3.61 / 3.70
 training data (Bandai) does best.  The eyes (an HMD) stay 0.936 H high, so
 the head joint lies 0.066 H (11.5 cm at 1.75 m) below them
 (:mod:`.device_offsets`).
+
+Shoes: the proportions are barefoot; a made body stands on soles
+(:attr:`BodyMeasurements.sole`, default :data:`SOLE` = 3 cm), which lift
+every joint by as much, so the stature stays the barefoot one and the rest
+ankles are ``0.039 H + sole`` above the floor.  Both studios' skeletons,
+floored by their feet, stand their ankles that much higher than the
+barefoot proportions put them: HDM05 2.9 cm, Bandai Namco 3.3 cm (the head
+joint's height above the ankles gives the stature).  Without the soles, a
+stature measured from the head's height above the floor came out 2.0 % (HDM05)
+and 2.5 % (Bandai) too tall, so the legs were about 3 cm too long; with them,
+0.1 % and 0.3 %.  Solving with bodies calibrated from the head's height,
+soles 0 / 3 cm gave MPJPE 10.50 / 10.39 cm (HDM05) and 3.90 / 3.41 cm
+(Bandai), knees 19.52 / 19.15 and 5.97 / 4.62 cm.
 """
 from __future__ import annotations
 
@@ -97,6 +110,10 @@ PROPORTIONS = dict(
     collar_out=0.040, collar_height=0.800,
 )
 
+#: metres a made body stands above the floor on its shoe soles (see the module docstring); a
+#: barefoot performer: ``BodyMeasurements(sole=0)``
+SOLE = 0.03
+
 
 @dataclass
 class BodyMeasurements:
@@ -105,7 +122,9 @@ class BodyMeasurements:
     ``arm_span`` is wrist-to-wrist in a T-pose (what hand trackers measure);
     when given and the arm segments are not, upper arm and forearm are scaled
     together so the span matches.  ``shoulder_width`` and ``hip_width`` are
-    distances between the joint centres.
+    distances between the joint centres.  ``sole``: the shoe soles' thickness, how far the
+    feet stand above the floor (``None``: :data:`SOLE`; 0 barefoot); the stature is the
+    barefoot one.
     """
     stature: float = 1.75
     arm_span: Optional[float] = None
@@ -115,6 +134,12 @@ class BodyMeasurements:
     shank: Optional[float] = None
     shoulder_width: Optional[float] = None
     hip_width: Optional[float] = None
+    sole: Optional[float] = None
+
+    @property
+    def sole_height(self) -> float:
+        """The soles' thickness in metres (:data:`SOLE` when not given)."""
+        return SOLE if self.sole is None else float(self.sole)
 
     def to_dict(self):
         return {k: v for k, v in asdict(self).items() if v is not None}
@@ -132,22 +157,33 @@ class Body:
     measurements: BodyMeasurements = field(default_factory=BodyMeasurements)
 
     @classmethod
-    def from_offsets(cls, offsets, root_rest, stature=None):
+    def from_offsets(cls, offsets, root_rest, stature=None, sole=0.0):
+        """A body with these rest ``offsets`` ``(22, 3)`` and pelvis rest position ``root_rest``
+        ``(3,)`` (metres; the feet stand where they put them), on soles ``sole`` metres thick
+        (the floor is that far below where the barefoot feet would stand).  stature: metres,
+        default from the head joint's height, ``(z - sole) / 0.870``."""
         offsets = np.asarray(offsets, dtype=np.float64).reshape(NUM_JOINTS, 3)
         root_rest = np.asarray(root_rest, dtype=np.float64).reshape(3)
         body = cls(offsets, root_rest)
         rest = body.rest_positions()
         if stature is None:
-            stature = float(rest[J["head"], 2] / PROPORTIONS["head_height"])
-        body.measurements = BodyMeasurements(stature=float(stature))
+            stature = float((rest[J["head"], 2] - sole) / PROPORTIONS["head_height"])
+        body.measurements = BodyMeasurements(stature=float(stature), sole=float(sole))
         return body
 
     @property
     def stature(self) -> float:
         return float(self.measurements.stature)
 
+    @property
+    def sole(self) -> float:
+        """Metres the rest feet stand above the floor on their soles (:meth:`from_offsets`
+        bodies: 0 unless given)."""
+        return self.measurements.sole_height
+
     def rest_positions(self):
-        """``(22, 3)`` world positions of the rest T-pose (feet on z=0 for made bodies)."""
+        """``(22, 3)`` world positions of the rest T-pose (made bodies: the soles on z = 0, the
+        joints :attr:`sole` higher than the barefoot proportions)."""
         p = np.zeros((NUM_JOINTS, 3))
         p[0] = self.root_rest
         for j in range(1, NUM_JOINTS):
@@ -165,7 +201,7 @@ class Body:
 
     def scaled(self, factor):
         return Body.from_offsets(self.offsets * factor, self.root_rest * factor,
-                                 stature=self.stature * factor)
+                                 stature=self.stature * factor, sole=self.sole * factor)
 
 
 def stature_from_head_above_ankles(head_above_ankles):
@@ -175,7 +211,8 @@ def stature_from_head_above_ankles(head_above_ankles):
 
 
 def make_body(measurements: BodyMeasurements | float | None = None) -> Body:
-    """Build a :class:`Body` from measurements (or a stature in metres)."""
+    """Build a :class:`Body` from measurements (or a stature in metres), its rest T-pose standing
+    on its soles on the floor ``z = 0`` (:attr:`BodyMeasurements.sole`)."""
     if measurements is None:
         measurements = BodyMeasurements()
     elif not isinstance(measurements, BodyMeasurements):
@@ -201,6 +238,9 @@ def make_body(measurements: BodyMeasurements | float | None = None) -> Body:
                     ("thigh", th), ("shank", sh)):
         if not np.isfinite(v) or v <= 0:
             raise ValueError(f"{name} must be a positive length in metres, got {v!r}")
+    sole = m.sole_height
+    if not np.isfinite(sole) or not 0.0 <= sole <= 0.2:
+        raise ValueError(f"sole must be 0-0.2 m (the shoe soles' thickness; 0 barefoot), got {m.sole!r}")
 
     ankle_h = P["ankle_height"]
     hip_h = ankle_h + sh + th              # legs define where the hips are
@@ -227,6 +267,7 @@ def make_body(measurements: BodyMeasurements | float | None = None) -> Body:
         pos[J[f"{side}_knee"]] = [sx * hw / 2, 0, hip_h - th]
         pos[J[f"{side}_ankle"]] = [sx * hw / 2, 0, ankle_h]
         pos[J[f"{side}_foot"]] = [sx * hw / 2, -P["foot_forward"], P["foot_height"]]
+    pos[:, 2] += sole
     offsets = np.zeros_like(pos)
     offsets[1:] = pos[1:] - pos[PARENTS[1:]]
     body = Body(offsets, pos[0].copy(), BodyMeasurements(**{**m.to_dict(), "stature": H}))

@@ -45,7 +45,9 @@ class SolveSettings:
     plausible, else stature from the standing head height), ``"TPOSE"`` (calibrate on the
     T-pose at ``tpose_time`` seconds after the first sample) or ``"MEASURE"`` (``height`` and
     optional ``arm_span``, metres); with TPOSE/AUTO a given ``height`` overrides the measured
-    stature.  offsets: a device-offsets preset name, ``"none"``, ``"auto"`` (see
+    stature.  sole: the performer's shoe soles, metres (None: :data:`.skeleton.SOLE`, 3 cm; 0
+    barefoot): the stature measured from the head's height is the barefoot one, and the body
+    stands that much above the floor.  offsets: a device-offsets preset name, ``"none"``, ``"auto"`` (see
     :func:`resolve_offsets`) or an offsets dict (:mod:`.device_offsets`).  max_frames: crop.
     layout: a layout file (path or dict) fixing the columns of a wide-layout CSV.  rate: samples
     per second of a wide-layout CSV, or of keypoints, timed by a frame counter only.
@@ -63,6 +65,7 @@ class SolveSettings:
     tpose_time: float | None = None
     height: float | None = None
     arm_span: float | None = None
+    sole: float | None = None
     offsets: object = "auto"
     max_frames: int | None = None
     layout: object = None
@@ -163,14 +166,16 @@ def make_targets(times, pos, quat, valid, fps, offsets="none"):
     return device_offsets.to_targets(times, pos, quat, valid, off, fps=fps), off
 
 
-def body_from_head_height(targets: TrackerTargets, height=None, arm_span=None) -> sk.Body:
+def body_from_head_height(targets: TrackerTargets, height=None, arm_span=None, sole=None) -> sk.Body:
     """A body when no calibration pose is available: stature = ``height`` (metres) if given,
-    else the 90th percentile of the head joint height / 0.870 (standing), clipped to 1.0-2.3 m."""
+    else from the 90th percentile of the head joint height (standing on ``sole`` metres of shoe
+    sole, None: :data:`.skeleton.SOLE`: (z - sole) / 0.870), clipped to 1.0-2.3 m."""
+    sole_m = sk.SOLE if sole is None else float(sole)
     if height is None:
-        head_z = np.asarray(targets.pos["head"])[:, 2]
-        height = float(np.clip(np.nanpercentile(head_z, 90) / sk.PROPORTIONS["head_height"], 1.0, 2.3))
+        head_z = np.nanpercentile(np.asarray(targets.pos["head"])[:, 2], 90)
+        height = float(np.clip((head_z - sole_m) / sk.PROPORTIONS["head_height"], 1.0, 2.3))
     try:
-        return sk.make_body(sk.BodyMeasurements(stature=float(height), arm_span=arm_span or None))
+        return sk.make_body(sk.BodyMeasurements(stature=float(height), arm_span=arm_span or None, sole=sole))
     except ValueError as exc:
         raise SolveError(f"body measurements: {exc}") from exc
 
@@ -197,11 +202,13 @@ def calibrate(settings: SolveSettings, targets: TrackerTargets, times, offsets):
             raise SolveError("calibration by measurements needs a height (metres)")
         if untyped:
             info.append(no_pose_note)
-        return body_from_head_height(targets, settings.height, settings.arm_span), offsets, info
+        return body_from_head_height(targets, settings.height, settings.arm_span, settings.sole), offsets, info
     t0 = float(times[0])
     meas = {"stature": float(settings.height)} if settings.height else None
     if settings.arm_span and meas is not None:
         meas["arm_span"] = float(settings.arm_span)
+    if settings.sole is not None:
+        meas = {**(meas or {}), "sole": float(settings.sole)}
     if mode == "TPOSE":
         if settings.tpose_time is None:
             raise SolveError("T-pose calibration needs the time of the T-pose")
@@ -216,7 +223,7 @@ def calibrate(settings: SolveSettings, targets: TrackerTargets, times, offsets):
             info.append("no T-pose found: stature from the standing head height")
             if untyped:
                 info.append(no_pose_note)
-            return body_from_head_height(targets, settings.height, settings.arm_span), offsets, info
+            return body_from_head_height(targets, settings.height, settings.arm_span, settings.sole), offsets, info
         t = cand.time
     try:
         res = cal.calibrate(targets, time=t, offsets=offsets, t0=t0, measurements=meas)

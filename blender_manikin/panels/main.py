@@ -119,6 +119,7 @@ class MANIKIN_PT_calibration(_Base, Panel):
         else:
             toggled_row(layout, s, "use_height", "height", "Height")
         layout.prop(s, "arm_span")
+        layout.prop(s, "sole")
         layout.separator()
         row = layout.row(align=True)
         row.prop(s, "offsets_preset")

@@ -81,7 +81,7 @@ from ..core.devices import HAND_DEVICES
 from ..core import hybrik
 from ..core import limb_solver as ls
 from ..core import rotations as rot
-from ..core.skeleton import PROPORTIONS, Body, J, JOINT_NAMES, LIMBS, NUM_JOINTS, forward_kinematics, make_body
+from ..core.skeleton import PROPORTIONS, SOLE, Body, J, JOINT_NAMES, LIMBS, NUM_JOINTS, forward_kinematics, make_body
 
 #: bump when the stored ground truth changes meaning
 PREPROCESS_VERSION = 1
@@ -693,9 +693,10 @@ def lowest_foot_height(local, root, offsets):
 #: solver builds by default (:func:`~..core.skeleton.make_body`), that random bodies move towards
 _DEFAULT_OFFSETS = make_body(1.0).offsets
 SOLVER_MEASURES = features.body_measures(_DEFAULT_OFFSETS, features.stature_from_offsets(_DEFAULT_OFFSETS))
-#: the network's statures (:func:`features.stature_from_offsets`) between the floor and the lowest
-#: foot joint of a standing foot: make_body's ball of the foot, foot_height of the body model's
-#: stature, which is 0.871 / 0.831 network statures
+#: the network's statures (:func:`features.stature_from_offsets`) between the soles and the
+#: lowest foot joint of a standing foot: make_body's ball of the foot, foot_height of the body
+#: model's stature, which is 0.871 / 0.831 network statures; the soles (:data:`SOLE` metres)
+#: lift it further, as make_body does
 FOOT_CLEARANCE = PROPORTIONS["foot_height"] / float(features.stature_from_offsets(_DEFAULT_OFFSETS))
 
 
@@ -1077,10 +1078,11 @@ class WindowSampler:
         root = root * k[:, None, None]
         low1 = lowest_foot_height(loc_flat, root.reshape(N, 3), np.repeat(new_off, W, 0)).reshape(B, W)
         above1 = low1 - lowest[:, None] * k[:, None]
-        # The floor: standing feet have their lowest joint (the ball) FOOT_CLEARANCE statures up,
-        # as on the body the solver builds (skeleton.make_body); then the floor augmentation.
+        # The floor: standing feet have their lowest joint (the ball) FOOT_CLEARANCE statures and
+        # SOLE metres up, as on the body the solver builds (skeleton.make_body); then the floor
+        # augmentation.
         offsets = new_off
-        root[..., 2] += above0 - above1 - (lowest * k)[:, None] + (FOOT_CLEARANCE * stature)[:, None]
+        root[..., 2] += above0 - above1 - (lowest * k)[:, None] + (FOOT_CLEARANCE * stature)[:, None] + SOLE
         if a.crouch > 0:
             local, root = self._crouch(rng, local, root, offsets, stature)
             loc_flat = local.reshape(N, NUM_JOINTS, 3, 3)
