@@ -62,12 +62,15 @@ every joint by as much, so the stature stays the barefoot one and the rest
 ankles are ``0.039 H + sole`` above the floor.  Both studios' skeletons,
 floored by their feet, stand their ankles that much higher than the
 barefoot proportions put them: HDM05 2.9 cm, Bandai Namco 3.3 cm (the head
-joint's height above the ankles gives the stature).  Without the soles, a
-stature measured from the head's height above the floor came out 2.0 % (HDM05)
-and 2.5 % (Bandai) too tall, so the legs were about 3 cm too long; with them,
-0.1 % and 0.3 %.  Solving with bodies calibrated from the head's height,
-soles 0 / 3 cm gave MPJPE 10.50 / 10.39 cm (HDM05) and 3.90 / 3.41 cm
-(Bandai), knees 19.52 / 19.15 and 5.97 / 4.62 cm.
+joint's height above the ankles gives the stature).  A T-pose calibration
+measures the stature from the head's height above the floor: without soles
+it came out 2.0 % (HDM05) and 2.5 % (Bandai) too tall, legs about 3 cm too
+long and the feet settled 3 cm too low; with 3 cm soles, 0.1 % and 0.3 %.
+Solved with bodies calibrated that way, soles 0 / 2 / 3 / 4 cm gave MPJPE
+10.50 / 10.36 / 10.32 / 10.29 cm (HDM05) and 3.90 / 3.53 / 3.41 / 3.32 cm
+(Bandai), knees 19.52 / 19.22 / 19.12 / 19.06 and 5.97 / 4.99 / 4.57 /
+4.22 cm.  3 cm is where the measured stature matches the skeletons, not the
+best score.
 """
 from __future__ import annotations
 
