@@ -243,8 +243,21 @@ def test_find_tpose_and_offsets_preset(addon, tmp_path):
     assert s.calibration == 'TPOSE' and 26 / 24 - 1e-6 <= s.tpose_time <= 44 / 24 + 1e-6
     assert bpy.ops.manikin.solve_full_body() == {'FINISHED'}
     assert s.armature["manikin_body"] is not None
-    stature = (s.armature.data.bones["head"].head_local[2] - sk.SOLE) / sk.PROPORTIONS["head_height"]
+    bones = s.armature.data.bones
+    assert s.sole == pytest.approx(sk.SOLE)
+    stature = (bones["head"].head_local[2] - sk.SOLE) / sk.PROPORTIONS["head_height"]
     assert abs(stature - 1.8) < 0.02
+    ball = bones["left_foot"].head_local[2]
+    assert ball == pytest.approx(sk.PROPORTIONS["foot_height"] * stature + sk.SOLE, abs=1e-4)
+    # barefoot: the same head height is a taller body whose feet stand on the floor
+    first = s.armature
+    s.sole = 0.0
+    assert bpy.ops.manikin.solve_full_body() == {'FINISHED'}
+    assert s.armature != first and first.name in bpy.data.objects      # a new armature, the old kept
+    bones = s.armature.data.bones
+    bare = bones["head"].head_local[2] / sk.PROPORTIONS["head_height"]
+    assert bare - stature == pytest.approx(sk.SOLE / sk.PROPORTIONS["head_height"], abs=2e-3)
+    assert bones["left_foot"].head_local[2] == pytest.approx(sk.PROPORTIONS["foot_height"] * bare, abs=1e-4)
     s.offsets_preset = 'quest_touch'
     assert bpy.ops.manikin.load_offsets_preset() == {'FINISHED'}
     assert s.offsets_text is not None and '"left_hand"' in s.offsets_text.as_string()

@@ -122,3 +122,12 @@ def test_network_windows_cover_every_frame_at_any_stride(stride):
     net = pipeline.run_network(out.targets, out.body, load_model(), stride=stride)
     assert np.isfinite(net.ankle_pos).all() and np.isfinite(net.swivel).all()
     assert net.ankle_pos.shape[0] == out.targets.num_frames
+
+
+def test_command_line_sole_reaches_the_settings():
+    from blender_manikin import cli
+    p = cli.build_parser()
+    assert cli.solve_settings(p.parse_args(["solve", "take.csv", "--out", "o"])).sole is None
+    assert cli.solve_settings(p.parse_args(["solve", "take.csv", "--out", "o", "--sole", "0"])).sole == 0.0
+    st = cli.solve_settings(p.parse_args(["convert", "in", "--out", "o", "--sole", "0.05"]))
+    assert st.sole == 0.05
