@@ -33,7 +33,7 @@ Six trackers (pelvis and feet, as in SparsePoser)
 Extra trackers are strapped on at any rotation and some centimetres from
 their joints, so their whole offset (translation *and* rotation) is measured
 from the pose: the body model's rest T-pose (:meth:`.skeleton.Body.rest_positions`,
-built from the measurements, feet on z = 0) is stood under the head joint
+built from the measurements, soles on z = 0) is stood under the head joint
 target, turned by the heading; that gives the expected pelvis and ankle
 positions, and with the raw device pose (the targets with the current offsets
 removed) ``offset_pos = R_deviceᵀ (p_joint - p_device)`` and
@@ -49,7 +49,7 @@ assumption, and whatever deviates from it ends up in the offset:
 
 * *ankles*: the feet stand like the body model's: under the hips (ankle
   centres ``hip_width`` = 0.100 H apart), straight below the head joint
-  front-to-back, at the model's ankle height 0.039 H, flat and pointing along
+  front-to-back, at the model's ankle height 0.039 H + sole, flat and pointing along
   the heading.  Ankle height, stance width and toe-out are therefore not
   measured (a tracker 8 cm above the ankle looks exactly like an ankle 8 cm
   higher); feet set wider than the hips shift the foot offsets inward by the
@@ -585,7 +585,7 @@ def calibrate(targets: TrackerTargets, time=None, offsets=None, window=0.25, pos
     rest = None
     try:
         # the body's rest T-pose stood under the head joint, turned by the heading: where the
-        # pelvis and ankles are in the calibration pose (feet on z = 0, rest head at x = y = 0)
+        # pelvis and ankles are in the calibration pose (soles on z = 0, rest head at x = y = 0)
         rest = np.array([head[0], head[1], 0.0]) + make_body(meas).rest_positions() @ Rh.T
     except ValueError as exc:
         problems.append(f"measurements are not usable: {exc}")
