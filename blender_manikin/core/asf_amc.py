@@ -121,7 +121,7 @@ The head is the one joint not taken where the cgspeed analogy would put it
 fractions of the height of the ``head`` bone's end (the top of the head;
 the legs confirm that scale: hip centres 0.51-0.52, knees 0.27-0.30, as in
 the body model's 0.530 / 0.285): ``lowerneck`` starts at 0.82-0.85 (body
-model neck: 0.840), ``upperneck`` at 0.88-0.90 and ``head`` at 0.94-0.95,
+model neck: 0.830), ``upperneck`` at 0.88-0.90 and ``head`` at 0.94-0.95,
 about eye level.  The head joint is the skull base, where the head sits on
 the neck, 0.910 of the top of the head: it is put 2/3 of the way up the
 lowerneck + upperneck polyline (:data:`HEAD_FRACTION`); with the ``head``
@@ -198,7 +198,7 @@ __all__ = [
 
 #: Metres per ASF length unit for ``:units length 0.45`` (CMU, HDM05).
 CMU_METRES_PER_UNIT = 0.0254 / 0.45
-#: Where :data:`ASF_MAP` puts the body's head joint (the skull base, top of the neck) along the
+#: Where :data:`ASF_MAP` puts the body's head joint (where the head sits on the neck) along the
 #: ASF neck lowerneck -> upperneck -> head (see the module docstring).
 HEAD_FRACTION = 2.0 / 3.0
 

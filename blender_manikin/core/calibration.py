@@ -89,7 +89,7 @@ from .plain import shown
 from .devices import EXTRA_DEVICES, HAND_DEVICES, REQUIRED_DEVICES
 from .pose_result import TrackerTargets
 from .rotations import geodesic_angle, matrix_to_quat, normalize, orthonormalize, quat_to_matrix, rotation_between
-from .skeleton import J, PROPORTIONS, SOLE, BodyMeasurements, make_body
+from .skeleton import J, PROPORTIONS, SOLE, BodyMeasurements, make_body, sole_or_default
 
 #: eye (HMD) height as a fraction of stature (Drillis & Contini, Winter 2009 Fig. 4.1)
 EYE_HEIGHT = PROPORTIONS["eye_height"]
@@ -142,9 +142,7 @@ def _sole_of(measurements):
     give, :data:`.skeleton.SOLE` when they do not."""
     if isinstance(measurements, BodyMeasurements):
         return measurements.sole_height
-    if isinstance(measurements, dict) and measurements.get("sole") is not None:
-        return float(measurements["sole"])
-    return SOLE
+    return sole_or_default(measurements.get("sole") if isinstance(measurements, dict) else None)
 
 
 #: statures (metres) outside which the solve summary warns (see :func:`stature_warning`)

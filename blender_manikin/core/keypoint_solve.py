@@ -255,7 +255,7 @@ def size_body(P, height=None, derived_spine=False, sole=None) -> sk.Body:
     if height:
         s = float(height) / H
         off, rel, ankle, H = off * s, rel * s, ankle * s, float(height)
-    sole = sk.SOLE if sole is None else float(sole)
+    sole = sk.sole_or_default(sole)
     root = np.array([0.0, 0.0, -ankle + sk.PROPORTIONS["ankle_height"] * H + sole])
     body = sk.Body.from_offsets(off, root, stature=H, sole=sole)
     return body

@@ -357,6 +357,14 @@ def smooth_frames(x, sigma):
     return out
 
 
+def _ankle_over_ball_on_sole(ankle_rot, body: Body, floor):
+    """``(T, 2)`` metres: the ankle height at which each foot, turned by ``ankle_rot``
+    ``(T, 2, 3, 3)`` world, has its ball on its sole (:attr:`.Body.sole` above ``floor``)."""
+    foot_off = body.offsets[[J["left_foot"], J["right_foot"]]]                 # (2, 3)
+    ball_dz = np.einsum("tkij,kj->tki", ankle_rot, foot_off)[..., 2]
+    return floor + body.sole - ball_dz
+
+
 def settle_planted_feet(ankle_pos, ankle_rot, contacts, body: Body, fps, floor=0.0, max_lift=None):
     """Put planted feet down on the floor: on frames a foot is planted (``contacts`` ``(T, 2)``
     bool) and its ankle hovers at most ``max_lift`` (default :data:`SETTLE_MAX`) metres above
@@ -367,10 +375,8 @@ def settle_planted_feet(ankle_pos, ankle_rot, contacts, body: Body, fps, floor=0
     ``ankle_pos`` ``(T, 2, 3)`` metres; returns a new array."""
     lift = SETTLE_MAX if max_lift is None else float(max_lift)
     out = np.array(ankle_pos, np.float64, copy=True)
-    foot_off = body.offsets[[J["left_foot"], J["right_foot"]]]
-    ball_dz = np.einsum("tkij,kj->tki", ankle_rot, foot_off)[..., 2]
     rest = body.rest_positions()[[J["left_ankle"], J["right_ankle"]], 2]
-    stand = np.maximum(floor + body.sole - ball_dz, floor + rest[None])         # (T, 2)
+    stand = np.maximum(_ankle_over_ball_on_sole(ankle_rot, body, floor), floor + rest[None])   # (T, 2)
     above = out[..., 2] - stand
     drop = np.where(contacts & (above > 0) & (above <= lift), above, 0.0)
     if out.shape[0] > 1:
@@ -387,10 +393,8 @@ def keep_feet_above_floor(ankle_pos, ankle_rot, body: Body, floor=0.0):
     :attr:`.Body.sole` above ``floor``.
     """
     out = np.array(ankle_pos, np.float64, copy=True)
-    foot_off = body.offsets[[J["left_foot"], J["right_foot"]]]                 # (2, 3)
-    ball_dz = np.einsum("tkij,kj->tki", ankle_rot, foot_off)[..., 2]
     min_ankle = 0.5 * body.rest_positions()[[J["left_ankle"], J["right_ankle"]], 2]
-    need = np.maximum(floor + body.sole - ball_dz, floor + min_ankle[None])
+    need = np.maximum(_ankle_over_ball_on_sole(ankle_rot, body, floor), floor + min_ankle[None])
     out[..., 2] = np.maximum(out[..., 2], need)
     return out
 

@@ -118,6 +118,11 @@ PROPORTIONS = dict(
 SOLE = 0.03
 
 
+def sole_or_default(sole) -> float:
+    """The soles' thickness in metres: ``sole``, or :data:`SOLE` when it is None."""
+    return SOLE if sole is None else float(sole)
+
+
 @dataclass
 class BodyMeasurements:
     """Measurements of a performer, metres.  Only ``stature`` is required.
@@ -142,7 +147,7 @@ class BodyMeasurements:
     @property
     def sole_height(self) -> float:
         """The soles' thickness in metres (:data:`SOLE` when not given)."""
-        return SOLE if self.sole is None else float(self.sole)
+        return sole_or_default(self.sole)
 
     def to_dict(self):
         return {k: v for k, v in asdict(self).items() if v is not None}

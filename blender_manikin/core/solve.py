@@ -170,10 +170,9 @@ def body_from_head_height(targets: TrackerTargets, height=None, arm_span=None, s
     """A body when no calibration pose is available: stature = ``height`` (metres) if given,
     else from the 90th percentile of the head joint height (standing on ``sole`` metres of shoe
     sole, None: :data:`.skeleton.SOLE`: (z - sole) / 0.870), clipped to 1.0-2.3 m."""
-    sole_m = sk.SOLE if sole is None else float(sole)
     if height is None:
         head_z = np.nanpercentile(np.asarray(targets.pos["head"])[:, 2], 90)
-        height = float(np.clip((head_z - sole_m) / sk.PROPORTIONS["head_height"], 1.0, 2.3))
+        height = float(np.clip((head_z - sk.sole_or_default(sole)) / sk.PROPORTIONS["head_height"], 1.0, 2.3))
     try:
         return sk.make_body(sk.BodyMeasurements(stature=float(height), arm_span=arm_span or None, sole=sole))
     except ValueError as exc:
