@@ -309,6 +309,13 @@ def test_train_cli_selects_the_dual_attention_backbone(cache, bvh_dir, tmp_path)
     assert isinstance(build_model(ModelConfig.from_dict(ck["config"])), DualAttentionPoser)
     contract, diff = export.export(r["checkpoint"], str(tmp_path / "dap.onnx"), quiet=True)
     assert diff <= 1e-4 and contract["architecture"]["arch"] == "dap"
+    # its exported weights read back exactly for fine-tuning (--init): the graph's order of the
+    # linear layers is not the order the model defines them in
+    from blender_manikin.training.init_weights import load_initial_weights
+    cfg, state = load_initial_weights(str(tmp_path / "dap.onnx"))
+    assert cfg.arch == "dap"
+    for k, v in ck["model"].items():
+        assert torch.allclose(state[k], v, atol=1e-7), k
 
 
 @pytest.fixture(scope="module")

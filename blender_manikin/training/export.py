@@ -109,12 +109,7 @@ def export(checkpoint, out, verify=True, quiet=False):
     out = os.fspath(out)
     os.makedirs(os.path.dirname(os.path.abspath(out)), exist_ok=True)
     tmp = out + ".tmp.onnx"
-    x = torch.randn(2, cfg.window, cfg.input_dim)
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        torch.onnx.export(model, (x,), tmp, input_names=[INPUT_NAME], output_names=[OUTPUT_NAME],
-                          dynamic_axes={INPUT_NAME: {0: "batch"}, OUTPUT_NAME: {0: "batch"}},
-                          opset_version=OPSET, dynamo=False, do_constant_folding=True)
+    write_graph(model, cfg, tmp)
     m = onnx.load(tmp)
     del m.metadata_props[:]
     p = m.metadata_props.add()
@@ -138,6 +133,18 @@ def export(checkpoint, out, verify=True, quiet=False):
         print(f"wrote {out} ({size / 1e6:.2f} MB, {contract['num_parameters']:,} parameters, kind "
               f"{cfg.kind}, window {cfg.window}, opset {OPSET}); onnxruntime vs torch max |diff| {diff:.2e}")
     return contract, diff
+
+
+def write_graph(model, cfg, path):
+    """``torch.onnx.export`` of ``model`` to ``path`` as every export makes it (opset
+    :data:`OPSET`, dynamic batch axis, constant folding), without the contract."""
+    import torch
+    x = torch.randn(2, cfg.window, cfg.input_dim)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        torch.onnx.export(model, (x,), path, input_names=[INPUT_NAME], output_names=[OUTPUT_NAME],
+                          dynamic_axes={INPUT_NAME: {0: "batch"}, OUTPUT_NAME: {0: "batch"}},
+                          opset_version=OPSET, dynamo=False, do_constant_folding=True)
 
 
 def verify_onnx(path, model, cfg, seed=0):

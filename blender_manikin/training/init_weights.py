@@ -8,10 +8,12 @@
 * a training checkpoint (``checkpoint.pt`` / ``best.pt``): its ``config`` and ``model``;
 * an exported model (``.onnx``, :mod:`.export`): the configuration comes from its contract
   (``kind``, ``input_devices``, ``architecture``) and the weights are read back from the graph's
-  initialisers.  ``torch.onnx.export`` keeps the names of most parameters; the weights of the
-  linear layers become unnamed ``MatMul`` operands, transposed, in the order the model defines
-  them, so those are matched in order and by shape.  The result is then checked the way an export
-  is checked (:func:`.export.verify_onnx`: onnxruntime against torch, max abs difference
+  initialisers.  ``torch.onnx.export`` keeps the names of most parameters, but the weights of
+  the linear layers become unnamed, transposed ``MatMul`` operands (in graph order, which is not
+  the order a model defines them in: the Dual Attention Poser's differ).  So the architecture is
+  exported once more with distinct random weights, and each parameter is found in that reference
+  by value, which names the initialiser to read from the file.  The result is then checked the
+  way an export is checked (:func:`.export.verify_onnx`: onnxruntime against torch, max abs difference
   <= 1e-4); a file that does not read back exactly raises :class:`ValueError` rather than
   starting a run from the wrong weights.
 
@@ -40,38 +42,47 @@ def config_from_contract(contract) -> ModelConfig:
     return ModelConfig.from_dict(arch)
 
 
-def _state_from_onnx(path, model):
-    """``state_dict`` of ``model`` filled from the ONNX file's initialisers (see module doc)."""
+def _state_from_onnx(path, model, cfg):
+    """``state_dict`` of ``model`` filled from the ONNX file's initialisers (see module doc).
+
+    Each parameter's initialiser is found by value in a reference export of the same
+    architecture whose parameters are all distinct random numbers (so the exporter merges
+    none of them): the reference names the initialiser (or transposed ``MatMul`` operand)
+    that holds the parameter, and the file's initialiser of that name is read."""
+    import tempfile
     import onnx
     import torch
     from onnx import numpy_helper
-    graph = onnx.load(path).graph
-    inits = {i.name: numpy_helper.to_array(i) for i in graph.initializer}
-    state = model.state_dict()
-    out, unnamed = {}, []
-    for name, t in state.items():
-        if name in inits and tuple(inits[name].shape) == tuple(t.shape):
-            out[name] = torch.from_numpy(np.array(inits[name], dtype=np.float32).reshape(t.shape))
-        else:
-            unnamed.append(name)
-    used = set(out)
-    # MatMul operands that are initialisers, in graph order (each once)
-    operands, seen = [], set()
-    for node in graph.node:
-        if node.op_type in ("MatMul", "Gemm"):
-            for i in node.input:
-                if i in inits and i not in used and i not in seen:
-                    seen.add(i)
-                    operands.append(i)
-    if len(operands) != len(unnamed):
-        raise ValueError(f"{path}: {len(unnamed)} parameters without a name in the graph "
-                         f"({', '.join(unnamed[:4])}...) against {len(operands)} unnamed weights")
-    for name, op in zip(unnamed, operands):
-        t, w = state[name], np.array(inits[op], dtype=np.float32)
-        if w.ndim == 2 and tuple(w.T.shape) == tuple(t.shape):
-            w = w.T
-        if tuple(w.shape) != tuple(t.shape):
-            raise ValueError(f"{path}: weight {op} {w.shape} does not fit parameter {name} {tuple(t.shape)}")
+    from .export import write_graph
+
+    with torch.no_grad():
+        gen = torch.Generator().manual_seed(0)
+        for q in model.parameters():
+            q.copy_(torch.randn(q.shape, generator=gen))
+    with tempfile.TemporaryDirectory() as tmp:
+        ref_path = os.path.join(tmp, "reference.onnx")
+        write_graph(model, cfg, ref_path)
+        ref = {i.name: numpy_helper.to_array(i) for i in onnx.load(ref_path).graph.initializer}
+    inits = {i.name: numpy_helper.to_array(i) for i in onnx.load(path).graph.initializer}
+    by_bytes = {}
+    for name, v in ref.items():
+        by_bytes.setdefault((v.shape, v.astype(np.float32).tobytes()), []).append((name, False))
+        if v.ndim == 2:
+            by_bytes.setdefault((v.T.shape, np.ascontiguousarray(v.T).astype(np.float32).tobytes()),
+                                []).append((name, True))
+    out = {}
+    for name, t in model.state_dict().items():
+        a = t.detach().numpy().astype(np.float32)
+        hits = by_bytes.get((a.shape, a.tobytes()), [])
+        if len(hits) != 1 or hits[0][0] not in inits:
+            raise ValueError(f"{path}: parameter {name} {tuple(a.shape)} not found in the graph "
+                             f"({len(hits)} candidates in the reference export)")
+        ref_name, transposed = hits[0]
+        w = np.array(inits[ref_name], dtype=np.float32)
+        w = w.T if transposed else w
+        if tuple(w.shape) != tuple(a.shape):
+            raise ValueError(f"{path}: initialiser {ref_name} {w.shape} does not fit parameter {name} "
+                             f"{tuple(a.shape)}")
         out[name] = torch.from_numpy(np.ascontiguousarray(w))
     return out
 
@@ -93,7 +104,7 @@ def load_initial_weights(path):
         except (KeyError, ValueError) as exc:
             raise ValueError(f"--init {path}: {exc}") from None
         model = build_model(cfg)
-        model.load_state_dict(_state_from_onnx(path, model))
+        model.load_state_dict(_state_from_onnx(path, model, cfg))
         model.eval()
         diff = verify_onnx(path, model, cfg)
         if not diff <= MAX_DIFF:
