@@ -48,7 +48,9 @@ def _state_from_onnx(path, model, cfg):
     Each parameter's initialiser is found by value in a reference export of the same
     architecture whose parameters are all distinct random numbers (so the exporter merges
     none of them): the reference names the initialiser (or transposed ``MatMul`` operand)
-    that holds the parameter, and the file's initialiser of that name is read."""
+    that holds the parameter, and the file's initialiser of that name is read.  Buffers (not
+    trained; the architecture fixes them) keep ``model``'s own values.  ``model``'s parameters
+    are overwritten on the way (the caller loads the returned state)."""
     import tempfile
     import onnx
     import torch
@@ -70,8 +72,8 @@ def _state_from_onnx(path, model, cfg):
         if v.ndim == 2:
             by_bytes.setdefault((v.T.shape, np.ascontiguousarray(v.T).astype(np.float32).tobytes()),
                                 []).append((name, True))
-    out = {}
-    for name, t in model.state_dict().items():
+    out = {name: b.clone() for name, b in model.named_buffers()}
+    for name, t in model.named_parameters():
         a = t.detach().numpy().astype(np.float32)
         hits = by_bytes.get((a.shape, a.tobytes()), [])
         if len(hits) != 1 or hits[0][0] not in inits:
