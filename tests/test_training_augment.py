@@ -273,3 +273,46 @@ def test_crouch_sinks_the_pelvis_onto_planted_feet():
     assert (lean[deep] < -0.01).all()
     plain = ds.WindowSampler(cs, window=40, augment=ds.Augment(crouch=0.0), seed=0)
     assert plain._crouch(rng, local, root, offsets, stature)[0] is local
+
+
+def test_stoop_bends_the_trunk_over_straight_legs_onto_planted_feet():
+    """Augment.stoop: the trunk pitches forward at the hips and through the spine, the head goes
+    low and ahead, the legs stay nearly straight (unlike a crouch) as hinges on the feet where they
+    were, the pelvis moves back; nothing changes with stoop=0."""
+    cs = _standing_clipset(bodies=(1.6, 1.75, 1.9), T=60)
+    smp = ds.WindowSampler(cs, window=40, augment=ds.Augment(stoop=1.0), seed=0)
+    rng = np.random.default_rng(3)
+    B, W = 3, 40
+    local = np.broadcast_to(np.eye(3), (B, W, sk.NUM_JOINTS, 3, 3)).copy()
+    bodies = [sk.make_body(s) for s in (1.6, 1.75, 1.9)]
+    offsets = np.stack([b.offsets for b in bodies])
+    root = np.stack([np.tile(b.root_rest, (W, 1)) for b in bodies])
+    stature = np.array([1.6, 1.75, 1.9])
+    loc2, root2 = smp._stoop(rng, local, root, offsets, stature)
+    rep = np.repeat(offsets, W, 0)
+    P0, _ = sk.forward_kinematics(local.reshape(-1, 22, 3, 3), root.reshape(-1, 3), None, offsets=rep)
+    P1, R1 = sk.forward_kinematics(loc2.reshape(-1, 22, 3, 3), root2.reshape(-1, 3), None, offsets=rep)
+    P0, P1, R1 = P0.reshape(B, W, 22, 3), P1.reshape(B, W, 22, 3), R1.reshape(B, W, 22, 3, 3)
+    ankles = [J["left_ankle"], J["right_ankle"]]
+    assert np.abs(P1[:, :, ankles] - P0[:, :, ankles]).max() < 1e-6          # feet stay planted
+    trunk = P1[..., J["neck"], :] - P1[..., 0, :]
+    bend = np.degrees(np.arctan2(-trunk[..., 1], trunk[..., 2]))             # forward (-Y) from upright
+    held = bend > 20
+    assert held.sum() > 10 and bend.max() <= np.degrees(ds.STOOP_BEND[1]) + 1.0 and bend.min() > -1.0
+    head_drop = (P0[..., J["head"], 2] - P1[..., J["head"], 2]) / stature[:, None]
+    assert (head_drop[bend > 60] > 0.1).all()                                # the head goes low ...
+    assert (P1[..., J["head"], 1] - P1[..., 0, 1])[held].max() < -0.05     # ... and ahead of the pelvis
+    assert ((P1[..., 0, 1] - P0[..., 0, 1])[held] > 0.0).all()              # the pelvis moves back
+    # the pelvis only sinks as far as straight legs need: far less than a crouch
+    assert ((P0[..., 0, 2] - P1[..., 0, 2]) / stature[:, None]).max() < 0.1
+    knee = np.degrees(rot.geodesic_angle(loc2[:, :, J["left_knee"]], np.eye(3)))
+    assert knee.max() < 35.0                                                 # the legs stay nearly straight
+    from blender_manikin.core import limb_solver as ls
+    b = loc2[:, :, J["left_knee"]] @ ls.A0[2]
+    assert np.abs(b @ ls.H0[2]).max() < 1e-9                                  # hinge knees
+    plain = ds.WindowSampler(cs, window=40, augment=ds.Augment(stoop=0.0), seed=0)
+    assert plain._stoop(rng, local, root, offsets, stature)[0] is local
+    # sampled batches stay finite with everything on
+    both = ds.WindowSampler(cs, window=20, augment=ds.Augment(stoop=0.5, crouch=0.5, lying=0.3), seed=0)
+    batch = both.sample(16, np.random.default_rng(1))
+    assert all(np.isfinite(v).all() for v in batch.values() if isinstance(v, np.ndarray))

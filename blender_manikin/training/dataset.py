@@ -81,7 +81,8 @@ from ..core.devices import HAND_DEVICES
 from ..core import hybrik
 from ..core import limb_solver as ls
 from ..core import rotations as rot
-from ..core.skeleton import PROPORTIONS, SOLE, Body, J, JOINT_NAMES, LIMBS, NUM_JOINTS, forward_kinematics, make_body
+from ..core.skeleton import (PARENTS, PROPORTIONS, SOLE, Body, J, JOINT_NAMES, LIMBS, NUM_JOINTS, forward_kinematics,
+                             make_body)
 
 #: bump when the stored ground truth changes meaning
 PREPROCESS_VERSION = 1
@@ -571,7 +572,10 @@ class Augment:
     people lie on the floor; the source motion's limbs keep moving), where its
     limbs let it lie flat (about half the Bandai windows do).  crouch:
     probability that the window crouches (:meth:`WindowSampler._crouch`: the
-    pelvis sinks and the legs fold onto the planted feet).
+    pelvis sinks and the legs fold onto the planted feet).  stoop:
+    probability that the window bends over at the hips with the legs nearly
+    straight (:meth:`WindowSampler._stoop`: a reach to the floor, a look under
+    a table).
     """
     speed: tuple = (0.8, 1.25)
     stature: tuple | None = (1.45, 2.05)
@@ -588,12 +592,13 @@ class Augment:
     dropout: float = 0.1
     lying: float = 0.0
     crouch: float = 0.0
+    stoop: float = 0.0
 
     @classmethod
     def off(cls):
         return cls(speed=(1.0, 1.0), stature=None, segment=0.0, floor=0.0, mirror=0.0, pos_noise=0.0,
                    rot_noise_deg=0.0, hand_offset_deg=0.0, head_offset=0.0, edge_prob=0.0, calibration=0.0,
-                   arm_mix=0.0, dropout=0.0, lying=0.0, crouch=0.0)
+                   arm_mix=0.0, dropout=0.0, lying=0.0, crouch=0.0, stoop=0.0)
 
 
 @dataclass
@@ -752,6 +757,23 @@ LYING_TRUNK = np.array([J[n] for n in ("pelvis", "spine1", "spine2", "spine3", "
 CROUCH_DEPTH = (0.08, 0.32)
 #: forward lean of a crouching trunk, radians per stature of depth (0.3 statures: ~20°)
 CROUCH_LEAN = 1.2
+#: how far a stooping trunk bends forward, radians (uniform; a reach to the floor with straight
+#: legs bends it about 90°)
+STOOP_BEND = (np.radians(25.0), np.radians(95.0))
+#: the share of a stoop's bend taken at the hips (the pelvis pitches); the rest is spread evenly
+#: over the three spine joints
+STOOP_HIP_SHARE = (0.5, 0.8)
+#: how far a stooping pelvis moves back to keep the balance, statures times sin(bend)
+STOOP_BACK = 0.08
+#: a stooping leg's hip-to-ankle distance shrinks by up to this share of what it was (uniform per
+#: window: knees straight or softened up to about 25°)
+STOOP_SOFT_KNEES = 0.03
+#: the legs' limb ids (``LIMBS`` order) and their hip, knee and ankle joints
+LEGS = [2, 3]
+LEG_HIPS = [LIMBS[i][1] for i in LEGS]
+LEG_KNEES = [LIMBS[i][2] for i in LEGS]
+LEG_ANKLES = [LIMBS[i][3] for i in LEGS]
+SPINE = [J["spine1"], J["spine2"], J["spine3"]]
 
 
 #: the joints whose local rotations the arm mix exchanges (collars down to the wrists)
@@ -798,6 +820,44 @@ def _hold_weights(W, start, hold, ramp):
 def _small_rotations(rng, shape, sigma_rad):
     """Random rotation matrices with per-axis N(0, sigma/sqrt(3)) (rms angle sigma)."""
     return rot.axis_angle_to_matrix(rng.normal(size=shape + (3,)) * (sigma_rad / math.sqrt(3.0)))
+
+
+def _leg_lengths(offsets):
+    """``(n, 2, 2)`` thigh and shank lengths of both legs, from offsets ``(n, 22, 3)``."""
+    return np.stack([np.linalg.norm(offsets[:, LEG_KNEES], axis=-1),
+                     np.linalg.norm(offsets[:, LEG_ANKLES], axis=-1)], -1)
+
+
+def _replant_legs(loc, root, P, Rw, offsets):
+    """The legs of a moved trunk solved again onto the ankles where they were.
+
+    loc ``(n, W, 22, 3, 3)`` local rotations and root ``(n, W, 3)`` metres of the new motion (the
+    trunk moved, the legs as before); P ``(n, W, 22, 3)`` and Rw ``(n, W, 22, 3, 3)``: the FK of
+    the motion before; offsets ``(n, 22, 3)``.  Each knee keeps its swivel, each ankle its world
+    orientation (:func:`.limb_solver.solve_limbs`: hinge knees).  Returns ``loc`` with new hip,
+    knee and ankle rotations (changed in place)."""
+    n, W = root.shape[:2]
+    swivel = ls.swivel_from_positions(P[:, :, LEG_HIPS], P[:, :, LEG_KNEES], P[:, :, LEG_ANKLES], Rw[:, :, [0, 0]],
+                                      LEGS, base_rot=Rw[:, :, LEG_HIPS])
+    P2, Rw2 = forward_kinematics(loc.reshape(n * W, NUM_JOINTS, 3, 3), root.reshape(n * W, 3), None,
+                                 offsets=np.repeat(offsets, W, 0))
+    P2, Rw2 = P2.reshape(n, W, NUM_JOINTS, 3), Rw2.reshape(n, W, NUM_JOINTS, 3, 3)
+    lengths = np.broadcast_to(_leg_lengths(offsets)[:, None], (n, W, 2, 2))
+    sol = ls.solve_limbs(P2[:, :, LEG_HIPS], P[:, :, LEG_ANKLES], swivel, lengths, Rw2[:, :, [0, 0]],
+                         end_rot=Rw[:, :, LEG_ANKLES], limb_ids=LEGS)
+    loc[:, :, LEG_HIPS] = sol.base_local
+    loc[:, :, LEG_KNEES] = sol.mid_local
+    loc[:, :, LEG_ANKLES] = sol.end_local
+    return loc
+
+
+def _facing_axes(R0):
+    """``(side, back)``: the horizontal left (+X) and back (+Y) unit axes of pelvis rotations
+    ``(..., 3, 3)``, each ``(..., 3)``."""
+    side = R0[..., :, 0].copy()
+    side[..., 2] = 0.0
+    side = rot.normalize(side)
+    return side, np.cross(np.broadcast_to([0.0, 0.0, 1.0], side.shape), side)
 
 
 class WindowSampler:
@@ -946,29 +1006,66 @@ class WindowSampler:
         off = np.repeat(offsets[pick], W, 0)
         P, Rw = forward_kinematics(loc.reshape(n * W, NUM_JOINTS, 3, 3), rt.reshape(n * W, 3), None, offsets=off)
         R0 = loc[:, :, 0]
-        side = R0[..., :, 0].copy()                                                       # the pelvis' +X (left)
-        side[..., 2] = 0.0
-        side = rot.normalize(side)
-        back = np.cross(np.broadcast_to([0.0, 0.0, 1.0], side.shape), side)            # +Y of a body facing -Y
+        side, back = _facing_axes(R0)
         lean = CROUCH_LEAN * d / s[:, None]
         loc[:, :, 0] = rot.axis_angle_to_matrix(side * lean[..., None]) @ R0
         rt = rt - d[..., None] * np.array([0.0, 0.0, 1.0]) + 0.25 * d[..., None] * back
-        legs = [2, 3]
-        hips = [b for _, b, _, _ in (LIMBS[i] for i in legs)]
-        knees = [m for _, _, m, _ in (LIMBS[i] for i in legs)]
-        ankles = [e for _, _, _, e in (LIMBS[i] for i in legs)]
+        loc = _replant_legs(loc, rt, P.reshape(n, W, NUM_JOINTS, 3), Rw.reshape(n, W, NUM_JOINTS, 3, 3),
+                            offsets[pick])
+        local, root = local.copy(), root.copy()
+        local[pick], root[pick] = loc, rt
+        return local, root
+
+    def _stoop(self, rng, local, root, offsets, stature):
+        """Bend a share (``Augment.stoop``) of the windows over at the hips: the trunk pitches
+        forward by :data:`STOOP_BEND` (held 0.5-2 s, eased in and out over 0.3-0.8 s), a share
+        :data:`STOOP_HIP_SHARE` of it at the hips and the rest through the spine, the pelvis
+        moves back (:data:`STOOP_BACK`) and down as far as the legs need to keep their reach (the
+        knees straight or softened, :data:`STOOP_SOFT_KNEES`), and the legs are solved again onto
+        the feet where they were.  The arms and head move with the trunk.  A head low and ahead,
+        pitched down, is then a body bent over as often as a crouch (:meth:`_crouch`), as people
+        reach for the floor both ways; the Bandai takes hold few of either.
+
+        local ``(B, W, 22, 3, 3)``, root ``(B, W, 3)`` metres, offsets ``(B, 22, 3)``, stature
+        ``(B,)``.  Returns new ``(local, root)``."""
+        B, W = root.shape[:2]
+        pick = np.nonzero(rng.uniform(size=B) < self.aug.stoop)[0]
+        if pick.size == 0:
+            return local, root
+        n = pick.size
+        s = stature[pick]
+        bend = rng.uniform(STOOP_BEND[0], STOOP_BEND[1], n)
+        share = rng.uniform(STOOP_HIP_SHARE[0], STOOP_HIP_SHARE[1], n)
+        hold = rng.uniform(0.5, 2.0, n) * self.fps
+        ramp = rng.uniform(0.3, 0.8, n) * self.fps
+        start = rng.uniform(-hold, W, n)
+        wgt = _hold_weights(W, start, hold, ramp)                                          # (n, W)
+        loc = local[pick].copy()
+        rt = root[pick].copy()
+        off = np.repeat(offsets[pick], W, 0)
+        P, Rw = forward_kinematics(loc.reshape(n * W, NUM_JOINTS, 3, 3), rt.reshape(n * W, 3), None, offsets=off)
         P, Rw = P.reshape(n, W, NUM_JOINTS, 3), Rw.reshape(n, W, NUM_JOINTS, 3, 3)
-        swivel = ls.swivel_from_positions(P[:, :, hips], P[:, :, knees], P[:, :, ankles], Rw[:, :, [0, 0]], legs,
-                                          base_rot=Rw[:, :, hips])
-        P2, Rw2 = forward_kinematics(loc.reshape(n * W, NUM_JOINTS, 3, 3), rt.reshape(n * W, 3), None, offsets=off)
-        P2, Rw2 = P2.reshape(n, W, NUM_JOINTS, 3), Rw2.reshape(n, W, NUM_JOINTS, 3, 3)
-        lengths = np.stack([np.linalg.norm(offsets[pick][:, knees], axis=-1),
-                            np.linalg.norm(offsets[pick][:, ankles], axis=-1)], -1)             # (n, 2, 2)
-        sol = ls.solve_limbs(P2[:, :, hips], P[:, :, ankles], swivel, np.broadcast_to(lengths[:, None], (n, W, 2, 2)),
-                             Rw2[:, :, [0, 0]], end_rot=Rw[:, :, ankles], limb_ids=legs)
-        loc[:, :, hips] = sol.base_local
-        loc[:, :, knees] = sol.mid_local
-        loc[:, :, ankles] = sol.end_local
+        side, back = _facing_axes(loc[:, :, 0])
+        loc[:, :, 0] = rot.axis_angle_to_matrix(side * ((bend * share)[:, None] * wgt)[..., None]) @ loc[:, :, 0]
+        # each spine joint turns about the same world axis: in its parent's frame as it was
+        # (every turn added above it is about that axis too)
+        spine = (bend * (1.0 - share) / len(SPINE))[:, None] * wgt
+        for j in SPINE:
+            axis = np.einsum("nwji,nwj->nwi", Rw[:, :, PARENTS[j]], side)
+            loc[:, :, j] = rot.axis_angle_to_matrix(axis * spine[..., None]) @ loc[:, :, j]
+        rt = rt + (STOOP_BACK * s * np.sin(bend))[:, None, None] * wgt[..., None] * back
+        # lower the pelvis where the bend lifts the hips further from the feet than they were,
+        # the knees softening by up to STOOP_SOFT_KNEES of the leg's reach (Newton steps on the
+        # hip-to-ankle distance against the pelvis' height)
+        soft = rng.uniform(0.0, STOOP_SOFT_KNEES, n)[:, None] * wgt                        # (n, W)
+        reach = np.linalg.norm(P[:, :, LEG_HIPS] - P[:, :, LEG_ANKLES], axis=-1) * (1.0 - soft)[..., None]
+        for _ in range(4):
+            P2, _ = forward_kinematics(loc.reshape(n * W, NUM_JOINTS, 3, 3), rt.reshape(n * W, 3), None, offsets=off)
+            leg = P2.reshape(n, W, NUM_JOINTS, 3)[:, :, LEG_HIPS] - P[:, :, LEG_ANKLES]      # (n, W, 2, 3)
+            gap = np.linalg.norm(leg, axis=-1)
+            step = np.maximum(gap - reach, 0.0) * gap / np.maximum(leg[..., 2], 0.3 * gap)
+            rt[..., 2] -= step.max(-1)
+        loc = _replant_legs(loc, rt, P, Rw, offsets[pick])
         local, root = local.copy(), root.copy()
         local[pick], root[pick] = loc, rt
         return local, root
@@ -1085,6 +1182,9 @@ class WindowSampler:
         root[..., 2] += above0 - above1 - (lowest * k)[:, None] + (FOOT_CLEARANCE * stature)[:, None] + SOLE
         if a.crouch > 0:
             local, root = self._crouch(rng, local, root, offsets, stature)
+            loc_flat = local.reshape(N, NUM_JOINTS, 3, 3)
+        if a.stoop > 0:
+            local, root = self._stoop(rng, local, root, offsets, stature)
             loc_flat = local.reshape(N, NUM_JOINTS, 3, 3)
         if a.lying > 0:
             local, root, contacts = self._lay_down(rng, local, root, contacts, offsets, stature)
