@@ -241,23 +241,32 @@ def test_lying_lays_whole_bodies_on_the_floor_and_only_when_asked():
     assert np.array_equal(again["x"], a["x"]) and np.array_equal(again["y"], a["y"])
 
 
+def _rest_windows(statures, W):
+    """``(local (B, W, 22, 3, 3), root (B, W, 3), offsets (B, 22, 3), stature (B,))``: default
+    bodies of ``statures`` standing in the rest pose for ``W`` frames."""
+    bodies = [sk.make_body(s) for s in statures]
+    local = np.broadcast_to(np.eye(3), (len(bodies), W, sk.NUM_JOINTS, 3, 3)).copy()
+    root = np.stack([np.tile(b.root_rest, (W, 1)) for b in bodies])
+    return local, root, np.stack([b.offsets for b in bodies]), np.array(statures, float)
+
+
+def _window_fk(local, root, offsets):
+    """FK of windows: ``(positions (B, W, 22, 3), world rotations (B, W, 22, 3, 3))``."""
+    B, W = root.shape[:2]
+    P, R = sk.forward_kinematics(local.reshape(-1, 22, 3, 3), root.reshape(-1, 3), None,
+                                 offsets=np.repeat(offsets, W, 0))
+    return P.reshape(B, W, 22, 3), R.reshape(B, W, 22, 3, 3)
+
+
 def test_crouch_sinks_the_pelvis_onto_planted_feet():
     """Augment.crouch: the pelvis sinks (and the trunk leans forward), the legs fold as hinges
     onto the feet where they were; nothing changes with crouch=0."""
     cs = _standing_clipset(bodies=(1.6, 1.75, 1.9), T=60)
     smp = ds.WindowSampler(cs, window=40, augment=ds.Augment(crouch=1.0), seed=0)
     rng = np.random.default_rng(2)
-    B, W = 3, 40
-    local = np.broadcast_to(np.eye(3), (B, W, sk.NUM_JOINTS, 3, 3)).copy()
-    bodies = [sk.make_body(s) for s in (1.6, 1.75, 1.9)]
-    offsets = np.stack([b.offsets for b in bodies])
-    root = np.stack([np.tile(b.root_rest, (W, 1)) for b in bodies])
-    stature = np.array([1.6, 1.75, 1.9])
+    local, root, offsets, stature = _rest_windows((1.6, 1.75, 1.9), 40)
     loc2, root2 = smp._crouch(rng, local, root, offsets, stature)
-    rep = np.repeat(offsets, W, 0)
-    P0, _ = sk.forward_kinematics(local.reshape(-1, 22, 3, 3), root.reshape(-1, 3), None, offsets=rep)
-    P1, _ = sk.forward_kinematics(loc2.reshape(-1, 22, 3, 3), root2.reshape(-1, 3), None, offsets=rep)
-    P0, P1 = P0.reshape(B, W, 22, 3), P1.reshape(B, W, 22, 3)
+    P0, P1 = _window_fk(local, root, offsets)[0], _window_fk(loc2, root2, offsets)[0]
     drop = (P0[..., 0, 2] - P1[..., 0, 2]) / stature[:, None]
     assert drop.max() > 0.07 and drop.max() <= ds.CROUCH_DEPTH[1] + 1e-9 and drop.min() >= -1e-9
     ankles = [J["left_ankle"], J["right_ankle"]]
@@ -282,17 +291,9 @@ def test_stoop_bends_the_trunk_over_straight_legs_onto_planted_feet():
     cs = _standing_clipset(bodies=(1.6, 1.75, 1.9), T=60)
     smp = ds.WindowSampler(cs, window=40, augment=ds.Augment(stoop=1.0), seed=0)
     rng = np.random.default_rng(3)
-    B, W = 3, 40
-    local = np.broadcast_to(np.eye(3), (B, W, sk.NUM_JOINTS, 3, 3)).copy()
-    bodies = [sk.make_body(s) for s in (1.6, 1.75, 1.9)]
-    offsets = np.stack([b.offsets for b in bodies])
-    root = np.stack([np.tile(b.root_rest, (W, 1)) for b in bodies])
-    stature = np.array([1.6, 1.75, 1.9])
+    local, root, offsets, stature = _rest_windows((1.6, 1.75, 1.9), 40)
     loc2, root2 = smp._stoop(rng, local, root, offsets, stature)
-    rep = np.repeat(offsets, W, 0)
-    P0, _ = sk.forward_kinematics(local.reshape(-1, 22, 3, 3), root.reshape(-1, 3), None, offsets=rep)
-    P1, R1 = sk.forward_kinematics(loc2.reshape(-1, 22, 3, 3), root2.reshape(-1, 3), None, offsets=rep)
-    P0, P1, R1 = P0.reshape(B, W, 22, 3), P1.reshape(B, W, 22, 3), R1.reshape(B, W, 22, 3, 3)
+    P0, P1 = _window_fk(local, root, offsets)[0], _window_fk(loc2, root2, offsets)[0]
     ankles = [J["left_ankle"], J["right_ankle"]]
     assert np.abs(P1[:, :, ankles] - P0[:, :, ankles]).max() < 1e-6          # feet stay planted
     trunk = P1[..., J["neck"], :] - P1[..., 0, :]
@@ -307,6 +308,8 @@ def test_stoop_bends_the_trunk_over_straight_legs_onto_planted_feet():
     assert ((P0[..., 0, 2] - P1[..., 0, 2]) / stature[:, None]).max() < 0.1
     knee = np.degrees(rot.geodesic_angle(loc2[:, :, J["left_knee"]], np.eye(3)))
     assert knee.max() < 35.0                                                 # the legs stay nearly straight
+    still = (loc2[:, :, 0] == local[:, :, 0]).all((-1, -2))                  # frames outside the hold
+    assert still.any() and np.abs(P1[still] - P0[still]).max() < 1e-6      # untouched outside the hold
     from blender_manikin.core import limb_solver as ls
     b = loc2[:, :, J["left_knee"]] @ ls.A0[2]
     assert np.abs(b @ ls.H0[2]).max() < 1e-9                                  # hinge knees

@@ -977,6 +977,14 @@ class WindowSampler:
         contacts[pick] = np.where(wgt[..., None] > 0.5, 1.0, contacts[pick])
         return q, root, contacts
 
+    def _random_hold(self, rng, n, W):
+        """``(n, W)`` weights of one random hold per window (:func:`_hold_weights`): held
+        0.5-2 s, eased in and out over 0.3-0.8 s, starting anywhere that overlaps the window."""
+        hold = rng.uniform(0.5, 2.0, n) * self.fps
+        ramp = rng.uniform(0.3, 0.8, n) * self.fps
+        start = rng.uniform(-hold, W, n)
+        return _hold_weights(W, start, hold, ramp)
+
     def _crouch(self, rng, local, root, offsets, stature):
         """Crouch a share (``Augment.crouch``) of the windows: the pelvis sinks by up to
         :data:`CROUCH_DEPTH` statures (held 0.5-2 s, eased in and out over 0.3-0.8 s) and a
@@ -996,10 +1004,7 @@ class WindowSampler:
         n = pick.size
         s = stature[pick]
         depth = rng.uniform(CROUCH_DEPTH[0], CROUCH_DEPTH[1], n) * s
-        hold = rng.uniform(0.5, 2.0, n) * self.fps
-        ramp = rng.uniform(0.3, 0.8, n) * self.fps
-        start = rng.uniform(-hold, W, n)
-        wgt = _hold_weights(W, start, hold, ramp)
+        wgt = self._random_hold(rng, n, W)
         d = depth[:, None] * wgt                                                          # (n, W)
         loc = local[pick].copy()
         rt = root[pick].copy()
@@ -1036,10 +1041,7 @@ class WindowSampler:
         s = stature[pick]
         bend = rng.uniform(STOOP_BEND[0], STOOP_BEND[1], n)
         share = rng.uniform(STOOP_HIP_SHARE[0], STOOP_HIP_SHARE[1], n)
-        hold = rng.uniform(0.5, 2.0, n) * self.fps
-        ramp = rng.uniform(0.3, 0.8, n) * self.fps
-        start = rng.uniform(-hold, W, n)
-        wgt = _hold_weights(W, start, hold, ramp)                                          # (n, W)
+        wgt = self._random_hold(rng, n, W)                                                 # (n, W)
         loc = local[pick].copy()
         rt = root[pick].copy()
         off = np.repeat(offsets[pick], W, 0)
