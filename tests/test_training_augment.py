@@ -258,15 +258,24 @@ def _window_fk(local, root, offsets):
     return P.reshape(B, W, 22, 3), R.reshape(B, W, 22, 3, 3)
 
 
+def _reposed_rest_windows(field, seed):
+    """Rest-pose windows of three bodies (1.6, 1.75, 1.9 m, 40 frames) through one augmentation
+    (``Augment.<field> = 1``, its ``WindowSampler._<field>`` method, ``rng`` seeded ``seed``):
+    ``(clipset, rng, (local, root, offsets, stature), (new local, new root), P before, P after)``
+    with P ``(3, 40, 22, 3)``."""
+    cs = _standing_clipset(bodies=(1.6, 1.75, 1.9), T=60)
+    smp = ds.WindowSampler(cs, window=40, augment=ds.Augment(**{field: 1.0}), seed=0)
+    rng = np.random.default_rng(seed)
+    local, root, offsets, stature = _rest_windows((1.6, 1.75, 1.9), 40)
+    loc2, root2 = getattr(smp, "_" + field)(rng, local, root, offsets, stature)
+    P0, P1 = _window_fk(local, root, offsets)[0], _window_fk(loc2, root2, offsets)[0]
+    return cs, rng, (local, root, offsets, stature), (loc2, root2), P0, P1
+
+
 def test_crouch_sinks_the_pelvis_onto_planted_feet():
     """Augment.crouch: the pelvis sinks (and the trunk leans forward), the legs fold as hinges
     onto the feet where they were; nothing changes with crouch=0."""
-    cs = _standing_clipset(bodies=(1.6, 1.75, 1.9), T=60)
-    smp = ds.WindowSampler(cs, window=40, augment=ds.Augment(crouch=1.0), seed=0)
-    rng = np.random.default_rng(2)
-    local, root, offsets, stature = _rest_windows((1.6, 1.75, 1.9), 40)
-    loc2, root2 = smp._crouch(rng, local, root, offsets, stature)
-    P0, P1 = _window_fk(local, root, offsets)[0], _window_fk(loc2, root2, offsets)[0]
+    cs, rng, (local, root, offsets, stature), (loc2, root2), P0, P1 = _reposed_rest_windows("crouch", 2)
     drop = (P0[..., 0, 2] - P1[..., 0, 2]) / stature[:, None]
     assert drop.max() > 0.07 and drop.max() <= ds.CROUCH_DEPTH[1] + 1e-9 and drop.min() >= -1e-9
     ankles = [J["left_ankle"], J["right_ankle"]]
@@ -288,12 +297,7 @@ def test_stoop_bends_the_trunk_over_straight_legs_onto_planted_feet():
     """Augment.stoop: the trunk pitches forward at the hips and through the spine, the head goes
     low and ahead, the legs stay nearly straight (unlike a crouch) as hinges on the feet where they
     were, the pelvis moves back; nothing changes with stoop=0."""
-    cs = _standing_clipset(bodies=(1.6, 1.75, 1.9), T=60)
-    smp = ds.WindowSampler(cs, window=40, augment=ds.Augment(stoop=1.0), seed=0)
-    rng = np.random.default_rng(3)
-    local, root, offsets, stature = _rest_windows((1.6, 1.75, 1.9), 40)
-    loc2, root2 = smp._stoop(rng, local, root, offsets, stature)
-    P0, P1 = _window_fk(local, root, offsets)[0], _window_fk(loc2, root2, offsets)[0]
+    cs, rng, (local, root, offsets, stature), (loc2, root2), P0, P1 = _reposed_rest_windows("stoop", 3)
     ankles = [J["left_ankle"], J["right_ankle"]]
     assert np.abs(P1[:, :, ankles] - P0[:, :, ankles]).max() < 1e-6          # feet stay planted
     trunk = P1[..., J["neck"], :] - P1[..., 0, :]
