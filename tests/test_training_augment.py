@@ -250,14 +250,6 @@ def _rest_windows(statures, W):
     return local, root, np.stack([b.offsets for b in bodies]), np.array(statures, float)
 
 
-def _window_fk(local, root, offsets):
-    """FK of windows: ``(positions (B, W, 22, 3), world rotations (B, W, 22, 3, 3))``."""
-    B, W = root.shape[:2]
-    P, R = sk.forward_kinematics(local.reshape(-1, 22, 3, 3), root.reshape(-1, 3), None,
-                                 offsets=np.repeat(offsets, W, 0))
-    return P.reshape(B, W, 22, 3), R.reshape(B, W, 22, 3, 3)
-
-
 def _reposed_rest_windows(field, seed):
     """Rest-pose windows of three bodies (1.6, 1.75, 1.9 m, 40 frames) through one augmentation
     (``Augment.<field> = 1``, its ``WindowSampler._<field>`` method, ``rng`` seeded ``seed``):
@@ -268,7 +260,7 @@ def _reposed_rest_windows(field, seed):
     rng = np.random.default_rng(seed)
     local, root, offsets, stature = _rest_windows((1.6, 1.75, 1.9), 40)
     loc2, root2 = getattr(smp, "_" + field)(rng, local, root, offsets, stature)
-    P0, P1 = _window_fk(local, root, offsets)[0], _window_fk(loc2, root2, offsets)[0]
+    P0, P1 = ds._window_fk(local, root, offsets)[0], ds._window_fk(loc2, root2, offsets)[0]
     return cs, rng, (local, root, offsets, stature), (loc2, root2), P0, P1
 
 
@@ -323,3 +315,23 @@ def test_stoop_bends_the_trunk_over_straight_legs_onto_planted_feet():
     both = ds.WindowSampler(cs, window=20, augment=ds.Augment(stoop=0.5, crouch=0.5, lying=0.3), seed=0)
     batch = both.sample(16, np.random.default_rng(1))
     assert all(np.isfinite(v).all() for v in batch.values() if isinstance(v, np.ndarray))
+
+
+def test_stoop_leaves_the_pelvis_alone_for_a_leg_kicked_up():
+    """A stooping window whose leg is raised above the hip (a high kick): lowering the pelvis
+    would take that foot further away, so only the hanging leg sets how low the pelvis goes (an
+    earlier version stepped on every leg and could throw the body metres below the floor)."""
+    cs = _standing_clipset(bodies=(1.6, 1.75, 1.9), T=60)
+    smp = ds.WindowSampler(cs, window=40, augment=ds.Augment(stoop=1.0), seed=0)
+    local, root, offsets, stature = _rest_windows((1.6, 1.75, 1.9), 40)
+    kick = rot.axis_angle_to_matrix(np.array([-np.radians(120.0), 0.0, 0.0]))    # thigh swung forward and up
+    local[:, :, J["left_hip"]] = kick
+    for seed in range(6):
+        loc2, root2 = smp._stoop(np.random.default_rng(seed), local, root, offsets, stature)
+        P0, P1 = ds._window_fk(local, root, offsets)[0], ds._window_fk(loc2, root2, offsets)[0]
+        assert P0[..., J["left_ankle"], 2].min() > P0[..., J["left_hip"], 2].max()      # the foot is up
+        assert np.isfinite(P1).all()
+        sink = (P0[..., 0, 2] - P1[..., 0, 2]) / stature[:, None]
+        assert sink.max() < 0.1                                              # no deeper than for straight legs
+        right = J["right_ankle"]
+        assert np.abs(P1[..., right, :] - P0[..., right, :]).max() < 1e-6    # the standing foot stays planted

@@ -822,6 +822,15 @@ def _small_rotations(rng, shape, sigma_rad):
     return rot.axis_angle_to_matrix(rng.normal(size=shape + (3,)) * (sigma_rad / math.sqrt(3.0)))
 
 
+def _window_fk(local, root, offsets):
+    """FK of windows: ``(positions (n, W, 22, 3), world rotations (n, W, 22, 3, 3))`` of local
+    rotations ``(n, W, 22, 3, 3)``, root ``(n, W, 3)`` and each window's offsets ``(n, 22, 3)``."""
+    n, W = root.shape[:2]
+    P, R = forward_kinematics(local.reshape(n * W, NUM_JOINTS, 3, 3), root.reshape(n * W, 3), None,
+                              offsets=np.repeat(offsets, W, 0))
+    return P.reshape(n, W, NUM_JOINTS, 3), R.reshape(n, W, NUM_JOINTS, 3, 3)
+
+
 def _leg_lengths(offsets):
     """``(n, 2, 2)`` thigh and shank lengths of both legs, from offsets ``(n, 22, 3)``."""
     return np.stack([np.linalg.norm(offsets[:, LEG_KNEES], axis=-1),
@@ -839,9 +848,7 @@ def _replant_legs(loc, root, P, Rw, offsets):
     n, W = root.shape[:2]
     swivel = ls.swivel_from_positions(P[:, :, LEG_HIPS], P[:, :, LEG_KNEES], P[:, :, LEG_ANKLES], Rw[:, :, [0, 0]],
                                       LEGS, base_rot=Rw[:, :, LEG_HIPS])
-    P2, Rw2 = forward_kinematics(loc.reshape(n * W, NUM_JOINTS, 3, 3), root.reshape(n * W, 3), None,
-                                 offsets=np.repeat(offsets, W, 0))
-    P2, Rw2 = P2.reshape(n, W, NUM_JOINTS, 3), Rw2.reshape(n, W, NUM_JOINTS, 3, 3)
+    P2, Rw2 = _window_fk(loc, root, offsets)
     lengths = np.broadcast_to(_leg_lengths(offsets)[:, None], (n, W, 2, 2))
     sol = ls.solve_limbs(P2[:, :, LEG_HIPS], P[:, :, LEG_ANKLES], swivel, lengths, Rw2[:, :, [0, 0]],
                          end_rot=Rw[:, :, LEG_ANKLES], limb_ids=LEGS)
@@ -1008,15 +1015,13 @@ class WindowSampler:
         d = depth[:, None] * wgt                                                          # (n, W)
         loc = local[pick].copy()
         rt = root[pick].copy()
-        off = np.repeat(offsets[pick], W, 0)
-        P, Rw = forward_kinematics(loc.reshape(n * W, NUM_JOINTS, 3, 3), rt.reshape(n * W, 3), None, offsets=off)
+        P, Rw = _window_fk(loc, rt, offsets[pick])
         R0 = loc[:, :, 0]
         side, back = _facing_axes(R0)
         lean = CROUCH_LEAN * d / s[:, None]
         loc[:, :, 0] = rot.axis_angle_to_matrix(side * lean[..., None]) @ R0
         rt = rt - d[..., None] * np.array([0.0, 0.0, 1.0]) + 0.25 * d[..., None] * back
-        loc = _replant_legs(loc, rt, P.reshape(n, W, NUM_JOINTS, 3), Rw.reshape(n, W, NUM_JOINTS, 3, 3),
-                            offsets[pick])
+        loc = _replant_legs(loc, rt, P, Rw, offsets[pick])
         local, root = local.copy(), root.copy()
         local[pick], root[pick] = loc, rt
         return local, root
@@ -1044,9 +1049,7 @@ class WindowSampler:
         wgt = self._random_hold(rng, n, W)                                                 # (n, W)
         loc = local[pick].copy()
         rt = root[pick].copy()
-        off = np.repeat(offsets[pick], W, 0)
-        P, Rw = forward_kinematics(loc.reshape(n * W, NUM_JOINTS, 3, 3), rt.reshape(n * W, 3), None, offsets=off)
-        P, Rw = P.reshape(n, W, NUM_JOINTS, 3), Rw.reshape(n, W, NUM_JOINTS, 3, 3)
+        P, Rw = _window_fk(loc, rt, offsets[pick])
         side, back = _facing_axes(loc[:, :, 0])
         loc[:, :, 0] = rot.axis_angle_to_matrix(side * ((bend * share)[:, None] * wgt)[..., None]) @ loc[:, :, 0]
         # each spine joint turns about the same world axis: in its parent's frame as it was
@@ -1058,15 +1061,16 @@ class WindowSampler:
         rt = rt + (STOOP_BACK * s * np.sin(bend))[:, None, None] * wgt[..., None] * back
         # lower the pelvis where the bend lifts the hips further from the feet than they were,
         # the knees softening by up to STOOP_SOFT_KNEES of the leg's reach (Newton steps on the
-        # hip-to-ankle distance against the pelvis' height)
+        # hip-to-ankle distance against the pelvis' height; only legs that hang down from the
+        # hip, where lowering it brings the foot closer: a foot kicked up to the hip is left be)
         soft = rng.uniform(0.0, STOOP_SOFT_KNEES, n)[:, None] * wgt                        # (n, W)
         reach = np.linalg.norm(P[:, :, LEG_HIPS] - P[:, :, LEG_ANKLES], axis=-1) * (1.0 - soft)[..., None]
         for _ in range(4):
-            P2, _ = forward_kinematics(loc.reshape(n * W, NUM_JOINTS, 3, 3), rt.reshape(n * W, 3), None, offsets=off)
-            leg = P2.reshape(n, W, NUM_JOINTS, 3)[:, :, LEG_HIPS] - P[:, :, LEG_ANKLES]      # (n, W, 2, 3)
+            leg = _window_fk(loc, rt, offsets[pick])[0][:, :, LEG_HIPS] - P[:, :, LEG_ANKLES]  # (n, W, 2, 3)
             gap = np.linalg.norm(leg, axis=-1)
-            step = np.maximum(gap - reach, 0.0) * gap / np.maximum(leg[..., 2], 0.3 * gap)
-            rt[..., 2] -= step.max(-1)
+            down = leg[..., 2] > 0.3 * gap
+            step = np.maximum(gap - reach, 0.0) * gap / np.where(down, leg[..., 2], 1.0)
+            rt[..., 2] -= np.where(down, step, 0.0).max(-1)
         loc = _replant_legs(loc, rt, P, Rw, offsets[pick])
         local, root = local.copy(), root.copy()
         local[pick], root[pick] = loc, rt
@@ -1109,9 +1113,7 @@ class WindowSampler:
         c = root[src, W // 2][:, None]
         moved = np.einsum("nwij,nwj->nwi", G, root[src] - c) + c
         rp = np.concatenate([moved[..., :2], np.zeros((n * K, W, 1))], -1)
-        P, _ = forward_kinematics(lp.reshape(n * K * W, NUM_JOINTS, 3, 3), rp.reshape(n * K * W, 3), None,
-                                  offsets=np.repeat(offsets[src], W, 0))
-        P = P.reshape(n * K, W, NUM_JOINTS, 3)
+        P = _window_fk(lp, rp, offsets[src])[0]
         s = stature[src][:, None]
         trunk = LYING_TRUNK_CLEARANCE * s - P[:, :, LYING_TRUNK, 2].min(-1)               # (nK, W)
         lift = np.maximum(trunk, LYING_CLEARANCE * s - P[..., 2].min(-1))
