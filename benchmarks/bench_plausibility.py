@@ -15,7 +15,9 @@ calibration ``AUTO``) once per model, and the table prints, per recording and mo
   do not carry it;
 * foot skating: mean horizontal ankle speed (cm/s) on the frames a foot is planted;
 * hands off: share of frames on which a wrist misses its tracker by more than 1 cm, and the
-  largest miss (cm);
+  largest miss (cm); *inside elbow fold*: the share of frames on which a hand misses because its
+  tracker is closer to the shoulder than the most-flexed elbow (150°) puts the wrist, even after
+  the collar's swing (:meth:`.PoseResult.misses`; the rest of the misses are out of reach);
 * the estimated stature (metres) and how the body was sized.
 
 A second table solves standing T- and A-poses made by FK (``benchmarks/standing.py``: bodies of
@@ -46,7 +48,8 @@ DEFAULT_RECORDINGS = [os.path.join(SHARED, "data", "vr", "beatsaber-replay-sampl
                       os.path.join(ROOT, "examples", "example_recording.csv")]
 PREVIOUS = os.path.join(ROOT, "benchmarks", "models", "manikin_s_previous.onnx")
 UNITS = {"knee p10": "deg", "knee median": "deg", "knee p90": "deg", "pelvis off feet": "%",
-         "foot skate": "cm/s", "hands off": "%", "hand miss max": "cm", "stature": "m"}
+         "foot skate": "cm/s", "hands off": "%", "inside elbow fold": "%", "hand miss max": "cm",
+         "stature": "m"}
 COLUMNS = list(UNITS)
 
 
@@ -67,12 +70,14 @@ def plausibility(result, targets):
     for dev, joint in (("left_hand", "left_wrist"), ("right_hand", "right_wrist")):
         misses.append(np.linalg.norm(P[:, J[joint]] - targets.pos[dev], axis=-1))
     miss = np.stack(misses, -1)
+    close = np.stack([result.misses(limb, 0.01)[1] for limb in (0, 1)], -1)
     return {
         "knee p10": float(np.percentile(knees, 10)), "knee median": float(np.median(knees)),
         "knee p90": float(np.percentile(knees, 90)),
         "pelvis off feet": float(100.0 * off[both].mean()) if both.any() else 0.0,
         "foot skate": float(100.0 * speed[contacts].mean()) if contacts.any() else 0.0,
-        "hands off": float(100.0 * (miss > 0.01).any(-1).mean()), "hand miss max": float(100.0 * miss.max()),
+        "hands off": float(100.0 * (miss > 0.01).any(-1).mean()),
+        "inside elbow fold": float(100.0 * close.any(-1).mean()), "hand miss max": float(100.0 * miss.max()),
         "stature": float(result.body.stature),
     }
 

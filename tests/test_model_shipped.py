@@ -116,6 +116,8 @@ def test_arms_too_short_are_lengthened_from_the_reach(runner, example):
     far_before = (res.reach_error[:, :2] > 0.005).any(1).sum()
     assert far_before > 0.02 * targets.num_frames
     assert any("out of reach" in n and "body size" in n for n in res.quality_notes())
+    far, close = res.misses(0)
+    assert np.array_equal(far | close, res.reach_error[:, 0] > 0.005) and far.sum() > close.sum()
     first = calibration.arm_span_for_reach(res)
     assert first is not None and first > 1.25
     new_body, again, span = calibration.adapt_arms_to_reach(res, lambda b: pipeline.solve(targets, b, runner))
@@ -166,6 +168,12 @@ def test_hand_on_the_shoulder_is_reported_as_an_offset_problem(runner, example):
     assert miss.max() < d_min - np.hypot(0.03, 0.03) - 0.02
     assert np.all(np.linalg.norm(res.positions[f, sk.J["right_wrist"]] - res.positions[f, sk.J["right_shoulder"]],
                                  axis=-1) >= d_min - 1e-6)
+    # the same split, per frame: the moved frames are misses inside the fold, none out of reach
+    far, close = res.misses(1)
+    moved_frames = np.zeros(targets.num_frames, bool)
+    moved_frames[f] = True
+    assert np.array_equal(close, moved_frames & (res.reach_error[:, 1] > 0.005)) and close[f].all()
+    assert not far.any()
 
 
 def test_chunked_solve_equals_the_whole_take_solve(runner, example, monkeypatch):

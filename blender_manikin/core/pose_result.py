@@ -106,6 +106,28 @@ class PoseResult:
     def swivel_dict(self):
         return {name: self.swivel[:, i] for i, name in enumerate(LIMB_NAMES)}
 
+    def misses(self, limb, tolerance=0.005):
+        """Frames on which limb ``limb`` (index into :data:`.skeleton.LIMBS`) missed its target by
+        more than ``tolerance`` metres, split by why: ``(far, close)``, two ``(T,)`` bool arrays.
+        *far*: the target is further from the shoulder / hip than the solved hand / ankle (out of
+        reach); *close*: nearer than it (inside the most-flexed elbow / knee).  Without targets for
+        the limb every miss counts as far.  All False when there is no ``reach_error``.
+        """
+        T = self.local_rot.shape[0]
+        if self.reach_error is None:
+            return np.zeros(T, bool), np.zeros(T, bool)
+        name, base_j, _, end_j = LIMBS[limb]
+        bad = self.reach_error[:, limb] > tolerance
+        far = bad.copy()
+        dev = _LIMB_WORDS[name][0].replace(" ", "_")
+        if bad.any() and self.targets is not None and dev in self.targets.pos:
+            f = np.nonzero(bad)[0]          # FK on the frames that missed only (long takes)
+            pos = self.fk()[0][f] if self._fk is not None else \
+                forward_kinematics(self.local_rot[f], self.root_pos[f], self.body)[0]
+            far[f] = (np.linalg.norm(self.targets.pos[dev][f] - pos[:, base_j], axis=-1)
+                      > np.linalg.norm(pos[:, end_j] - pos[:, base_j], axis=-1))
+        return far, bad & ~far
+
     def quality_notes(self, reach_tolerance=0.005):
         """Plain-language notes on where the solve had to give way, for the user.
 
@@ -118,21 +140,9 @@ class PoseResult:
         """
         notes = []
         if self.reach_error is not None:
-            for i, (name, base_j, _, end_j) in enumerate(LIMBS):
-                bad = self.reach_error[:, i] > reach_tolerance
-                if not bad.any():
-                    continue
+            for i, name in enumerate(LIMB_NAMES):
+                far, close = self.misses(i, reach_tolerance)
                 end, base, mid = _LIMB_WORDS[name]
-                dev = end.replace(" ", "_")
-                far = bad
-                if self.targets is not None and dev in self.targets.pos:
-                    f = np.nonzero(bad)[0]          # FK on the frames that missed only (long takes)
-                    pos = self.fk()[0][f] if self._fk is not None else \
-                        forward_kinematics(self.local_rot[f], self.root_pos[f], self.body)[0]
-                    far = bad.copy()
-                    far[f] = (np.linalg.norm(self.targets.pos[dev][f] - pos[:, base_j], axis=-1)
-                              > np.linalg.norm(pos[:, end_j] - pos[:, base_j], axis=-1))
-                close = bad & ~far
                 if far.any():
                     notes.append(f"{end} out of reach on {int(far.sum())} frame(s), by up to "
                                  f"{100 * float(self.reach_error[far, i].max()):.1f} cm (check the body size)")
