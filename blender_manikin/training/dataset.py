@@ -1015,13 +1015,14 @@ class WindowSampler:
         d = depth[:, None] * wgt                                                          # (n, W)
         loc = local[pick].copy()
         rt = root[pick].copy()
-        P, Rw = _window_fk(loc, rt, offsets[pick])
+        off = offsets[pick]
+        P, Rw = _window_fk(loc, rt, off)
         R0 = loc[:, :, 0]
         side, back = _facing_axes(R0)
         lean = CROUCH_LEAN * d / s[:, None]
         loc[:, :, 0] = rot.axis_angle_to_matrix(side * lean[..., None]) @ R0
         rt = rt - d[..., None] * np.array([0.0, 0.0, 1.0]) + 0.25 * d[..., None] * back
-        loc = _replant_legs(loc, rt, P, Rw, offsets[pick])
+        loc = _replant_legs(loc, rt, P, Rw, off)
         local, root = local.copy(), root.copy()
         local[pick], root[pick] = loc, rt
         return local, root
@@ -1049,7 +1050,8 @@ class WindowSampler:
         wgt = self._random_hold(rng, n, W)                                                 # (n, W)
         loc = local[pick].copy()
         rt = root[pick].copy()
-        P, Rw = _window_fk(loc, rt, offsets[pick])
+        off = offsets[pick]
+        P, Rw = _window_fk(loc, rt, off)
         side, back = _facing_axes(loc[:, :, 0])
         loc[:, :, 0] = rot.axis_angle_to_matrix(side * ((bend * share)[:, None] * wgt)[..., None]) @ loc[:, :, 0]
         # each spine joint turns about the same world axis: in its parent's frame as it was
@@ -1066,12 +1068,12 @@ class WindowSampler:
         soft = rng.uniform(0.0, STOOP_SOFT_KNEES, n)[:, None] * wgt                        # (n, W)
         reach = np.linalg.norm(P[:, :, LEG_HIPS] - P[:, :, LEG_ANKLES], axis=-1) * (1.0 - soft)[..., None]
         for _ in range(4):
-            leg = _window_fk(loc, rt, offsets[pick])[0][:, :, LEG_HIPS] - P[:, :, LEG_ANKLES]  # (n, W, 2, 3)
+            leg = _window_fk(loc, rt, off)[0][:, :, LEG_HIPS] - P[:, :, LEG_ANKLES]           # (n, W, 2, 3)
             gap = np.linalg.norm(leg, axis=-1)
             down = leg[..., 2] > 0.3 * gap
             step = np.maximum(gap - reach, 0.0) * gap / np.where(down, leg[..., 2], 1.0)
             rt[..., 2] -= np.where(down, step, 0.0).max(-1)
-        loc = _replant_legs(loc, rt, P, Rw, offsets[pick])
+        loc = _replant_legs(loc, rt, P, Rw, off)
         local, root = local.copy(), root.copy()
         local[pick], root[pick] = loc, rt
         return local, root
