@@ -430,3 +430,66 @@ def test_init_fine_tunes_from_a_checkpoint_or_an_exported_model(cache, bvh_dir, 
     torch.save({"weights": 1}, bad)
     with pytest.raises(SystemExit, match="not a training checkpoint"):
         train.main(common + ["--steps", "1", "--init", str(bad), "--out", str(tmp_path / "f")])
+
+
+def test_weight_average_formula_and_swap():
+    """WeightAverage: avg = d avg + (1 - d) w with d = min(decay, (1 + n) / (10 + n)); applied() swaps
+    the average in and the raw weights back."""
+    from blender_manikin.training.weight_average import WeightAverage
+    lin = torch.nn.Linear(2, 1)
+    with torch.no_grad():
+        lin.weight.fill_(0.0)
+        lin.bias.fill_(0.0)
+    avg = WeightAverage(lin, 0.5)
+    expect = 0.0
+    for n, w in enumerate((1.0, 2.0, 4.0)):
+        with torch.no_grad():
+            lin.weight.fill_(w)
+        d = min(0.5, (1 + n) / (10 + n))
+        assert avg.rate() == pytest.approx(d)
+        avg.update(lin)
+        expect = d * expect + (1 - d) * w
+    assert torch.allclose(avg.weights["weight"], torch.full((1, 2), expect))
+    with avg.applied(lin):
+        assert torch.allclose(lin.weight, torch.full((1, 2), expect))
+    assert torch.all(lin.weight == 4.0)
+    with pytest.raises(ValueError, match="decay"):
+        WeightAverage(lin, 1.0)
+
+
+def test_ema_run_resumes_exactly_and_exports_the_average(cache, bvh_dir, asf_dir, tmp_path):
+    """--ema: the average survives --resume bit for bit, best.pt is chosen on the average's
+    --select-on error (the raw weights' is logged beside it), and export writes the average."""
+    from blender_manikin.training import train, export
+    from blender_manikin.core.model_runner import ModelRunner
+    root, _ = cache
+    common = ["--bvh", bvh_dir, "--cache-dir", root, "--window", "12", "--steps", "6", "--ema", "0.9",
+              "--ckpt-steps", "2", "--select-on", asf_dir] + TINY
+    train.main(common + ["--out", str(tmp_path / "a")])
+    train.main(common + ["--out", str(tmp_path / "b"), "--stop-at", "3"])
+    train.main(common[:-len(TINY)] + ["--out", str(tmp_path / "b"), "--resume"] + TINY)
+    a = torch.load(tmp_path / "a" / "checkpoint.pt", weights_only=False)
+    b = torch.load(tmp_path / "b" / "checkpoint.pt", weights_only=False)
+    assert a["ema"]["updates"] == b["ema"]["updates"] == 6 and b["args"]["ema"] == 0.9
+    for k, v in a["ema"]["weights"].items():
+        assert torch.allclose(v, b["ema"]["weights"][k], atol=1e-6), k
+    assert any(not torch.allclose(v, a["model"][k]) for k, v in a["ema"]["weights"].items())
+    hist = [h for h in a["history"] if "select_mpjpe_cm" in h]
+    assert [h["step"] for h in hist] == [2, 4, 6] and all("raw_select_mpjpe_cm" in h for h in hist)
+    assert any(h["raw_select_mpjpe_cm"] != h["select_mpjpe_cm"] for h in hist)
+    best = torch.load(tmp_path / "a" / "best.pt", weights_only=False)
+    assert best["step"] == min(hist, key=lambda h: h["select_mpjpe_cm"])["step"]
+
+    out = tmp_path / "ema.onnx"
+    contract, _ = export.export(str(tmp_path / "a" / "checkpoint.pt"), str(out), quiet=True)
+    assert contract["training"]["weight_average"] == {"decay": 0.9, "updates": 6}
+    x = ds.WindowSampler(ds.build_cache(bvh_dir, root, verbose=False), window=12, seed=3).sample(2)["x"]
+    got = ModelRunner(str(out), threads=1).predict(x)
+    outs = {}
+    for name in ("ema", "model"):
+        model = PoseNet(ModelConfig.from_dict(a["config"]))
+        model.load_state_dict(a["ema"]["weights"] if name == "ema" else a["model"])
+        model.eval()
+        with torch.no_grad():
+            outs[name] = model(torch.from_numpy(x)).numpy()
+    assert np.abs(got - outs["ema"]).max() < 1e-4 < np.abs(got - outs["model"]).max()

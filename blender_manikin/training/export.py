@@ -25,6 +25,7 @@ import numpy as np
 
 from ..core import features
 from ..core.skeleton import JOINT_NAMES, TORSO_JOINTS
+from .weight_average import trained_weights
 
 CONTRACT_KEY = "manikin_contract"
 CONTRACT_VERSION = 1
@@ -88,7 +89,9 @@ def build_contract(ckpt, num_parameters):
         "training": {"steps": int(ckpt.get("step", 0)), "minutes": round(float(ckpt.get("elapsed", 0.0)) / 60, 2),
                      "batch": ckpt.get("args", {}).get("batch"), "seed": ckpt.get("args", {}).get("seed"),
                      "init": (os.path.basename(ckpt["args"]["init"]) if ckpt.get("args", {}).get("init")
-                              else None)},
+                              else None),
+                     "weight_average": ({"decay": ckpt["ema"]["decay"], "updates": ckpt["ema"]["updates"]}
+                                        if ckpt.get("ema") else None)},
         "validation": {k: v for k, v in val.items()} if val else {},
     }
 
@@ -103,7 +106,7 @@ def export(checkpoint, out, verify=True, quiet=False):
     ckpt = torch.load(checkpoint, map_location="cpu", weights_only=False)
     cfg = ModelConfig.from_dict(ckpt["config"])
     model = build_model(cfg)
-    model.load_state_dict(ckpt["model"])
+    model.load_state_dict(trained_weights(ckpt))
     model.eval()
     contract = build_contract(ckpt, count_parameters(model))
     out = os.fspath(out)

@@ -27,6 +27,7 @@ import os
 import numpy as np
 
 from .model import ModelConfig
+from .weight_average import trained_weights
 
 #: largest |onnxruntime - torch| accepted for weights read back from an ONNX file
 MAX_DIFF = 1e-4
@@ -116,4 +117,4 @@ def load_initial_weights(path):
     ckpt = torch.load(path, map_location="cpu", weights_only=False)
     if not isinstance(ckpt, dict) or "model" not in ckpt or "config" not in ckpt:
         raise ValueError(f"--init {path}: not a training checkpoint (no 'model' and 'config')")
-    return ModelConfig.from_dict(ckpt["config"]), ckpt["model"]
+    return ModelConfig.from_dict(ckpt["config"]), trained_weights(ckpt)

@@ -16,6 +16,8 @@
   states, data description, validation history) every ``--ckpt-minutes``
   and at the end, written atomically.  ``--resume`` continues from it
   exactly (same batches, same dropout) and may extend the plan.
+* ``--ema DECAY`` keeps a moving average of the weights
+  (:mod:`.weight_average`); validation, ``best.pt`` and export then use it.
 * Validation loss and metrics (MPJPE, hand/upper/lower errors in cm, root
   orientation error, contact accuracy) on fixed windows of the held-out
   takes, printed on stdout at every checkpoint and appended to
@@ -27,6 +29,7 @@ Then export: ``python -m blender_manikin.training.export --checkpoint DIR/checkp
 from __future__ import annotations
 
 import argparse
+import contextlib
 import dataclasses
 import json
 import math
@@ -36,6 +39,7 @@ import time
 
 
 from ..core import features
+from .weight_average import WeightAverage
 from ..core.devices import DEVICES
 
 SIX_TRACKERS = DEVICES
@@ -85,6 +89,10 @@ def build_parser():
                    help="override an augmentation setting of dataset.Augment, e.g. --aug arm_mix=0 "
                         "(repeatable; a resumed run keeps its settings unless given again)")
     p.add_argument("--weight-decay", type=float, default=0.01)
+    p.add_argument("--ema", type=float, default=0.0, metavar="DECAY",
+                   help="keep an exponential moving average of the weights with this decay (e.g. 0.999, "
+                        "about the last 1,000 steps); validation, best.pt and export then use the "
+                        "averaged weights (training/weight_average.py); 0 (default): off")
     p.add_argument("--warmup", type=int, default=300, help="warm-up steps (at most 5 %% of a step plan)")
     p.add_argument("--ckpt-minutes", type=float, default=5.0, help="checkpoint + validation interval")
     p.add_argument("--ckpt-steps", type=int, default=None, help="also checkpoint every N steps")
@@ -258,7 +266,7 @@ def main(argv=None):
                 setattr(args, k, prev.get(k))
         if isinstance(args.bvh, str):            # runs from before several sources
             args.bvh = [args.bvh]
-        for k in ("seed", "batch", "lr", "weight_decay", "warmup"):
+        for k in ("seed", "batch", "lr", "weight_decay", "warmup", "ema"):
             if k in prev:
                 setattr(args, k, prev[k])
         if args.lam is None:
@@ -353,21 +361,29 @@ def main(argv=None):
     model = build_model(cfg)
     opt = torch.optim.AdamW(model.parameters(), lr=args.lr, weight_decay=args.weight_decay)
     step, elapsed, history = 0, 0.0, []
+    averaged = None
     if ckpt is not None:
         model.load_state_dict(ckpt["model"])
         opt.load_state_dict(ckpt["optimizer"])
+        if args.ema:
+            averaged = WeightAverage(model, args.ema)
+            if ckpt.get("ema"):
+                averaged.load_state_dict(ckpt["ema"])
         step, elapsed, history = int(ckpt["step"]), float(ckpt["elapsed"]), list(ckpt.get("history", []))
         torch.set_rng_state(ckpt["torch_rng"])
         say(f"resumed {ckpt_path} at step {step} ({elapsed / 60:.1f} min trained)")
     elif init_state is not None:
         model.load_state_dict(init_state)
         say(f"initial weights from {args.init}")
+    if averaged is None and args.ema:
+        averaged = WeightAverage(model, args.ema)
     nparams = count_parameters(model)
     say(f"model: {cfg.kind}, {cfg.arch}, d_model {cfg.d_model}, {cfg.layers} layers, {cfg.heads} heads, window "
         f"{cfg.window}, inputs {list(cfg.devices)}: {nparams:,} parameters; batch {args.batch}, "
         f"{args.threads} threads; loss weights {dict(losses.LAMBDA, **lam)}; plan: "
         + (f"{args.steps} steps" if args.steps else "") + (" / " if args.steps and args.minutes else "")
-        + (f"{args.minutes:g} min" if args.minutes else ""))
+        + (f"{args.minutes:g} min" if args.minutes else "")
+        + (f"; validating the weight average (decay {args.ema:g})" if averaged is not None else ""))
 
     warmup = args.warmup if not args.steps else min(args.warmup, max(1, args.steps // 20))
 
@@ -384,14 +400,21 @@ def main(argv=None):
                               elapsed=elapsed, config=cfg.to_dict(), args=vars(args),
                               torch_rng=torch.get_rng_state(),
                               data=data_info, history=history, val=val, num_parameters=nparams,
+                              ema=averaged.state_dict() if averaged is not None else None,
                               code_version=__version__, saved=time.strftime("%Y-%m-%d %H:%M:%S")))
 
     def validate():
-        m = evaluate(model, val_batches, cfg.kind, cfg.devices, lam=lam)
+        """Metrics of the weights the run stands for (the average with --ema); with --ema also the
+        raw weights' on the --select-on source, as ``raw_select_*``."""
+        with (averaged.applied(model) if averaged is not None else contextlib.nullcontext()):
+            m = evaluate(model, val_batches, cfg.kind, cfg.devices, lam=lam)
+            sm = evaluate(model, select_batches, cfg.kind, cfg.devices, lam=lam) if select_batches is not None else None
         rec = dict(step=step, minutes=round(elapsed / 60, 2), **{k: round(v, 5) for k, v in m.items()})
-        if select_batches is not None:
-            sm = evaluate(model, select_batches, cfg.kind, cfg.devices, lam=lam)
+        if sm is not None:
             rec.update({f"select_{k}": round(v, 5) for k, v in sm.items()})
+            if averaged is not None:
+                raw = evaluate(model, select_batches, cfg.kind, cfg.devices, lam=lam)
+                rec.update({f"raw_select_{k}": round(raw[k], 5) for k in ("mpjpe_cm", "lower_cm")})
         history.append(rec)
         with open(os.path.join(args.out, "metrics.jsonl"), "a") as f:
             f.write(json.dumps(rec) + "\n")
@@ -400,7 +423,9 @@ def main(argv=None):
             f"hand {m['hand_cm']:.2f}  upper {m['upper_cm']:.2f}  lower {m['lower_cm']:.2f} cm  "
             f"root {m['root_deg']:.2f} deg  contact acc {m['contact_acc']:.3f}"
             + (f"  | select-on: MPJPE {rec['select_mpjpe_cm']:.2f}  lower {rec['select_lower_cm']:.2f} cm"
-               if select_batches is not None else ""))
+               if select_batches is not None else "")
+            + (f" (raw weights {rec['raw_select_mpjpe_cm']:.2f}, {rec['raw_select_lower_cm']:.2f})"
+               if "raw_select_mpjpe_cm" in rec else ""))
         return rec
 
     def keep_best(rec):
@@ -437,6 +462,8 @@ def main(argv=None):
             total.backward()
             torch.nn.utils.clip_grad_norm_(model.parameters(), 1.0)
             opt.step()
+            if averaged is not None:
+                averaged.update(model)
             step += 1
             lv = total.item()
             if not math.isfinite(lv):
