@@ -67,3 +67,43 @@ def test_targets_round_trip_through_decode():
     cs = dec["swivel_cs"]
     assert np.allclose(np.angle(np.exp(1j * (np.arctan2(cs[..., 1], cs[..., 0]) - sw))), 0, atol=1e-5)
     assert np.allclose(dec["contact"], 0.5)                   # logit 0
+
+
+def _encoded(loc, root, offsets, contacts, body, B, W, kind):
+    """(x, y) of a motion: make_inputs from its head and wrists, encode_targets from its joints."""
+    from blender_manikin.core import limb_solver as ls
+    pos, wr = sk.forward_kinematics(loc, root, body, offsets=offsets)
+    limbs = np.array([lb[1:] for lb in sk.LIMBS])
+    sw = ls.swivel_from_positions(pos[:, limbs[:, 0]], pos[:, limbs[:, 1]], pos[:, limbs[:, 2]],
+                                  wr[:, sk.PARENTS[limbs[:, 0]]], base_rot=wr[:, limbs[:, 0]])
+    pos, wr = pos.reshape(B, W, 22, 3), wr.reshape(B, W, 22, 3, 3)
+    P = {d: pos[:, :, features.DEVICE_JOINT[d]] for d in features.INPUT_DEVICES}
+    R = {d: wr[:, :, features.DEVICE_JOINT[d]] for d in features.INPUT_DEVICES}
+    st = np.full(B, 1.75)
+    x, C, o = features.make_inputs(P, R, st, 30.0, body=np.tile(features.body_features(offsets[0], 1.75), (B, 1)))
+    y = features.encode_targets(wr, loc.reshape(B, W, 22, 3, 3), pos, sw.reshape(B, W, 4),
+                                contacts.reshape(B, W, 2), C, o, st, kind=kind)
+    return x, y
+
+
+def test_mirrored_inputs_and_outputs_are_those_of_the_mirrored_motion():
+    """mirror_inputs / mirror_outputs equal the inputs and targets made from the left/right mirror
+    image of a motion (the training augmentation's mirror), for both output kinds; each is its own
+    inverse.  Fails with a swivel sign, a collar or ankle swap, or a 6D sign wrong."""
+    from blender_manikin.training.dataset import mirror_motion
+    rng = np.random.default_rng(4)
+    B, W = 3, 12
+    body = sk.make_body(1.75)
+    loc = random_pose(rng, B * W, spread=0.5)
+    root = np.tile(body.root_rest, (B * W, 1)) + rng.normal(0, 0.3, (B * W, 3))
+    offsets = np.broadcast_to(body.offsets, (B * W, 22, 3)).copy()
+    contacts = rng.uniform(size=(B * W, 2))
+    for kind in ("manikin", "fk"):
+        x, y = _encoded(loc, root, offsets, contacts, body, B, W, kind)
+        xm, ym = _encoded(*mirror_motion(loc, root, offsets, contacts), body, B, W, kind)
+        assert np.abs(xm - x).max() > 0.1 and np.abs(ym - y).max() > 0.1      # the mirror is not trivial
+        np.testing.assert_allclose(features.mirror_inputs(x), xm, atol=1e-5)
+        np.testing.assert_allclose(features.mirror_outputs(y, kind), ym, atol=1e-5)
+        np.testing.assert_array_equal(features.mirror_outputs(features.mirror_outputs(y, kind), kind), y)
+        np.testing.assert_array_equal(features.mirror_inputs(features.mirror_inputs(x)), x)
+        assert features.mirror_outputs(y[:0], kind).shape == (0,) + y.shape[1:]     # an empty batch

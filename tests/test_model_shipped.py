@@ -211,3 +211,50 @@ def test_writers_in_chunks_write_the_same_files(runner, example, tmp_path, monke
     doc = export_json.read_json(written["json"][1])
     assert export_json.validate_document(doc) == []
     np.testing.assert_allclose(doc["positions"], res.positions, atol=1e-6)
+
+
+def _mirror_image(targets):
+    """The left/right mirror image (x -> -x) of tracker targets."""
+    from blender_manikin.core.pose_result import TrackerTargets
+    M = sk.MIRROR_M
+    name = sk.mirror_name
+    return TrackerTargets(fps=targets.fps, pos={name(d): p * [-1.0, 1, 1] for d, p in targets.pos.items()},
+                          rot={name(d): M @ r @ M for d, r in targets.rot.items()},
+                          valid={name(d): v for d, v in targets.valid.items()})
+
+
+def test_mirrored_windows_make_the_network_stage_mirror_symmetric(runner, example):
+    """mirror="both": the network stage of the mirrored recording is the mirror image of the
+    original's, which the network alone is not.  "alternate" (the default) feeds every second
+    window mirrored and keeps the others."""
+    targets, body, _ = example
+    M = sk.MIRROR_M
+
+    def asymmetry(a, b):
+        return max(np.abs(b.root_rot - M @ a.root_rot @ M).max(),
+                   np.abs(b.torso_rot - M @ a.torso_rot[:, [0, 1, 2, 3, 5, 4]] @ M).max(),
+                   np.abs(b.ankle_pos - a.ankle_pos[:, ::-1] * [-1.0, 1, 1]).max(),
+                   np.abs(b.ankle_rot - M @ a.ankle_rot[:, ::-1] @ M).max(),
+                   np.abs(np.exp(1j * b.swivel) - np.exp(-1j * a.swivel[:, [1, 0, 3, 2]])).max(),
+                   np.abs(b.contact - a.contact[:, ::-1]).max())
+
+    mirrored = _mirror_image(targets)
+    both = [pipeline.run_network(t, body, runner, mirror="both") for t in (targets, mirrored)]
+    off = [pipeline.run_network(t, body, runner, mirror="off") for t in (targets, mirrored)]
+    assert asymmetry(*both) < 1e-4 < 0.01 < asymmetry(*off)
+
+    class Recorder:
+        def __init__(self):
+            self.contract, self.batch, self.x = runner.contract, runner.batch, []
+
+        def predict(self, x):
+            self.x.append(x.copy())
+            return runner.predict(x)
+    seen = {}
+    for mode in ("off", "alternate"):
+        rec = Recorder()
+        pipeline.run_network(targets, body, rec, mirror=None if mode == "alternate" else mode)   # None: the default
+        seen[mode] = np.concatenate(rec.x)
+    assert pipeline.MIRROR_WINDOWS == "alternate" and len(seen["off"]) >= 4
+    np.testing.assert_array_equal(seen["alternate"][0::2], seen["off"][0::2])
+    np.testing.assert_allclose(seen["alternate"][1::2], features.mirror_inputs(seen["off"][1::2]), atol=1e-6)

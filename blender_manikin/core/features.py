@@ -44,7 +44,7 @@ import numpy as np
 
 from . import rotations as rot
 from .devices import DEVICE_JOINT, REQUIRED_DEVICES  # noqa: F401  (DEVICE_JOINT: used by training)
-from .skeleton import J, NUM_JOINTS
+from .skeleton import J, MIRROR_JOINTS, MIRROR_M, NUM_JOINTS, mirror_name
 
 INPUT_DEVICES = REQUIRED_DEVICES
 PER_DEVICE = 12
@@ -209,6 +209,58 @@ def make_inputs(pos, rot_m, stature, fps, devices=INPUT_DEVICES, frames=None, bo
         b = np.broadcast_to(b.reshape(-1, 1, b.shape[-1]), (feats[0].shape[0], feats[0].shape[1], b.shape[-1]))
         feats.append(b)
     return np.concatenate(feats, -1).astype(np.float32), C, o
+
+
+#: sign of each 6D component (first column, then second) under ``R -> M R M``, ``M = diag(-1, 1, 1)``:
+#: the first column becomes ``-M c0``, the second ``M c1`` (linear, so it holds for raw network 6D too)
+SIXD_MIRROR_SIGN = np.concatenate([-np.diag(MIRROR_M), np.diag(MIRROR_M)])
+_X_MIRROR_SIGN = np.diag(MIRROR_M)
+
+
+def mirror_inputs(x, devices=INPUT_DEVICES):
+    """Network inputs ``(..., W, 12·D [+ K])`` of the left/right mirror image (x -> -x) of the
+    same windows: what :func:`make_inputs` makes from mirrored trackers.
+
+    A mirrored window's canonical frame is the mirror of the original's (its heading yaw is
+    negated), so in canonical coordinates the mirror is exact: positions and velocities
+    negate x, orientations become ``M R M``, and the left and right devices swap. The body
+    features (left/right averages) stay. ``devices`` must hold each device's mirror image."""
+    x = np.asarray(x)
+    order = [devices.index(mirror_name(d)) for d in devices]
+    sign = np.concatenate([_X_MIRROR_SIGN, SIXD_MIRROR_SIGN, _X_MIRROR_SIGN]).astype(x.dtype)
+    D = len(devices) * PER_DEVICE
+    per = x[..., :D].reshape(x.shape[:-1] + (len(devices), PER_DEVICE))[..., order, :] * sign
+    return np.concatenate([per.reshape(x.shape[:-1] + (D,)), x[..., D:]], -1)
+
+
+def mirror_outputs(y, kind="manikin"):
+    """Network outputs ``(..., W, F_out)`` (raw: 6D, canonical positions, (cos, sin), logits) mapped
+    through the left/right mirror: the outputs for the mirrored window, read back as the
+    original's. Its own inverse. Swivel angles negate under the mirror (each limb's swivel frame
+    ``(u, v = n × u)`` turns left-handed), so their sines change sign as the limbs swap."""
+    y = np.asarray(y)
+    sl = output_slices(kind)
+    lead = y.shape[:-1]
+    out = np.empty_like(y)
+
+    def block(name, n, width):
+        return y[..., sl[name]].reshape(lead + (n, width))
+
+    def put(name, v):
+        out[..., sl[name]] = v.reshape(lead + (sl[name].stop - sl[name].start,))
+
+    s6 = SIXD_MIRROR_SIGN.astype(y.dtype)
+    put("root_rot", block("root_rot", 1, 6) * s6)
+    put("contact", block("contact", 2, 1)[..., ::-1, :])
+    if kind == "manikin":
+        torso = [TORSO_LOCAL.index(mirror_name(n)) for n in TORSO_LOCAL]
+        put("torso_rot", block("torso_rot", len(TORSO_LOCAL), 6)[..., torso, :] * s6)
+        put("ankle_pos", block("ankle_pos", 2, 3)[..., ::-1, :] * _X_MIRROR_SIGN.astype(y.dtype))
+        put("ankle_rot", block("ankle_rot", 2, 6)[..., ::-1, :] * s6)
+        put("swivel", block("swivel", 4, 2)[..., [1, 0, 3, 2], :] * np.array([1, -1], y.dtype))
+    else:
+        put("local_rot", block("local_rot", NUM_JOINTS - 1, 6)[..., MIRROR_JOINTS[1:] - 1, :] * s6)
+    return out
 
 
 def encode_targets(world_rot, local_rot, positions, swivel, contacts, C, o, stature, kind="manikin",

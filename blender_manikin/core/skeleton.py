@@ -89,6 +89,18 @@ PARENTS = np.array([-1, 0, 0, 0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 9, 9, 12, 13, 14, 16
 NUM_JOINTS = 22
 J = {name: i for i, name in enumerate(JOINT_NAMES)}
 
+
+def mirror_name(name: str) -> str:
+    """The left/right mirror image of a joint or device name ("left_knee" -> "right_knee")."""
+    return name.replace("left_", "\0").replace("right_", "left_").replace("\0", "right_")
+
+
+#: joint index of each joint's left/right mirror image (x -> -x)
+MIRROR_JOINTS = np.array([J[mirror_name(n)] for n in JOINT_NAMES])
+#: the mirror x -> -x, as it acts on a rotation: ``R -> MIRROR_M @ R @ MIRROR_M`` (every rest frame
+#: of the body model is world aligned, so this is a joint's mirrored rotation)
+MIRROR_M = np.diag([-1.0, 1.0, 1.0])
+
 TORSO_JOINTS = (J["pelvis"], J["spine1"], J["spine2"], J["spine3"], J["neck"],
                 J["left_collar"], J["right_collar"], J["head"])
 

@@ -81,8 +81,8 @@ from ..core.devices import HAND_DEVICES
 from ..core import hybrik
 from ..core import limb_solver as ls
 from ..core import rotations as rot
-from ..core.skeleton import (PARENTS, PROPORTIONS, SOLE, Body, J, JOINT_NAMES, LIMBS, NUM_JOINTS, forward_kinematics,
-                             make_body)
+from ..core.skeleton import (MIRROR_JOINTS, MIRROR_M, PARENTS, PROPORTIONS, SOLE, Body, J, LIMBS,
+                             NUM_JOINTS, forward_kinematics, make_body)
 
 #: bump when the stored ground truth changes meaning
 PREPROCESS_VERSION = 1
@@ -654,9 +654,8 @@ class ClipSet:
 
 
 #: joint index of each joint's mirror image (left <-> right)
-MIRROR = np.array([J[n.replace("left_", "\0").replace("right_", "left_").replace("\0", "right_")]
-                   for n in JOINT_NAMES])
-_MIRROR_M = np.diag([-1.0, 1.0, 1.0])
+MIRROR = MIRROR_JOINTS
+_MIRROR_M = MIRROR_M
 
 #: offsets each segment-group factor scales: (joint, axes) pairs
 SEGMENT_GROUPS = {
