@@ -256,5 +256,24 @@ def test_mirrored_windows_make_the_network_stage_mirror_symmetric(runner, exampl
         pipeline.run_network(targets, body, rec, mirror=None if mode == "alternate" else mode)   # None: the default
         seen[mode] = np.concatenate(rec.x)
     assert pipeline.MIRROR_WINDOWS == "alternate" and len(seen["off"]) >= 4
+    with pytest.raises(ValueError, match="mirror 'sideways'"):
+        pipeline.run_network(targets, body, runner, mirror="sideways")
+
     np.testing.assert_array_equal(seen["alternate"][0::2], seen["off"][0::2])
     np.testing.assert_allclose(seen["alternate"][1::2], features.mirror_inputs(seen["off"][1::2]), atol=1e-6)
+
+    # a model with a tracker on one side only has no mirror image: its windows all run plain
+    import dataclasses
+    from blender_manikin.core.pose_result import TrackerTargets
+    one_sided = dataclasses.replace(runner.contract, devices=("head", "left_hand", "right_hand", "left_foot"))
+    feet = TrackerTargets(fps=targets.fps, pos=dict(targets.pos, left_foot=targets.pos["head"] * [1.0, 1, 0]),
+                          rot=dict(targets.rot, left_foot=targets.rot["head"]))
+    plain = {}
+    for mode in (None, "off"):
+        rec = Recorder()
+        rec.contract = one_sided
+        rec.predict = lambda x, rec=rec: (rec.x.append(x.copy()),
+                                          np.zeros(x.shape[:2] + (one_sided.output_dim,), np.float32))[1]
+        pipeline.run_network(feet, body, rec, mirror=mode)
+        plain[mode] = np.concatenate(rec.x)
+    np.testing.assert_array_equal(plain[None], plain["off"])

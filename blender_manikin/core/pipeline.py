@@ -40,7 +40,7 @@ from .plain import shown
 from . import rotations as rot
 from .devices import REQUIRED_DEVICES
 from .pose_result import PoseResult, TrackerTargets
-from .skeleton import Body, J, NUM_JOINTS, PARENTS, forward_kinematics
+from .skeleton import Body, J, NUM_JOINTS, PARENTS, forward_kinematics, mirror_name
 
 #: a foot is planted (reported and locked) where the network is this confident
 CONTACT_THRESHOLD = 0.8
@@ -206,6 +206,8 @@ def run_network(targets: TrackerTargets, body: Body, runner, progress=None, stri
     mirror = MIRROR_WINDOWS if mirror is None else mirror
     if mirror not in MIRROR_CHOICES:
         raise ValueError(f"mirror {mirror!r}: choose one of {', '.join(MIRROR_CHOICES)}")
+    if any(mirror_name(d) not in c.devices for d in c.devices):
+        mirror = "off"                  # a model with a tracker on one side only has no mirror image
     pos_m, rot_m = {}, {}
     for d in c.devices:
         if d not in targets.pos:
