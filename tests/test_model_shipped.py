@@ -277,3 +277,14 @@ def test_mirrored_windows_make_the_network_stage_mirror_symmetric(runner, exampl
         pipeline.run_network(feet, body, rec, mirror=mode)
         plain[mode] = np.concatenate(rec.x)
     np.testing.assert_array_equal(plain[None], plain["off"])
+
+    # neither does a model not trained on mirrored windows, unless asked to
+    unmirrored = dataclasses.replace(runner.contract, raw=dict(runner.contract.raw, training_data={}))
+    assert runner.contract.trained_mirrored and not unmirrored.trained_mirrored
+    for mode in (None, "alternate"):
+        rec = Recorder()
+        rec.contract = unmirrored
+        pipeline.run_network(targets, body, rec, mirror=mode)
+        plain[mode] = np.concatenate(rec.x)
+    np.testing.assert_array_equal(plain[None], seen["off"])
+    np.testing.assert_array_equal(plain["alternate"], seen["alternate"])

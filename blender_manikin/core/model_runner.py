@@ -45,6 +45,13 @@ class Contract:
     raw: dict
 
     @property
+    def trained_mirrored(self):
+        """Whether the model was trained on left/right mirrored windows (its contract records a
+        mirror augmentation), so that a mirrored window is as familiar to it as a plain one."""
+        aug = (self.raw.get("training_data") or {}).get("augmentation") or {}
+        return bool(aug.get("mirror"))
+
+    @property
     def body(self):
         """Whether the model takes :data:`features.BODY_FEATURES` (the performer's proportions)."""
         return bool(self.raw.get("body_features"))

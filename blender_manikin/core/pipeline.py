@@ -60,7 +60,9 @@ WINDOW_STRIDE = 0.5
 #: mirrored instead of plain: no extra cost) or "both" (every window both ways: twice the network)
 #: (HDM05, calibrated body, three trackers, off / alternate / both: MPJPE 9.62 / 9.56 / 9.47 cm,
 #: knees 16.87 / 16.72 / 16.56, jitter 0.84 / 0.83 / 0.83; alternate with a quarter-window stride
-#: 9.46; alternate is also ahead for the four- and six-tracker models, DAP and Bandai's held-out takes)
+#: 9.46; alternate is also ahead for the four- and six-tracker models, DAP and Bandai's held-out takes).
+#: A model whose contract records no mirror augmentation runs plain by default: the network-only
+#: baseline (benchmarks/models/baseline_fk.onnx) lost with mirrored windows (Bandai 4.21 -> 4.49 cm)
 MIRROR_WINDOWS = "alternate"
 MIRROR_CHOICES = ("off", "alternate", "both")
 #: axes a planted ankle is locked on: x, y stop the sliding; locking z too moved the ankle
@@ -198,12 +200,14 @@ def run_network(targets: TrackerTargets, body: Body, runner, progress=None, stri
     not depend on it, so neither does the result.  smooth_s: Gaussian sigma in seconds of a
     temporal filter on the blended predictions (default :data:`NETWORK_SMOOTH_S`, the ankle
     positions :data:`ANKLE_SMOOTH_S`; 0: both off).  mirror: one of :data:`MIRROR_CHOICES` (default
-    :data:`MIRROR_WINDOWS`): windows also run as their left/right mirror image, averaged back in.
+    :data:`MIRROR_WINDOWS` for a model trained with mirrored windows, else "off"): windows also run
+    as their left/right mirror image, averaged back in.
     """
     c = runner.contract
     W = c.window
     fps = float(targets.fps)
-    mirror = MIRROR_WINDOWS if mirror is None else mirror
+    if mirror is None:        # by default only a model trained on mirrored windows sees them
+        mirror = MIRROR_WINDOWS if c.trained_mirrored else "off"
     if mirror not in MIRROR_CHOICES:
         raise ValueError(f"mirror {mirror!r}: choose one of {', '.join(MIRROR_CHOICES)}")
     if any(mirror_name(d) not in c.devices for d in c.devices):
