@@ -207,7 +207,7 @@ def run_network(targets: TrackerTargets, body: Body, runner, progress=None, stri
     W = c.window
     fps = float(targets.fps)
     if mirror is None:        # by default only a model trained on mirrored windows sees them
-        mirror = MIRROR_WINDOWS if c.trained_mirrored else "off"
+        mirror = MIRROR_WINDOWS if getattr(c, "trained_mirrored", False) else "off"
     if mirror not in MIRROR_CHOICES:
         raise ValueError(f"mirror {mirror!r}: choose one of {', '.join(MIRROR_CHOICES)}")
     if any(mirror_name(d) not in c.devices for d in c.devices):
