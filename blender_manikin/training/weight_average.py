@@ -4,7 +4,9 @@ The weights a run ships are often better as an average over its last few
 thousand optimizer steps than as the last step alone: the average smooths the
 step-to-step noise of small batches. ``train.py --ema DECAY`` keeps one; the
 run then validates, selects (``best.pt``) and exports the averaged weights,
-while the optimizer goes on updating the raw ones.
+while the optimizer goes on updating the raw ones. (On the shipped stage-2 recipe, whose cosine
+decay ends at 5 % of the rate, it changed nothing: HDM05 10.11 cm averaged against 10.08 raw at
+the end; the model card has the run.)
 
 A checkpoint keeps both: ``"model"`` (raw, what the optimizer resumes) and
 ``"ema"`` (:meth:`WeightAverage.state_dict`). :func:`trained_weights` is the one
