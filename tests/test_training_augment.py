@@ -125,7 +125,7 @@ def test_mirror_is_a_reflection_with_sides_swapped():
     P, _ = sk.forward_kinematics(local, root, body)
     lm, rm, om, cm = ds.mirror_motion(local, root, body.offsets, rec["contacts"])
     Pm, _ = sk.forward_kinematics(lm, rm, None, offsets=np.broadcast_to(om, (20,) + om.shape))
-    expect = P[:, ds.MIRROR] * np.array([-1.0, 1.0, 1.0])
+    expect = P[:, sk.MIRROR_JOINTS] * np.array([-1.0, 1.0, 1.0])
     assert np.abs(Pm - expect).max() < 1e-9
     assert np.allclose(np.linalg.det(lm), 1.0)
     assert (cm == rec["contacts"][:, ::-1]).all()

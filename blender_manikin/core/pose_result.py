@@ -11,7 +11,10 @@ from .skeleton import Body, LIMB_NAMES, LIMBS, forward_kinematics
 _LIMB_WORDS = {"left_arm": ("left hand", "shoulder", "elbow"), "right_arm": ("right hand", "shoulder", "elbow"),
                "left_leg": ("left foot", "hip", "knee"), "right_leg": ("right foot", "hip", "knee")}
 
-from .devices import DEVICES  # noqa: E402,F401  (the vocabulary lives in core/devices.py)
+from .devices import DEVICE_JOINT, DEVICES  # noqa: E402,F401  (the vocabulary lives in core/devices.py)
+
+#: the device that drives each limb's end joint (wrist: hand, ankle: foot)
+_END_DEVICE = {j: d for d, j in DEVICE_JOINT.items()}
 
 #: frames the writers convert at a time (:meth:`PoseResult.fk_chunks`, the BVH writer): bounds
 #: their memory on long takes; what they write does not depend on it
@@ -119,7 +122,7 @@ class PoseResult:
         name, base_j, _, end_j = LIMBS[limb]
         bad = self.reach_error[:, limb] > tolerance
         far = bad.copy()
-        dev = _LIMB_WORDS[name][0].replace(" ", "_")
+        dev = _END_DEVICE[end_j]
         if bad.any() and self.targets is not None and dev in self.targets.pos:
             f = np.nonzero(bad)[0]          # FK on the frames that missed only (long takes)
             pos = self.fk()[0][f] if self._fk is not None else \

@@ -653,10 +653,6 @@ class ClipSet:
         return int(self.lengths.sum())
 
 
-#: joint index of each joint's mirror image (left <-> right)
-MIRROR = MIRROR_JOINTS
-_MIRROR_M = MIRROR_M
-
 #: offsets each segment-group factor scales: (joint, axes) pairs
 SEGMENT_GROUPS = {
     "feet": [(J["left_foot"], (0, 1, 2)), (J["right_foot"], (0, 1, 2))],
@@ -712,10 +708,10 @@ def mirror_motion(local, root, offsets, contacts):
     aligned, so the mirrored rotation of joint j is ``M R[mirror(j)] M`` with
     ``M = diag(-1, 1, 1)`` (a proper rotation); left and right hinge axes of
     the limb solver are mirror images, so hinges stay hinges."""
-    M = _MIRROR_M
-    local_m = M @ local[..., MIRROR, :, :] @ M
+    M = MIRROR_M
+    local_m = M @ local[..., MIRROR_JOINTS, :, :] @ M
     root_m = root * np.array([-1.0, 1.0, 1.0])
-    offsets_m = offsets[..., MIRROR, :] * np.array([-1.0, 1.0, 1.0])
+    offsets_m = offsets[..., MIRROR_JOINTS, :] * np.array([-1.0, 1.0, 1.0])
     return local_m, root_m, offsets_m, contacts[..., ::-1]
 
 
