@@ -91,6 +91,7 @@ import numpy as np  # noqa: E402
 from bench_pose import DATASETS, SHARED, clip_metrics, dataset_files, load_clip_with_contacts  # noqa: E402
 from blender_manikin.core import hybrik, metrics, rotations as rot  # noqa: E402
 from blender_manikin.core import keypoint_layouts as kl, keypoint_solve as ks  # noqa: E402
+from blender_manikin.core.smoothing import parse_smoothing  # noqa: E402
 from blender_manikin.core import limb_solver as ls, skeleton as sk  # noqa: E402
 from blender_manikin.core.io_keypoints import KeypointRecording  # noqa: E402
 from blender_manikin.core.pose_result import PoseResult  # noqa: E402
@@ -381,7 +382,7 @@ def main(argv=None):
     ap.add_argument("--drop", type=float, default=0.05, help="fraction of the points set missing (NaN)")
     ap.add_argument("--max-clips", type=int, default=20, help="clips per dataset (0: all)")
     ap.add_argument("--max-frames", type=int, default=600, help="frames per clip (0: all)")
-    ap.add_argument("--smoothing", type=ks.parse_smoothing, default=DEFAULT_SMOOTHING,
+    ap.add_argument("--smoothing", type=parse_smoothing, default=DEFAULT_SMOOTHING,
                     help="smoothed methods: auto or a Savitzky-Golay window in seconds (default: SolveSettings')")
     ap.add_argument("--target-noise", type=float, default=2.0,
                     help="σ (cm per coordinate, one of --noise) where the target line is checked")

@@ -3,7 +3,8 @@ the HDM05 validation set (another studio, other people and motions), side by sid
 
     python benchmarks/bench_pose.py [--datasets bandai,hdm05] [--model M.onnx]
         [--previous-model P.onnx] [--fk-model F.onnx] [--pelvis-model P4.onnx]
-        [--six-model P6.onnx] [--trackers 3,4,6] [--max-clips N] [--markdown]
+        [--six-model P6.onnx] [--trackers 3,4,6] [--capture 72[,2,0.5,1]] [--smoothing auto|S]
+        [--max-clips N] [--markdown]
 
 Ground truth: every clip is mapped onto the 22-joint body and solved by HybrIK into the cache
 the training uses (``training/dataset.py``; HDM05 through ``core/asf_amc.py``), and posed by FK
@@ -26,6 +27,17 @@ position errors (cm), H-PE (hands, cm), Jitter (10^2 m/s^3; GT: the ground truth
 GP (ground penetration, cm), foot skating (cm/s: horizontal speed of a predicted ankle on the
 frames the ground-truth foot is planted), frames/s (the whole method on all the set's frames
 in one call, this machine's CPU; measured, never asserted).
+
+``--capture HZ[,MM[,DEG[,MS]]]`` (e.g. ``--capture 72``): the trackers as a headset records them
+instead of the clip's own frames: sampled at HZ with position noise (σ MM per coordinate,
+default 2 mm), rotation noise (σ DEG per axis, default 0.5°) and timestamp jitter (σ MS, default
+1 ms), then resampled onto the clip's 30 fps frames by the import's own resampler
+(:func:`captured_targets`); the same samples for every method.  The default: no capture, the
+ground truth's joint poses on the clip's frames.
+
+``--smoothing auto|SECONDS`` (default ``auto``, as the solve): the tracker smoothing of
+:mod:`blender_manikin.core.smoothing` on every method's input, after the capture, as
+``solve_recording`` does after resampling (``0``: none).
 
 ``--per-class``: under each table, MPJPE and L-PE per motion class (read from the clip's
 file name: HDM05 ``HDM_bd_squat1Reps_001_120.amc`` -> squat, Bandai ``dataset-1_walk_...`` ->
@@ -76,6 +88,7 @@ from blender_manikin.core import skeleton as sk  # noqa: E402
 from blender_manikin.core.devices import DEVICE_JOINT, REQUIRED_DEVICES  # noqa: E402
 from blender_manikin.core.model_runner import ModelRunner, MODELS_DIR  # noqa: E402
 from blender_manikin.core.pose_result import TrackerTargets  # noqa: E402
+from blender_manikin.core.smoothing import parse_smoothing, smooth_targets  # noqa: E402
 
 SHARED = os.path.join(os.path.dirname(ROOT), "shared", "data")
 DATASETS = {
@@ -137,6 +150,82 @@ def targets_from_gt(pos, world, fps, devices=REQUIRED_DEVICES):
     dev = {d: DEVICE_JOINT[d] for d in devices}
     return TrackerTargets(fps=fps, pos={d: pos[:, j].copy() for d, j in dev.items()},
                           rot={d: world[:, j].copy() for d, j in dev.items()})
+
+
+#: ``--capture`` fields, in order, with their defaults past the rate
+CAPTURE_FIELDS = ("rate", "pos_mm", "rot_deg", "time_ms")
+CAPTURE_DEFAULTS = (None, 2.0, 0.5, 1.0)
+
+
+def parse_capture(text):
+    """``--capture HZ[,MM[,DEG[,MS]]]`` -> ``{"rate", "pos_mm", "rot_deg", "time_ms"}``, or None
+    for an empty text.  Raises SystemExit naming the field that is not a positive (or, past
+    the rate, non-negative) number."""
+    if not text:
+        return None
+    parts = [p.strip() for p in text.split(",")]
+    if len(parts) > len(CAPTURE_FIELDS):
+        raise SystemExit(f"--capture {text!r}: at most {len(CAPTURE_FIELDS)} values "
+                         f"({','.join(CAPTURE_FIELDS)})")
+    out = dict(zip(CAPTURE_FIELDS, CAPTURE_DEFAULTS))
+    for name, p in zip(CAPTURE_FIELDS, parts):
+        try:
+            v = float(p)
+        except ValueError:
+            raise SystemExit(f"--capture {text!r}: {name} {p!r} is not a number") from None
+        if not np.isfinite(v) or v < 0 or (name == "rate" and v <= 0):
+            raise SystemExit(f"--capture {text!r}: {name} must be {'positive' if name == 'rate' else '>= 0'}, "
+                             f"got {p}")
+        out[name] = v
+    return out
+
+
+def captured_targets(targets, capture, seed):
+    """``targets`` as a headset would record and the add-on import them: each device sampled at
+    ``capture["rate"]`` Hz, at instants off their logged timestamps by Gaussian jitter
+    (σ ``time_ms``, one draw per sample shared by all devices, as one runtime frame), with
+    Gaussian position noise (σ ``pos_mm`` per coordinate) and rotation noise (a random
+    rotation vector, σ ``rot_deg`` per axis, applied in world axes), then resampled onto the
+    clip's frame grid by :func:`blender_manikin.core.resample.resample` (the import's own
+    resampler: interpolation, jump and freeze checks; not its head-height check, which a clip
+    lying on the floor would fail).
+
+    targets: :class:`TrackerTargets` on the clip's frames (``fps``, ``(T, 3)`` metres,
+    ``(T, 3, 3)``).  seed: ``int`` or sequence; a device's noise depends on the seed and the
+    device only, so every tracker set sees the same samples of the devices it shares.
+    Returns ``(TrackerTargets, T')``: the grid from 0 s to the last logged sample, ``T' <= T``
+    frames (the ground truth's first ``T'`` frames are its match).
+    """
+    from blender_manikin.core.devices import DEVICES
+    from blender_manikin.core.recording import Recording, TrackerStream
+    from blender_manikin.core.resample import resample
+    fps, T = float(targets.fps), targets.num_frames
+    dur = (T - 1) / fps
+    n = int(np.floor(dur * capture["rate"] + 1e-9)) + 1
+    logged = np.arange(n) / capture["rate"]
+    rng = np.random.default_rng(seed)
+    actual = np.clip(logged + rng.normal(0.0, capture["time_ms"] / 1000.0, n), 0.0, dur)
+    f = actual * fps
+    i0 = np.minimum(np.floor(f).astype(int), T - 1)
+    i1 = np.minimum(i0 + 1, T - 1)
+    w = f - i0
+    streams = {}
+    for d in targets.pos:
+        drng = np.random.default_rng([*np.atleast_1d(seed), 1 + DEVICES.index(d)])
+        P = targets.pos[d]
+        pos = (1 - w)[:, None] * P[i0] + w[:, None] * P[i1]
+        pos = pos + drng.normal(0.0, capture["pos_mm"] / 1000.0, pos.shape)
+        q = rot.quat_continuous(rot.matrix_to_quat(targets.rot[d]))
+        q = rot.quat_slerp(q[i0], q[i1], w)
+        noise = rot.axis_angle_to_quat(drng.normal(0.0, np.deg2rad(capture["rot_deg"]), (n, 3)))
+        streams[d] = TrackerStream(d, logged, pos, rot.quat_mul(noise, q))
+    times, pos, quat, valid, _ = resample(Recording(streams=streams, source="captured"), fps,
+                                          t_start=0.0, t_end=float(logged[-1]), required=tuple(streams),
+                                          check_units=False)      # metres by construction; lying-down
+                                                                  # clips hold the head near the floor
+    return (TrackerTargets(fps=fps, pos={d: pos[d] for d in streams},
+                           rot={d: rot.quat_to_matrix(quat[d]) for d in streams},
+                           valid={d: valid[d] for d in streams}), int(times.shape[0]))
 
 
 def calibrated_body(gt_body, legs=False):
@@ -236,6 +325,15 @@ def run_dataset(name, methods, args, body_mode):
         bodies = {d: (calibrated_body(gt_body, legs="pelvis" in d) if body_mode == "calibrated" else gt_body)
                   for d in sets}
         tgs = {d: targets_from_gt(gt_pos, gt_world, fps, d) for d in sets}
+        if args.capture:
+            caught = {d: captured_targets(tg, args.capture, seed=[0, i]) for d, tg in tgs.items()}
+            tgs = {d: c[0] for d, c in caught.items()}
+            T = min(c[1] for c in caught.values())
+            tgs = {d: TrackerTargets(fps=tg.fps, pos={k: v[:T] for k, v in tg.pos.items()},
+                                     rot={k: v[:T] for k, v in tg.rot.items()},
+                                     valid={k: v[:T] for k, v in tg.valid.items()}) for d, tg in tgs.items()}
+            gt_local, gt_pos, contacts = gt_local[:T], gt_pos[:T], contacts[:T]
+        tgs = {d: smooth_targets(tg, args.smoothing)[0] for d, tg in tgs.items()}     # as the solve does
         frames += T
         all_targets.append((tgs, bodies))
         cls = by_class.setdefault(motion_class(f), {"clips": 0, "frames": 0})
@@ -365,6 +463,13 @@ def main(argv=None):
                     help="bodies to solve with, comma-separated: calibrated (what a T-pose calibration "
                          "builds) and/or gt (the true skeleton)")
     ap.add_argument("--max-clips", type=int, default=0, help="limit the clips per dataset (0: all)")
+    ap.add_argument("--capture", type=parse_capture, default=None, metavar="HZ[,MM[,DEG[,MS]]]",
+                    help="trackers as a headset records them: sampled at HZ with position noise MM "
+                         "(σ per coordinate, default 2), rotation noise DEG (default 0.5) and timestamp "
+                         "jitter MS (default 1), resampled by the import's resampler, e.g. --capture 72")
+    ap.add_argument("--smoothing", type=parse_smoothing, default="auto", metavar="auto|SECONDS",
+                    help="the tracker smoothing every method's input gets, as the solve's --smoothing "
+                         "(default auto)")
     ap.add_argument("--markdown", action="store_true", help="print only the tables")
     ap.add_argument("--per-class", action="store_true",
                     help="also MPJPE and L-PE per motion class (shipped and previous model)")
@@ -398,8 +503,13 @@ def main(argv=None):
     fmt = {"frames/s": ",.0f", "H-PE": ".4f", "GP": ".4f", "MPJPE": ".2f"}
     for r in results:
         what = "calibrated body (T-pose: stature and arm span)" if r["body"] == "calibrated" else "true skeleton"
+        caught = "; smoothing " + (args.smoothing if args.smoothing == "auto" else f"{args.smoothing:g} s")
+        if args.capture:
+            c = args.capture
+            caught += (f"; trackers captured at {c['rate']:g} Hz, noise {c['pos_mm']:g} mm / {c['rot_deg']:g} deg, "
+                       f"timestamp jitter {c['time_ms']:g} ms, resampled")
         print(f"\n{r['name']}, {what}: {r['clips']} clips, {r['frames']} frames at 30 fps "
-              f"({os.path.basename(r['source'])})")
+              f"({os.path.basename(r['source'])}){caught}")
         rows = [(m, {(f"{k} [{UNITS[k]}]" if UNITS.get(k) else k): v for k, v in row.items() if k in UNITS})
                 for m, row in r["rows"] if m in main_methods]
         cols = [f"{k} [{UNITS[k]}]" if UNITS[k] else k for k in COLUMNS]

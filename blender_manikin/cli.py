@@ -36,8 +36,9 @@ Options of ``solve`` (they mirror the panel; ``--help`` has them all):
 --rate HZ                     samples per second of a wide-layout CSV or keypoints
                               with no times
 --up +x|-x|+y|-y|+z|-z        keypoints: the file's up axis (default: detected)
---smoothing auto|SECONDS      keypoints: auto (default: each point's filter from its noise) or a
-                              Savitzky-Golay window in seconds (0: off)
+--smoothing auto|SECONDS      trackers and keypoints: auto (default: each device's or point's
+                              filter from its measured noise; clean ones are left as they
+                              are) or one Savitzky-Golay window in seconds (0: off)
 --ik adaptive|naive           keypoints: HybrIK adaptive (default) or naive IK
 --mapping FILE.json           keypoints: a CSV's column names for the layout's points
 --save-layout FILE.json       write the layout detected in the first wide CSV
@@ -110,8 +111,9 @@ def _add_solve_options(s):
     s.add_argument("--up", default=None, choices=("+x", "-x", "+y", "-y", "+z", "-z"),
                    help="keypoints: the file's up axis (default: told from the body)")
     s.add_argument("--smoothing", type=_smoothing_arg, default="auto", metavar="auto|SECONDS",
-                   help="keypoints: 'auto' (default: each point gets the Savitzky-Golay filter its measured "
-                        "noise calls for) or one window in seconds for all (0: off)")
+                   help="trackers and keypoints: 'auto' (default: each device or point gets the "
+                        "Savitzky-Golay filter its measured noise calls for; clean ones are left as they are) "
+                        "or one window in seconds for all (0: off)")
     s.add_argument("--ik", choices=("adaptive", "naive"), default="adaptive",
                    help="keypoints: HybrIK adaptive (default) or naive twist-and-swing IK")
     s.add_argument("--mapping", default=None, metavar="FILE.json",
@@ -162,7 +164,7 @@ def append_character(spec):
 
 def _smoothing_arg(text):
     """argparse type of ``--smoothing``: ``auto`` or seconds >= 0."""
-    from .core.keypoint_solve import parse_smoothing
+    from .core.smoothing import parse_smoothing
     from .core.solve import SolveError
     try:
         return parse_smoothing(text)

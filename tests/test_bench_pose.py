@@ -28,3 +28,52 @@ def test_class_table_is_frame_weighted_and_sorted_worst_first(capsys):
     kick, squat = lines[1], lines[2]                     # kick's 14 cm first, squat's 5 cm next
     assert [c.strip() for c in kick.split("|")[1:-1]] == ["kick", "1", "50", "14.00", "20.00", "13.00", "19.00"]
     assert [c.strip() for c in squat.split("|")[1:-1]] == ["squat", "2", "100", "5.00", "8.00", "6.00", "9.00"]
+
+
+def _moving_targets(T=90, fps=30.0):
+    """Head and hands on smooth paths (metres, Z-up), each turning about Z: ``TrackerTargets``."""
+    import numpy as np
+    from blender_manikin.core import rotations as rot
+    from blender_manikin.core.pose_result import TrackerTargets
+    t = np.arange(T) / fps
+    pos, rotm = {}, {}
+    for k, d in enumerate(("head", "left_hand", "right_hand")):
+        pos[d] = np.stack([0.3 * np.sin(t + k), 0.2 * np.cos(0.7 * t), 1.2 + 0.1 * np.sin(2 * t + k)], -1)
+        rotm[d] = rot.axis_angle_to_matrix(np.stack([0 * t, 0 * t, 0.8 * np.sin(t + k)], -1))
+    return TrackerTargets(fps=fps, pos=pos, rot=rotm)
+
+
+def test_capture_without_noise_reproduces_the_targets():
+    import numpy as np
+    from blender_manikin.core import rotations as rot
+    tg = _moving_targets()
+    cap = bp.parse_capture("72,0,0,0")
+    out, T = bp.captured_targets(tg, cap, seed=[0, 1])
+    assert 88 <= T <= 90 and out.fps == tg.fps
+    for d in tg.pos:
+        assert np.abs(out.pos[d] - tg.pos[d][:T]).max() < 2e-3          # linear resampling of a smooth path
+        ang = np.degrees(rot.geodesic_angle(out.rot[d], tg.rot[d][:T]))
+        assert ang.max() < 0.5
+
+
+def test_capture_noise_has_the_asked_size_and_is_shared_between_tracker_sets():
+    import numpy as np
+    tg = _moving_targets(T=900)
+    cap = bp.parse_capture("72,5,0,0")
+    a, T = bp.captured_targets(tg, cap, seed=[0, 3])
+    b, _ = bp.captured_targets(tg, cap, seed=[0, 3])
+    c, _ = bp.captured_targets(tg, cap, seed=[0, 4])
+    err = a.pos["head"] - tg.pos["head"][:T]
+    # 72 Hz noise read back at 30 fps by linear interpolation: σ between 5/√2 and 5 mm
+    assert 3.0 < 1000 * err.std() < 5.5
+    assert np.array_equal(a.pos["left_hand"], b.pos["left_hand"])
+    assert not np.allclose(a.pos["left_hand"], c.pos["left_hand"])
+
+
+def test_capture_argument_errors_name_the_field():
+    import pytest
+    assert bp.parse_capture("") is None
+    assert bp.parse_capture("90") == {"rate": 90.0, "pos_mm": 2.0, "rot_deg": 0.5, "time_ms": 1.0}
+    for bad, word in (("0", "rate"), ("72,x", "pos_mm"), ("72,1,-1", "rot_deg"), ("72,1,1,1,1", "at most")):
+        with pytest.raises(SystemExit, match=word):
+            bp.parse_capture(bad)

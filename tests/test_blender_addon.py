@@ -137,7 +137,9 @@ def test_solve_operator_builds_live_rig_by_default(addon, recording):
     assert bpy.ops.manikin.solve_full_body() == {'FINISHED'}
     assert s.armature == obj and obj.animation_data.action.name.startswith("MANIKIN_solve")
     fk = joints(frames)
-    assert np.max(np.abs(live - fk)) < 1e-4
+    # the stub solver's arms are fully straight, where an elbow on its hinge is most sensitive
+    # to the reach: Blender's float32 (reach to ~1e-7 m) moves it by up to sqrt(2 L 1e-7) ~ 0.2 mm
+    assert np.max(np.abs(live - fk)) < 5e-4
 
 
 def test_errors_are_reported(addon, tmp_path):
@@ -218,6 +220,9 @@ def test_scene_objects_as_trackers(addon):
     s.use_scene_range = False
     s.frame_start, s.frame_end = 1, 30
     s.reuse_armature = False
+    # the sampling must be exact: no filter (Auto would take this synthetic take's 2 Hz swings of
+    # every joint for noise and choose a 0.2 s window)
+    s.smoothing_mode, s.smoothing = 'WINDOW', 0.0
     assert bpy.ops.manikin.solve_full_body() == {'FINISHED'}
     out = s.armature
     assert out != src.armature

@@ -10,6 +10,7 @@ import pytest
 from blender_manikin.core import keypoint_layouts as kl
 from blender_manikin.core import hybrik
 from blender_manikin.core import keypoint_solve as ks
+from blender_manikin.core import smoothing as sm
 from blender_manikin.core import rotations as rot
 from blender_manikin.core import skeleton as sk
 from blender_manikin.core.io_keypoints import is_keypoint_input, read_keypoints
@@ -186,11 +187,11 @@ def test_bridge_gaps_and_smoothing():
     np.testing.assert_allclose(filled[3:6, 0, 0], t[3:6])               # linear: exact on a line
     np.testing.assert_allclose(filled[0], filled[1])                     # held before the first
     # Savitzky-Golay (quadratic) keeps quadratics exactly, ends included; noise shrinks
-    np.testing.assert_allclose(ks.smooth(x, 10.0, 0.5), x, atol=1e-12)
+    np.testing.assert_allclose(sm.smooth(x, 10.0, 0.5), x, atol=1e-12)
     rng = np.random.default_rng(0)
     n = rng.normal(size=(400, 3))
-    assert ks.smooth(n, 30.0, 0.4).std() < 0.6 * n.std()
-    np.testing.assert_array_equal(ks.smooth(n, 30.0, 0.0), n)
+    assert sm.smooth(n, 30.0, 0.4).std() < 0.6 * n.std()
+    np.testing.assert_array_equal(sm.smooth(n, 30.0, 0.0), n)
 
 
 def test_track_noise_and_auto_smoothing_follow_each_points_own_noise():
@@ -204,22 +205,22 @@ def test_track_noise_and_auto_smoothing_follow_each_points_own_noise():
                       for k, f in enumerate((0.3, 0.3, 2.0, 2.0))], 1)            # (T, 4, 3): slow, slow, fast, fast
     sigma = np.array([0.0, 0.02, 0.0, 0.02])
     x = truth + rng.normal(size=truth.shape) * sigma[None, :, None]
-    est = ks.track_noise(x)
+    est = sm.track_noise(x)
     assert est[0] < 0.002 and est[2] < 0.004                     # clean tracks: (nearly) no noise measured
     np.testing.assert_allclose(est[[1, 3]], 0.02, rtol=0.2)
-    y, choice = ks.smooth_auto(x, fps)
-    win = np.array([ks.AUTO_FILTERS[c][0] for c in choice])
+    y, choice = sm.smooth_auto(x, fps)
+    win = np.array([sm.AUTO_FILTERS[c][0] for c in choice])
     assert win[1] > win[3] > 0.0 and win[2] <= 0.2                # slow noisy: longest; clean fast: (nearly) none
     err = np.linalg.norm(y - truth, axis=-1).mean(0)
     assert err[0] < 0.001 and err[2] < 0.003                       # clean input stays (nearly) as it was
     for w in (0.2, 0.4, 0.8):                                       # better than one window for all
-        fixed = np.linalg.norm(ks.smooth(x, fps, w) - truth, axis=-1).mean(0)
+        fixed = np.linalg.norm(sm.smooth(x, fps, w) - truth, axis=-1).mean(0)
         assert err.sum() < fixed.sum()
-    assert ks.savgol_trace(T, 1, 2) == T and ks.savgol_trace(T, 13, 2) < T / 3
-    assert ks.parse_smoothing("auto") == "auto" and ks.parse_smoothing("0.3") == 0.3 and ks.parse_smoothing(None) == 0
+    assert sm.savgol_trace(T, 1, 2) == T and sm.savgol_trace(T, 13, 2) < T / 3
+    assert sm.parse_smoothing("auto") == "auto" and sm.parse_smoothing("0.3") == 0.3 and sm.parse_smoothing(None) == 0
     for bad in ("soft", -1.0, "nan"):
         with pytest.raises(SolveError, match="expected 'auto' or a window in seconds"):
-            ks.parse_smoothing(bad)
+            sm.parse_smoothing(bad)
 
 
 def test_rigid_trunk_meets_the_hips_and_shoulders_of_a_bent_trunk():

@@ -136,14 +136,14 @@ class MANIKIN_Settings(PropertyGroup):
     keypoint_rate: FloatProperty(name="Rate", default=30.0, min=1.0, max=1000.0,
                                  description="Samples per second of a keypoint file without times")
     smoothing_mode: EnumProperty(name="Smoothing", default='AUTO',
-                                 items=[('AUTO', "Auto", "Each keypoint gets the Savitzky-Golay filter its own "
-                                         "measured noise calls for: clean points stay sharp, noisy ones are "
-                                         "smoothed more"),
+                                 items=[('AUTO', "Auto", "Each tracker or keypoint gets the Savitzky-Golay filter "
+                                         "its own measured noise calls for: clean ones are left as they are, "
+                                         "noisy ones are smoothed more"),
                                         ('WINDOW', "Window", "One Savitzky-Golay window, in seconds, for every "
-                                         "keypoint")])
+                                         "tracker or keypoint")])
     smoothing: FloatProperty(name="Window", default=0.4, min=0.0, max=3.0, unit='TIME_ABSOLUTE',
-                             description="Savitzky-Golay window over the keypoints, seconds (0: off); "
-                                         "longer removes more noise and more fast detail")
+                             description="Savitzky-Golay window over the tracker poses or keypoints, seconds "
+                                         "(0: off); longer removes more noise and more fast detail")
     ik: EnumProperty(name="IK", default='ADAPTIVE',
                      items=[('ADAPTIVE', "Adaptive", "HybrIK adaptive: each bone aims at its keypoint from "
                              "where the chain actually is, so errors do not accumulate"),
@@ -284,8 +284,8 @@ def config_from_settings(context):
         cfg.keypoint_layout = None if s.keypoint_layout == 'AUTO' else s.keypoint_layout.lower()
         cfg.up = None if s.keypoint_up == 'AUTO' else s.keypoint_up.lower()
         cfg.rate = float(s.keypoint_rate) if s.use_keypoint_rate else None
-        cfg.smoothing = "auto" if s.smoothing_mode == 'AUTO' else float(s.smoothing)
         cfg.ik = s.ik.lower()
+    cfg.smoothing = "auto" if s.smoothing_mode == 'AUTO' else float(s.smoothing)
     cfg.layout = bpy.path.abspath(s.layout_file) if s.layout_file else None
     cfg.axes = None if s.axes == 'AUTO' else s.axes.lower()
     units = s.keypoint_units if s.source == 'KEYPOINTS' else s.units

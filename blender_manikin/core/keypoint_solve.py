@@ -9,9 +9,9 @@ Stages (each a function, for tests and benchmarks):
 1. read (:func:`.io_keypoints.read_keypoints`): metres, Blender axes, NaN = missing;
 2. :func:`bridge_gaps`: every point's missing stretches filled by linear interpolation in
    time (held at the ends), reported as :class:`.resample.Gap` s;
-3. smoothing: by default (``smoothing="auto"``) :func:`smooth_auto`: each point's own
+3. smoothing: by default (``smoothing="auto"``) :func:`.smoothing.smooth_auto`: each point's own
    Savitzky-Golay filter, chosen by Stein's unbiased risk estimate from the noise measured on
-   it; or :func:`smooth`, one quadratic Savitzky-Golay window of ``smoothing`` seconds (zero lag);
+   it; or :func:`.smoothing.smooth`, one quadratic Savitzky-Golay window of ``smoothing`` seconds (zero lag);
 4. resampling to the solve's frame rate (linear in time);
 5. :func:`.keypoint_layouts.body22_from_keypoints`: the 22 joints and the orientations the
    layout shows;
@@ -40,6 +40,7 @@ from . import rotations as rot
 from . import skeleton as sk
 from .pose_result import PoseResult
 from .resample import Gap, GapReport
+from .smoothing import AUTO_FILTERS, parse_smoothing, smooth, smooth_auto, smoothing_note
 from .solve import SolveError, SolveOutcome, SolveSettings
 
 #: left / right joint pairs whose bone lengths are averaged
@@ -88,106 +89,6 @@ def bridge_gaps(time, points, names=None):
             reason = "start" if a == 0 else ("end" if b == len(t) - 1 else "lost")
             gaps.append(Gap(name, float(t[max(a - 1, 0)]), float(t[min(b + 1, len(t) - 1)]), reason, int(b - a + 1)))
     return X, gaps
-
-
-def savgol_weights(window: int, order: int = 2):
-    """``(window, window)`` Savitzky-Golay weights: row ``i`` gives the least-squares polynomial
-    (degree ``order``) through a window's samples evaluated at its sample ``i`` (the middle row
-    is the usual smoothing kernel; the others serve the first and last half-windows)."""
-    h = window // 2
-    A = np.vander(np.arange(-h, h + 1, dtype=np.float64), order + 1, increasing=True)
-    return A @ np.linalg.pinv(A)
-
-
-def savgol_window(seconds, fps, T):
-    """Frames (odd, at most ``T``) of a Savitzky-Golay window of ``seconds`` at ``fps``."""
-    w = int(round(seconds * fps)) | 1
-    return w if w <= T else (T if T % 2 else T - 1)
-
-
-def smooth(x, fps, seconds, order=2):
-    """Savitzky-Golay filter along axis 0 over ``seconds`` (an odd number of frames, at least
-    ``order + 2``; else unchanged): zero lag, and polynomials of degree ``order`` pass through
-    unchanged, ends included (the first and last half-windows take the polynomial fitted to the
-    first and last whole window).  ``x``: ``(T, ...)``; returns a new array."""
-    x = np.asarray(x, np.float64)
-    w = savgol_window(seconds, fps, x.shape[0])
-    if seconds <= 0 or w < order + 2:
-        return x.copy()
-    h = w // 2
-    W = savgol_weights(w, order)
-    T = x.shape[0]
-    out = np.zeros_like(x)
-    for i in range(w):
-        out[h:T - h] += W[h, i] * x[i:T - w + 1 + i]
-    flat = x.reshape(T, -1)
-    out.reshape(T, -1)[:h] = W[:h] @ flat[:w]
-    out.reshape(T, -1)[T - h:] = W[h + 1:] @ flat[T - w:]
-    return out
-
-
-#: the filters :func:`smooth_auto` chooses from: (window seconds, polynomial order); (0, 0) is none
-AUTO_FILTERS = ((0.0, 0),) + tuple((w, 2) for w in (0.2, 0.3, 0.4, 0.5, 0.6, 0.8)) \
-    + tuple((w, 4) for w in (0.6, 0.8, 1.0, 1.2, 1.6))
-#: frames of the local cubic fit whose residual measures a track's noise
-NOISE_WINDOW = 7
-
-
-def savgol_trace(T, window, order=2):
-    """Trace of the ``(T, T)`` matrix :func:`smooth` applies (its degrees of freedom)."""
-    if window < order + 2 or window > T:
-        return float(T)
-    h = window // 2
-    W = savgol_weights(window, order)
-    return float((T - 2 * h) * W[h, h] + np.trace(W[:h, :h]) + sum(W[h + 1 + i, window - h + i] for i in range(h)))
-
-
-def track_noise(x):
-    """``(K,)`` noise standard deviation (the input's units) of each track of ``x`` ``(T, K, 3)``:
-    from the residual of a local cubic fit over :data:`NOISE_WINDOW` frames, robustly (the
-    median squared residual, so fast moves and filled gaps count little), assuming white noise
-    of the same size on the three axes.  NaN for a track with missing samples (bridge them first)."""
-    x = np.asarray(x, np.float64)
-    w = NOISE_WINDOW
-    if x.shape[0] < 3 * w:
-        return np.full(x.shape[1], np.nan)
-    h = w // 2
-    r = (x - smooth(x, 1.0, w, order=3))[h:-h]          # fps 1: the window is in frames
-    c = savgol_weights(w, 3)[h, h]
-    # median of a chi-square(1) variable is 0.455 of its mean; a fitted residual keeps 1 - c of it
-    out = np.full(x.shape[1], np.nan)
-    ok = np.isfinite(r).all(axis=(0, 2))
-    out[ok] = np.sqrt(np.median(r[:, ok] ** 2, axis=(0, 2)) / 0.4549 / (1.0 - c))
-    return out
-
-
-def smooth_auto(x, fps, filters=AUTO_FILTERS):
-    """Each track of ``x`` ``(T, K, 3)`` smoothed by the filter of ``filters`` that Stein's
-    unbiased risk estimate says brings it closest to the noise-free motion.
-
-    For a linear smoother ``y = S x`` of a track with white noise σ (:func:`track_noise`) the
-    expected squared error to the true motion is estimated, without knowing it, as
-    ``|x - y|² - n σ² + 2 σ² tr(S)`` (n samples; Stein 1981): a longer window removes more
-    noise but bends fast motion more, and the estimate weighs the two on the track's own data.
-    So a wrist in a fast throw keeps a short window while a hip of the same take gets a long
-    one, and clean input is left nearly as it is.  fps: the samples' rate (windows are in
-    seconds).  Returns ``(smoothed (T, K, 3), choice (K,) index into filters)``."""
-    x = np.asarray(x, np.float64)
-    T, K = x.shape[:2]
-    sig2 = track_noise(x) ** 2
-    best = np.zeros(K, np.int64)
-    out = x.copy()
-    risk_best = np.full(K, np.inf)
-    ok = np.isfinite(sig2)
-    for i, (seconds, order) in enumerate(filters):
-        y = smooth(x, fps, seconds, order) if seconds > 0 else x
-        tr = savgol_trace(T, savgol_window(seconds, fps, T), order) if seconds > 0 else float(T)
-        risk = np.nansum((x - y) ** 2, axis=(0, 2)) + 3.0 * sig2 * (2.0 * tr - T)
-        better = ok & (risk < risk_best)
-        out[:, better] = y[:, better]
-        best[better] = i
-        risk_best[better] = risk[better]
-    return out, best
 
 
 def resample_points(time, X, fps, t0=None):
@@ -432,7 +333,7 @@ class PreparedKeypoints:
     twist); body: the sized :class:`.skeleton.Body`; floor: the floor height found in the
     keypoints (metres); gaps: the bridged :class:`.resample.Gap` s; never: points never seen;
     derived_spine: the layout has no spine points (:func:`rigid_trunk` applies); windows: with
-    ``smoothing="auto"``, the window (seconds, 0: none) :func:`smooth_auto` chose for each point
+    ``smoothing="auto"``, the window (seconds, 0: none) :func:`.smoothing.smooth_auto` chose for each point
     seen, else None."""
     times: np.ndarray
     P: np.ndarray
@@ -445,28 +346,9 @@ class PreparedKeypoints:
     windows: list = None
 
 
-def parse_smoothing(value):
-    """``"auto"`` or a window in seconds (float >= 0) from a setting (``"auto"``, a number or a
-    numeric string); :class:`.solve.SolveError` otherwise."""
-    if isinstance(value, str):
-        v = value.strip().lower()
-        if v == "auto":
-            return "auto"
-        try:
-            value = float(v)
-        except ValueError:
-            raise SolveError(f"smoothing {value!r}: expected 'auto' or a window in seconds") from None
-    if value is None:
-        return 0.0
-    value = float(value)
-    if not np.isfinite(value) or value < 0:
-        raise SolveError(f"smoothing {value!r}: expected 'auto' or a window in seconds >= 0")
-    return value
-
-
 def prepare_keypoints(rec, fps, smoothing, height=None, max_frames=None, sole=None) -> PreparedKeypoints:
     """Stages 2-7 of the module docstring on a :class:`.io_keypoints.KeypointRecording`: gaps
-    bridged, smoothed (``smoothing``: ``"auto"`` for :func:`smooth_auto`, else a Savitzky-Golay
+    bridged, smoothed (``smoothing``: ``"auto"`` for :func:`.smoothing.smooth_auto`, else a Savitzky-Golay
     window in seconds, 0: none), resampled to ``fps``, the 22 joints placed, the
     body sized (scaled to ``height`` metres when given, on ``sole`` metres of shoe sole, None:
     :data:`.skeleton.SOLE`) and the floor moved to z = 0.  Raises
@@ -542,12 +424,7 @@ def solve_keypoints(source, settings: SolveSettings | None = None, progress=None
     result.t0 = float(prep.times[0])
     out.result = result
     out.timings["solve"] = _time.perf_counter() - t
-    if smoothing == "auto":
-        w = np.asarray(prep.windows or [0.0])
-        told = (f"smoothing auto (per point, from its measured noise): windows {w.min():g}-{w.max():g} s, "
-                f"median {np.median(w):g} s")
-    else:
-        told = f"smoothing {smoothing:g} s" if smoothing else "no smoothing"
+    told = smoothing_note(smoothing, prep.windows, "point")
     out.info.append(f"keypoints: {'adaptive' if adaptive else 'naive'} HybrIK, floor at {prep.floor:+.3f} m "
                     f"moved to 0")
     out.info.append(told)

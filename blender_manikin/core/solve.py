@@ -49,13 +49,15 @@ class SolveSettings:
     barefoot): the stature measured from the head's height is the barefoot one, and the body
     stands that much above the floor.  offsets: a device-offsets preset name, ``"none"``, ``"auto"`` (see
     :func:`resolve_offsets`) or an offsets dict (:mod:`.device_offsets`).  max_frames: crop.
+    smoothing: ``"auto"`` (default: each device's, or keypoint's, track gets the Savitzky-Golay
+    filter its own measured noise calls for, so clean tracks stay as they are) or one window in
+    seconds for all (0: off); see :mod:`.smoothing`.
     layout: a layout file (path or dict) fixing the columns of a wide-layout CSV.  rate: samples
     per second of a wide-layout CSV, or of keypoints, timed by a frame counter only.
 
     Keypoint inputs (:mod:`.keypoint_solve`) also use: keypoint_layout (a
     :mod:`.keypoint_layouts` name; None: told from the file), up (the file's up axis, ``+y``
-    ...; None: told from the body), smoothing (``"auto"``: a filter per point chosen from its
-    measured noise; or a Savitzky-Golay window in seconds, 0: off), ik
+    ...; None: told from the body), ik
     (``"adaptive"`` or ``"naive"`` HybrIK) and mapping (a keypoint CSV's column mapping file).
     """
     axes: str | None = None
@@ -72,7 +74,7 @@ class SolveSettings:
     rate: float | None = None
     keypoint_layout: str | None = None
     up: str | None = None
-    smoothing: object = "auto"        # keypoints: "auto" or a window in seconds
+    smoothing: object = "auto"        # "auto" or a window in seconds (0: off); trackers and keypoints
     ik: str = "adaptive"
     mapping: object = None
     model: str | None = None          # None / "auto": by the recording's trackers; a shipped name or .onnx
@@ -353,6 +355,10 @@ def solve_recording(source, settings: SolveSettings | None = None, solver=None, 
         pos = {d: v[:n] for d, v in pos.items()}
         quat = {d: v[:n] for d, v in quat.items()}
         valid = {d: v[:n] for d, v in valid.items()}
+    from .smoothing import parse_smoothing, smooth_device_poses, smoothing_note
+    smoothing = parse_smoothing(settings.smoothing)
+    pos, quat, windows = smooth_device_poses(pos, quat, settings.fps, smoothing)
+    smoothed = smoothing_note(smoothing, list(windows.values()) if windows else None, "device")
     out.targets, offsets = make_targets(times, pos, quat, valid, settings.fps,
                                         resolve_offsets(settings.offsets, out.recording))
     out.timings["resample"] = _time.perf_counter() - t
@@ -364,6 +370,7 @@ def solve_recording(source, settings: SolveSettings | None = None, solver=None, 
     note = stature_note(settings, out)
     if note:
         out.info.append(note)
+    out.info.append(smoothed)
     out.timings["calibrate"] = _time.perf_counter() - t
     report(STAGES["solving"], "solving")
     t = _time.perf_counter()

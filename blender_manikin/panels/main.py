@@ -17,6 +17,13 @@ class _Base:
         return context.scene is not None and hasattr(context.scene, "manikin")
 
 
+def smoothing_rows(col, s):
+    """The Smoothing setting (trackers and keypoints alike), its window when one is set."""
+    col.prop(s, "smoothing_mode")
+    if s.smoothing_mode == 'WINDOW':
+        col.prop(s, "smoothing")
+
+
 class MANIKIN_PT_solve(_Base, Panel):
     bl_label = "Solve Full Body"
     bl_idname = "MANIKIN_PT_solve"
@@ -42,9 +49,7 @@ class MANIKIN_PT_solve(_Base, Panel):
             col.prop(s, "keypoint_up")
             toggled_row(col, s, "use_keypoint_rate", "keypoint_rate", "Rate")
             col.separator()
-            col.prop(s, "smoothing_mode")
-            if s.smoothing_mode == 'WINDOW':
-                col.prop(s, "smoothing")
+            smoothing_rows(col, s)
             col.prop(s, "ik")
             toggled_row(col, s, "use_height", "height", "Height")
         else:
@@ -56,6 +61,7 @@ class MANIKIN_PT_solve(_Base, Panel):
                     col.prop_search(src, "bone", src.object.data, "bones", text="Bone")
         if s.source != 'KEYPOINTS':           # keypoints are solved by HybrIK, no network
             col.separator()
+            smoothing_rows(col, s)
             col.prop(s, "model")
             if s.model == 'FILE':
                 col.prop(s, "model_file")
