@@ -104,3 +104,15 @@ def test_solve_smooths_a_noisy_recording_and_says_so(tmp_path):
         raw = np.linalg.norm(off.targets.pos[d] - clean, axis=-1).mean()
         smoothed = np.linalg.norm(auto.targets.pos[d] - clean, axis=-1).mean()
         assert smoothed < 0.6 * raw
+
+
+def test_smooth_gives_the_same_on_any_memory_layout():
+    """A track picked out of a larger array (not C-contiguous) is filtered, ends included, as its
+    contiguous copy is."""
+    rng = np.random.default_rng(1)
+    x = rng.normal(size=(120, 6, 3))
+    view = x[:, [1, 4]]
+    assert not view.flags["C_CONTIGUOUS"]
+    np.testing.assert_allclose(sm.smooth(view, FPS, 0.4), sm.smooth(np.ascontiguousarray(view), FPS, 0.4),
+                               atol=1e-12)
+    np.testing.assert_allclose(sm.smooth(x[::2], FPS, 0.4), sm.smooth(x[::2].copy(), FPS, 0.4), atol=1e-12)

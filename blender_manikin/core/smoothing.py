@@ -40,8 +40,8 @@ def smooth(x, fps, seconds, order=2):
     """Savitzky-Golay filter along axis 0 over ``seconds`` (an odd number of frames, at least
     ``order + 2``; else unchanged): zero lag, and polynomials of degree ``order`` pass through
     unchanged, ends included (the first and last half-windows take the polynomial fitted to the
-    first and last whole window).  ``x``: ``(T, ...)``; returns a new array."""
-    x = np.asarray(x, np.float64)
+    first and last whole window).  ``x``: ``(T, ...)``, any memory layout; returns a new array."""
+    x = np.ascontiguousarray(x, np.float64)     # the ends are written through reshape views
     w = savgol_window(seconds, fps, x.shape[0])
     if seconds <= 0 or w < order + 2:
         return x.copy()
@@ -110,16 +110,23 @@ def smooth_auto(x, fps, filters=AUTO_FILTERS, noise_floor=0.0):
     sig2 = track_noise(x) ** 2
     best = np.zeros(K, np.int64)
     out = x.copy()
-    risk_best = np.full(K, np.inf)
     ok = np.isfinite(sig2) & (sig2 > np.broadcast_to(np.asarray(noise_floor, np.float64), (K,)) ** 2)
+    idx = np.nonzero(ok)[0]           # only these tracks are filtered (the rest: none, and no cost)
+    if idx.size == 0:
+        return out, best
+    xs, s2 = x[:, idx], sig2[idx]
+    ys, choice = xs.copy(), np.zeros(idx.size, np.int64)
+    risk_best = np.full(idx.size, np.inf)
     for i, (seconds, order) in enumerate(filters):
-        y = smooth(x, fps, seconds, order) if seconds > 0 else x
+        y = smooth(xs, fps, seconds, order) if seconds > 0 else xs
         tr = savgol_trace(T, savgol_window(seconds, fps, T), order) if seconds > 0 else float(T)
-        risk = np.nansum((x - y) ** 2, axis=(0, 2)) + 3.0 * sig2 * (2.0 * tr - T)
-        better = ok & (risk < risk_best)
-        out[:, better] = y[:, better]
-        best[better] = i
+        risk = np.sum((xs - y) ** 2, axis=(0, 2)) + 3.0 * s2 * (2.0 * tr - T)
+        better = risk < risk_best
+        ys[:, better] = y[:, better]
+        choice[better] = i
         risk_best[better] = risk[better]
+    out[:, idx] = ys
+    best[idx] = choice
     return out, best
 
 
