@@ -293,6 +293,20 @@ def test_panels_draw(addon):
     s.source = 'FILE'
     panels.MANIKIN_PT_solve.draw(SimpleNamespace(layout=PanelLayout(log)), bpy.context)
     assert ("operator", "manikin.solve_full_body") in log and ("prop", "filepath") in log
+    # the Smoothing setting is shown for tracker recordings (and scene objects) as for keypoints,
+    # and its window only when one is set; the solve gets it whatever the source
+    from blender_manikin.blender.properties import config_from_settings
+    assert ("prop", "smoothing_mode") in log and ("prop", "smoothing") not in log
+    s.smoothing_mode, s.smoothing = 'WINDOW', 0.25
+    for source in ('FILE', 'SCENE'):
+        s.source = source
+        log = []
+        panels.MANIKIN_PT_solve.draw(SimpleNamespace(layout=PanelLayout(log)), bpy.context)
+        assert ("prop", "smoothing_mode") in log and ("prop", "smoothing") in log
+    s.source = 'FILE'
+    assert config_from_settings(bpy.context).smoothing == pytest.approx(0.25)
+    s.smoothing_mode = 'AUTO'
+    assert config_from_settings(bpy.context).smoothing == "auto"
 
 
 def test_modal_progress_cancel_and_finish(addon, recording, monkeypatch):
