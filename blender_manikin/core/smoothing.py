@@ -150,8 +150,6 @@ def parse_smoothing(value):
     return value
 
 
-
-
 def smoothing_note(smoothing, windows=None, what="point"):
     """The solve summary's line for a ``smoothing`` setting (:func:`parse_smoothing`'s value);
     with ``"auto"``, ``windows`` are the seconds :func:`smooth_auto` chose (0: none) for each
@@ -194,7 +192,7 @@ def smooth_device_poses(pos, quat, fps, smoothing):
     smoothed x and y axes (x kept, y made orthogonal; :func:`.rotations.frame_from_axes`).
 
     Returns ``(pos, quat, windows)``: new dicts of the same shapes, and for ``"auto"`` the
-    window in seconds chosen per device (its longest over its four tracks; 0: none), else None.
+    window in seconds chosen per device (its longest over its three tracks; 0: none), else None.
     """
     if not parse_smoothing(smoothing) or not pos:
         return dict(pos), dict(quat), None
