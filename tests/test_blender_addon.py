@@ -112,6 +112,11 @@ def test_solve_operator_builds_live_rig_by_default(addon, recording):
     from blender_manikin.blender import live_rig
     s = _settings(recording)
     assert s.live_rig
+    # the raw samples: the stub solver's arms are fully straight, where an elbow on its hinge is
+    # most sensitive to the reach, and smoothing this recording's 2 mm jitter moves the reach
+    # there by amounts Blender's float32 turns into 0.2 mm at the elbow (core/smoothing.py has
+    # its own tests)
+    s.smoothing_mode, s.smoothing = 'WINDOW', 0.0
     assert bpy.ops.manikin.solve_full_body() == {'FINISHED'}
     obj = s.armature
     live_action = obj.animation_data.action
@@ -137,9 +142,7 @@ def test_solve_operator_builds_live_rig_by_default(addon, recording):
     assert bpy.ops.manikin.solve_full_body() == {'FINISHED'}
     assert s.armature == obj and obj.animation_data.action.name.startswith("MANIKIN_solve")
     fk = joints(frames)
-    # the stub solver's arms are fully straight, where an elbow on its hinge is most sensitive
-    # to the reach: Blender's float32 (reach to ~1e-7 m) moves it by up to sqrt(2 L 1e-7) ~ 0.2 mm
-    assert np.max(np.abs(live - fk)) < 5e-4
+    assert np.max(np.abs(live - fk)) < 1e-4
 
 
 def test_errors_are_reported(addon, tmp_path):
