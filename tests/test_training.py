@@ -388,9 +388,11 @@ def test_aug_overrides_and_their_checks():
     assert aug.arm_mix == 0.0 and aug.stature == (1.5, 1.9) and aug.dropout == 0.25
     assert train.parse_aug(["stature=none"]).stature is None
     for bad, msg in (("nope=1", "FIELD one of"), ("arm_mix=x", "not a number"), ("stature=1.5", "two numbers"),
-                     ("arm_mix=1,2", "one number")):
+                     ("arm_mix=1,2", "one number"), ("stoop_knees=0.9", "stoop_knees 0.9: must be between 0"),
+                     ("stoop_knees=-0.1", "must be between 0")):
         with pytest.raises(SystemExit, match=msg):
             train.parse_aug([bad])
+    assert train.parse_aug(["stoop_knees=0.45"]).stoop_knees == 0.45
 
 
 def test_init_fine_tunes_from_a_checkpoint_or_an_exported_model(cache, bvh_dir, tmp_path):

@@ -317,6 +317,36 @@ def test_stoop_bends_the_trunk_over_straight_legs_onto_planted_feet():
     assert all(np.isfinite(v).all() for v in batch.values() if isinstance(v, np.ndarray))
 
 
+def test_stoop_knees_bend_a_stoop_into_a_semi_squat():
+    """Augment.stoop_knees: a stoop's knees may bend as far as a semi-squat (as people mostly
+    lift things off the floor), the pelvis sinking with them, the legs still hinges on the
+    planted feet; the default keeps them nearly straight; a share outside 0-0.6 is refused."""
+    cs = _standing_clipset(bodies=(1.6, 1.75, 1.9), T=60)
+    ankles = [J["left_ankle"], J["right_ankle"]]
+    from blender_manikin.core import limb_solver as ls
+    knees, sinks = {}, {}
+    for share in (0.03, 0.45):
+        smp = ds.WindowSampler(cs, window=40, augment=ds.Augment(stoop=1.0, stoop_knees=share), seed=0)
+        k, d = [], []
+        for seed in range(8):
+            local, root, offsets, stature = _rest_windows((1.6, 1.75, 1.9), 40)
+            loc2, root2 = smp._stoop(np.random.default_rng(seed), local, root, offsets, stature)
+            P0, P1 = ds._window_fk(local, root, offsets)[0], ds._window_fk(loc2, root2, offsets)[0]
+            assert np.abs(P1[:, :, ankles] - P0[:, :, ankles]).max() < 1e-6      # feet stay planted
+            b = loc2[:, :, J["left_knee"]] @ ls.A0[2]
+            assert np.abs(b @ ls.H0[2]).max() < 1e-9                              # hinge knees
+            k.append(np.degrees(rot.geodesic_angle(loc2[:, :, J["left_knee"]], np.eye(3))).max(1))
+            d.append(((P0[..., 0, 2] - P1[..., 0, 2]) / stature[:, None]).max(1))
+        knees[share], sinks[share] = np.concatenate(k), np.concatenate(d)
+    assert knees[0.03].max() < 35.0                                       # nearly straight by default
+    assert knees[0.45].max() > 90.0 and np.median(knees[0.45]) > 50.0       # a semi-squat
+    assert knees[0.45].max() < 130.0
+    assert np.median(sinks[0.45]) > 2 * np.median(sinks[0.03])            # the pelvis sinks with them
+    for bad in (-0.01, 0.61):
+        with pytest.raises(ValueError, match="stoop_knees"):
+            ds.WindowSampler(cs, window=40, augment=ds.Augment(stoop=1.0, stoop_knees=bad), seed=0)
+
+
 def test_stoop_leaves_the_pelvis_alone_for_a_leg_kicked_up():
     """A stooping window whose leg is raised above the hip (a high kick): lowering the pelvis
     would take that foot further away, so only the hanging leg sets how low the pelvis goes (an

@@ -573,9 +573,12 @@ class Augment:
     limbs let it lie flat (about half the Bandai windows do).  crouch:
     probability that the window crouches (:meth:`WindowSampler._crouch`: the
     pelvis sinks and the legs fold onto the planted feet).  stoop:
-    probability that the window bends over at the hips with the legs nearly
-    straight (:meth:`WindowSampler._stoop`: a reach to the floor, a look under
-    a table).
+    probability that the window bends over at the hips (:meth:`WindowSampler._stoop`:
+    a reach to the floor, a look under a table).  stoop_knees: how far a
+    stooping window's knees may bend, as the largest share of each leg's
+    hip-to-ankle reach they take off (uniform per window from 0): 0.03 keeps
+    the legs nearly straight (up to about 25°), 0.45 also gives the
+    semi-squat people mostly lift with (up to about 110°).
     """
     speed: tuple = (0.8, 1.25)
     stature: tuple | None = (1.45, 2.05)
@@ -593,6 +596,13 @@ class Augment:
     lying: float = 0.0
     crouch: float = 0.0
     stoop: float = 0.0
+    stoop_knees: float = 0.03
+
+    def check(self):
+        """Raise ``ValueError`` for a setting the sampler cannot use."""
+        if not 0.0 <= float(self.stoop_knees) <= STOOP_MAX_KNEES:
+            raise ValueError(f"stoop_knees {self.stoop_knees!r}: must be between 0 and {STOOP_MAX_KNEES} "
+                             f"(a share of the leg's hip-to-ankle reach)")
 
     @classmethod
     def off(cls):
@@ -760,9 +770,9 @@ STOOP_BEND = (np.radians(25.0), np.radians(95.0))
 STOOP_HIP_SHARE = (0.5, 0.8)
 #: how far a stooping pelvis moves back to keep the balance, statures times sin(bend)
 STOOP_BACK = 0.08
-#: a stooping leg's hip-to-ankle distance shrinks by up to this share of what it was (uniform per
-#: window: knees straight or softened up to about 25°)
-STOOP_SOFT_KNEES = 0.03
+#: the largest a stooping leg's hip-to-ankle distance may shrink by, as a share of what it was
+#: (``Augment.stoop_knees`` picks the upper end of the uniform draw per window, at most this)
+STOOP_MAX_KNEES = 0.6
 #: the legs' limb ids (``LIMBS`` order) and their hip, knee and ankle joints
 LEGS = [2, 3]
 LEG_HIPS = [LIMBS[i][1] for i in LEGS]
@@ -882,6 +892,7 @@ class WindowSampler:
         self.devices = tuple(devices)
         self.body = bool(body)
         self.aug = Augment() if augment is None else augment
+        self.aug.check()
         self.fps = float(fps)
         self.rng = np.random.default_rng(seed)
         w = self.clips.lengths.astype(np.float64)
@@ -1026,8 +1037,9 @@ class WindowSampler:
         """Bend a share (``Augment.stoop``) of the windows over at the hips: the trunk pitches
         forward by :data:`STOOP_BEND` (held 0.5-2 s, eased in and out over 0.3-0.8 s), a share
         :data:`STOOP_HIP_SHARE` of it at the hips and the rest through the spine, the pelvis
-        moves back (:data:`STOOP_BACK`) and down as far as the legs need to keep their reach (the
-        knees straight or softened, :data:`STOOP_SOFT_KNEES`), and the legs are solved again onto
+        moves back (:data:`STOOP_BACK`) and down as far as the legs need to keep their reach less
+        a random share of it up to ``Augment.stoop_knees`` (the knees straight, softened or
+        bent into a semi-squat), and the legs are solved again onto
         the feet where they were.  The arms and head move with the trunk.  A head low and ahead,
         pitched down, is then a body bent over as often as a crouch (:meth:`_crouch`), as people
         reach for the floor both ways; the Bandai takes hold few of either.
@@ -1057,10 +1069,10 @@ class WindowSampler:
             loc[:, :, j] = rot.axis_angle_to_matrix(axis * spine[..., None]) @ loc[:, :, j]
         rt = rt + (STOOP_BACK * s * np.sin(bend))[:, None, None] * wgt[..., None] * back
         # lower the pelvis where the bend lifts the hips further from the feet than they were,
-        # the knees softening by up to STOOP_SOFT_KNEES of the leg's reach (Newton steps on the
+        # the knees bending by up to Augment.stoop_knees of the leg's reach (Newton steps on the
         # hip-to-ankle distance against the pelvis' height; only legs that hang down from the
         # hip, where lowering it brings the foot closer: a foot kicked up to the hip is left be)
-        soft = rng.uniform(0.0, STOOP_SOFT_KNEES, n)[:, None] * wgt                        # (n, W)
+        soft = rng.uniform(0.0, self.aug.stoop_knees, n)[:, None] * wgt                   # (n, W)
         reach = np.linalg.norm(P[:, :, LEG_HIPS] - P[:, :, LEG_ANKLES], axis=-1) * (1.0 - soft)[..., None]
         for _ in range(4):
             leg = _window_fk(loc, rt, off)[0][:, :, LEG_HIPS] - P[:, :, LEG_ANKLES]           # (n, W, 2, 3)

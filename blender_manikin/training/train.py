@@ -209,6 +209,10 @@ def parse_aug(items):
             raise SystemExit(f"--aug {it!r}: {k} takes " + ("two numbers (LOW,HIGH)" if isinstance(current, tuple)
                                                               else "one number"))
         setattr(aug, k, None if vals is None else (tuple(vals) if len(vals) == 2 else vals[0]))
+    try:
+        aug.check()
+    except ValueError as exc:
+        raise SystemExit(f"--aug: {exc}") from None
     return aug
 
 
