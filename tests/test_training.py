@@ -389,10 +389,12 @@ def test_aug_overrides_and_their_checks():
     assert train.parse_aug(["stature=none"]).stature is None
     for bad, msg in (("nope=1", "FIELD one of"), ("arm_mix=x", "not a number"), ("stature=1.5", "two numbers"),
                      ("arm_mix=1,2", "one number"), ("stoop_knees=0.9", "stoop_knees 0.9: must be between 0"),
-                     ("stoop_knees=-0.1", "must be between 0")):
+                     ("stoop_knees=-0.1", "must be between 0"), ("stoop_bend=90,40", "stoop_bend 90,40: must be"),
+                     ("stoop_look=2", "stoop_look 2.0: must be")):
         with pytest.raises(SystemExit, match=msg):
             train.parse_aug([bad])
-    assert train.parse_aug(["stoop_knees=0.45"]).stoop_knees == 0.45
+    aug = train.parse_aug(["stoop_knees=0.45", "stoop_bend=25,125", "stoop_look=0.6"])
+    assert aug.stoop_knees == 0.45 and aug.stoop_bend == (25.0, 125.0) and aug.stoop_look == 0.6
 
 
 def test_init_fine_tunes_from_a_checkpoint_or_an_exported_model(cache, bvh_dir, tmp_path):

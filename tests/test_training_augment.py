@@ -295,7 +295,7 @@ def test_stoop_bends_the_trunk_over_straight_legs_onto_planted_feet():
     trunk = P1[..., J["neck"], :] - P1[..., 0, :]
     bend = np.degrees(np.arctan2(-trunk[..., 1], trunk[..., 2]))             # forward (-Y) from upright
     held = bend > 20
-    assert held.sum() > 10 and bend.max() <= np.degrees(ds.STOOP_BEND[1]) + 1.0 and bend.min() > -1.0
+    assert held.sum() > 10 and bend.max() <= ds.Augment().stoop_bend[1] + 1.0 and bend.min() > -1.0
     head_drop = (P0[..., J["head"], 2] - P1[..., J["head"], 2]) / stature[:, None]
     assert (head_drop[bend > 60] > 0.1).all()                                # the head goes low ...
     assert (P1[..., J["head"], 1] - P1[..., 0, 1])[held].max() < -0.05     # ... and ahead of the pelvis
@@ -345,6 +345,48 @@ def test_stoop_knees_bend_a_stoop_into_a_semi_squat():
     for bad in (-0.01, 0.61):
         with pytest.raises(ValueError, match="stoop_knees"):
             ds.WindowSampler(cs, window=40, augment=ds.Augment(stoop=1.0, stoop_knees=bad), seed=0)
+
+
+def test_stoop_bend_folds_past_horizontal_and_stoop_look_lifts_the_head():
+    """Augment.stoop_bend sets how far the trunk bends (past 90°: a full forward fold, the head
+    below the hips); Augment.stoop_look has the neck and head take part of the bend back (the
+    face turns up towards what the hands reach for) without moving the arms."""
+    cs = _standing_clipset(bodies=(1.6, 1.75, 1.9), T=60)
+    ankles = [J["left_ankle"], J["right_ankle"]]
+
+    def stooped(**kw):
+        smp = ds.WindowSampler(cs, window=40, augment=ds.Augment(stoop=1.0, stoop_bend=(110.0, 125.0), **kw), seed=0)
+        local, root, offsets, stature = _rest_windows((1.6, 1.75, 1.9), 40)
+        loc2, root2 = smp._stoop(np.random.default_rng(4), local, root, offsets, stature)
+        P0 = ds._window_fk(local, root, offsets)[0]
+        P1, R1 = ds._window_fk(loc2, root2, offsets)
+        assert np.abs(P1[:, :, ankles] - P0[:, :, ankles]).max() < 1e-6          # feet stay planted
+        return P1, R1
+
+    P, R = stooped()
+    trunk = P[..., J["neck"], :] - P[..., 0, :]
+    bend = np.degrees(np.arctan2(-trunk[..., 1], trunk[..., 2]))            # forward (-Y) from upright
+    full = bend > 100
+    assert full.sum() >= 5 and bend.max() < 126.0
+    assert (P[..., J["head"], 2] < P[..., 0, 2])[full].all()                 # the head below the pelvis
+    face = -R[..., J["head"], :, 1]                                          # the head's forward axis
+    down = np.degrees(np.arctan2(-face[..., 2], -face[..., 1]))              # below the horizontal, forward
+    P2, R2 = stooped(stoop_look=1.0)
+    face2 = -R2[..., J["head"], :, 1]
+    down2 = np.degrees(np.arctan2(-face2[..., 2], -face2[..., 1]))
+    assert (down[full] > 100).all()                                          # turned with the trunk ...
+    assert np.median(down2[full]) < np.median(down[full]) - 20               # ... or looking up from it
+    spine3 = J["spine3"]
+    for side in ("left", "right"):                                           # the arms hang from the trunk alike
+        w = J[f"{side}_wrist"]
+        rel = np.einsum("...ji,...j->...i", R[..., spine3, :, :], P[..., w, :] - P[..., spine3, :])
+        rel2 = np.einsum("...ji,...j->...i", R2[..., spine3, :, :], P2[..., w, :] - P2[..., spine3, :])
+        assert np.abs(rel - rel2).max() < 1e-6
+    for bad in ((-5.0, 90.0), (60.0, 40.0), (25.0, 170.0)):
+        with pytest.raises(ValueError, match="stoop_bend"):
+            ds.WindowSampler(cs, window=40, augment=ds.Augment(stoop=1.0, stoop_bend=bad), seed=0)
+    with pytest.raises(ValueError, match="stoop_look"):
+        ds.WindowSampler(cs, window=40, augment=ds.Augment(stoop=1.0, stoop_look=1.5), seed=0)
 
 
 def test_stoop_leaves_the_pelvis_alone_for_a_leg_kicked_up():

@@ -578,7 +578,12 @@ class Augment:
     stooping window's knees may bend, as the largest share of each leg's
     hip-to-ankle reach they take off (uniform per window from 0): 0.03 keeps
     the legs nearly straight (up to about 25°), 0.45 also gives the
-    semi-squat people mostly lift with (up to about 110°).
+    semi-squat people mostly lift with (up to about 110°).  stoop_bend:
+    (low, high) degrees, the range a stoop's trunk bends forward by (uniform
+    per window); past 90° the head goes below the hips, as in a full
+    forward fold.  stoop_look: the largest share of a stoop's bend the neck
+    and head take back (uniform per window from 0), as people who bend over
+    keep looking at what they reach for; 0 turns the head with the trunk.
     """
     speed: tuple = (0.8, 1.25)
     stature: tuple | None = (1.45, 2.05)
@@ -597,12 +602,20 @@ class Augment:
     crouch: float = 0.0
     stoop: float = 0.0
     stoop_knees: float = 0.03
+    stoop_bend: tuple = (25.0, 95.0)
+    stoop_look: float = 0.0
 
     def check(self):
         """Raise ``ValueError`` for a setting the sampler cannot use."""
         if not 0.0 <= float(self.stoop_knees) <= STOOP_MAX_KNEES:
             raise ValueError(f"stoop_knees {self.stoop_knees!r}: must be between 0 and {STOOP_MAX_KNEES} "
                              f"(a share of the leg's hip-to-ankle reach)")
+        low, high = (float(v) for v in self.stoop_bend)
+        if not 0.0 <= low <= high <= STOOP_MAX_BEND:
+            raise ValueError(f"stoop_bend {low:g},{high:g}: must be LOW,HIGH degrees with "
+                             f"0 <= LOW <= HIGH <= {STOOP_MAX_BEND:g}")
+        if not 0.0 <= float(self.stoop_look) <= 1.0:
+            raise ValueError(f"stoop_look {self.stoop_look!r}: must be between 0 and 1 (a share of the bend)")
 
     @classmethod
     def off(cls):
@@ -762,9 +775,9 @@ LYING_TRUNK = np.array([J[n] for n in ("pelvis", "spine1", "spine2", "spine3", "
 CROUCH_DEPTH = (0.08, 0.32)
 #: forward lean of a crouching trunk, radians per stature of depth (0.3 statures: ~20°)
 CROUCH_LEAN = 1.2
-#: how far a stooping trunk bends forward, radians (uniform; a reach to the floor with straight
-#: legs bends it about 90°)
-STOOP_BEND = (np.radians(25.0), np.radians(95.0))
+#: the most a stooping trunk may bend forward, degrees (``Augment.stoop_bend``: by default 25-95°,
+#: uniform; a reach to the floor with straight legs bends it about 90°, a full fold further)
+STOOP_MAX_BEND = 150.0
 #: the share of a stoop's bend taken at the hips (the pelvis pitches); the rest is spread evenly
 #: over the three spine joints
 STOOP_HIP_SHARE = (0.5, 0.8)
@@ -1035,12 +1048,14 @@ class WindowSampler:
 
     def _stoop(self, rng, local, root, offsets, stature):
         """Bend a share (``Augment.stoop``) of the windows over at the hips: the trunk pitches
-        forward by :data:`STOOP_BEND` (held 0.5-2 s, eased in and out over 0.3-0.8 s), a share
+        forward by ``Augment.stoop_bend`` (held 0.5-2 s, eased in and out over 0.3-0.8 s), a share
         :data:`STOOP_HIP_SHARE` of it at the hips and the rest through the spine, the pelvis
         moves back (:data:`STOOP_BACK`) and down as far as the legs need to keep their reach less
         a random share of it up to ``Augment.stoop_knees`` (the knees straight, softened or
         bent into a semi-squat), and the legs are solved again onto
-        the feet where they were.  The arms and head move with the trunk.  A head low and ahead,
+        the feet where they were.  The arms move with the trunk; the head does too, less a
+        random share of the bend up to ``Augment.stoop_look`` that the neck and head take back
+        (looking at what the hands reach for).  A head low and ahead,
         pitched down, is then a body bent over as often as a crouch (:meth:`_crouch`), as people
         reach for the floor both ways; the Bandai takes hold few of either.
 
@@ -1052,7 +1067,7 @@ class WindowSampler:
             return local, root
         n = pick.size
         s = stature[pick]
-        bend = rng.uniform(STOOP_BEND[0], STOOP_BEND[1], n)
+        bend = np.radians(rng.uniform(self.aug.stoop_bend[0], self.aug.stoop_bend[1], n))
         share = rng.uniform(STOOP_HIP_SHARE[0], STOOP_HIP_SHARE[1], n)
         wgt = self._random_hold(rng, n, W)                                                 # (n, W)
         loc = local[pick].copy()
@@ -1067,6 +1082,12 @@ class WindowSampler:
         for j in SPINE:
             axis = np.einsum("nwji,nwj->nwi", Rw[:, :, PARENTS[j]], side)
             loc[:, :, j] = rot.axis_angle_to_matrix(axis * spine[..., None]) @ loc[:, :, j]
+        if self.aug.stoop_look > 0:
+            # the neck and head take part of the bend back, half each, about the same axis
+            look = -(bend * rng.uniform(0.0, self.aug.stoop_look, n) / 2.0)[:, None] * wgt
+            for j in (J["neck"], J["head"]):
+                axis = np.einsum("nwji,nwj->nwi", Rw[:, :, PARENTS[j]], side)
+                loc[:, :, j] = rot.axis_angle_to_matrix(axis * look[..., None]) @ loc[:, :, j]
         rt = rt + (STOOP_BACK * s * np.sin(bend))[:, None, None] * wgt[..., None] * back
         # lower the pelvis where the bend lifts the hips further from the feet than they were,
         # the knees bending by up to Augment.stoop_knees of the leg's reach (Newton steps on the
