@@ -876,6 +876,16 @@ def _replant_legs(loc, root, P, Rw, offsets):
     return loc
 
 
+def _turn_about_world_axis(loc, Rw, joints, axis, angle):
+    """Turn each of ``joints`` by ``angle`` ``(n, W)`` radians about the world ``axis`` ``(n, W, 3)``,
+    in place in the local rotations ``loc`` ``(n, W, 22, 3, 3)``.  ``Rw`` ``(n, W, 22, 3, 3)`` are
+    the world rotations before any of these turns: each joint's turn is expressed in its parent's
+    frame as it was, which holds while every turn added above it is about the same world axis."""
+    for j in joints:
+        local_axis = np.einsum("nwji,nwj->nwi", Rw[:, :, PARENTS[j]], axis)
+        loc[:, :, j] = rot.axis_angle_to_matrix(local_axis * angle[..., None]) @ loc[:, :, j]
+
+
 def _facing_axes(R0):
     """``(side, back)``: the horizontal left (+X) and back (+Y) unit axes of pelvis rotations
     ``(..., 3, 3)``, each ``(..., 3)``."""
@@ -1076,18 +1086,11 @@ class WindowSampler:
         P, Rw = _window_fk(loc, rt, off)
         side, back = _facing_axes(loc[:, :, 0])
         loc[:, :, 0] = rot.axis_angle_to_matrix(side * ((bend * share)[:, None] * wgt)[..., None]) @ loc[:, :, 0]
-        # each spine joint turns about the same world axis: in its parent's frame as it was
-        # (every turn added above it is about that axis too)
-        spine = (bend * (1.0 - share) / len(SPINE))[:, None] * wgt
-        for j in SPINE:
-            axis = np.einsum("nwji,nwj->nwi", Rw[:, :, PARENTS[j]], side)
-            loc[:, :, j] = rot.axis_angle_to_matrix(axis * spine[..., None]) @ loc[:, :, j]
+        _turn_about_world_axis(loc, Rw, SPINE, side, (bend * (1.0 - share) / len(SPINE))[:, None] * wgt)
         if self.aug.stoop_look > 0:
-            # the neck and head take part of the bend back, half each, about the same axis
+            # the neck and head take part of the bend back, half each
             look = -(bend * rng.uniform(0.0, self.aug.stoop_look, n) / 2.0)[:, None] * wgt
-            for j in (J["neck"], J["head"]):
-                axis = np.einsum("nwji,nwj->nwi", Rw[:, :, PARENTS[j]], side)
-                loc[:, :, j] = rot.axis_angle_to_matrix(axis * look[..., None]) @ loc[:, :, j]
+            _turn_about_world_axis(loc, Rw, (J["neck"], J["head"]), side, look)
         rt = rt + (STOOP_BACK * s * np.sin(bend))[:, None, None] * wgt[..., None] * back
         # lower the pelvis where the bend lifts the hips further from the feet than they were,
         # the knees bending by up to Augment.stoop_knees of the leg's reach (Newton steps on the
