@@ -74,7 +74,6 @@ from __future__ import annotations
 import argparse
 import os
 import platform
-import re
 import sys
 import time
 
@@ -268,21 +267,15 @@ def clip_metrics(res, gt_local, gt_pos, fps, contacts, targets=None):
     return ev
 
 
-#: motion class patterns of the clip file names: HDM05 (``HDM_<actor>_<class><digits>...``) and
-#: the Bandai Namco takes (``dataset-<n>_<class>_<style>_<nnn>``)
-CLASS_PATTERNS = (re.compile(r"HDM_[a-z]+_([A-Za-z]+)"), re.compile(r"dataset-\d+_([a-z-]+)_"))
 PER_CLASS_METHODS = (SHIPPED, "(p) MANIKIN, previous model")
 PER_CLASS_COLUMNS = ("MPJPE", "L-PE")
 
 
 def motion_class(path):
-    """The motion class in a cache clip's file name (``"squat"``, ``"walk"``), or ``"other"``."""
-    name = os.path.basename(path)
-    for pat in CLASS_PATTERNS:
-        found = pat.findall(name)
-        if found:
-            return found[-1]          # Bandai names hold the folder "dataset-1_data_" first
-    return "other"
+    """The motion class in a cache clip's file name (``"squat"``, ``"walk"``; the training data's
+    :func:`~blender_manikin.training.dataset.motion_class`), or ``"other"``."""
+    from blender_manikin.training import dataset
+    return dataset.motion_class(path) or "other"
 
 
 def dataset_files(name, max_clips=0):

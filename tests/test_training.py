@@ -238,6 +238,7 @@ def test_train_resume_and_export(cache, bvh_dir, tmp_path):
     assert c["joint_names"] == list(sk.JOINT_NAMES) and c["input_devices"] == list(features.INPUT_DEVICES)
     assert c["normalisation"]["vel_scale"] == features.VEL_SCALE
     assert c["training_data"]["clips"] == 7 and c["training"]["steps"] == 6
+    assert c["training_data"]["sampling"]["balance"] == 0.0       # every frame alike unless --balance
     assert c["licence"] == "unknown: state it in the sources file" and "mpjpe_cm" in c["validation"]
     assert [x["name"] for x in c["training_data"]["sources"]] == [os.path.basename(bvh_dir)]
     # the add-on's reader accepts it, and onnxruntime equals torch on a real batch
@@ -258,11 +259,17 @@ def test_resume_with_new_loss_weights(cache, bvh_dir, tmp_path):
     from blender_manikin.training import train
     root, _ = cache
     common = ["--bvh", bvh_dir, "--cache-dir", root, "--window", "16"] + TINY + ["--out", str(tmp_path / "r")]
-    train.main(common + ["--steps", "3"])
+    train.main(common + ["--steps", "3", "--balance", "0.5"])
     res = train.main(common + ["--steps", "5", "--resume", "--lam", "mid=1.0"])
     assert res["step"] == 5
     ck = torch.load(tmp_path / "r" / "checkpoint.pt", weights_only=False)
     assert ck["args"]["lam"] == ["mid=1.0"] and ck["step"] == 5
+    # the class balance of the sampler survives the resume, and the run records each class's share
+    assert ck["args"]["balance"] == 0.5 and ck["data"]["sampling"]["balance"] == 0.5
+    shares = ck["data"]["sampling"]["group_shares"]
+    assert set(shares) == {"dataset-t_walk", "cmu_07"} and abs(sum(shares.values()) - 1) < 1e-3
+    with pytest.raises(SystemExit, match="--balance 2.0: expected a number from 0 to 1"):
+        train.main(common[:-1] + [str(tmp_path / "bad"), "--steps", "1", "--balance", "2"])
     assert train.parse_lam(["mid=1", "foot=0.5"]) == {"mid": 1.0, "foot": 0.5}
     for bad in (["knee=1"], ["mid"], ["mid=x"]):
         with pytest.raises(SystemExit, match="--lam"):

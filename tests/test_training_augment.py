@@ -407,3 +407,42 @@ def test_stoop_leaves_the_pelvis_alone_for_a_leg_kicked_up():
         assert sink.max() < 0.1                                              # no deeper than for straight legs
         right = J["right_ankle"]
         assert np.abs(P1[..., right, :] - P0[..., right, :]).max() < 1e-6    # the standing foot stays planted
+
+
+def test_motion_groups_of_take_names():
+    assert ds.motion_class("Bandai-Namco-Research-Motiondataset-1/data/dataset-1_kick_active_001.bvh") == "kick"
+    assert ds.motion_class("Bandai-Namco-Research-Motiondataset-2_data_dataset-2_walk-turn-left_x_003-6e.npz") \
+        == "walk-turn-left"
+    assert ds.motion_class("amc/HDM_bd_kickLFront1Reps_001_120.amc") == "kickLFront"
+    assert ds.motion_class("01_02.amc") is None
+    assert ds.motion_group("dataset-2_run_active_017.bvh") == "run"
+    assert ds.motion_group("subjects/01/01_02.amc") == "01"          # CMU: a subject's session
+    assert ds.motion_group("dance.bvh") == "dance"                   # a group of one take
+    assert ds.motion_group("07.bvh") == "07"
+
+
+def _named_clipset(names, T=30):
+    cs = _standing_clipset(T=T, bodies=(1.75,) * len(names))
+    cs.names = list(names)
+    return cs
+
+
+def test_balance_draws_rare_classes_more_and_zero_keeps_every_frame_alike():
+    names = [f"dataset-2_walk_x_{i:03d}.bvh" for i in range(3)] + ["dataset-1_kick_x_001.bvh"]
+    cs = _named_clipset(names)                       # walk: 90 frames in 3 takes, kick: 30 in 1
+    plain = ds.WindowSampler(cs, window=8)
+    assert np.array_equal(plain.p, cs.lengths / cs.lengths.sum()) and plain.balance == 0.0
+    for b, kick in ((0.5, 30 ** 0.5 / (30 ** 0.5 + 90 ** 0.5)), (1.0, 0.5)):
+        s = ds.WindowSampler(cs, window=8, balance=b)
+        assert s.group_shares() == pytest.approx({"walk": 1 - kick, "kick": kick})
+        assert list(s.group_shares()) == ["walk", "kick"]           # largest first
+        assert s.p[0] == s.p[1] == s.p[2]                           # within a class, by length
+        cid, _ = s._times(6000, np.random.default_rng(1))           # the draws follow it
+        assert abs(np.mean(cid == 3) - kick) < 0.03
+    for bad in (-0.1, 1.5):
+        with pytest.raises(ValueError, match="balance"):
+            ds.WindowSampler(cs, window=8, balance=bad)
+    unnamed = _named_clipset(names)
+    unnamed.names = []
+    with pytest.raises(ValueError, match="take names"):
+        ds.WindowSampler(unnamed, window=8, balance=0.5)

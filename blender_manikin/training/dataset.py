@@ -546,6 +546,30 @@ def split_files(clip_files):
     return ([os.path.join(d, f) for f in split["train"]], [os.path.join(d, f) for f in split["val"]], split)
 
 
+#: motion class patterns of take names: HDM05 (``HDM_<actor>_<class><digits>...``) and the
+#: Bandai Namco takes (``dataset-<n>_<class>_<style>_<nnn>``)
+MOTION_CLASS_PATTERNS = (re.compile(r"HDM_[a-z]+_([A-Za-z]+)"), re.compile(r"dataset-\d+_([a-z-]+)_"))
+
+
+def motion_class(name):
+    """The motion class in a take's name, path or cache file name (HDM05
+    ``HDM_bd_squat1Reps_001_120.amc`` -> ``"squat"``, Bandai ``dataset-1_walk_active_001.bvh`` ->
+    ``"walk"``), or ``None`` when the name follows neither convention."""
+    found = [m for pat in MOTION_CLASS_PATTERNS for m in pat.findall(os.path.basename(str(name)))]
+    return found[-1] if found else None   # cache names hold the folder ("dataset-1_data_") first
+
+
+def motion_group(name):
+    """The sampling group of a take (:class:`WindowSampler` ``balance``): its motion class
+    (:func:`motion_class`), else its file stem without a final take number (CMU ``01_02.amc`` ->
+    ``"01"``, a subject's session), else the stem itself (a group of one take)."""
+    cls = motion_class(name)
+    if cls is not None:
+        return cls
+    stem = os.path.splitext(os.path.basename(str(name)))[0]
+    return re.sub(r"[_\-. ]*\d+$", "", stem) or stem
+
+
 # --------------------------------------------------------------------------
 # windows
 @dataclass
@@ -908,7 +932,7 @@ class WindowSampler:
     """
 
     def __init__(self, clips, window=40, kind="manikin", devices=features.INPUT_DEVICES,
-                 augment=None, seed=0, fps=MODEL_FPS, body=True):
+                 augment=None, seed=0, fps=MODEL_FPS, body=True, balance=0.0):
         self.clips = clips if isinstance(clips, ClipSet) else ClipSet.load(list(clips))
         self.window = int(window)
         self.kind = kind
@@ -918,8 +942,40 @@ class WindowSampler:
         self.aug.check()
         self.fps = float(fps)
         self.rng = np.random.default_rng(seed)
+        self.p = self.clip_probabilities(balance)
+        self.balance = float(balance)
+
+    def clip_probabilities(self, balance=0.0):
+        """``(C,)`` float64: the probability that a window is drawn from each clip.
+
+        balance: 0 draws every frame alike (a clip in proportion to its length); ``b`` in (0, 1]
+        divides each clip's length by its group's total frames to the power ``b``
+        (:func:`motion_group`: the motion class in the take's name), so a group's share of the
+        windows goes as its frames to the power ``1 - b``: at 0.5, a class with a hundredth of
+        another's frames gets a tenth of its windows; at 1, every group gets the same share.
+        Rare classes (kicks, dance) are then seen more often without dropping any frame."""
+        b = float(balance)
+        if not 0.0 <= b <= 1.0:
+            raise ValueError(f"balance {balance!r}: expected a number from 0 to 1")
         w = self.clips.lengths.astype(np.float64)
-        self.p = w / w.sum()
+        if b > 0.0:
+            if len(self.clips.names) != len(w):
+                raise ValueError("balance needs the clips' take names (ClipSet.names)")
+            groups = [motion_group(n) for n in self.clips.names]
+            total = {}
+            for g, n in zip(groups, w):
+                total[g] = total.get(g, 0.0) + n
+            w = w * np.array([total[g] for g in groups]) ** -b
+        return w / w.sum()
+
+    def group_shares(self):
+        """``{group: share}``: each sampling group's (:func:`motion_group`) share of the windows
+        drawn, largest first."""
+        shares = {}
+        for name, p in zip(self.clips.names, self.p):
+            g = motion_group(name)
+            shares[g] = shares.get(g, 0.0) + float(p)
+        return dict(sorted(shares.items(), key=lambda kv: -kv[1]))
 
     # rng state, for exact resume
     def get_state(self):

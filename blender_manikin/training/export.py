@@ -83,7 +83,7 @@ def build_contract(ckpt, num_parameters):
         "architecture": {k: v for k, v in cfg.to_dict().items() if k not in ("kind", "devices")},
         "num_parameters": int(num_parameters),
         "training_data": {k: data.get(k) for k in ("source", "sources", "clips", "frames", "split", "contact_rule",
-                                                    "augmentation", "validation")},
+                                                    "augmentation", "sampling", "validation")},
         "licence": data.get("licence", "see training data"),
         "code_version": __version__,
         "training": {"steps": int(ckpt.get("step", 0)), "minutes": round(float(ckpt.get("elapsed", 0.0)) / 60, 2),

@@ -88,6 +88,11 @@ def build_parser():
     p.add_argument("--aug", action="append", default=None, metavar="FIELD=VALUE",
                    help="override an augmentation setting of dataset.Augment, e.g. --aug arm_mix=0 "
                         "(repeatable; a resumed run keeps its settings unless given again)")
+    p.add_argument("--balance", type=float, default=None, metavar="B",
+                   help="draw windows less in proportion to each motion class's frames (0 to 1; "
+                        "dataset.WindowSampler.clip_probabilities): a class's share goes as its frames to "
+                        "the power 1 - B, so rare classes (kicks, dance) are seen more; 0 (default): every "
+                        "frame alike (a resumed run keeps its setting unless given again)")
     p.add_argument("--weight-decay", type=float, default=0.01)
     p.add_argument("--ema", type=float, default=0.0, metavar="DECAY",
                    help="keep an exponential moving average of the weights with this decay (e.g. 0.999, "
@@ -275,6 +280,8 @@ def main(argv=None):
                 setattr(args, k, prev[k])
         if args.lam is None:
             args.lam = prev.get("lam")
+        if args.balance is None:
+            args.balance = prev.get("balance")
         if args.aug is None:
             # runs from before --aug used the defaults of their time: the arm mix and tracker
             # dropouts came later
@@ -289,6 +296,10 @@ def main(argv=None):
         raise SystemExit("--bvh SOURCE or --sources FILE.json is required")
     lam = parse_lam(args.lam)
     aug = parse_aug(args.aug)
+    if args.balance is None:
+        args.balance = 0.0
+    if not 0.0 <= args.balance <= 1.0:
+        raise SystemExit(f"--balance {args.balance}: expected a number from 0 to 1")
     init_state = None
     if ckpt is None and args.init:
         from .init_weights import load_initial_weights
@@ -328,7 +339,7 @@ def main(argv=None):
     train_set = dataset.ClipSet.load(train_files)
     val_set = train_set if val_is_train else dataset.ClipSet.load(val_files)
     sampler = dataset.WindowSampler(train_set, window=cfg.window, kind=cfg.kind, devices=cfg.devices,
-                                    seed=args.seed, body=cfg.body, augment=aug)
+                                    seed=args.seed, body=cfg.body, augment=aug, balance=args.balance)
     val_batches = dataset.fixed_batches(val_set, args.val_windows, 64, window=cfg.window, kind=cfg.kind,
                                         devices=cfg.devices, seed=args.seed + 12345, body=cfg.body)
     select_batches = None
@@ -353,12 +364,18 @@ def main(argv=None):
                      licence=dataset.combined_licence([p["licence"] for p in per_source]),
                      contact_rule=dict(speed_mps=dataset.CONTACT_SPEED, height_m=dataset.CONTACT_HEIGHT),
                      augmentation=dataclasses.asdict(sampler.aug),
+                     sampling=dict(balance=sampler.balance,
+                                   group_shares={g: round(v, 4) for g, v in sampler.group_shares().items()}),
                      validation=f"{args.val_windows} fixed windows of the held-out takes, no augmentation"
                      + (f"; checkpoints chosen on {os.path.basename(args.select_on)}" if args.select_on else ""))
     split = data_info["split"]
     say(f"data: {data_info['clips']} clips, {data_info['frames']} frames from {data_info['source']}; "
         f"train {len(train_files)} clips / {split['train_frames']} frames, "
         f"val {len(val_files)} clips / {split['val_frames']} frames ({split['val_takes']} takes)")
+    if sampler.balance:
+        shares = sampler.group_shares()
+        say(f"sampling: balance {sampler.balance:g} over {len(shares)} motion classes; windows drawn: "
+            + ", ".join(f"{g} {100 * v:.1f} %" for g, v in shares.items()))
 
     # --------------------------------------------------------------- model
     torch.manual_seed(args.seed)
