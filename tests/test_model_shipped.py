@@ -58,8 +58,9 @@ def test_model_file_and_contract_match_the_code(runner):
 
 @pytest.mark.parametrize("name", ["pelvis", "six"])
 def test_tracker_set_models_are_shipped_with_their_devices(name):
-    """The four- and six-tracker networks: same contract as the three-tracker one, their devices
-    listed (issue 14), within the same size budget."""
+    """The four- and six-tracker networks: the same kind of contract as the three-tracker one,
+    their devices listed (issue 14), within the same size budget.  Each model's window is its own
+    (the three-tracker network was widened to 60 frames; the pipeline reads it from the contract)."""
     from blender_manikin.core import model_choice
     path = model_choice.shipped_model_path(name)
     assert os.path.isfile(path), f"the {name} model must be committed"
@@ -69,7 +70,7 @@ def test_tracker_set_models_are_shipped_with_their_devices(name):
     assert c.kind == "manikin" and c.devices == model_choice.SHIPPED_MODELS[name][1]
     assert c.body and c.input_dim == features.input_dim(c.devices, body=True)
     assert "CC BY-NC-ND" in c.raw["licence"] and 0 < r.num_parameters <= 2_000_000
-    assert c.window == ModelRunner(DEFAULT_MODEL).contract.window
+    assert c.window >= 2 and c.raw["centre_frame"] == c.window // 2
 
 
 def test_inference_hands_on_trackers_and_feet_above_floor(runner, example):

@@ -4,6 +4,7 @@ Needs torch and onnx (requirements-train.txt); skipped without them.  Uses
 only synthetic BVH files written into tmp dirs (no /work/shared data) and a
 tiny network, so the whole module runs in a few seconds on 2 cores.
 """
+import dataclasses
 import json
 import os
 
@@ -441,6 +442,37 @@ def test_init_fine_tunes_from_a_checkpoint_or_an_exported_model(cache, bvh_dir, 
     torch.save({"weights": 1}, bad)
     with pytest.raises(SystemExit, match="not a training checkpoint"):
         train.main(common + ["--steps", "1", "--init", str(bad), "--out", str(tmp_path / "f")])
+
+
+def test_init_with_another_window_lines_up_the_centre_frame(cache, bvh_dir, tmp_path):
+    """--init PATH --window W fine-tunes with a wider (or narrower) window: the positional
+    embedding keeps its centre frame where the canonical frame is taken, the frames it did not
+    cover repeat its ends, every other weight is the model's own; the contract records the new
+    window.  The Dual Attention Poser, whose frame mixing is sized by the window, is refused."""
+    from blender_manikin.training import train, export
+    from blender_manikin.training.init_weights import load_initial_weights, widen_window
+    root, _ = cache
+    common = ["--bvh", bvh_dir, "--cache-dir", root] + TINY
+    first = train.main(common + ["--window", "16", "--steps", "2", "--out", str(tmp_path / "a")])
+    onnx_path = tmp_path / "a.onnx"
+    export.export(first["checkpoint"], str(onnx_path), quiet=True)
+    cfg, state = load_initial_weights(str(onnx_path))
+    wide = train.main(common + ["--window", "24", "--steps", "0", "--init", str(onnx_path),
+                                "--out", str(tmp_path / "b")])
+    w = torch.load(wide["checkpoint"], weights_only=False)
+    assert w["config"]["window"] == 24
+    pos, old = w["model"]["pos"][0], state["pos"][0]                  # (24, d), (16, d)
+    assert torch.equal(pos[4:20], old)                                # old centre 8 -> new centre 12
+    assert torch.equal(pos[:4], old[:1].expand(4, -1)) and torch.equal(pos[20:], old[-1:].expand(4, -1))
+    for k, v in state.items():
+        if k != "pos":
+            assert torch.equal(w["model"][k], v), k
+    c, _ = export.export(wide["checkpoint"], str(tmp_path / "b.onnx"), quiet=True)
+    assert c["architecture"]["window"] == 24 and c["centre_frame"] == 12
+    narrow_cfg, narrow = widen_window(cfg, state, 10)                  # the centred slice
+    assert narrow_cfg.window == 10 and torch.equal(narrow["pos"][0], old[3:13])
+    with pytest.raises(ValueError, match="only posenet weights"):
+        widen_window(dataclasses.replace(cfg, arch="dap"), state, 24)
 
 
 def test_weight_average_formula_and_swap():

@@ -118,3 +118,33 @@ def load_initial_weights(path):
     if not isinstance(ckpt, dict) or "model" not in ckpt or "config" not in ckpt:
         raise ValueError(f"--init {path}: not a training checkpoint (no 'model' and 'config')")
     return ModelConfig.from_dict(ckpt["config"]), trained_weights(ckpt)
+
+
+def widen_window(cfg, state, window):
+    """``(cfg, state)`` of the same weights for a ``window``-frame window (``train --init PATH
+    --window W``): a fine-tuning run that sees more context than the model was trained with.
+
+    Only the transformer backbone (``arch`` "posenet") depends on the window, through its learned
+    positional embedding ``pos`` ``(1, W, d)``.  The old embedding is placed so that the centre
+    frames line up (old frame ``W_old // 2`` becomes frame ``window // 2``; the centre frame is
+    where the canonical frame is taken), and the frames it did not cover repeat its first and
+    last embedding.  A narrower window keeps the centred slice.  The Dual Attention Poser's
+    frame-mixing matrices are sized by the window too and are not remapped: ``ValueError``.
+    """
+    import dataclasses
+    import torch
+    window = int(window)
+    if window == cfg.window:
+        return cfg, state
+    if window < 2:
+        raise ValueError(f"--window {window}: at least 2 frames")
+    if cfg.arch != "posenet":
+        raise ValueError(f"--window {window}: the {cfg.arch} backbone's weights depend on its window "
+                         f"({cfg.window}); only posenet weights can be widened")
+    pos = state["pos"]                                              # (1, W_old, d)
+    old = pos.shape[1]
+    shift = window // 2 - old // 2                                  # new index = old index + shift
+    src = torch.clamp(torch.arange(window) - shift, 0, old - 1)
+    out = dict(state)
+    out["pos"] = pos[:, src].clone()
+    return dataclasses.replace(cfg, window=window), out

@@ -57,7 +57,9 @@ def build_parser():
     p.add_argument("--minutes", type=float, default=None, help="time budget (default 60 without --steps)")
     p.add_argument("--steps", type=int, default=None, help="number of optimizer steps")
     p.add_argument("--batch", type=int, default=48)
-    p.add_argument("--window", type=int, default=40)
+    p.add_argument("--window", type=int, default=None,
+                   help="frames per network window (default 40; with --init, widens or narrows the "
+                        "model's window, its positional embedding lined up at the centre frame)")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--resume", action="store_true",
                    help="continue OUT/checkpoint.pt with its model, data, seed, batch and optimizer settings "
@@ -309,9 +311,15 @@ def main(argv=None):
             raise SystemExit(str(exc)) from None
         if args.devices is not None and parse_devices(args.devices, args.six_trackers) != tuple(cfg.devices):
             raise SystemExit(f"--devices {args.devices}: --init {args.init} takes {', '.join(cfg.devices)}")
+        if args.window is not None and args.window != cfg.window:
+            from .init_weights import widen_window
+            try:
+                cfg, init_state = widen_window(cfg, init_state, args.window)
+            except ValueError as exc:
+                raise SystemExit(str(exc)) from None
     elif ckpt is None:
         devices = parse_devices(args.devices, args.six_trackers)
-        cfg = ModelConfig(kind=args.kind, devices=devices, window=args.window, d_model=args.d_model,
+        cfg = ModelConfig(kind=args.kind, devices=devices, window=args.window or 40, d_model=args.d_model,
                           layers=args.layers, heads=args.heads, ff_mult=args.ff_mult,
                           head_hidden=args.head_hidden, dropout=args.dropout, causal=args.causal,
                           arch=args.arch)
