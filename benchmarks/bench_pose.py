@@ -414,7 +414,8 @@ def tracker_set_methods(args):
             continue
         names[k] = (f"{label} ({os.path.basename(paths[k])})", f"{label}: {paths[k]}")
         methods[names[k][1]] = needs(runner.contract.devices,
-                                     lambda tg, b, runner=runner: pipeline.solve(tg, b, runner))
+                                     lambda tg, b, runner=runner: pipeline.solve(tg, b, runner,
+                                                                                 overlap=args.overlap))
     return names, methods
 
 
@@ -463,16 +464,19 @@ def main(argv=None):
     ap.add_argument("--smoothing", type=parse_smoothing, default="auto", metavar="auto|SECONDS",
                     help="the tracker smoothing every method's input gets, as the solve's --smoothing "
                          "(default auto)")
+    ap.add_argument("--overlap", type=int, choices=pipeline.OVERLAP_CHOICES, default=2,
+                    help="network windows seeing each frame, for every MANIKIN row (the solve's --overlap; "
+                         "default 2)")
     ap.add_argument("--markdown", action="store_true", help="print only the tables")
     ap.add_argument("--per-class", action="store_true",
                     help="also MPJPE and L-PE per motion class (shipped and previous model)")
     args = ap.parse_args(argv)
 
     runner = ModelRunner(args.model)
-    methods = {"(a) MANIKIN, shipped model": lambda tg, b: pipeline.solve(tg, b, runner)}
+    methods = {"(a) MANIKIN, shipped model": lambda tg, b: pipeline.solve(tg, b, runner, overlap=args.overlap)}
     if os.path.isfile(args.previous_model) and os.path.abspath(args.previous_model) != os.path.abspath(args.model):
         prev = ModelRunner(args.previous_model)
-        methods["(p) MANIKIN, previous model"] = lambda tg, b: pipeline.solve(tg, b, prev)
+        methods["(p) MANIKIN, previous model"] = lambda tg, b: pipeline.solve(tg, b, prev, overlap=args.overlap)
     if os.path.isfile(args.fk_model):
         fk_runner = ModelRunner(args.fk_model)
         methods["(b) network only (FK, AvatarPoser-style)"] = lambda tg, b: baselines.network_only(tg, b, fk_runner)
@@ -497,6 +501,8 @@ def main(argv=None):
     for r in results:
         what = "calibrated body (T-pose: stature and arm span)" if r["body"] == "calibrated" else "true skeleton"
         caught = "; smoothing " + (args.smoothing if args.smoothing == "auto" else f"{args.smoothing:g} s")
+        if args.overlap != 2:
+            caught += f"; {args.overlap} network windows per frame"
         if args.capture:
             c = args.capture
             caught += (f"; trackers captured at {c['rate']:g} Hz, noise {c['pos_mm']:g} mm / {c['rot_deg']:g} deg, "

@@ -39,6 +39,8 @@ Options of ``solve`` (they mirror the panel; ``--help`` has them all):
 --smoothing auto|SECONDS      trackers and keypoints: auto (default: each device's or point's
                               filter from its measured noise; clean ones are left as they
                               are) or one Savitzky-Golay window in seconds (0: off)
+--overlap 2|3|4               network windows seeing each frame: 2 (default, fastest), 3 or 4
+                              (a little more accurate at 1.5 and 2 times the network time)
 --ik adaptive|naive           keypoints: HybrIK adaptive (default) or naive IK
 --mapping FILE.json           keypoints: a CSV's column names for the layout's points
 --save-layout FILE.json       write the layout detected in the first wide CSV
@@ -103,6 +105,9 @@ def _add_solve_options(s):
                    help="the pose network: auto (default: the shipped model for the recording's trackers, "
                         "head and hands / + pelvis / + pelvis and feet, per stretch when a tracker is lost "
                         "for long), a shipped model's name, or a model you trained")
+    s.add_argument("--overlap", type=int, choices=(2, 3, 4), default=2,
+                   help="network windows that see each frame: 2 (default, fastest), 3 or 4 (a little "
+                        "more accurate at 1.5 and 2 times the network time)")
     s.add_argument("--layout", default=None, metavar="FILE.json|KEYPOINTS",
                    help="the columns, time, units and axes of wide-layout CSV inputs (default: detected); "
                         "or the layout of keypoint inputs: " + "|".join(_keypoint_layouts()))
@@ -266,7 +271,8 @@ def solve_settings(args):
                        layout=layout, rate=getattr(args, "rate", None), keypoint_layout=keypoint_layout,
                        up=getattr(args, "up", None), smoothing=getattr(args, "smoothing", "auto"),
                        ik=getattr(args, "ik", "adaptive"), mapping=getattr(args, "mapping", None),
-                       model=getattr(args, "model", None), sole=getattr(args, "sole", None))
+                       model=getattr(args, "model", None), sole=getattr(args, "sole", None),
+                       overlap=getattr(args, "overlap", 2))
     if args.calibration_time is not None:
         st.calibration, st.tpose_time = "TPOSE", float(args.calibration_time)
         st.height, st.arm_span = args.height, args.arm_span

@@ -312,6 +312,33 @@ def test_panels_draw(addon):
     assert config_from_settings(bpy.context).smoothing == "auto"
 
 
+def test_panel_overlap_reaches_the_solver(addon, recording, monkeypatch):
+    """The panel's Overlap (network windows per frame) is shown with the pose model and reaches
+    the solver; the default (2) calls it as before."""
+    from blender_manikin.panels import main as panels
+    from blender_manikin.blender.properties import config_from_settings
+    from types import SimpleNamespace
+    calls = []
+
+    def spy(targets, body, progress=None, **kw):
+        calls.append(kw)
+        return stub_solver(targets, body, progress=progress)
+    monkeypatch.setattr(solve_job, "run_solver", spy)
+    s = _settings(recording)
+    s.live_rig = False
+    log = []
+    panels.MANIKIN_PT_solve.draw(SimpleNamespace(layout=PanelLayout(log)), bpy.context)
+    assert ("prop", "overlap") in log
+    assert s.overlap == '2' and config_from_settings(bpy.context).overlap == 2
+    assert bpy.ops.manikin.solve_full_body() == {'FINISHED'}
+    assert calls and all("overlap" not in kw for kw in calls)
+    s.overlap = '3'
+    assert config_from_settings(bpy.context).overlap == 3
+    calls.clear()
+    assert bpy.ops.manikin.solve_full_body() == {'FINISHED'}
+    assert calls and all(kw.get("overlap") == 3 for kw in calls)
+
+
 def test_modal_progress_cancel_and_finish(addon, recording, monkeypatch):
     """Drive the operator's modal() with timer / Esc events (no UI event loop in background)."""
     from types import SimpleNamespace

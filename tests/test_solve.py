@@ -124,6 +124,42 @@ def test_network_windows_cover_every_frame_at_any_stride(stride):
     assert net.ankle_pos.shape[0] == out.targets.num_frames
 
 
+def test_overlap_sets_how_many_windows_see_each_frame(monkeypatch):
+    """overlap N (2, 3, 4): the stride is the model's window / N, for any model's window; the
+    solve's setting, the command line's --overlap and the Dask conversion reach the network;
+    anything else is refused with what is allowed."""
+    from blender_manikin import cli
+    from blender_manikin.core import pipeline
+    from blender_manikin.core.model_runner import load_model
+    out = cs.solve_recording(EXAMPLE, cs.SolveSettings(fps=30.0))
+    runner = load_model()
+    W = runner.contract.window
+    two = pipeline.run_network(out.targets, out.body, runner)
+    three = pipeline.run_network(out.targets, out.body, runner, overlap=3)
+    same = pipeline.run_network(out.targets, out.body, runner, stride=round(W / 3))
+    assert np.array_equal(three.ankle_pos, same.ankle_pos) and np.array_equal(three.swivel, same.swivel)
+    assert not np.allclose(two.ankle_pos, three.ankle_pos)        # more views of each frame, another average
+    assert np.array_equal(two.ankle_pos, pipeline.run_network(out.targets, out.body, runner, overlap=2).ankle_pos)
+    seen = []
+    real = pipeline.run_network
+
+    def spy(*a, **k):
+        seen.append(k.get("overlap"))
+        return real(*a, **k)
+    monkeypatch.setattr(pipeline, "run_network", spy)
+    res = cs.solve_recording(EXAMPLE, cs.SolveSettings(fps=30.0, overlap=4)).result
+    assert seen and set(seen) == {4} and np.isfinite(res.positions).all()
+    for bad in (1, 5, 2.5, "3"):
+        with pytest.raises(cs.SolveError, match="choose 2, 3, 4"):
+            cs.solve_recording(EXAMPLE, cs.SolveSettings(fps=30.0, overlap=bad))
+    p = cli.build_parser()
+    assert cli.solve_settings(p.parse_args(["solve", "take.csv", "--out", "o"])).overlap == 2
+    assert cli.solve_settings(p.parse_args(["solve", "take.csv", "--out", "o", "--overlap", "3"])).overlap == 3
+    assert cli.solve_settings(p.parse_args(["convert", "in", "--out", "o", "--overlap", "4"])).overlap == 4
+    with pytest.raises(SystemExit):
+        p.parse_args(["solve", "take.csv", "--out", "o", "--overlap", "5"])
+
+
 def test_command_line_sole_reaches_the_settings():
     from blender_manikin import cli
     p = cli.build_parser()

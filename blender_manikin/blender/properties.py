@@ -197,6 +197,13 @@ class MANIKIN_Settings(PropertyGroup):
                ('PELVIS', "Head, Hands and Pelvis", "The four-tracker network"),
                ('SIX', "Six Trackers", "The network for head, hands, pelvis and feet"),
                ('FILE', "Model File", "A network you trained (.onnx)")])
+    overlap: EnumProperty(
+        name="Overlap", default='2',
+        items=[('2', "2 Windows", "Each frame is seen by two network windows (fastest)"),
+               ('3', "3 Windows", "Each frame is seen by three network windows: a little more accurate, "
+                "1.5 times the network time"),
+               ('4', "4 Windows", "Each frame is seen by four network windows: twice the network time")],
+        description="How many network windows see each frame; more average more views of it")
     model_file: StringProperty(name="Model File", subtype='FILE_PATH', default="",
                                description="A pose network trained with blender_manikin.training (.onnx)")
     offsets_preset: EnumProperty(name="Offsets", items=_preset_items,
@@ -311,6 +318,7 @@ def config_from_settings(context):
         cfg.model = bpy.path.abspath(s.model_file)
     else:
         cfg.model = s.model.lower()
+    cfg.overlap = int(s.overlap)
     cfg.create_trackers = s.create_trackers
     cfg.live_rig = s.live_rig
     cfg.set_scene_range = s.set_scene_range

@@ -85,9 +85,9 @@ def load_source(config: SolveConfig):
     return core_solve.read_recording(config.filepath, config.settings())
 
 
-def run_solver(targets, body, progress=None, model=None):
+def run_solver(targets, body, progress=None, model=None, overlap=None):
     """:func:`blender_manikin.core.solve.default_solver` (separate so tests can replace it)."""
-    return core_solve.default_solver(targets, body, progress=progress, model=model)
+    return core_solve.default_solver(targets, body, progress=progress, model=model, overlap=overlap)
 
 
 # --------------------------------------------------------------------------
@@ -175,9 +175,16 @@ class SolveJob:
             from ..core.keypoint_solve import solve_keypoints
             out = solve_keypoints(source, cfg.settings(), progress=progress)
         else:
-            solver = run_solver
+            choice = {}
             if cfg.model and str(cfg.model).strip().lower() != "auto":     # the user's choice of network
-                solver = functools.partial(run_solver, model=cfg.model)
+                choice["model"] = cfg.model
+            if cfg.overlap != SolveSettings.overlap:                        # more windows per frame
+                from ..core.pipeline import overlap_windows
+                try:
+                    choice["overlap"] = overlap_windows(cfg.overlap)
+                except ValueError as exc:
+                    raise SolveError(str(exc)) from None
+            solver = functools.partial(run_solver, **choice) if choice else run_solver
             out = core_solve.solve_recording(source, cfg.settings(), solver=solver, progress=progress)
         self.outcome = out
         self.recording, self.report, self.targets = out.recording, out.report, out.targets

@@ -55,6 +55,13 @@ LOCK_SMOOTH_S = 0.05
 #: window stride as a fraction of the window (0.5: every frame is seen by two windows;
 #: 0.25 is 1 % more accurate on held-out takes and half as fast)
 WINDOW_STRIDE = 0.5
+#: windows each frame is seen by, as :func:`solve`'s ``overlap`` (the panel's *Overlap*, the CLI's
+#: ``--overlap``) chooses it: the stride is the window / overlap.  2 (default: the stride above)
+#: keeps 10,000 frames/s; 3 and 4 average more windows at 1.5 and 2 times the network time
+#: (shipped 60-frame network, calibrated body, overlap 2 / 3 / 4: HDM05 MPJPE 9.31 / 9.20 /
+#: 9.17 cm, knees 16.25 / 16.04 / 16.03; Bandai 3.33 / 3.32 / 3.31; frames/s on HDM05 13,115 /
+#: 10,270 / 9,182; benchmarks/bench_pose.py --overlap)
+OVERLAP_CHOICES = (2, 3, 4)
 #: which windows the network also sees left/right mirrored (:func:`.features.mirror_inputs`), its
 #: outputs mirrored back and averaged with the plain ones: "off", "alternate" (every second window
 #: mirrored instead of plain: no extra cost) or "both" (every window both ways: twice the network)
@@ -101,6 +108,18 @@ NETWORK_WINDOWS_PER_BATCH = 1024
 #: scene frames posed at a time by the torso FK, collar and limb stages (bounds their memory);
 #: the result does not depend on it (the leg-reach filter looks past the chunk edges)
 ASSEMBLY_CHUNK_FRAMES = 8192
+
+
+def overlap_windows(overlap) -> int:
+    """``overlap`` as an int of :data:`OVERLAP_CHOICES`, or ``ValueError`` saying what is allowed."""
+    try:
+        n = int(overlap)
+    except (TypeError, ValueError):
+        n = None
+    if n is None or n != overlap or n not in OVERLAP_CHOICES:
+        raise ValueError(f"overlap {overlap!r}: choose {', '.join(map(str, OVERLAP_CHOICES))} "
+                         f"(windows seeing each frame)")
+    return n
 
 
 class SolveCancelled(Exception):
@@ -189,12 +208,14 @@ def resample_pose_targets(pos, rotm, fps_in, fps_out):
 
 
 def run_network(targets: TrackerTargets, body: Body, runner, progress=None, stride=None, windows_per_batch=None,
-                smooth_s=None, mirror=None):
+                smooth_s=None, mirror=None, overlap=None):
     """Windows → onnxruntime → blended per-frame :class:`NetworkOutput` at the scene fps.
 
     stride: frames between window starts at the model's rate (default
     :data:`WINDOW_STRIDE` × window, at most one window); smaller strides average more windows per
-    frame (smoother, slower).  windows_per_batch: windows built, run and
+    frame (smoother, slower).  overlap: instead of a stride, how many windows see each frame (one
+    of :data:`OVERLAP_CHOICES`; the stride is then the model's window / overlap, so the choice
+    means the same for every model's window).  windows_per_batch: windows built, run and
     decoded at a time (default :data:`NETWORK_WINDOWS_PER_BATCH`), which bounds
     the memory on long takes; the windows and the order they are blended in do
     not depend on it, so neither does the result.  smooth_s: Gaussian sigma in seconds of a
@@ -218,7 +239,9 @@ def run_network(targets: TrackerTargets, body: Body, runner, progress=None, stri
             raise ValueError(f"the pose model needs a '{d}' tracker; the recording has {list(targets.pos)}")
         pos_m[d], rot_m[d], t_in, t_out = resample_pose_targets(targets.pos[d], targets.rot[d], fps, c.fps)
     N = t_out.shape[0]
-    stride = min(max(int(stride or round(WINDOW_STRIDE * W)), 1), W)     # no frame between two windows
+    if not stride:
+        stride = round(W / overlap_windows(overlap)) if overlap is not None else round(WINDOW_STRIDE * W)
+    stride = min(max(int(stride), 1), W)                                  # no frame between two windows
     pad = W // 2
     starts = np.arange(-pad, max(N - pad, 1), stride)
     if starts[-1] + W < N:               # a stride over half a window: one more window reaches the last frame
@@ -560,14 +583,14 @@ def check_targets(targets: TrackerTargets):
 
 
 def predict(targets: TrackerTargets, body: Body, runner=None, progress=None, stride=None,
-            mirror=None) -> NetworkOutput:
+            mirror=None, overlap=None) -> NetworkOutput:
     """The network stage of :func:`solve`: checked targets → :class:`NetworkOutput`.
 
     runner: what :func:`.model_choice.plan_models` takes: ``None`` (default: the shipped model
     for the recording's trackers, per stretch when a tracker is lost for long), a shipped
     model's name, an ``.onnx`` path, a MANIKIN :class:`~.model_runner.ModelRunner`, or a
     :class:`.model_choice.ModelPlan`.  The output's ``notes`` say which model solved what.
-    stride, mirror: see :func:`run_network`."""
+    stride, mirror, overlap: see :func:`run_network`."""
     from . import model_choice
     check_targets(targets)
     plan = runner if isinstance(runner, model_choice.ModelPlan) else model_choice.plan_models(targets, runner)
@@ -580,7 +603,8 @@ def predict(targets: TrackerTargets, body: Body, runner=None, progress=None, str
         def part(x, k=k):
             if progress is not None:
                 progress((k + float(x)) / n)
-        outs.append(run_network(targets, body, r, progress=part, stride=stride, mirror=mirror))
+        outs.append(run_network(targets, body, r, progress=part, stride=stride, mirror=mirror,
+                                overlap=overlap))
     net = outs[0] if n == 1 else blend_outputs(outs, plan.weights)
     net.notes = list(plan.notes)
     return net
@@ -720,23 +744,25 @@ def assemble(targets: TrackerTargets, body: Body, net: NetworkOutput, progress=N
 
 
 def solve(targets: TrackerTargets, body: Body, runner=None, progress=None, lock_feet=True,
-          fk_runner=None, lower_body="ik", stride=None, chunk_frames=None, mirror=None):
+          fk_runner=None, lower_body="ik", stride=None, chunk_frames=None, mirror=None, overlap=None):
     """Full-body pose for every frame of ``targets``: :func:`predict`, then :func:`assemble`.
 
     runner: see :func:`predict` (default: the shipped model for the recording's trackers; the
     result's ``notes`` say which).  progress: optional ``callable(fraction)``; raise :class:`SolveCancelled`
     (or anything) from it to stop.  lower_body: ``"ik"`` (MANIKIN) or
     ``"fk"`` (ablation: legs from ``fk_runner``'s predicted rotations).
-    stride, mirror: see :func:`run_network` (a quarter window, ``stride=10``, is about 1 % more
-    accurate on HDM05 and half as fast).  chunk_frames: see :func:`assemble`.  The result's
-    ``with_body(body)`` re-assembles the same network output with another body (MANIKIN only; None for the ablation).
+    stride, mirror, overlap: see :func:`run_network` (``overlap=3``: each frame seen by three
+    windows, 1.2 % more accurate on HDM05 at 1.5 times the network time; :data:`OVERLAP_CHOICES`).
+    chunk_frames: see :func:`assemble`.  The result's ``with_body(body)`` re-assembles the same
+    network output with another body (MANIKIN only; None for the ablation).
     """
     def report(x):
         if progress is not None:
             progress(x)
 
     t_start = time.perf_counter()
-    net = predict(targets, body, runner, progress=lambda x: report(0.6 * x), stride=stride, mirror=mirror)
+    net = predict(targets, body, runner, progress=lambda x: report(0.6 * x), stride=stride, mirror=mirror,
+                  overlap=overlap)
     t_net = time.perf_counter()
     result = assemble(targets, body, net, progress=lambda x: report(0.6 + 0.35 * x), lock_feet=lock_feet,
                       chunk_frames=chunk_frames)

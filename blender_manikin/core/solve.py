@@ -59,6 +59,9 @@ class SolveSettings:
     :mod:`.keypoint_layouts` name; None: told from the file), up (the file's up axis, ``+y``
     ...; None: told from the body), ik
     (``"adaptive"`` or ``"naive"`` HybrIK) and mapping (a keypoint CSV's column mapping file).
+    Tracker inputs also use model (the pose network) and overlap (how many network windows see
+    each frame: 2, the default, keeps 10,000 frames/s; 3 and 4 are a little more accurate at 1.5
+    and 2 times the network time; :data:`.pipeline.OVERLAP_CHOICES`).
     """
     axes: str | None = None
     units: str | None = None
@@ -78,6 +81,7 @@ class SolveSettings:
     ik: str = "adaptive"
     mapping: object = None
     model: str | None = None          # None / "auto": by the recording's trackers; a shipped name or .onnx
+    overlap: int = 2                  # windows seeing each frame: 2, 3 or 4 (pipeline.OVERLAP_CHOICES)
 
 
 @dataclass
@@ -270,15 +274,16 @@ def stature_note(settings: SolveSettings, outcome: SolveOutcome):
     return cal.stature_warning(outcome.body.stature, float(np.nanpercentile(head, 90)), sized_by, units)
 
 
-def default_solver(targets, body, progress=None, model=None):
+def default_solver(targets, body, progress=None, model=None, overlap=None):
     """:func:`.pipeline.solve` (network, torso, feet, limbs) with ``model`` (default: the shipped
-    model for the recording's trackers, :mod:`.model_choice`)."""
+    model for the recording's trackers, :mod:`.model_choice`), each frame seen by ``overlap``
+    network windows (default 2)."""
     from . import model_choice, pipeline
     try:
         path = model_choice.resolve_model(model)
     except ValueError as exc:
         raise SolveError(str(exc)) from exc
-    return pipeline.solve(targets, body, runner=path, progress=progress)
+    return pipeline.solve(targets, body, runner=path, progress=progress, overlap=overlap)
 
 
 def adapt_arms(settings: SolveSettings, outcome: SolveOutcome, result, solver, progress=None):
@@ -328,8 +333,14 @@ def solve_recording(source, settings: SolveSettings | None = None, solver=None, 
     for what the user can fix."""
     settings = settings or SolveSettings()
     if solver is None:
+        from .pipeline import overlap_windows
+        try:
+            overlap = overlap_windows(settings.overlap)
+        except ValueError as exc:
+            raise SolveError(str(exc)) from None
+
         def solver(targets, body, progress=None):
-            return default_solver(targets, body, progress=progress, model=settings.model)
+            return default_solver(targets, body, progress=progress, model=settings.model, overlap=overlap)
     report = progress or (lambda f, stage=None: None)
     if settings.fps is None or not settings.fps > 0:
         raise SolveError("no frame rate: set fps")
