@@ -464,7 +464,7 @@ def main(argv=None):
     ap.add_argument("--smoothing", type=parse_smoothing, default="auto", metavar="auto|SECONDS",
                     help="the tracker smoothing every method's input gets, as the solve's --smoothing "
                          "(default auto)")
-    ap.add_argument("--overlap", type=int, choices=pipeline.OVERLAP_CHOICES, default=2,
+    ap.add_argument("--overlap", type=int, choices=pipeline.OVERLAP_CHOICES, default=pipeline.DEFAULT_OVERLAP,
                     help="network windows seeing each frame, for every MANIKIN row (the solve's --overlap; "
                          "default 2)")
     ap.add_argument("--markdown", action="store_true", help="print only the tables")
@@ -501,7 +501,7 @@ def main(argv=None):
     for r in results:
         what = "calibrated body (T-pose: stature and arm span)" if r["body"] == "calibrated" else "true skeleton"
         caught = "; smoothing " + (args.smoothing if args.smoothing == "auto" else f"{args.smoothing:g} s")
-        if args.overlap != 2:
+        if args.overlap != pipeline.DEFAULT_OVERLAP:
             caught += f"; {args.overlap} network windows per frame"
         if args.capture:
             c = args.capture

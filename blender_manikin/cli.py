@@ -105,7 +105,8 @@ def _add_solve_options(s):
                    help="the pose network: auto (default: the shipped model for the recording's trackers, "
                         "head and hands / + pelvis / + pelvis and feet, per stretch when a tracker is lost "
                         "for long), a shipped model's name, or a model you trained")
-    s.add_argument("--overlap", type=int, choices=(2, 3, 4), default=2,
+    from .core.pipeline import DEFAULT_OVERLAP, OVERLAP_CHOICES
+    s.add_argument("--overlap", type=int, choices=OVERLAP_CHOICES, default=DEFAULT_OVERLAP,
                    help="network windows that see each frame: 2 (default, fastest), 3 or 4 (a little "
                         "more accurate at 1.5 and 2 times the network time)")
     s.add_argument("--layout", default=None, metavar="FILE.json|KEYPOINTS",
@@ -272,7 +273,7 @@ def solve_settings(args):
                        up=getattr(args, "up", None), smoothing=getattr(args, "smoothing", "auto"),
                        ik=getattr(args, "ik", "adaptive"), mapping=getattr(args, "mapping", None),
                        model=getattr(args, "model", None), sole=getattr(args, "sole", None),
-                       overlap=getattr(args, "overlap", 2))
+                       overlap=getattr(args, "overlap", SolveSettings.overlap))
     if args.calibration_time is not None:
         st.calibration, st.tpose_time = "TPOSE", float(args.calibration_time)
         st.height, st.arm_span = args.height, args.arm_span

@@ -178,12 +178,8 @@ class SolveJob:
             choice = {}
             if cfg.model and str(cfg.model).strip().lower() != "auto":     # the user's choice of network
                 choice["model"] = cfg.model
-            if cfg.overlap != SolveSettings.overlap:                        # more windows per frame
-                from ..core.pipeline import overlap_windows
-                try:
-                    choice["overlap"] = overlap_windows(cfg.overlap)
-                except ValueError as exc:
-                    raise SolveError(str(exc)) from None
+            if cfg.overlap != SolveSettings.overlap:      # more windows per frame (checked by the solve)
+                choice["overlap"] = cfg.overlap
             solver = functools.partial(run_solver, **choice) if choice else run_solver
             out = core_solve.solve_recording(source, cfg.settings(), solver=solver, progress=progress)
         self.outcome = out

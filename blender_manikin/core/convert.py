@@ -134,12 +134,11 @@ def convert_task(path, out_dir, stem, fmts, settings, model=None, options=None):
     try:
         st = SolveSettings(**settings)
         spec = model if model is not None else st.model
-        overlap = pipeline.overlap_windows(st.overlap)
 
         def solver(targets, body, progress=None):
             # one onnxruntime thread per worker; each worker loads a model once (load_model's cache)
             plan = model_choice.plan_models(targets, spec, threads=1)
-            return pipeline.solve(targets, body, plan, progress=progress, overlap=overlap)
+            return pipeline.solve(targets, body, plan, progress=progress, overlap=st.overlap)
 
         out = solve_recording(path, st, solver=solver)
         for fmt in fmts:

@@ -52,16 +52,14 @@ CONTACT_THRESHOLD = 0.8
 CONTACT_BLEND_S = 0.2
 #: seconds (Gaussian sigma) of smoothing of the locked ankle paths, so locking adds no jerk
 LOCK_SMOOTH_S = 0.05
-#: window stride as a fraction of the window (0.5: every frame is seen by two windows;
-#: 0.25 is 1 % more accurate on held-out takes and half as fast)
-WINDOW_STRIDE = 0.5
 #: windows each frame is seen by, as :func:`solve`'s ``overlap`` (the panel's *Overlap*, the CLI's
-#: ``--overlap``) chooses it: the stride is the window / overlap.  2 (default: the stride above)
-#: keeps 10,000 frames/s; 3 and 4 average more windows at 1.5 and 2 times the network time
-#: (shipped 60-frame network, calibrated body, overlap 2 / 3 / 4: HDM05 MPJPE 9.31 / 9.20 /
+#: ``--overlap``) chooses it: the window stride is the window / overlap.  2 (default: half a
+#: window) keeps 10,000 frames/s; 3 and 4 average more windows at 1.5 and 2 times the network
+#: time (shipped 60-frame network, calibrated body, overlap 2 / 3 / 4: HDM05 MPJPE 9.31 / 9.20 /
 #: 9.17 cm, knees 16.25 / 16.04 / 16.03; Bandai 3.33 / 3.32 / 3.31; frames/s on HDM05 13,115 /
 #: 10,270 / 9,182; benchmarks/bench_pose.py --overlap)
 OVERLAP_CHOICES = (2, 3, 4)
+DEFAULT_OVERLAP = 2
 #: which windows the network also sees left/right mirrored (:func:`.features.mirror_inputs`), its
 #: outputs mirrored back and averaged with the plain ones: "off", "alternate" (every second window
 #: mirrored instead of plain: no extra cost) or "both" (every window both ways: twice the network)
@@ -211,18 +209,18 @@ def run_network(targets: TrackerTargets, body: Body, runner, progress=None, stri
                 smooth_s=None, mirror=None, overlap=None):
     """Windows → onnxruntime → blended per-frame :class:`NetworkOutput` at the scene fps.
 
-    stride: frames between window starts at the model's rate (default
-    :data:`WINDOW_STRIDE` × window, at most one window); smaller strides average more windows per
-    frame (smoother, slower).  overlap: instead of a stride, how many windows see each frame (one
-    of :data:`OVERLAP_CHOICES`; the stride is then the model's window / overlap, so the choice
-    means the same for every model's window).  windows_per_batch: windows built, run and
-    decoded at a time (default :data:`NETWORK_WINDOWS_PER_BATCH`), which bounds
-    the memory on long takes; the windows and the order they are blended in do
-    not depend on it, so neither does the result.  smooth_s: Gaussian sigma in seconds of a
-    temporal filter on the blended predictions (default :data:`NETWORK_SMOOTH_S`, the ankle
-    positions :data:`ANKLE_SMOOTH_S`; 0: both off).  mirror: one of :data:`MIRROR_CHOICES` (default
-    :data:`MIRROR_WINDOWS` for a model trained with mirrored windows, else "off"): windows also run
-    as their left/right mirror image, averaged back in.
+    stride: frames between window starts at the model's rate (at most one window; default the
+    window / ``overlap``); smaller strides average more windows per frame (smoother, slower).
+    overlap: how many windows see each frame, one of :data:`OVERLAP_CHOICES` (default
+    :data:`DEFAULT_OVERLAP`), so the choice means the same for every model's window.
+    windows_per_batch: windows built, run and decoded at a time (default
+    :data:`NETWORK_WINDOWS_PER_BATCH`), which bounds the memory on long takes; the windows and
+    the order they are blended in do not depend on it, so neither does the result.
+    smooth_s: Gaussian sigma in seconds of a temporal filter on the blended predictions (default
+    :data:`NETWORK_SMOOTH_S`, the ankle positions :data:`ANKLE_SMOOTH_S`; 0: both off).
+    mirror: one of :data:`MIRROR_CHOICES` (default :data:`MIRROR_WINDOWS` for a model trained
+    with mirrored windows, else "off"): windows also run as their left/right mirror image,
+    averaged back in.
     """
     c = runner.contract
     W = c.window
@@ -240,7 +238,7 @@ def run_network(targets: TrackerTargets, body: Body, runner, progress=None, stri
         pos_m[d], rot_m[d], t_in, t_out = resample_pose_targets(targets.pos[d], targets.rot[d], fps, c.fps)
     N = t_out.shape[0]
     if not stride:
-        stride = round(W / overlap_windows(overlap)) if overlap is not None else round(WINDOW_STRIDE * W)
+        stride = round(W / overlap_windows(DEFAULT_OVERLAP if overlap is None else overlap))
     stride = min(max(int(stride), 1), W)                                  # no frame between two windows
     pad = W // 2
     starts = np.arange(-pad, max(N - pad, 1), stride)

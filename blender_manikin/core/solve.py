@@ -20,6 +20,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from . import skeleton as sk
+from .pipeline import DEFAULT_OVERLAP, overlap_windows
 from .pose_result import PoseResult, TrackerTargets
 
 
@@ -81,7 +82,7 @@ class SolveSettings:
     ik: str = "adaptive"
     mapping: object = None
     model: str | None = None          # None / "auto": by the recording's trackers; a shipped name or .onnx
-    overlap: int = 2                  # windows seeing each frame: 2, 3 or 4 (pipeline.OVERLAP_CHOICES)
+    overlap: int = DEFAULT_OVERLAP    # windows seeing each frame: 2, 3 or 4 (pipeline.OVERLAP_CHOICES)
 
 
 @dataclass
@@ -332,15 +333,14 @@ def solve_recording(source, settings: SolveSettings | None = None, solver=None, 
     (a cancel) stops the solve.  Returns the :class:`SolveOutcome`; raises :class:`SolveError`
     for what the user can fix."""
     settings = settings or SolveSettings()
+    try:
+        overlap_windows(settings.overlap)        # any solver gets it from the settings: check it once
+    except ValueError as exc:
+        raise SolveError(str(exc)) from None
     if solver is None:
-        from .pipeline import overlap_windows
-        try:
-            overlap = overlap_windows(settings.overlap)
-        except ValueError as exc:
-            raise SolveError(str(exc)) from None
-
         def solver(targets, body, progress=None):
-            return default_solver(targets, body, progress=progress, model=settings.model, overlap=overlap)
+            return default_solver(targets, body, progress=progress, model=settings.model,
+                                  overlap=settings.overlap)
     report = progress or (lambda f, stage=None: None)
     if settings.fps is None or not settings.fps > 0:
         raise SolveError("no frame rate: set fps")
