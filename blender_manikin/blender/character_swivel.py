@@ -194,12 +194,7 @@ def _set_bone(eb, name, head, R, length, parent=None, connect=False):
     """Edit bone ``name`` (created or re-placed): head, rest rotation ``R`` (3x3, columns X Y Z,
     armature space), length; not deforming."""
     from mathutils import Matrix
-    b = eb.get(name)
-    if b is None:
-        b = eb.new(name)
-    b.use_deform = False
-    b.use_connect = False
-    b.parent = None
+    b = live_rig.free_edit_bone(eb, name)
     b.head = (0.0, 0.0, 0.0)
     b.tail = (0.0, float(max(length, 1e-4)), 0.0)
     b.roll = 0.0

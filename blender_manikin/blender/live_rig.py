@@ -175,7 +175,19 @@ def _u0_perp(li):
 
 
 # --------------------------------------------------------------------------
-# edit-mode helper
+# edit-mode helpers
+def free_edit_bone(eb, name: str):
+    """Edit bone ``name`` of ``eb`` (an armature's ``edit_bones``), created if missing, made a
+    free helper: not deforming, unparented, unconnected. Head, tail and roll are the caller's."""
+    b = eb.get(name)
+    if b is None:
+        b = eb.new(name)
+    b.use_deform = False
+    b.use_connect = False
+    b.parent = None
+    return b
+
+
 @contextmanager
 def _edit_mode(obj, context):
     """Enter edit mode on ``obj`` (made active), yield its edit bones, restore the previous state."""
@@ -233,13 +245,7 @@ def _create_bones(obj, context):
             l2 = (end.head - mid.head).length
 
             def new(name):
-                b = eb.get(name)
-                if b is None:
-                    b = eb.new(name)
-                b.use_deform = False
-                b.use_connect = False
-                b.parent = None
-                return b
+                return free_edit_bone(eb, name)
 
             # hand / foot control: same rest frame as the wrist / ankle, longer
             c = new(r.ctrl)
