@@ -124,6 +124,32 @@ def test_network_windows_cover_every_frame_at_any_stride(stride):
     assert net.ankle_pos.shape[0] == out.targets.num_frames
 
 
+def test_window_blend_weights_rise_from_the_ends_and_reach_the_network(monkeypatch):
+    """Overlapping windows blend with the triangle to WINDOW_BLEND_POWER: symmetric, largest at
+    the centre, smallest (but not zero) at the ends; power 1 is the triangle itself.  The network
+    stage uses them: another power gives another blend, the same power the same one."""
+    from blender_manikin.core import pipeline
+    from blender_manikin.core.model_runner import load_model
+    for W in (40, 60, 61):
+        w = pipeline.window_blend_weights(W)
+        assert w.shape == (W,) and np.allclose(w, w[::-1]) and (w > 0).all()
+        half = w[:(W + 1) // 2]
+        assert (np.diff(half) > 0).all() and w.argmax() in (W // 2 - 1, W // 2)
+        tri = 1.0 - np.abs((np.arange(W) + 0.5) / W * 2.0 - 1.0)
+        assert np.allclose(pipeline.window_blend_weights(W, 1.0), tri + 1e-3)
+        assert np.allclose(w, tri ** pipeline.WINDOW_BLEND_POWER + 1e-3)
+    assert 0.0 < pipeline.WINDOW_BLEND_POWER < 1.0       # flatter than the triangle (measured better)
+    out = cs.solve_recording(EXAMPLE, cs.SolveSettings(fps=30.0))
+    runner = load_model()
+    default = pipeline.run_network(out.targets, out.body, runner)
+    power = pipeline.WINDOW_BLEND_POWER
+    monkeypatch.setattr(pipeline, "WINDOW_BLEND_POWER", 1.0)
+    triangle = pipeline.run_network(out.targets, out.body, runner)
+    assert not np.allclose(default.ankle_pos, triangle.ankle_pos)
+    monkeypatch.setattr(pipeline, "WINDOW_BLEND_POWER", power)
+    assert np.array_equal(default.ankle_pos, pipeline.run_network(out.targets, out.body, runner).ankle_pos)
+
+
 def test_overlap_sets_how_many_windows_see_each_frame(monkeypatch):
     """overlap N (2, 3, 4): the stride is the model's window / N, for any model's window; the
     solve's setting, the command line's --overlap and the Dask conversion reach the network;

@@ -5,7 +5,8 @@
 1. resample the head and hand targets to the network's fps (contract) and
    cut them into centred windows (stride W/2), batched through onnxruntime;
 2. decode every window from its canonical frame and blend overlapping
-   windows (triangular weights; 6D rotations and (cos, sin) averaged, then
+   windows (weights rising from each window's ends to its centre,
+   :func:`window_blend_weights`; 6D rotations and (cos, sin) averaged, then
    re-normalised); filter the rotations and swivel angles in time (Gaussian,
    :data:`NETWORK_SMOOTH_S`); resample back to the scene frames;
 3. torso FK from the predicted root orientation and torso rotations, placed
@@ -103,6 +104,28 @@ ANKLE_SMOOTH_S = 0.05
 LEG_REACH_SMOOTH_S = 0.03
 #: network windows built, run and decoded at a time (bounds the network's memory on long takes)
 NETWORK_WINDOWS_PER_BATCH = 1024
+#: shape of the weights overlapping windows are blended with: a triangle (0 at a window's ends, 1
+#: at its centre) raised to this power (:func:`window_blend_weights`).  Under 1 the curve is
+#: flatter, so a frame's neighbouring window counts more and the blend averages more, while a
+#: window's end frames (context on one side only) still weigh least (0.5: 0.13 of the centre's
+#: weight for 60 frames), so no seam shows where a window starts.  Triangle (1) / its square
+#: root (0.5) / flat-topped (0.25) / flat (0): HDM05, calibrated body, three trackers, MPJPE
+#: 9.31 / 9.27 / 9.26 / 9.26 cm, knees 16.25 / 16.19 / 16.18 / 16.19, jitter 0.77 / 0.77 / 0.78 /
+#: 0.79 (ground truth 0.93); held-out Bandai 3.33 / 3.32 / 3.32 / 3.31 cm; 2 (a sharper peak): 9.37,
+#: Bandai 3.33.  The square root takes the gain without the jitter; with it, also HDM05 captured at
+#: 72 Hz 9.36 -> 9.32 cm, true skeleton 8.66 -> 8.63, four trackers 7.22 -> 7.20, six 4.04 -> 4.04,
+#: DAP 9.62 -> 9.57 (benchmarks/bench_pose.py)
+WINDOW_BLEND_POWER = 0.5
+
+
+def window_blend_weights(W, power=None):
+    """``(W,)`` float64 weights of a window's frames in the blend of overlapping windows: the
+    triangle ``1 - |2 (i + 0.5) / W - 1|`` (1 / W at both ends, 1 at the centre) to the power
+    ``power`` (default :data:`WINDOW_BLEND_POWER`), plus 1e-3 so a frame only one window sees
+    (the take's ends) still gets a weight."""
+    p = WINDOW_BLEND_POWER if power is None else float(power)
+    tri = 1.0 - np.abs((np.arange(W) + 0.5) / W * 2.0 - 1.0)
+    return tri ** p + 1e-3
 #: scene frames posed at a time by the torso FK, collar and limb stages (bounds their memory);
 #: the result does not depend on it (the leg-reach filter looks past the chunk edges)
 ASSEMBLY_CHUNK_FRAMES = 8192
@@ -248,7 +271,7 @@ def run_network(targets: TrackerTargets, body: Body, runner, progress=None, stri
     # 0.871 statures above the ankles, as make_body builds); older ones with the body's own.
     s_net = float(features.stature_from_offsets(body.offsets)) if c.body else body.stature
     body_in = features.body_features(body.offsets, s_net)[None] if c.body else None
-    tri = 1.0 - np.abs((np.arange(W) + 0.5) / W * 2.0 - 1.0) + 1e-3       # triangular blend weights
+    tri = window_blend_weights(W)
     # a multiple of the runner's batch, so onnxruntime sees the same batches whatever the chunking
     per = max(int(windows_per_batch or NETWORK_WINDOWS_PER_BATCH), 1)
     rb = max(int(getattr(runner, "batch", 1) or 1), 1)
