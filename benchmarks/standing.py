@@ -2,8 +2,12 @@
 calibration check of ``tests/test_standing.py`` and ``benchmarks/bench_plausibility.py``.
 
 Bodies: the solver's own proportions at any stature (``skeleton.make_body``) and one with the
-Bandai Namco training skeleton's proportions (long shanks, narrow shoulders, a short neck).
+Bandai Namco training skeleton's proportions (long shanks, narrow shoulders, a short neck); the
+benchmark also stands the HDM05 subset's five performers on their own skeletons
+(:func:`hdm05_performers`, when ``../shared`` is there).
 """
+import os
+
 import numpy as np
 
 from blender_manikin.core import calibration as cal
@@ -66,29 +70,66 @@ def standing_targets(body, pose="T", seconds=4.0, fps=30.0, seed=0):
                           rot={d: R[:, j].copy() for d, j in DEVICE_JOINTS.items()})
 
 
+def performer_body(who):
+    """The performer of a :data:`CASES` entry: ``"bandai"`` (:func:`bandai_like_body`), a stature
+    in metres (:func:`skeleton.make_body`), or a :class:`skeleton.Body` as it is (another
+    studio's skeleton, :func:`hdm05_performers`)."""
+    if isinstance(who, sk.Body):
+        return who
+    return bandai_like_body() if who == "bandai" else sk.make_body(float(who))
+
+
 def solve_standing(who, pose, runner):
     """Calibrate (a T-pose found automatically, an A-pose at a given time) and solve; a hold of
     :data:`HOLDS` is solved with the performer's stature, as typed.  Returns ``(knee flexion
-    (T, 2) degrees, ankle height error (T, 2) metres, calibration or None)``."""
-    performer = bandai_like_body() if who == "bandai" else sk.make_body(float(who))
+    (T, 2) degrees, ankle height error (T, 2) metres, calibration or None)``; the ankle error is
+    against the rest body the solve used (:func:`solve_standing_full` also gives the solve)."""
+    knees, ankle_err, res, _, _ = solve_standing_full(who, pose, runner)
+    return knees, ankle_err, res
+
+
+def solve_standing_full(who, pose, runner):
+    """:func:`solve_standing`, returning ``(knees, ankle_err, calibration or None, solved
+    PoseResult, performer Body)``, so the solve can also be held against the performer's own
+    skeleton (its rest ankles: :func:`ankle_error_against`)."""
+    performer = performer_body(who)
     targets = standing_targets(performer, pose)
+    res = None
     if pose in HOLDS:
         body = sk.make_body(performer.stature)
-        solved = pipeline.solve(targets, body, runner)
-        rest_ankle = body.rest_positions()[[J["left_ankle"], J["right_ankle"]], 2]
-        return (metrics.knee_flexion(solved.positions),
-                np.abs(solved.positions[:, [J["left_ankle"], J["right_ankle"]], 2] - rest_ankle), None)
-    if pose == "T":
-        cand = cal.find_tpose(targets)
-        if not cand.plausible:
-            raise ValueError(f"no plausible T-pose found: {cand}")
-        frame = cand.frame
     else:
-        frame = targets.num_frames // 2
-    res = cal.calibrate(targets, frame=frame)
-    body = cal.body_for(res.measurements)
+        if pose == "T":
+            cand = cal.find_tpose(targets)
+            if not cand.plausible:
+                raise ValueError(f"no plausible T-pose found: {cand}")
+            frame = cand.frame
+        else:
+            frame = targets.num_frames // 2
+        res = cal.calibrate(targets, frame=frame)
+        body = cal.body_for(res.measurements)
     solved = pipeline.solve(targets, body, runner)
     knees = metrics.knee_flexion(solved.positions)
+    return knees, ankle_error_against(solved.positions, body), res, solved, performer
+
+
+def ankle_error_against(positions, body):
+    """``(T, 2)`` metres: how far the solved ankle joints (``positions`` ``(T, 22, 3)``, Z-up)
+    are above or below ``body``'s ankles at rest, as absolute values."""
     rest_ankle = body.rest_positions()[[J["left_ankle"], J["right_ankle"]], 2]
-    ankle_err = np.abs(solved.positions[:, [J["left_ankle"], J["right_ankle"]], 2] - rest_ankle)
-    return knees, ankle_err, res
+    return np.abs(positions[:, [J["left_ankle"], J["right_ankle"]], 2] - rest_ankle)
+
+
+def hdm05_performers():
+    """``{actor: Body}``: the HDM05 subset's performers (``bd``, ``bk``, ``dg``, ``mm``, ``tr``),
+    each with the skeleton of its first clip in the benchmark's cache (another studio's
+    skeletons, mapped onto the 22 joints; their rest pose is a T-pose).  ``{}`` when
+    ``../shared/data/validation`` is absent.  Never trained on."""
+    from bench_pose import dataset_files, load_clip
+    files, _ = dataset_files("hdm05")
+    out = {}
+    for f in files or []:
+        name = os.path.basename(f)
+        actor = name.split("_HDM_")[1].split("_")[0] if "_HDM_" in name else None
+        if actor and actor not in out:
+            out[actor] = load_clip(f)[0]
+    return dict(sorted(out.items()))

@@ -21,3 +21,24 @@ def test_standing_calibration_pose_is_solved_standing_straight(who, pose):
     k = 15          # every frame after the first half second (the network's windows are centred)
     assert knees[k:-k].max() < 10.0, f"knees flexed {knees[k:-k].max():.1f} deg"
     assert ankle_err[k:-k].max() < 0.02, f"ankles {100 * ankle_err[k:-k].max():.1f} cm off the rest height"
+
+
+def test_a_performer_skeleton_stands_as_it_is_and_is_held_against_its_own_ankles():
+    """Another studio's skeleton (here: a Body with the Bandai proportions, its ankles higher than
+    the body model puts them) is stood as it is (``performer_body`` keeps a Body), calibrated
+    and solved straight; the ankle error against the performer's own skeleton is then the
+    difference between its ankles and the calibrated rest body's, which the benchmark reports
+    beside the error against the rest body."""
+    import numpy as np
+    from benchmarks.standing import J, ankle_error_against, bandai_like_body, performer_body, solve_standing_full
+    performer = bandai_like_body(1.80)
+    assert performer_body(performer) is performer
+    knees, ankle_err, res, solved, who = solve_standing_full(performer, "T", load_model())
+    assert who is performer and res.pose == "T"
+    k = 15
+    assert knees[k:-k].max() < 10.0 and ankle_err[k:-k].max() < 0.02
+    own = ankle_error_against(solved.positions, performer)[k:-k]
+    rest = performer.rest_positions()[[J["left_ankle"], J["right_ankle"]], 2]
+    body_rest = solved.body.rest_positions()[[J["left_ankle"], J["right_ankle"]], 2]
+    assert np.allclose(own, np.abs(body_rest - rest), atol=0.005)
+    assert (own > 0.02).all()       # the body model's ankle sits elsewhere than this skeleton's
