@@ -99,7 +99,8 @@ def _add_solve_options(s):
                         "(default 0.03; 0 barefoot)")
     s.add_argument("--offsets", default="auto", metavar="auto|none|PRESET|FILE",
                    help="device-to-joint offsets: a preset name, a JSON file, or auto (default: the "
-                        "recording's '# offsets:' metadata, beat_saber for .bsor, else none)")
+                        "recording's '# offsets:' metadata, beat_saber for .bsor and Beat Saber .xror, "
+                        "openxr_generic for other .xror, else none)")
     s.add_argument("--bvh-units", choices=("cm", "m"), default="cm")
     s.add_argument("--model", default="auto", metavar="auto|head_hands|pelvis|six|FILE.onnx",
                    help="the pose network: auto (default: the shipped model for the recording's trackers, "

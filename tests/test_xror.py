@@ -43,6 +43,21 @@ def test_synthetic_xror_reads_in_blender_axes(tmp_path):
     assert formats.load_recording(tmp_path / "bs.xror").metadata["offsets"] == "beat_saber"
 
 
+def test_auto_offsets_of_an_xror_take_by_its_app(tmp_path):
+    """--offsets auto: a Beat Saber session gets the saber preset; any other app's take is a
+    headset and controllers, so the generic OpenXR preset (view pose for the head, grip poses for
+    the hands), never "none", which would take the headset's pose for the head joint."""
+    from blender_manikin.core import solve as cs
+    for app, want in (("Beat Saber", "beat_saber"), ("Some Other Game", "openxr_generic"), ("", "openxr_generic")):
+        data, _, _ = _xror(app=app)
+        path = tmp_path / f"take_{want}_{len(app)}.xror"
+        path.write_bytes(data)
+        rec = formats.load_recording(path)
+        assert cs.resolve_offsets("auto", rec) == want, app
+        assert cs.resolve_offsets("none", rec) == "none"           # what the user sets is kept
+    assert formats.default_offsets("x.xror") == "openxr_generic" and formats.default_offsets("x.csv") == "none"
+
+
 def test_six_devices(tmp_path):
     data, _, _ = _xror(devices=("HEAD", "HAND_LEFT", "HAND_RIGHT", "WAIST", "FOOT_LEFT", "FOOT_RIGHT"))
     (tmp_path / "six.xror").write_bytes(data)

@@ -177,8 +177,14 @@ def _read_xror(path, axes=None, units=None):
 register_reader(ReaderFormat("csv", "native or wide-layout CSV", (".csv",), _read_csv, _sniff_csv))
 register_reader(ReaderFormat("bsor", "Beat Saber replay", (".bsor",), _read_bsor, _sniff_bsor,
                              default_offsets="beat_saber"))
-# XROR: the file names its app; the reader sets the offsets metadata (beat_saber for Beat Saber)
-register_reader(ReaderFormat("xror", "XROR / BOXRR-23", (".xror",), _read_xror))
+# XROR: the file names its app; the reader sets the offsets metadata (beat_saber for Beat Saber).
+# Any other app: its HEAD device is a headset pose, between the eyes, and its hands controller
+# poses, so the generic OpenXR preset (view and grip poses), not "none": taking a headset's pose
+# for the head joint puts that joint 11.5 cm too high and 8 cm too far forward (the bundled
+# example, OpenXR view and grip poses, solved with --offsets none: no T-pose found, and a body
+# sized from the head height 1.88 m tall for its 1.75 m performer)
+register_reader(ReaderFormat("xror", "XROR / BOXRR-23", (".xror",), _read_xror,
+                             default_offsets="openxr_generic"))
 
 
 def _read_keypoints(path, axes=None, units=None):

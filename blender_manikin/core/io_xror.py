@@ -12,7 +12,10 @@ Schema this reader relies on (checked on ``../shared/data/vr/xror-beatsaber-samp
   frame the time in seconds, then 7 numbers per device in ``info.hardware.devices`` order;
 * Unity axes (left-handed, +Y up, +Z forward) and metres, by the format's convention;
 * ``info.software.app.name`` names the application (``Beat Saber``: the hand poses are saber
-  poses, so the ``beat_saber`` device offsets apply, as for ``.bsor``);
+  poses, so the ``beat_saber`` device offsets apply, as for ``.bsor``; any other app: the
+  format's default, ``openxr_generic``: the HEAD device is the headset's pose between the eyes,
+  as XR runtimes report it, and the hands are taken as controller grip poses;
+  :mod:`.formats`);
 * as in BSOR, frame 0 is all zeros and the first frames may share time 0.
 
 ``events`` (note cuts and the like) are not read.  Needs the ``bson`` codec of ``pymongo`` and
