@@ -110,6 +110,10 @@ TRACKER_SETS = {
     "6": ("6 trackers (+ pelvis, feet)", REQUIRED_DEVICES + ("pelvis", "left_foot", "right_foot")),
 }
 SHIPPED = "(a) MANIKIN, shipped model"
+#: ``--body`` modes and their table titles
+BODY_TITLES = {"calibrated": "calibrated body (T-pose: stature and arm span)", "gt": "true skeleton",
+               "tpose": "T-pose calibration (the add-on's, from the performer's T-pose)"}
+BODY_MODES = tuple(BODY_TITLES)
 TRACKER_COLUMNS = ["MPJPE", "L-PE", "knee", "ankle", "ankle→target", "ankle→target max", "skate",
                    "Jitter", "Jitter-GT", "frames/s"]
 TRACKER_UNITS = {**UNITS, "ankle→target": "mm", "ankle→target max": "mm"}
@@ -248,6 +252,24 @@ def calibrated_body(gt_body, legs=False):
     return sk.make_body(m)
 
 
+def tpose_body(gt_body, devices=REQUIRED_DEVICES):
+    """The body the add-on's own T-pose calibration builds for this performer (``--body tpose``):
+    the performer's skeleton stood for 4 s in its rest pose, a T-pose, with a 1 cm sway
+    (``benchmarks/standing.py``), its ``devices`` given their joints' poses, the T-pose found
+    (:func:`.calibration.find_tpose`), measured (:func:`.calibration.calibrate`: stature from
+    the head's height above the floor, arm span, and with a pelvis tracker the legs) and sized
+    (:func:`.calibration.body_for`), as a recording that starts with a T-pose is.  Unlike
+    :func:`calibrated_body` it goes through the floor the clip's skeleton stands on, as a real
+    calibration does.  Raises ValueError when no plausible T-pose is found."""
+    from blender_manikin.core import calibration as cal
+    from standing import standing_targets
+    targets = standing_targets(gt_body, "T", devices=devices)
+    cand = cal.find_tpose(targets)
+    if not cand.plausible:
+        raise ValueError(f"no plausible T-pose in the performer's rest pose: {cand}")
+    return cal.body_for(cal.calibrate(targets, frame=cand.frame).measurements)
+
+
 def clip_metrics(res, gt_local, gt_pos, fps, contacts, targets=None):
     """The clip's metrics; with ``targets`` that have foot trackers, also the solved ankles'
     distance to them (``ankle→target``: mean, ``ankle→target max``: max, mm)."""
@@ -309,14 +331,23 @@ def run_dataset(name, methods, args, body_mode):
     sums = {m: {} for m in methods}
     by_class = {}           # class -> {"clips", "frames", (method, column): frame-weighted sum}
     frames, all_targets = 0, []
+    tpose_cache = {}
     for i, f in enumerate(files):
         gt_body, gt_local, gt_pos, gt_world, fps, contacts = load_clip_with_contacts(f)
         T = gt_pos.shape[0]
         if T < 4:
             continue
         sets = set(devs.values())
-        bodies = {d: (calibrated_body(gt_body, legs="pelvis" in d) if body_mode == "calibrated" else gt_body)
-                  for d in sets}
+        if body_mode == "calibrated":
+            bodies = {d: calibrated_body(gt_body, legs="pelvis" in d) for d in sets}
+        elif body_mode == "tpose":
+            key = gt_body.offsets.tobytes() + gt_body.root_rest.tobytes()      # one per performer
+            for d in sets:
+                if (key, d) not in tpose_cache:
+                    tpose_cache[key, d] = tpose_body(gt_body, d)
+            bodies = {d: tpose_cache[key, d] for d in sets}
+        else:
+            bodies = {d: gt_body for d in sets}
         tgs = {d: targets_from_gt(gt_pos, gt_world, fps, d) for d in sets}
         if args.capture:
             caught = {d: captured_targets(tg, args.capture, seed=[0, i]) for d, tg in tgs.items()}
@@ -454,8 +485,9 @@ def main(argv=None):
                     help="tracker sets compared in the second table, comma-separated from 3,4,6 "
                          "('' or none: no table)")
     ap.add_argument("--body", default="calibrated,gt",
-                    help="bodies to solve with, comma-separated: calibrated (what a T-pose calibration "
-                         "builds) and/or gt (the true skeleton)")
+                    help="bodies to solve with, comma-separated: calibrated (the body model at the "
+                         "skeleton's stature and arm span), gt (the true skeleton) and/or tpose (what the "
+                         "add-on's calibration builds from the performer standing in a T-pose)")
     ap.add_argument("--max-clips", type=int, default=0, help="limit the clips per dataset (0: all)")
     ap.add_argument("--capture", type=parse_capture, default=None, metavar="HZ[,MM[,DEG[,MS]]]",
                     help="trackers as a headset records them: sampled at HZ with position noise MM "
@@ -490,8 +522,8 @@ def main(argv=None):
         if name not in DATASETS:
             raise SystemExit(f"unknown dataset {name!r}: choose from {', '.join(DATASETS)}")
         for body_mode in [b.strip() for b in args.body.split(",") if b.strip()]:
-            if body_mode not in ("calibrated", "gt"):
-                raise SystemExit(f"unknown body {body_mode!r}: choose calibrated or gt")
+            if body_mode not in BODY_MODES:
+                raise SystemExit(f"unknown body {body_mode!r}: choose from {', '.join(BODY_MODES)}")
             r = run_dataset(name, methods, args, body_mode)
             if r is not None:
                 results.append(r)
@@ -499,7 +531,7 @@ def main(argv=None):
         print(f"machine: {platform.processor() or platform.machine()}, {os.cpu_count()} CPUs, numpy {np.__version__}")
     fmt = {"frames/s": ",.0f", "H-PE": ".4f", "GP": ".4f", "MPJPE": ".2f"}
     for r in results:
-        what = "calibrated body (T-pose: stature and arm span)" if r["body"] == "calibrated" else "true skeleton"
+        what = BODY_TITLES[r["body"]]
         caught = "; smoothing " + (args.smoothing if args.smoothing == "auto" else f"{args.smoothing:g} s")
         if args.overlap != pipeline.DEFAULT_OVERLAP:
             caught += f"; {args.overlap} network windows per frame"

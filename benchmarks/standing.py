@@ -12,6 +12,7 @@ import numpy as np
 
 from blender_manikin.core import calibration as cal
 from blender_manikin.core import metrics, pipeline, rotations as rot, skeleton as sk
+from blender_manikin.core.devices import DEVICE_JOINT
 from blender_manikin.core.pose_result import TrackerTargets
 
 J = sk.J
@@ -45,9 +46,11 @@ def bandai_like_body(stature=1.70):
 HOLDS = ("down", "forward")
 
 
-def standing_targets(body, pose="T", seconds=4.0, fps=30.0, seed=0):
-    """Head and wrist joint targets of ``body`` standing still, swaying 1 cm, in a T-pose, an
-    A-pose (arms 40 degrees down) or one of :data:`HOLDS`."""
+def standing_targets(body, pose="T", seconds=4.0, fps=30.0, seed=0, devices=None):
+    """Joint targets of ``body`` standing still, swaying 1 cm, in a T-pose, an A-pose (arms 40
+    degrees down) or one of :data:`HOLDS`: of the head and wrists, or of ``devices`` (each the
+    pose of its joint, :data:`.devices.DEVICE_JOINT`: pelvis tracker = pelvis joint, foot
+    trackers = ankles)."""
     rng = np.random.default_rng(seed)
     T = int(seconds * fps)
     t = np.arange(T) / fps
@@ -66,8 +69,9 @@ def standing_targets(body, pose="T", seconds=4.0, fps=30.0, seed=0):
     local[:, 0] = rot.axis_angle_rotation(np.array([1.0, 0.0, 0.0]), sway)
     root = np.tile(body.root_rest, (T, 1))
     P, R = sk.forward_kinematics(local, root, body)
-    return TrackerTargets(fps=fps, pos={d: P[:, j].copy() for d, j in DEVICE_JOINTS.items()},
-                          rot={d: R[:, j].copy() for d, j in DEVICE_JOINTS.items()})
+    joints = DEVICE_JOINTS if devices is None else {d: DEVICE_JOINT[d] for d in devices}
+    return TrackerTargets(fps=fps, pos={d: P[:, j].copy() for d, j in joints.items()},
+                          rot={d: R[:, j].copy() for d, j in joints.items()})
 
 
 def performer_body(who):

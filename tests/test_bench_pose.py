@@ -77,3 +77,29 @@ def test_capture_argument_errors_name_the_field():
     for bad, word in (("0", "rate"), ("72,x", "pos_mm"), ("72,1,-1", "rot_deg"), ("72,1,1,1,1", "at most")):
         with pytest.raises(SystemExit, match=word):
             bp.parse_capture(bad)
+
+
+def test_tpose_body_is_what_the_calibration_builds_from_the_performer_standing_in_a_tpose():
+    """--body tpose: the performer's skeleton stood in its rest T-pose and calibrated by the
+    add-on's own calibration: a body-model performer gets its own stature and span back, another
+    skeleton roughly what the skeleton-based estimate (--body calibrated) gives; with a pelvis
+    tracker the legs are measured from it, as calibrated_body(legs=True) sizes them."""
+    import numpy as np
+    from blender_manikin.core import calibration as cal, skeleton as sk
+    from standing import bandai_like_body
+    J = sk.J
+    me = sk.make_body(1.80)
+    b = bp.tpose_body(me)
+    rest = me.rest_positions()
+    span = np.linalg.norm(rest[J["left_wrist"]] - rest[J["right_wrist"]])
+    # the span measured, plus the reach margin body_for gives each arm
+    assert abs(b.stature - 1.80) < 0.01 and abs(b.measurements.arm_span - span - 2 * cal.REACH_MARGIN) < 0.005
+    other = bandai_like_body(1.70)
+    t, c = bp.tpose_body(other), bp.calibrated_body(other)
+    assert abs(t.stature / c.stature - 1.0) < 0.03
+    assert abs(t.measurements.arm_span - c.measurements.arm_span - 2 * cal.REACH_MARGIN) < 0.005
+    legs = bp.tpose_body(other, ("head", "left_hand", "right_hand", "pelvis"))
+    ref = bp.calibrated_body(other, legs=True)
+    for k in ("thigh", "shank"):
+        assert abs(getattr(legs.measurements, k) - getattr(ref.measurements, k)) < 0.02, k
+    assert "tpose" in bp.BODY_MODES and set(bp.BODY_TITLES) == set(bp.BODY_MODES)
