@@ -14,7 +14,9 @@ split (whole takes the network never saw).  HDM05: every clip (it is never train
 Each set is solved twice (``--body calibrated,gt``): with the body a T-pose calibration gives
 (the solver's own proportions, ``skeleton.make_body``, sized to the performer's stature and
 arm span, as for a real user: the error then includes the skeletons' differences), and with
-the true skeleton.
+the true skeleton.  ``--body tpose`` sizes each performer by the add-on's own calibration
+instead (:func:`tpose_body`: the skeleton stood in its rest T-pose, measured from the head's
+height above the floor and the wrists' distance, as a recording that starts with a T-pose is).
 
 Methods: (a) the shipped model, network + analytic limbs (``core.pipeline.solve``); (p) the
 previously shipped model, same pipeline; (b) the network-only baseline: the same backbone trained
