@@ -254,22 +254,42 @@ def calibrated_body(gt_body, legs=False):
     return sk.make_body(m)
 
 
-def tpose_body(gt_body, devices=REQUIRED_DEVICES):
-    """The body the add-on's own T-pose calibration builds for this performer (``--body tpose``):
-    the performer's skeleton stood for 4 s in its rest pose, a T-pose, with a 1 cm sway
+def tpose_calibration(gt_body, devices=REQUIRED_DEVICES):
+    """What the add-on's own T-pose calibration makes of this performer (``--body tpose``): the
+    performer's skeleton stood for 4 s in its rest pose, a T-pose, with a 1 cm sway
     (``benchmarks/standing.py``), its ``devices`` given their joints' poses, the T-pose found
     (:func:`.calibration.find_tpose`), measured (:func:`.calibration.calibrate`: stature from
-    the head's height above the floor, arm span, and with a pelvis tracker the legs) and sized
+    the head's height above the floor, arm span, with a pelvis tracker the legs, and the device
+    offsets: the pelvis and foot trackers' measured whole) and sized
     (:func:`.calibration.body_for`), as a recording that starts with a T-pose is.  Unlike
     :func:`calibrated_body` it goes through the floor the clip's skeleton stands on, as a real
-    calibration does.  Raises ValueError when no plausible T-pose is found."""
+    calibration does.  Returns ``(Body, offsets)`` (offsets: the device-offsets dict to apply to
+    the clip's device poses, :func:`with_offsets`).  Raises ValueError when no plausible T-pose
+    is found."""
     from blender_manikin.core import calibration as cal
     from standing import standing_targets
     targets = standing_targets(gt_body, "T", devices=devices)
     cand = cal.find_tpose(targets)
     if not cand.plausible:
         raise ValueError(f"no plausible T-pose in the performer's rest pose: {cand}")
-    return cal.body_for(cal.calibrate(targets, frame=cand.frame).measurements)
+    res = cal.calibrate(targets, frame=cand.frame)
+    return cal.body_for(res.measurements), res.offsets
+
+
+def tpose_body(gt_body, devices=REQUIRED_DEVICES):
+    """The body of :func:`tpose_calibration`."""
+    return tpose_calibration(gt_body, devices)[0]
+
+
+def with_offsets(targets, offsets):
+    """``targets`` (:class:`TrackerTargets`, device poses: here the joints' own) with the device
+    ``offsets`` applied (:func:`.device_offsets.apply_offsets`), as the solve applies the
+    calibrated offsets to a recording's devices."""
+    from blender_manikin.core.device_offsets import apply_offsets
+    pos, rot_ = {}, {}
+    for d in targets.pos:
+        pos[d], rot_[d] = apply_offsets(targets.pos[d], targets.rot[d], offsets, device=d)
+    return TrackerTargets(fps=targets.fps, pos=pos, rot=rot_, valid=dict(targets.valid))
 
 
 def clip_metrics(res, gt_local, gt_pos, fps, contacts, targets=None):
@@ -346,8 +366,8 @@ def run_dataset(name, methods, args, body_mode):
             key = gt_body.offsets.tobytes() + gt_body.root_rest.tobytes()      # one per performer
             for d in sets:
                 if (key, d) not in tpose_cache:
-                    tpose_cache[key, d] = tpose_body(gt_body, d)
-            bodies = {d: tpose_cache[key, d] for d in sets}
+                    tpose_cache[key, d] = tpose_calibration(gt_body, d)
+            bodies = {d: tpose_cache[key, d][0] for d in sets}
         else:
             bodies = {d: gt_body for d in sets}
         tgs = {d: targets_from_gt(gt_pos, gt_world, fps, d) for d in sets}
@@ -359,6 +379,8 @@ def run_dataset(name, methods, args, body_mode):
                                      rot={k: v[:T] for k, v in tg.rot.items()},
                                      valid={k: v[:T] for k, v in tg.valid.items()}) for d, tg in tgs.items()}
             gt_local, gt_pos, contacts = gt_local[:T], gt_pos[:T], contacts[:T]
+        if body_mode == "tpose":          # the calibrated device offsets, as the solve applies them
+            tgs = {d: with_offsets(tg, tpose_cache[key, d][1]) for d, tg in tgs.items()}
         tgs = {d: smooth_targets(tg, args.smoothing)[0] for d, tg in tgs.items()}     # as the solve does
         frames += T
         all_targets.append((tgs, bodies))

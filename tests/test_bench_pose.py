@@ -103,3 +103,29 @@ def test_tpose_body_is_what_the_calibration_builds_from_the_performer_standing_i
     for k in ("thigh", "shank"):
         assert abs(getattr(legs.measurements, k) - getattr(ref.measurements, k)) < 0.02, k
     assert "tpose" in bp.BODY_MODES and set(bp.BODY_TITLES) == set(bp.BODY_MODES)
+
+
+def test_tpose_offsets_put_the_foot_targets_where_the_calibrated_body_has_its_ankles():
+    """--body tpose with foot trackers: the calibration measures the pelvis and foot trackers'
+    offsets whole, so once applied (with_offsets) the ankle targets of the standing performer sit
+    at the calibrated body's ankle height, even where the performer's own skeleton puts its
+    ankles elsewhere; the head and hands keep their positions."""
+    import numpy as np
+    from blender_manikin.core import skeleton as sk
+    from standing import bandai_like_body, standing_targets
+    J = sk.J
+    devices = ("head", "left_hand", "right_hand", "pelvis", "left_foot", "right_foot")
+    other = bandai_like_body(1.70)
+    body, offsets = bp.tpose_calibration(other, devices)
+    raw = standing_targets(other, "T", devices=devices)
+    out = bp.with_offsets(raw, offsets)
+    rest = body.rest_positions()
+    own = other.rest_positions()
+    for side in ("left", "right"):
+        want = rest[J[f"{side}_ankle"], 2]
+        assert abs(own[J[f"{side}_ankle"], 2] - want) > 0.02                 # the skeletons differ...
+        assert np.abs(out.pos[f"{side}_foot"][:, 2] - want).max() < 0.01     # ...the targets follow the body
+    for d in ("head", "left_hand", "right_hand"):
+        assert np.abs(out.pos[d] - raw.pos[d]).max() < 1e-9
+    same = bp.with_offsets(raw, "none")
+    assert all(np.array_equal(same.pos[d], raw.pos[d]) and np.allclose(same.rot[d], raw.rot[d]) for d in devices)
