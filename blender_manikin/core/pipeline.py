@@ -105,18 +105,21 @@ ANKLE_SMOOTH_S = 0.05
 LEG_REACH_SMOOTH_S = 0.03
 #: network windows built, run and decoded at a time (bounds the network's memory on long takes)
 NETWORK_WINDOWS_PER_BATCH = 1024
-#: shape of the weights overlapping windows are blended with: a triangle (0 at a window's ends, 1
-#: at its centre) raised to this power (:func:`window_blend_weights`).  Under 1 the curve is
+#: shape of the weights overlapping windows are blended with: a triangle (about 0 at a window's
+#: ends, 1 at its centre) raised to this power (:func:`window_blend_weights`).  Under 1 the curve is
 #: flatter, so a frame's neighbouring window counts more and the blend averages more, while a
 #: window's end frames (context on one side only) still weigh least (0.5: 0.13 of the centre's
 #: weight for 60 frames), so no seam shows where a window starts.  Triangle (1) / its square
-#: root (0.5) / flat-topped (0.25) / flat (0): HDM05, calibrated body, three trackers, MPJPE
+#: root (0.5) / its fourth root (0.25) / flat (0): HDM05, calibrated body, three trackers, MPJPE
 #: 9.31 / 9.27 / 9.26 / 9.26 cm, knees 16.25 / 16.19 / 16.18 / 16.19, jitter 0.77 / 0.77 / 0.78 /
 #: 0.79 (ground truth 0.93); held-out Bandai 3.33 / 3.32 / 3.32 / 3.31 cm; 2 (a sharper peak): 9.37,
 #: Bandai 3.33.  The square root takes the gain without the jitter; with it, also HDM05 captured at
 #: 72 Hz 9.36 -> 9.32 cm, true skeleton 8.66 -> 8.63, four trackers 7.22 -> 7.20, six 4.04 -> 4.04,
 #: DAP 9.62 -> 9.57 (benchmarks/bench_pose.py)
 WINDOW_BLEND_POWER = 0.5
+#: scene frames posed at a time by the torso FK, collar and limb stages (bounds their memory);
+#: the result does not depend on it (the leg-reach filter looks past the chunk edges)
+ASSEMBLY_CHUNK_FRAMES = 8192
 
 
 def window_blend_weights(W, power=None):
@@ -127,9 +130,6 @@ def window_blend_weights(W, power=None):
     p = WINDOW_BLEND_POWER if power is None else float(power)
     tri = 1.0 - np.abs((np.arange(W) + 0.5) / W * 2.0 - 1.0)
     return tri ** p + 1e-3
-#: scene frames posed at a time by the torso FK, collar and limb stages (bounds their memory);
-#: the result does not depend on it (the leg-reach filter looks past the chunk edges)
-ASSEMBLY_CHUNK_FRAMES = 8192
 
 
 def overlap_windows(overlap) -> int:
