@@ -15,7 +15,7 @@ Each set is solved twice (``--body calibrated,gt``): with the body a T-pose cali
 (the solver's own proportions, ``skeleton.make_body``, sized to the performer's stature and
 arm span, as for a real user: the error then includes the skeletons' differences), and with
 the true skeleton.  ``--body tpose`` sizes each performer by the add-on's own calibration
-instead (:func:`tpose_body`: the skeleton stood in its rest T-pose, measured from the head's
+instead (:func:`tpose_calibration`: the skeleton stood in its rest T-pose, measured from the head's
 height above the floor and the wrists' distance, as a recording that starts with a T-pose is).
 
 Methods: (a) the shipped model, network + analytic limbs (``core.pipeline.solve``); (p) the
@@ -276,20 +276,14 @@ def tpose_calibration(gt_body, devices=REQUIRED_DEVICES):
     return cal.body_for(res.measurements), res.offsets
 
 
-def tpose_body(gt_body, devices=REQUIRED_DEVICES):
-    """The body of :func:`tpose_calibration`."""
-    return tpose_calibration(gt_body, devices)[0]
-
-
 def with_offsets(targets, offsets):
     """``targets`` (:class:`TrackerTargets`, device poses: here the joints' own) with the device
-    ``offsets`` applied (:func:`.device_offsets.apply_offsets`), as the solve applies the
-    calibrated offsets to a recording's devices."""
-    from blender_manikin.core.device_offsets import apply_offsets
-    pos, rot_ = {}, {}
-    for d in targets.pos:
-        pos[d], rot_[d] = apply_offsets(targets.pos[d], targets.rot[d], offsets, device=d)
-    return TrackerTargets(fps=targets.fps, pos=pos, rot=rot_, valid=dict(targets.valid))
+    ``offsets`` applied by :func:`.device_offsets.to_targets`, as the solve applies the calibrated
+    offsets to a recording's devices."""
+    from blender_manikin.core.device_offsets import to_targets
+    T = targets.num_frames
+    quat = {d: rot.matrix_to_quat(targets.rot[d]) for d in targets.rot}
+    return to_targets(np.arange(T) / targets.fps, targets.pos, quat, targets.valid, offsets, fps=targets.fps)
 
 
 def clip_metrics(res, gt_local, gt_pos, fps, contacts, targets=None):

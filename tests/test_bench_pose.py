@@ -89,16 +89,16 @@ def test_tpose_body_is_what_the_calibration_builds_from_the_performer_standing_i
     from standing import bandai_like_body
     J = sk.J
     me = sk.make_body(1.80)
-    b = bp.tpose_body(me)
+    b = bp.tpose_calibration(me)[0]
     rest = me.rest_positions()
     span = np.linalg.norm(rest[J["left_wrist"]] - rest[J["right_wrist"]])
     # the span measured, plus the reach margin body_for gives each arm
     assert abs(b.stature - 1.80) < 0.01 and abs(b.measurements.arm_span - span - 2 * cal.REACH_MARGIN) < 0.005
     other = bandai_like_body(1.70)
-    t, c = bp.tpose_body(other), bp.calibrated_body(other)
+    t, c = bp.tpose_calibration(other)[0], bp.calibrated_body(other)
     assert abs(t.stature / c.stature - 1.0) < 0.03
     assert abs(t.measurements.arm_span - c.measurements.arm_span - 2 * cal.REACH_MARGIN) < 0.005
-    legs = bp.tpose_body(other, ("head", "left_hand", "right_hand", "pelvis"))
+    legs = bp.tpose_calibration(other, ("head", "left_hand", "right_hand", "pelvis"))[0]
     ref = bp.calibrated_body(other, legs=True)
     for k in ("thigh", "shank"):
         assert abs(getattr(legs.measurements, k) - getattr(ref.measurements, k)) < 0.02, k
