@@ -427,8 +427,10 @@ def test_init_fine_tunes_from_a_checkpoint_or_an_exported_model(cache, bvh_dir, 
     for k, v in ck["model"].items():
         assert torch.allclose(kept["model"][k], v, atol=1e-7), k
     tuned = train.main(common + ["--steps", "2", "--init", str(onnx_path), "--out", str(tmp_path / "c"),
-                                 "--aug", "lying=0.5"])
+                                 "--aug", "lying=0.5", "--dropout", "0.2"])
     t = torch.load(tuned["checkpoint"], weights_only=False)
+    # dropout is a training setting the exported model does not carry: --dropout sets it for --init runs
+    assert kept["config"]["dropout"] == 0.05 and t["config"]["dropout"] == 0.2
     assert any(not torch.allclose(t["model"][k], v) for k, v in ck["model"].items())
     c, _ = export.export(tuned["checkpoint"], str(tmp_path / "c.onnx"), quiet=True)
     assert c["training"]["init"] == "a.onnx" and c["training_data"]["augmentation"]["lying"] == 0.5

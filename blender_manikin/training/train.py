@@ -74,7 +74,8 @@ def build_parser():
     p.add_argument("--heads", type=int, default=4)
     p.add_argument("--ff-mult", type=int, default=4)
     p.add_argument("--head-hidden", type=int, default=256)
-    p.add_argument("--dropout", type=float, default=0.05)
+    p.add_argument("--dropout", type=float, default=0.05,
+                   help="residual and attention dropout while training (also with --init; a resumed run keeps its own)")
     p.add_argument("--causal", action="store_true", help="live variant: attend to past frames only")
     p.add_argument("--arch", choices=("posenet", "dap"), default="posenet",
                    help="backbone: posenet (shared Transformer, global + local heads) or dap (Dual Attention "
@@ -317,6 +318,8 @@ def main(argv=None):
                 cfg, init_state = widen_window(cfg, init_state, args.window)
             except ValueError as exc:
                 raise SystemExit(str(exc)) from None
+        # dropout is a training setting, not part of the exported model: --dropout applies here too
+        cfg = dataclasses.replace(cfg, dropout=args.dropout)
     elif ckpt is None:
         devices = parse_devices(args.devices, args.six_trackers)
         cfg = ModelConfig(kind=args.kind, devices=devices, window=args.window or 40, d_model=args.d_model,
