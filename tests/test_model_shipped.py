@@ -86,6 +86,8 @@ def test_inference_hands_on_trackers_and_feet_above_floor(runner, example):
     assert res.at_limit.shape == (T, 4) and res.at_limit.dtype == bool
     assert metrics.ground_penetration(pos) < 1e-7                               # cm
     assert pos[..., 2].min() > -1e-9
+    ank = [sk.J["left_ankle"], sk.J["right_ankle"]]                           # no foot sinks in
+    assert pipeline.feet_below_floor(pos[:, ank], res.world_rot[:, ank], body).max() <= pipeline.FOOT_SINK + 1e-6
     # planted feet do not slide: between two planted frames the ankle moves < 1 mm horizontally
     for k, ankle in enumerate((sk.J["left_ankle"], sk.J["right_ankle"])):
         both = res.contacts[:-1, k] & res.contacts[1:, k]

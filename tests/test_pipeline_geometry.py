@@ -139,6 +139,34 @@ def test_keep_feet_above_floor():
     assert np.allclose(out[-1], ankle[-1])
 
 
+def test_feet_keep_ball_and_heel_at_their_standing_height():
+    """A flat foot the network put 2 cm into the floor comes up to its rest ankle height (less
+    FOOT_SINK); turned toes up it stands on its heel, toes down on its ball, both at their rest
+    height; a foot in the air is left; feet_below_floor measures what is left sunk."""
+    body = sk.make_body(1.75)
+    k = [sk.J["left_foot"], sk.J["right_foot"]]
+    rest = body.rest_positions()
+    ankle_rest, ball_rest = rest[[sk.J["left_ankle"], sk.J["right_ankle"]], 2], rest[k, 2]
+    pitches = np.radians([0.0, -25.0, 25.0, 0.0])            # about x: - toes up (the feet face -y)
+    T = len(pitches)
+    R = np.broadcast_to(rot.axis_angle_to_matrix(pitches[:, None] * [1.0, 0, 0])[:, None], (T, 2, 3, 3))
+    ankle = np.zeros((T, 2, 3))
+    ankle[:, :, 2] = ankle_rest - 0.02
+    ankle[-1, :, 2] = 0.4                                      # in the air
+    sunk = pl.feet_below_floor(ankle, R, body)
+    assert np.allclose(sunk[0], 0.02) and (sunk[1:3] > 0.02).all() and (sunk[-1] == 0).all()
+    out = pl.keep_feet_above_floor(ankle, R, body)
+    assert np.allclose(out[0, :, 2], ankle_rest - pl.FOOT_SINK)
+    assert np.allclose(out[-1], ankle[-1]) and np.allclose(out[..., :2], ankle[..., :2])
+    ball = out + np.einsum("tkij,kj->tki", R, body.offsets[k])
+    heel_off = body.offsets[k] * [-pl.HEEL_BACK, -pl.HEEL_BACK, 1.0]
+    heel = out + np.einsum("tkij,kj->tki", R, heel_off)
+    assert np.allclose(heel[1, :, 2], ball_rest - pl.FOOT_SINK) and (ball[1, :, 2] > ball_rest + 0.04).all()
+    assert np.allclose(ball[2, :, 2], ball_rest - pl.FOOT_SINK) and (heel[2, :, 2] > ball_rest + 0.01).all()
+    assert (out[1:3, :, 2] > ankle_rest).all()                 # a tilted foot lifts its ankle
+    assert pl.feet_below_floor(out, R, body).max() <= pl.FOOT_SINK + 1e-12
+
+
 def test_reach_collars_brings_far_hand_within_reach():
     body = sk.make_body(1.75)
     T = 3

@@ -11,7 +11,8 @@
    :data:`NETWORK_SMOOTH_S`); resample back to the scene frames;
 3. torso FK from the predicted root orientation and torso rotations, placed
    so the head joint lands exactly on its target;
-4. feet: predicted ankle poses lifted so no joint goes below the floor,
+4. feet: predicted ankle poses lifted so no foot sinks into the floor (ball
+   and heel at their standing height, :func:`keep_feet_above_floor`),
    planted while the predicted contact probability is above 0.8 (horizontal
    position locked over the contact, blended in and out; the height stays
    the network's, which keeps the knee consistent with the predicted hips;
@@ -429,26 +430,56 @@ def smooth_frames(x, sigma):
     return out
 
 
-def _ankle_over_ball_on_sole(ankle_rot, body: Body, floor):
-    """``(T, 2)`` metres: the ankle height at which each foot, turned by ``ankle_rot``
-    ``(T, 2, 3, 3)`` world, has its ball on its sole (:attr:`.Body.sole` above ``floor``)."""
-    foot_off = body.offsets[[J["left_foot"], J["right_foot"]]]                 # (2, 3)
-    ball_dz = np.einsum("tkij,kj->tki", ankle_rot, foot_off)[..., 2]
-    return floor + body.sole - ball_dz
+#: the heel, where the foot meets the floor behind the ankle: as far behind the ankle as this
+#: share of the ankle-to-ball distance (a foot is about 4 ankle-to-heel lengths long, the ankle
+#: 20 % of it from the heel, the ball 72 %), level with the ball in the rest pose
+HEEL_BACK = 0.38
+#: metres a foot the network placed may sink into the floor (ball or heel below its standing
+#: height) before :func:`keep_feet_above_floor` lifts the ankle.  A few millimetres of a standing
+#: foot's predicted pitch lift the ankle by as much (13 cm lever to the ball), and a nearly straight
+#: leg then bends 10 degrees for 4 mm; 5 mm keeps standing knees straight (T- and A-pose knee max
+#: 0.0 degrees, against 10.6 with 0; benchmarks/bench_plausibility.py), and HDM05 (T-pose body,
+#: 72 Hz trackers) MPJPE / ankles 9.37 / 16.63 cm, against 9.36 / 16.57 with 0 and, before the
+#: heel and the ball's standing height were kept (the ball's joint could reach the sole, 2.1 cm
+#: lower), 9.40 / 16.88
+FOOT_SINK = 0.005
+
+
+def ankle_height_on_floor(ankle_rot, body: Body, floor=0.0, sink=0.0):
+    """``(T, 2)`` metres: the lowest ankle height at which each foot, turned by ``ankle_rot``
+    ``(T, 2, 3, 3)`` world, keeps its ball (the foot joint) and its heel no lower than ``sink``
+    metres below where they are when the body stands in its rest pose on ``floor`` (the flesh
+    under them and the :attr:`.Body.sole` included).  A flat foot gives the rest ankle height;
+    a foot turned toes up rests on its heel, toes down on its ball, and either way the ankle
+    rises.  The heel is :data:`HEEL_BACK` of the ankle-to-ball distance behind the ankle, level
+    with the ball in the rest pose."""
+    k = [J["left_foot"], J["right_foot"]]
+    rest_z = body.rest_positions()[k, 2]                                       # (2,) ball above floor
+    ball = body.offsets[k]                                                     # (2, 3) from the ankle
+    heel = ball * np.array([-HEEL_BACK, -HEEL_BACK, 1.0])                      # behind, level with it
+    need = [floor + rest_z - sink - np.einsum("tkij,kj->tki", ankle_rot, off)[..., 2] for off in (ball, heel)]
+    return np.maximum(*need)
+
+
+def feet_below_floor(ankle_pos, ankle_rot, body: Body, floor=0.0):
+    """``(T, 2)`` metres each foot's ball or heel is below its standing height (0 where it is
+    not): how far the foot sinks into ``floor``.  ankle_pos ``(T, 2, 3)``, ankle_rot ``(T, 2,
+    3, 3)`` world, as :func:`ankle_height_on_floor`."""
+    return np.maximum(ankle_height_on_floor(ankle_rot, body, floor) - np.asarray(ankle_pos)[..., 2], 0.0)
 
 
 def settle_planted_feet(ankle_pos, ankle_rot, contacts, body: Body, fps, floor=0.0, max_lift=None):
     """Put planted feet down on the floor: on frames a foot is planted (``contacts`` ``(T, 2)``
     bool) and its ankle hovers at most ``max_lift`` (default :data:`SETTLE_MAX`) metres above
-    where the foot stands on ``floor`` (the ball of the foot on its sole, :attr:`.Body.sole` above
-    the floor, and the ankle at least at its rest height), the ankle comes down to it; the drop is smoothed over
+    where the foot stands on ``floor`` (:func:`ankle_height_on_floor`: its ball and heel at their
+    standing height, and the ankle at least at its rest height), the ankle comes down to it; the drop is smoothed over
     :data:`SETTLE_SMOOTH_S` so it eases in and out (:func:`keep_feet_above_floor` runs after it).
     A planted foot held higher than that (on a step, the network unsure) is left.
     ``ankle_pos`` ``(T, 2, 3)`` metres; returns a new array."""
     lift = SETTLE_MAX if max_lift is None else float(max_lift)
     out = np.array(ankle_pos, np.float64, copy=True)
     rest = body.rest_positions()[[J["left_ankle"], J["right_ankle"]], 2]
-    stand = np.maximum(_ankle_over_ball_on_sole(ankle_rot, body, floor), floor + rest[None])   # (T, 2)
+    stand = np.maximum(ankle_height_on_floor(ankle_rot, body, floor), floor + rest[None])   # (T, 2)
     above = out[..., 2] - stand
     drop = np.where(contacts & (above > 0) & (above <= lift), above, 0.0)
     if out.shape[0] > 1:
@@ -458,15 +489,16 @@ def settle_planted_feet(ankle_pos, ankle_rot, contacts, body: Body, fps, floor=0
 
 
 def keep_feet_above_floor(ankle_pos, ankle_rot, body: Body, floor=0.0):
-    """Lift ankle targets so the ankle and the foot (ball) joint stay above ``floor``.
+    """Lift ankle targets so that no foot sinks into ``floor``.
 
-    ankle_pos ``(T, 2, 3)``, ankle_rot ``(T, 2, 3, 3)`` world.  The ankle keeps
-    at least half its rest height; the ball of the foot stays on its sole, at least
-    :attr:`.Body.sole` above ``floor``.
+    ankle_pos ``(T, 2, 3)``, ankle_rot ``(T, 2, 3, 3)`` world.  The ball of the foot and the
+    heel stay at most :data:`FOOT_SINK` below their standing height
+    (:func:`ankle_height_on_floor`: a flat foot keeps its ankle at the rest height, less that),
+    and the ankle at least half its rest height.  Returns a new array.
     """
     out = np.array(ankle_pos, np.float64, copy=True)
     min_ankle = 0.5 * body.rest_positions()[[J["left_ankle"], J["right_ankle"]], 2]
-    need = np.maximum(_ankle_over_ball_on_sole(ankle_rot, body, floor), floor + min_ankle[None])
+    need = np.maximum(ankle_height_on_floor(ankle_rot, body, floor, FOOT_SINK), floor + min_ankle[None])
     out[..., 2] = np.maximum(out[..., 2], need)
     return out
 
@@ -741,8 +773,9 @@ def assemble(targets: TrackerTargets, body: Body, net: NetworkOutput, progress=N
         legs = soften_leg_reach(pos[:, ls.LIMB_BASE[2:]], ankle_pos[g], lengths[2:].sum(-1), sigma)
         inner = slice(a - g.start, f.stop - g.start)
         loc, root, pos, world, legs = loc[inner], root[inner], pos[inner], world[inner], legs[inner]
-        # a tracked foot is where its tracker says; a predicted one reaches its softened target
-        legs = np.where(foot_exact[f][..., None], ankle_pos[f], legs)
+        # a tracked foot is where its tracker says; a predicted one reaches its softened target,
+        # kept out of the floor (the filter may stretch a leg a few millimetres down)
+        legs = np.where(foot_exact[f][..., None], ankle_pos[f], keep_feet_above_floor(legs, ankle_rot[f], body))
         tp, tr = ({d: v[f] for d, v in targets.pos.items()}, {d: v[f] for d, v in targets.rot.items()})
         loc = _reach_collars(loc, pos, world, np.stack([tp["left_hand"], tp["right_hand"]], 0), body)
         # limbs (bases and their parents from the torso FK above)
