@@ -57,10 +57,11 @@ LOCK_SMOOTH_S = 0.05
 #: windows each frame is seen by, as :func:`solve`'s ``overlap`` (the panel's *Overlap*, the CLI's
 #: ``--overlap``) chooses it: the window stride is the window / overlap.  2 (default: half a
 #: window) keeps 10,000 frames/s; 3 and 4 average more windows at 1.5 and 2 times the network
-#: time (shipped 60-frame network, calibrated body, :data:`WINDOW_BLEND_POWER` 0.5, overlap 2 / 3 / 4:
-#: HDM05 MPJPE 9.27 / 9.17 / 9.14 cm, knees 16.19 / 15.97 / 15.98; Bandai 3.32 / 3.31 / 3.31;
+#: time (shipped 60-frame network, calibrated body, :data:`WINDOW_BLEND_POWER` 0.5, feet kept out
+#: of the floor, overlap 2 / 3 / 4: HDM05 MPJPE 9.24 / 9.14 / 9.11 cm, knees 16.17 / 15.95 / 15.96;
 #: benchmarks/bench_pose.py --overlap; the HDM05 set as one take, best of four back to back,
-#: 16,821 / 12,559 / 10,644 frames/s, where an earlier, slower run gave 13,115 / 10,270 / 9,182)
+#: 13,776 / 11,313 / 8,702 frames/s, where an earlier, faster run gave 16,821 / 12,559 / 10,644;
+#: before the feet, Bandai 3.32 / 3.31 / 3.31)
 OVERLAP_CHOICES = (2, 3, 4)
 DEFAULT_OVERLAP = 2
 #: which windows the network also sees left/right mirrored (:func:`.features.mirror_inputs`), its
