@@ -439,10 +439,11 @@ HEEL_BACK = 0.38
 #: height) before :func:`keep_feet_above_floor` lifts the ankle.  A few millimetres of a standing
 #: foot's predicted pitch lift the ankle by as much (13 cm lever to the ball), and a nearly straight
 #: leg then bends 10 degrees for 4 mm; 5 mm keeps standing knees straight (T- and A-pose knee max
-#: 0.0 degrees, against 10.6 with 0; benchmarks/bench_plausibility.py), and HDM05 (T-pose body,
-#: 72 Hz trackers) MPJPE / ankles 9.37 / 16.63 cm, against 9.36 / 16.57 with 0 and, before the
+#: 0.0 degrees, against 10.6 with 0; benchmarks/bench_plausibility.py).  HDM05 (T-pose body,
+#: 72 Hz trackers) MPJPE / ankles: 9.36 / 16.62 cm; 9.37 / 16.63 before the leg-reach filter's
+#: ankles were kept out of the floor too, and 9.36 / 16.57 with 0 then; 9.40 / 16.88 before the
 #: heel and the ball's standing height were kept (the ball's joint could reach the sole, 2.1 cm
-#: lower), 9.40 / 16.88
+#: lower)
 FOOT_SINK = 0.005
 
 
