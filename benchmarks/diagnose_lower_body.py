@@ -11,7 +11,8 @@ Prints, per dataset:
    them), and the signed mean error of the pelvis, knees and ankles in the true hips' heading
    frame (side: + to the performer's right; forward: + ahead; up: + higher; cm);
 2. the knee error taken apart: the hip and ankle errors the leg inherits, the knee error, and
-   the knee error with the best swivel the solved hip and ankle allow (:func:`knee_on_best_swivel`:
+   the knee error with the best swivel the solved hip and ankle allow (:func:`knee_on_best_swivel`,
+   the limb solver's own swivel circle:
    what a perfect swivel angle would leave; the rest is the hip and the ankle);
 3. lean: the solved feet against the feet a body leaning into its head's horizontal acceleration
    would have (:func:`lean_fit`; a body accelerating at ``a`` leans ``atan(a / g)`` over its
@@ -35,7 +36,7 @@ sys.path.insert(0, HERE)
 
 import numpy as np  # noqa: E402
 
-from blender_manikin.core import skeleton as sk  # noqa: E402
+from blender_manikin.core import limb_solver as ls, skeleton as sk  # noqa: E402
 from blender_manikin.core.metrics import format_table  # noqa: E402
 
 J = sk.J
@@ -66,26 +67,17 @@ def signed_errors(pred_pos, gt_pos, joints=BIAS_JOINTS):
     return np.einsum("tij,tkj->tki", heading_frame(gt_pos), d)
 
 
-def knee_on_best_swivel(pred_pos, gt_pos):
-    """``(T, 2, 3)`` metres: each knee on the circle the solved hip, ankle and bone lengths allow,
-    turned to the swivel angle that puts it nearest the true knee (the solved knee's distance to
-    it is the swivel's share of the knee error).  pred_pos, gt_pos ``(T, 22, 3)``."""
-    out = []
-    for s in SIDES:
-        h, k, a = (pred_pos[:, J[f"{s}_{n}"]] for n in ("hip", "knee", "ankle"))
-        l1, l2 = np.linalg.norm(k - h, axis=-1), np.linalg.norm(a - k, axis=-1)
-        d = a - h
-        dn = np.maximum(np.linalg.norm(d, axis=-1), 1e-9)
-        u = d / dn[:, None]
-        along = (l1 ** 2 - l2 ** 2 + dn ** 2) / (2 * dn)
-        radius = np.sqrt(np.maximum(l1 ** 2 - along ** 2, 0.0))
-        centre = h + along[:, None] * u
-        g = gt_pos[:, J[f"{s}_knee"]] - centre
-        g -= np.sum(g * u, -1, keepdims=True) * u
-        gn = np.linalg.norm(g, axis=-1, keepdims=True)
-        # a true knee on the leg's axis: every swivel is as good, keep the solved knee
-        out.append(np.where(gn > 1e-9, centre + radius[:, None] * g / np.maximum(gn, 1e-9), k))
-    return np.stack(out, 1)
+def knee_on_best_swivel(pred_pos, pred_world, lengths, gt_pos):
+    """``(T, 2, 3)`` metres: each knee where the limb solver puts it (:func:`.limb_solver.mid_from_swivel`)
+    for the solved hip and ankle, the body's leg ``lengths`` (``(4, 2)``, :meth:`.Body.limb_lengths`)
+    and the swivel angle of the true knee about that hip-ankle axis: the nearest the knee gets with
+    a perfect swivel (the solved knee's distance to it is the swivel's share of the knee error).
+    pred_pos, gt_pos ``(T, 22, 3)``; pred_world ``(T, 22, 3, 3)`` the solved world rotations."""
+    legs = [2, 3]                                              # LIMBS order: the left and right leg
+    base, end = pred_pos[:, ls.LIMB_BASE[legs]], pred_pos[:, ls.LIMB_END[legs]]
+    parent = pred_world[:, ls.LIMB_PARENT[legs]]
+    phi = ls.swivel_from_positions(base, gt_pos[:, ls.LIMB_MID[legs]], end, parent, limb_ids=legs)
+    return ls.mid_from_swivel(base, end, phi, np.asarray(lengths)[legs], parent, limb_ids=legs)
 
 
 def expected_lean(head_pos, fps):
@@ -115,7 +107,7 @@ def diagnose_clip(res, gt_pos, fps, contacts, targets):
     P = res.positions
     ank = [J["left_ankle"], J["right_ankle"]]
     planted = np.asarray(contacts[:, :2], bool)
-    best = knee_on_best_swivel(P, gt_pos)
+    best = knee_on_best_swivel(P, res.world_rot, res.body.limb_lengths(), gt_pos)
     knees = [J["left_knee"], J["right_knee"]]
     hips = [J["left_hip"], J["right_hip"]]
     feet_p = P[:, ank, :2].mean(1)

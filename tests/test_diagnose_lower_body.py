@@ -13,14 +13,15 @@ J = sk.J
 
 
 def _bent_pose(T=4):
-    """``(T, 22, 3)`` metres: a 1.75 m body with both knees bent 40 degrees (FK)."""
+    """``(positions (T, 22, 3) metres, world rotations (T, 22, 3, 3), body)``: a 1.75 m body with
+    both knees bent 40 degrees (FK)."""
     body = sk.make_body(1.75)
     local = np.broadcast_to(np.eye(3), (T, 22, 3, 3)).copy()
     for s in ("left", "right"):
         local[:, J[f"{s}_hip"]] = rot.axis_angle_to_matrix(np.array([-0.35, 0.0, 0.0]))
         local[:, J[f"{s}_knee"]] = rot.axis_angle_to_matrix(np.array([0.7, 0.0, 0.0]))
-    pos, _ = sk.forward_kinematics(local, np.tile(body.root_rest, (T, 1)), body)
-    return np.asarray(pos)
+    pos, world = sk.forward_kinematics(local, np.tile(body.root_rest, (T, 1)), body)
+    return np.asarray(pos), np.asarray(world), body
 
 
 def _turn_knees(pos, angle):
@@ -35,24 +36,25 @@ def _turn_knees(pos, angle):
 
 
 def test_best_swivel_finds_the_true_knee_on_the_solved_circle():
-    gt = _bent_pose()
-    assert np.allclose(dg.knee_on_best_swivel(gt, gt), gt[:, [J["left_knee"], J["right_knee"]]], atol=1e-9)
-    turned = _turn_knees(gt, np.radians(35.0))
+    gt, world, body = _bent_pose()
+    lengths = body.limb_lengths()
     knees = [J["left_knee"], J["right_knee"]]
+    assert np.allclose(dg.knee_on_best_swivel(gt, world, lengths, gt), gt[:, knees], atol=1e-9)
+    turned = _turn_knees(gt, np.radians(35.0))
     raw = np.linalg.norm(turned[:, knees] - gt[:, knees], axis=-1)
-    best = np.linalg.norm(dg.knee_on_best_swivel(turned, gt) - gt[:, knees], axis=-1)
+    best = np.linalg.norm(dg.knee_on_best_swivel(turned, world, lengths, gt) - gt[:, knees], axis=-1)
     assert raw.min() > 0.05 and best.max() < 1e-6        # a wrong swivel alone: all of it recovered
     bent = turned.copy()                                   # and the knee bent 20 degrees more, the
     R = rot.axis_angle_to_matrix(np.array([np.radians(20.0), 0.0, 0.0]))   # ankle with it: a wrong
     for s in ("left", "right"):                            # ankle the swivel cannot undo
         k, a = bent[:, J[f"{s}_knee"]], bent[:, J[f"{s}_ankle"]]
         bent[:, J[f"{s}_ankle"]] = k + (a - k) @ R.T
-    left = np.linalg.norm(dg.knee_on_best_swivel(bent, gt) - gt[:, knees], axis=-1)
+    left = np.linalg.norm(dg.knee_on_best_swivel(bent, world, lengths, gt) - gt[:, knees], axis=-1)
     assert (left > 0.005).all() and (left < np.linalg.norm(bent[:, knees] - gt[:, knees], axis=-1)).all()
 
 
 def test_signed_errors_are_in_the_performers_heading_frame():
-    gt = _bent_pose()
+    gt = _bent_pose()[0]
     facing = -np.array([0.0, 1.0, 0.0])                    # the rest body faces -Y
     side = gt[0, J["right_hip"]] - gt[0, J["left_hip"]]
     pred = gt.copy()
