@@ -27,6 +27,9 @@ Options of ``solve`` (they mirror the panel; ``--help`` has them all):
                               body measurement)
 --arm-span METRES             wrist-to-wrist span (with --height)
 --sole METRES                 the performer's shoe soles (default 0.03; 0 barefoot)
+--floor METRES|height         trackers: the recording's floor height (default 0), or
+                              'height': under the --height performer standing in the
+                              take (an origin at eye level); moved to 0
 --offsets auto|none|PRESET|FILE  device offsets: auto (the file's metadata or its
                               format's default), a preset name or a JSON file
 --layout FILE.json            the columns, time, units, axes and Euler order of
@@ -97,6 +100,10 @@ def _add_solve_options(s):
     s.add_argument("--sole", type=float, default=None, metavar="METRES",
                    help="thickness of the performer's shoe soles: the feet stand this far above the floor "
                         "(default 0.03; 0 barefoot)")
+    s.add_argument("--floor", type=_floor_arg, default=0.0, metavar="METRES|height",
+                   help="trackers: where the recording's floor is, metres on its vertical axis (default 0), "
+                        "or 'height': under the performer of --height standing in the take (an origin at eye "
+                        "level or on a desk); the floor is moved to 0")
     s.add_argument("--offsets", default="auto", metavar="auto|none|PRESET|FILE",
                    help="device-to-joint offsets: a preset name, a JSON file, or auto (default: the "
                         "recording's '# offsets:' metadata, beat_saber for .bsor and Beat Saber .xror, "
@@ -175,6 +182,15 @@ def _smoothing_arg(text):
     from .core.solve import SolveError
     try:
         return parse_smoothing(text)
+    except SolveError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+
+
+def _floor_arg(text):
+    """argparse type of ``--floor``: metres or ``height``."""
+    from .core.solve import SolveError, parse_floor
+    try:
+        return parse_floor(text)
     except SolveError as exc:
         raise argparse.ArgumentTypeError(str(exc)) from None
 
@@ -274,6 +290,7 @@ def solve_settings(args):
                        up=getattr(args, "up", None), smoothing=getattr(args, "smoothing", "auto"),
                        ik=getattr(args, "ik", "adaptive"), mapping=getattr(args, "mapping", None),
                        model=getattr(args, "model", None), sole=getattr(args, "sole", None),
+                       floor=getattr(args, "floor", 0.0),
                        overlap=getattr(args, "overlap", SolveSettings.overlap))
     if args.calibration_time is not None:
         st.calibration, st.tpose_time = "TPOSE", float(args.calibration_time)

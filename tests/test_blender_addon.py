@@ -275,6 +275,55 @@ def test_find_tpose_and_offsets_preset(addon, tmp_path):
         bpy.ops.manikin.solve_full_body()
 
 
+def test_floor_setting_finds_the_tpose_and_stands_the_body_on_the_ground(addon, tmp_path):
+    """A T-pose recording whose origin is at eye level (floor at -1.5 m): with the floor at 0
+    the solve is refused; the Floor setting (At Height, Under Performer) reaches the solve and
+    the T-pose finder, and the armature stands on Blender's ground."""
+    from blender_manikin.panels import main as panels
+    from blender_manikin.blender.properties import config_from_settings
+    from types import SimpleNamespace
+    res = synthetic_result(T=72, fps=24.0)
+    res.local_rot[20:51] = np.eye(3)
+    res.root_pos[20:51] = res.body.root_rest
+    res._fk = None
+    pos, wr = res.fk()
+    for dev, j in (("head", "head"), ("left_hand", "left_wrist"), ("right_hand", "right_wrist")):
+        res.targets.pos[dev] = pos[:, sk.J[j]] - np.array([0.0, 0.0, 1.5])
+        res.targets.rot[dev] = wr[:, sk.J[j]].copy()
+    s = _settings(str(write_recording_csv(tmp_path / "eyes.csv", res)))
+    s.calibration = 'AUTO'
+    assert s.floor_mode == 'ZERO' and config_from_settings(bpy.context).floor == 0.0
+    with pytest.raises(RuntimeError, match="head is only"):
+        bpy.ops.manikin.solve_full_body()
+    s.floor_mode, s.floor_height = 'OFFSET', -1.5
+    assert config_from_settings(bpy.context).floor == -1.5
+    assert bpy.ops.manikin.find_tpose() == {'FINISHED'}
+    assert s.calibration == 'TPOSE' and 26 / 24 - 1e-6 <= s.tpose_time <= 44 / 24 + 1e-6
+    assert bpy.ops.manikin.solve_full_body() == {'FINISHED'}
+    bones = s.armature.data.bones
+    stature = (bones["head"].head_local[2] - sk.SOLE) / sk.PROPORTIONS["head_height"]
+    assert abs(stature - 1.8) < 0.02 and "floor at -1.500 m (as set) moved to 0" in s.last_report
+    # under the performer: the typed height is used (whatever Override Height says) and places the floor
+    s.floor_mode, s.use_height, s.height = 'PERFORMER', False, 1.8
+    cfg = config_from_settings(bpy.context)
+    assert cfg.floor == "height" and cfg.height == pytest.approx(1.8)
+    assert bpy.ops.manikin.solve_full_body() == {'FINISHED'}
+    assert "under the 1.80 m performer" in s.last_report
+    # the panel shows the floor's height only when it is typed, and the height when it places the floor
+    for mode, shown_props in (('ZERO', ()), ('OFFSET', ("floor_height",)), ('PERFORMER', ("height",))):
+        s.floor_mode = mode
+        log = []
+        panels.MANIKIN_PT_calibration.draw(SimpleNamespace(layout=PanelLayout(log)), bpy.context)
+        assert ("prop", "floor_mode") in log
+        assert (("prop", "floor_height") in log) == (mode == 'OFFSET')
+        for name in shown_props:
+            assert ("prop", name) in log
+    # keypoints find their floor under the feet: the tracker setting does not reach them
+    s.source = 'KEYPOINTS'
+    s.floor_mode = 'OFFSET'
+    assert config_from_settings(bpy.context).floor == 0.0
+
+
 def test_panels_draw(addon):
     from blender_manikin.panels import main as panels
     from types import SimpleNamespace

@@ -350,7 +350,7 @@ def test_stature_warning_names_the_likely_cause():
     assert stature_warning(1.40, 1.27, "head height") is None and stature_warning(2.10, 1.9, "T-pose") is None
     low = stature_warning(0.35, 0.32, "head height")
     assert low.startswith("estimated stature 0.35 m is outside 1.40-2.10 m") and "floor" in low
-    assert "0.32 m above height 0" in low and "set the performer's height" in low
+    assert "0.32 m above height 0" in low and "set the performer's height" in low and "--floor" in low
     # centimetres read as metres: the unit factor that makes it plausible is named
     cm = stature_warning(175.0, 159.0, "head height", units="m")
     assert "--units cm" in cm and "1.75 m" in cm

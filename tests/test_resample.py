@@ -170,9 +170,15 @@ def test_units_check_other_cases():
         check_head_height(0.0165, units="cm")
     with pytest.raises(RecordingError, match="check the axes"):
         check_head_height(0.05)
-    with pytest.raises(RecordingError, match="units or axes are wrong"):
+    with pytest.raises(RecordingError, match="the units, the axes or the floor are wrong"):
         check_head_height(12.0)
     check_head_height(1.7)
+    # measured from a floor that is not at 0: an eye-level origin with the floor set at -1.6 m
+    check_head_height(0.05, floor=-1.6)
+    with pytest.raises(RecordingError, match=r"head is only 0\.05 m above the floor at -1\.60 m"):
+        check_head_height(-1.55, floor=-1.6)
+    with pytest.raises(RecordingError, match=r"set the Floor \(--floor\) to its height, or to 'height'"):
+        check_head_height(0.05)
 
 
 def test_non_increasing_times_in_a_stream_are_ignored_with_warning():

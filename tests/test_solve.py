@@ -193,3 +193,72 @@ def test_command_line_sole_reaches_the_settings():
     assert cli.solve_settings(p.parse_args(["solve", "take.csv", "--out", "o", "--sole", "0"])).sole == 0.0
     st = cli.solve_settings(p.parse_args(["convert", "in", "--out", "o", "--sole", "0.05"]))
     assert st.sole == 0.05
+
+
+def _raised(rec, dz):
+    """``rec`` with every device moved up by ``dz`` metres (a recording whose floor is at -dz)."""
+    import copy
+    out = copy.deepcopy(rec)
+    for st in out.streams.values():
+        st.pos[:, 2] += dz
+    return out
+
+
+def test_the_floor_setting_puts_an_eye_level_origin_on_the_ground():
+    """A recording whose origin is at the performer's eyes (an OpenXR LOCAL space: the floor at
+    -1.6 m) is refused with the floor at 0, naming the fix; told where the floor is, or to put it
+    under the 1.75 m performer, it solves as the recording on the floor does."""
+    rec = load_recording(EXAMPLE)
+    ref = cs.solve_recording(rec, cs.SolveSettings(fps=30.0))
+    assert ref.floor == 0.0 and not any(n.startswith("floor at") for n in ref.info)
+    low = _raised(rec, -1.6)
+    from blender_manikin.core.recording import RecordingError
+    with pytest.raises(RecordingError, match=r"head is only 0\.\d\d m above the floor.*--floor"):
+        cs.solve_recording(low, cs.SolveSettings(fps=30.0))
+    typed = cs.solve_recording(low, cs.SolveSettings(fps=30.0, floor=-1.6))
+    assert typed.floor == -1.6 and "floor at -1.600 m (as set) moved to 0" in typed.summary()
+    np.testing.assert_allclose(typed.result.positions, ref.result.positions, atol=1e-6)
+    np.testing.assert_allclose(typed.targets.pos["head"], ref.targets.pos["head"], atol=1e-9)
+    under = cs.solve_recording(low, cs.SolveSettings(fps=30.0, floor="height", height=1.75))
+    assert under.floor == pytest.approx(-1.6, abs=0.005)          # the performer is 1.75 m on 3 cm soles
+    assert under.info[0].startswith("calibrated on a T-pose")        # the T-pose is found above that floor
+    assert "(under the 1.75 m performer) moved to 0" in under.summary()
+    assert np.abs(under.result.positions - ref.result.positions).max() < 0.01
+    # a floor above the origin: the same, the other way
+    high = cs.solve_recording(_raised(rec, 0.4), cs.SolveSettings(fps=30.0, floor="0.4"))
+    np.testing.assert_allclose(high.result.positions, ref.result.positions, atol=1e-6)
+
+
+def test_floor_settings_are_checked():
+    assert cs.parse_floor(None) == 0.0 and cs.parse_floor("") == 0.0 and cs.parse_floor(" Height ") == "height"
+    assert cs.parse_floor("-1.25") == -1.25 and cs.parse_floor(0.3) == 0.3
+    for bad in ("floor", "nan", "inf", [1.0]):
+        with pytest.raises(cs.SolveError, match="floor"):
+            cs.parse_floor(bad)
+    with pytest.raises(cs.SolveError, match="floor"):               # before the file is read
+        cs.solve_recording("no_such_file.csv", cs.SolveSettings(floor="ground"))
+    with pytest.raises(cs.SolveError, match="needs the height"):
+        cs.solve_recording(EXAMPLE, cs.SolveSettings(fps=30.0, floor="height"))
+    from blender_manikin import cli
+    p = cli.build_parser()
+    assert cli.solve_settings(p.parse_args(["solve", "take.csv", "--out", "o"])).floor == 0.0
+    st = cli.solve_settings(p.parse_args(["solve", "t.csv", "--out", "o", "--floor", "height", "--height", "1.8"]))
+    assert st.floor == "height" and st.height == 1.8
+    assert cli.solve_settings(p.parse_args(["convert", "in", "--out", "o", "--floor", "-1.5"])).floor == -1.5
+    with pytest.raises(SystemExit):
+        p.parse_args(["solve", "take.csv", "--out", "o", "--floor", "low"])
+
+
+def test_a_head_far_from_the_typed_height_is_noted():
+    """With a typed height the body hangs from the head wherever it is: a head 30 cm above where
+    that performer's head stands (a floor 30 cm below the recording's zero) gets a note naming
+    the floor; the recording on its floor gets none."""
+    rec = load_recording(EXAMPLE)
+    ok = cs.solve_recording(rec, cs.SolveSettings(fps=30.0, calibration="MEASURE", height=1.75))
+    assert cs.head_height_note(cs.SolveSettings(height=1.75), ok) is None
+    assert not any(n.startswith("head stands") for n in ok.info)
+    off = cs.solve_recording(_raised(rec, 0.3), cs.SolveSettings(fps=30.0, calibration="MEASURE", height=1.75))
+    note = next(n for n in off.info if n.startswith("head stands"))
+    assert "0.30 m higher than a standing 1.75 m performer's (1.55 m)" in note and "floor" in note
+    assert note in off.summary()
+    assert cs.head_height_note(cs.SolveSettings(), off) is None           # no typed height: sized by the head

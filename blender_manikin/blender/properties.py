@@ -8,6 +8,7 @@ from bpy.props import (BoolProperty, CollectionProperty, EnumProperty, FloatProp
 from bpy.types import PropertyGroup
 
 from ..core import formats
+from ..core.solve import FLOOR_FROM_HEIGHT
 from ..core.devices import DEVICES, LABELS as DEVICE_LABELS  # noqa: F401  (labels: the panel)
 
 _AXES_ITEMS = [
@@ -187,6 +188,16 @@ class MANIKIN_Settings(PropertyGroup):
                         description="Thickness of the performer's shoe soles: the feet stand this far "
                                     "above the floor, and the height measured from the headset is "
                                     "the barefoot one (0 = barefoot)")
+    floor_mode: EnumProperty(
+        name="Floor", default='ZERO',
+        items=[('ZERO', "At Zero", "The recording's height 0 is the floor (room-scale VR: OpenXR stage, "
+                "SteamVR standing)"),
+               ('OFFSET', "At Height", "The floor is at Floor Height in the recording"),
+               ('PERFORMER', "Under Performer", "The floor is put under a performer of the typed Height "
+                "standing in the take (an origin at eye level or on a desk)")],
+        description="Where the recording's floor is; the solve moves it to Blender's ground (z = 0)")
+    floor_height: FloatProperty(name="Floor Height", default=0.0, soft_min=-3.0, soft_max=3.0, unit='LENGTH',
+                                description="Height of the recording's floor on its vertical axis")
 
     model: EnumProperty(
         name="Pose Model", default='AUTO',
@@ -300,10 +311,13 @@ def config_from_settings(context):
     cfg.fps = scene_fps(scene) if s.use_scene_fps else float(s.fps)
     cfg.calibration = s.calibration
     cfg.tpose_time = float(s.tpose_time)
-    if s.use_height or (s.calibration == 'MEASURE' and s.source != 'KEYPOINTS'):
+    trackers = s.source != 'KEYPOINTS'
+    if s.use_height or (trackers and (s.calibration == 'MEASURE' or s.floor_mode == 'PERFORMER')):
         cfg.height = float(s.height)
     cfg.arm_span = float(s.arm_span) if s.arm_span > 0 else None
     cfg.sole = float(s.sole)
+    if trackers:
+        cfg.floor = {'ZERO': 0.0, 'OFFSET': float(s.floor_height), 'PERFORMER': FLOOR_FROM_HEIGHT}[s.floor_mode]
     if s.offsets_text is not None:
         try:
             cfg.offsets = json.loads(s.offsets_text.as_string())

@@ -158,7 +158,7 @@ def stature_warning(stature, head_height, sized_by, units="m", plausible=PLAUSIB
     units: the units the positions were read in.  Likely causes: a typed height; positions in
     other units than read (a factor of 100 or 1000 would make the stature plausible); a floor
     that is not at height 0 (a tracking origin at eye level or on a desk makes the body too
-    small, one below the floor too big)."""
+    small, one below the floor too big; the solve's ``floor`` setting moves it)."""
     lo, hi = plausible
     s = float(stature)
     if lo <= s <= hi:
@@ -173,8 +173,8 @@ def stature_warning(stature, head_height, sized_by, units="m", plausible=PLAUSIB
         if name != units and lo <= s * k <= hi:
             causes.append(f"the units (read as {units}; in {name} the stature would be {s * k:.2f} m: "
                           f"--units {name})")
-    causes.append(f"the floor (the head stands {float(head_height):.2f} m above height 0; the recording's "
-                  "floor must be at 0)")
+    causes.append(f"the floor (the head stands {float(head_height):.2f} m above height 0; set the Floor, "
+                  "--floor, to the floor's height, or to 'height' to put it under a performer of the typed height)")
     causes.append("or set the performer's height")
     return text + "check " + ", ".join(causes)
 

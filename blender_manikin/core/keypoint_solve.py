@@ -41,7 +41,7 @@ from . import skeleton as sk
 from .pose_result import PoseResult
 from .resample import Gap, GapReport
 from .smoothing import AUTO_FILTERS, parse_smoothing, smooth, smooth_auto, smoothing_note
-from .solve import SolveError, SolveOutcome, SolveSettings
+from .solve import SolveError, SolveOutcome, SolveSettings, parse_floor
 
 #: left / right joint pairs whose bone lengths are averaged
 _PAIRS = [(sk.J[f"left_{n}"], sk.J[f"right_{n}"]) for n in
@@ -390,7 +390,8 @@ def solve_keypoints(source, settings: SolveSettings | None = None, progress=None
     units, up, rate, mapping (see :func:`.io_keypoints.read_keypoints`), smoothing (``"auto"`` or
     a window in seconds, see :func:`prepare_keypoints`),
     ik (``adaptive`` / ``naive``), height (scales the measured body to this stature, metres),
-    max_frames.  Tracker options (axes, offsets, calibration) do not apply.
+    max_frames.  Tracker options (axes, offsets, calibration, floor) do not apply: the floor is
+    found under the feet (:func:`estimate_floor`).
     progress: ``(fraction, stage)`` callback; an exception raised from it stops the solve."""
     from .io_keypoints import KeypointRecording, read_keypoints
     s = settings or SolveSettings()
@@ -428,6 +429,8 @@ def solve_keypoints(source, settings: SolveSettings | None = None, progress=None
     out.info.append(f"keypoints: {'adaptive' if adaptive else 'naive'} HybrIK, floor at {prep.floor:+.3f} m "
                     f"moved to 0")
     out.info.append(told)
+    if parse_floor(s.floor) != 0.0:
+        out.info.append(f"the floor setting ({s.floor!r}) is for trackers: keypoints find the floor under the feet")
     if b22.no_twist:
         out.info.append(f"no twist information: {', '.join(b22.no_twist)} (rest twist)")
     if never:

@@ -105,16 +105,18 @@ class GapReport:
         return self.summary()
 
 
-def check_head_height(height, path=None, units=None):
-    """Raise :class:`RecordingError` when a median head height (metres) is implausible.
+def check_head_height(height, path=None, units=None, floor=0.0):
+    """Raise :class:`RecordingError` when a median head height (metres, the recording's z) is
+    implausibly far above ``floor`` (the floor's height in the recording, metres).
 
-    Suggests the unit that would make it plausible.
+    Suggests the unit that would make it plausible, or the floor setting.
     """
     lo, hi = HEAD_HEIGHT_RANGE
-    h = float(height)
+    h = float(height) - float(floor)
     if lo <= h <= hi:
         return
     loaded = f" (read as units={units})" if units else ""
+    where = f"the floor at {float(floor):+.2f} m" if floor else "the floor"
     if h > hi:
         hint = None
         for name, factor in (("centimetres", 100.0), ("millimetres", 1000.0)):
@@ -122,11 +124,11 @@ def check_head_height(height, path=None, units=None):
                 hint = (name, "cm" if factor == 100 else "mm")
                 break
         if hint:
-            msg = (f"head is {h:.0f} m above the floor{loaded}: positions look like {hint[0]}; "
+            msg = (f"head is {h:.0f} m above {where}{loaded}: positions look like {hint[0]}; "
                    f"pass units={hint[1]}")
         else:
-            msg = (f"head is {h:.1f} m above the floor{loaded}: the units or axes are wrong "
-                   f"(positions should be metres with the floor at height 0)")
+            msg = (f"head is {h:.1f} m above {where}{loaded}: the units, the axes or the floor are "
+                   f"wrong (positions should be metres; set the Floor, --floor, if it is not at 0)")
     else:
         hint = None
         for name, factor in (("were scaled down 100x", 100.0), ("were scaled down 1000x", 1000.0)):
@@ -134,12 +136,13 @@ def check_head_height(height, path=None, units=None):
                 hint = name
                 break
         if hint and units and units != "m":
-            msg = (f"head is {h:.3f} m above the floor{loaded}: positions {hint}; they look like metres "
+            msg = (f"head is {h:.3f} m above {where}{loaded}: positions {hint}; they look like metres "
                    f"already, pass units=m")
         else:
-            msg = (f"head is only {h:.2f} m above the floor{loaded}: check the axes (height is the file's "
-                   f"up axis) and that the floor is at 0 (e.g. an OpenXR LOCAL space puts the origin at "
-                   f"the starting head pose, not on the floor)")
+            msg = (f"head is only {h:.2f} m above {where}{loaded}: check the axes (height is the file's "
+                   f"up axis) and the floor (an OpenXR LOCAL space puts the origin at the starting head "
+                   f"pose, not on the floor): set the Floor (--floor) to its height, or to 'height' "
+                   f"to put it under a performer of the typed height")
     raise RecordingError(msg, path=path)
 
 
@@ -184,7 +187,7 @@ def _jumps(pos, jump_m):
 
 
 def resample(recording: Recording, fps, t_start=None, t_end=None, required=REQUIRED_DEVICES,
-             gap_factor=3.0, freeze_s=0.1, move_tol=0.002, check_units=True, jump_m=0.25):
+             gap_factor=3.0, freeze_s=0.1, move_tol=0.002, check_units=True, jump_m=0.25, floor=0.0):
     """Resample every device of ``recording`` onto one frame grid.
 
     recording: a :class:`Recording` (Blender axes, metres).
@@ -198,7 +201,8 @@ def resample(recording: Recording, fps, t_start=None, t_end=None, required=REQUI
     freeze_s, move_tol: a pose repeated exactly for more than ``freeze_s``
     seconds while another device moves more than ``move_tol`` metres is frozen.
     jump_m: metres a sample may stand off both neighbours before it is a jump.
-    check_units: raise when the median head height is outside 0.5-3 m (see
+    check_units: raise when the median head height above ``floor`` (the floor's height in the
+    recording, metres; None: not known yet, no check) is outside 0.5-3 m (see
     :func:`check_head_height`).
 
     Returns ``(times, pos, quat, valid, report)``: ``times`` ``(T,)`` seconds;
@@ -256,10 +260,10 @@ def resample(recording: Recording, fps, t_start=None, t_end=None, required=REQUI
             P["reason"][idx[fr]] = "frozen"
 
     # --- units sanity check
-    if check_units and "head" in prep:
+    if check_units and floor is not None and "head" in prep:
         P = prep["head"]
         check_head_height(np.median(P["pos"][P["ok"], 2]), path=path,
-                          units=recording.metadata.get("units"))
+                          units=recording.metadata.get("units"), floor=floor)
 
     # --- grid
     firsts = {d: P["t"][P["ok"]][0] for d, P in prep.items()}

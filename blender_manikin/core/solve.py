@@ -48,8 +48,11 @@ class SolveSettings:
     optional ``arm_span``, metres); with TPOSE/AUTO a given ``height`` overrides the measured
     stature.  sole: the performer's shoe soles, metres (None: :data:`.skeleton.SOLE`, 3 cm; 0
     barefoot): the stature measured from the head's height is the barefoot one, and the body
-    stands that much above the floor.  offsets: a device-offsets preset name, ``"none"``, ``"auto"`` (see
-    :func:`resolve_offsets`) or an offsets dict (:mod:`.device_offsets`).  max_frames: crop.
+    stands that much above the floor.  floor: where the recording's floor is, metres on its
+    vertical axis (0, the default: at its zero), or ``"height"``: under a performer of
+    ``height`` standing in the take (:func:`floor_height`); the solve moves it to z = 0.
+    offsets: a device-offsets preset name, ``"none"``, ``"auto"`` (see :func:`resolve_offsets`)
+    or an offsets dict (:mod:`.device_offsets`).  max_frames: crop.
     smoothing: ``"auto"`` (default: each device's, or keypoint's, track gets the Savitzky-Golay
     filter its own measured noise calls for, so clean tracks stay as they are) or one window in
     seconds for all (0: off); see :mod:`.smoothing`.
@@ -72,6 +75,7 @@ class SolveSettings:
     height: float | None = None
     arm_span: float | None = None
     sole: float | None = None
+    floor: object = 0.0               # metres, or "height" (under the performer of `height`)
     offsets: object = "auto"
     max_frames: int | None = None
     layout: object = None
@@ -100,7 +104,7 @@ class SolveOutcome:
     info: list = field(default_factory=list)
     result: PoseResult | None = None
     timings: dict = field(default_factory=dict)
-    floor: float | None = None          # keypoint solves: the floor height found (metres), moved to z = 0
+    floor: float | None = None          # the floor's height in the recording (metres), moved to z = 0
 
     def summary(self, extra_timings=None) -> str:
         """One line: frames, fps, where the solve gave way, stature, calibration, gaps, timings."""
@@ -115,7 +119,8 @@ class SolveOutcome:
         if self.body is not None:
             parts.append(f"stature {self.body.stature:.2f} m")
         for note in self.info:
-            if note.startswith(("calibrated", "arm span", "estimated stature", "no twist information",
+            if note.startswith(("calibrated", "arm span", "estimated stature", "head stands", "floor at",
+                                "no twist information",
                                 "point(s) never seen", "retarget:", "smoothing", "no smoothing")) \
                     or " tracker offset" in note:
                 parts.append(note)
@@ -140,10 +145,13 @@ def read_recording(path, settings: SolveSettings):
                           rate=settings.rate)
 
 
-def resample_recording(recording, fps):
-    """``(times, pos, quat, valid, report)`` on a grid at ``fps`` (see :func:`.resample.resample`)."""
+def resample_recording(recording, fps, floor=0.0):
+    """``(times, pos, quat, valid, report)`` on a grid at ``fps`` (see :func:`.resample.resample`).
+    floor: the floor setting (:func:`parse_floor`): the head-height check measures from a
+    floor height and is skipped where the floor will be put under the performer."""
     from .resample import resample
-    return resample(recording, fps)
+    floor = parse_floor(floor)
+    return resample(recording, fps, floor=None if floor == FLOOR_FROM_HEIGHT else floor)
 
 
 def resolve_offsets(offsets, recording):
@@ -173,12 +181,81 @@ def make_targets(times, pos, quat, valid, fps, offsets="none"):
     return device_offsets.to_targets(times, pos, quat, valid, off, fps=fps), off
 
 
+def standing_head_height(targets: TrackerTargets) -> float:
+    """The head joint's standing height (metres, the recording's z): the 90th percentile of the
+    head target's z over the take (a performer who mostly stands, robust to jumps and noise)."""
+    return float(np.nanpercentile(np.asarray(targets.pos["head"])[:, 2], 90))
+
+
+def head_height_for(stature, sole=None) -> float:
+    """How high (metres above the floor) the head joint of a performer of ``stature`` metres
+    stands on ``sole`` metres of shoe sole (None: :data:`.skeleton.SOLE`): the inverse of
+    :func:`.calibration.stature_from_head_height`."""
+    return float(sk.sole_or_default(sole)) + float(stature) * sk.PROPORTIONS["head_height"]
+
+
+#: the floor settings that are not a number (see :func:`floor_height`)
+FLOOR_FROM_HEIGHT = "height"
+
+
+def parse_floor(value):
+    """``SolveSettings.floor`` checked: a float (metres) or :data:`FLOOR_FROM_HEIGHT`.
+    None or "" mean 0.  Raises :class:`SolveError` naming the value."""
+    if value is None or (isinstance(value, str) and not value.strip()):
+        return 0.0
+    if isinstance(value, str) and value.strip().lower() == FLOOR_FROM_HEIGHT:
+        return FLOOR_FROM_HEIGHT
+    try:
+        floor = float(value)
+    except (TypeError, ValueError):
+        raise SolveError(f"floor {value!r}: expected a height in metres or {FLOOR_FROM_HEIGHT!r}") from None
+    if not np.isfinite(floor):
+        raise SolveError(f"floor {value!r}: expected a finite height in metres")
+    return floor
+
+
+def floor_height(settings: SolveSettings, targets: TrackerTargets) -> float:
+    """Where the floor is in the recording (metres, the recording's z after axes and units).
+
+    ``settings.floor``: a number, the floor's height as typed (0, the default: the recording's
+    zero is the floor, as OpenXR's stage space and SteamVR's standing universe put it), or
+    ``"height"``: under a performer of ``settings.height`` standing in the take, i.e. the
+    standing head height (:func:`standing_head_height`) less the head height of that stature
+    (:func:`head_height_for`), for recordings whose origin is at eye level, on a desk or
+    anywhere else.  Raises :class:`SolveError` when ``"height"`` has no height."""
+    floor = parse_floor(settings.floor)
+    if floor != FLOOR_FROM_HEIGHT:
+        return floor
+    if not settings.height or settings.height <= 0:
+        raise SolveError("the floor from the performer's height needs the height (metres)")
+    return standing_head_height(targets) - head_height_for(settings.height, settings.sole)
+
+
+def move_floor(targets: TrackerTargets, floor: float) -> TrackerTargets:
+    """``targets`` with the floor at ``floor`` metres moved to z = 0 (every device lowered by
+    ``floor``); the same object when ``floor`` is 0."""
+    if not floor:
+        return targets
+    down = np.array([0.0, 0.0, float(floor)])
+    return TrackerTargets(fps=targets.fps, pos={d: np.asarray(v) - down for d, v in targets.pos.items()},
+                          rot=targets.rot, valid=targets.valid)
+
+
+def floor_note(settings: SolveSettings, floor: float):
+    """The note for the summary when the floor was moved (else None)."""
+    if not floor:
+        return None
+    how = (f"under the {settings.height:.2f} m performer" if parse_floor(settings.floor) == FLOOR_FROM_HEIGHT
+           else "as set")
+    return f"floor at {floor:+.3f} m ({how}) moved to 0"
+
+
 def body_from_head_height(targets: TrackerTargets, height=None, arm_span=None, sole=None) -> sk.Body:
     """A body when no calibration pose is available: stature = ``height`` (metres) if given,
-    else from the 90th percentile of the head joint height (standing on ``sole`` metres of shoe
-    sole, None: :data:`.skeleton.SOLE`: (z - sole) / 0.870), clipped to 1.0-2.3 m."""
+    else from the standing head height (:func:`standing_head_height`; standing on ``sole``
+    metres of shoe sole, None: :data:`.skeleton.SOLE`: (z - sole) / 0.870), clipped to 1.0-2.3 m."""
     if height is None:
-        head_z = np.nanpercentile(np.asarray(targets.pos["head"])[:, 2], 90)
+        head_z = standing_head_height(targets)
         height = float(np.clip((head_z - sk.sole_or_default(sole)) / sk.PROPORTIONS["head_height"], 1.0, 2.3))
     try:
         return sk.make_body(sk.BodyMeasurements(stature=float(height), arm_span=arm_span or None, sole=sole))
@@ -261,6 +338,11 @@ def calibrate(settings: SolveSettings, targets: TrackerTargets, times, offsets):
     return body, res.offsets, info
 
 
+#: metres the standing head may stand above or below where a typed height puts it before the
+#: summary says so (:func:`head_height_note`)
+HEAD_HEIGHT_TOLERANCE = 0.15
+
+
 def stature_note(settings: SolveSettings, outcome: SolveOutcome):
     """A note when the body's stature is implausible (:func:`.calibration.stature_warning`), else None."""
     from . import calibration as cal
@@ -270,9 +352,26 @@ def stature_note(settings: SolveSettings, outcome: SolveOutcome):
         sized_by = "T-pose"
     else:
         sized_by = "head height"
-    head = np.asarray(outcome.targets.pos["head"])[:, 2]
     units = settings.units or (getattr(outcome.recording, "metadata", None) or {}).get("units", "m")
-    return cal.stature_warning(outcome.body.stature, float(np.nanpercentile(head, 90)), sized_by, units)
+    return cal.stature_warning(outcome.body.stature, standing_head_height(outcome.targets), sized_by, units)
+
+
+def head_height_note(settings: SolveSettings, outcome: SolveOutcome, tolerance=HEAD_HEIGHT_TOLERANCE):
+    """With a typed height: a note when the standing head (:func:`standing_head_height`, floor
+    moved) is more than ``tolerance`` metres from where that performer's head stands
+    (:func:`head_height_for`), else None.  The body hangs from the head, so a floor that is
+    not where the recording says folds the legs (head too low) or lifts the feet (too high)."""
+    if not settings.height or outcome.body is None:
+        return None
+    head = standing_head_height(outcome.targets)
+    expected = head_height_for(outcome.body.stature, outcome.body.sole)
+    if abs(head - expected) <= tolerance:
+        return None
+    side = "lower" if head < expected else "higher"
+    return (f"head stands {head:.2f} m above the floor, {abs(head - expected):.2f} m {side} than a "
+            f"standing {outcome.body.stature:.2f} m performer's ({expected:.2f} m): check the floor "
+            f"(Floor 'height', --floor height, puts it under the performer), the height, or whether the "
+            f"performer sits")
 
 
 def default_solver(targets, body, progress=None, model=None, overlap=None):
@@ -344,6 +443,7 @@ def solve_recording(source, settings: SolveSettings | None = None, solver=None, 
     report = progress or (lambda f, stage=None: None)
     if settings.fps is None or not settings.fps > 0:
         raise SolveError("no frame rate: set fps")
+    parse_floor(settings.floor)                  # a bad floor setting fails before the file is read
     from .io_keypoints import KeypointRecording, is_keypoint_input
     if isinstance(source, KeypointRecording) or (
             (isinstance(source, str) or hasattr(source, "__fspath__")) and is_keypoint_input(source)):
@@ -359,7 +459,7 @@ def solve_recording(source, settings: SolveSettings | None = None, solver=None, 
         out.recording = source
     report(STAGES["resampling"], "resampling")
     t = _time.perf_counter()
-    times, pos, quat, valid, out.report = resample_recording(out.recording, settings.fps)
+    times, pos, quat, valid, out.report = resample_recording(out.recording, settings.fps, settings.floor)
     if settings.max_frames is not None and settings.max_frames > 0 and len(times) > settings.max_frames:
         n = int(settings.max_frames)
         times = times[:n]
@@ -372,15 +472,17 @@ def solve_recording(source, settings: SolveSettings | None = None, solver=None, 
     smoothed = smoothing_note(smoothing, list(windows.values()) if windows else None, "device")
     out.targets, offsets = make_targets(times, pos, quat, valid, settings.fps,
                                         resolve_offsets(settings.offsets, out.recording))
+    out.floor = floor_height(settings, out.targets)
+    out.targets = move_floor(out.targets, out.floor)
     out.timings["resample"] = _time.perf_counter() - t
     report(STAGES["calibrating"], "calibrating")
     t = _time.perf_counter()
     out.body, out.offsets, out.info = calibrate(settings, out.targets, times, offsets)
     if out.offsets is not offsets:     # calibration refined the device rotations
-        out.targets, _ = make_targets(times, pos, quat, valid, settings.fps, out.offsets)
-    note = stature_note(settings, out)
-    if note:
-        out.info.append(note)
+        out.targets = move_floor(make_targets(times, pos, quat, valid, settings.fps, out.offsets)[0], out.floor)
+    for note in (floor_note(settings, out.floor), stature_note(settings, out), head_height_note(settings, out)):
+        if note:
+            out.info.append(note)
     out.info.append(smoothed)
     out.timings["calibrate"] = _time.perf_counter() - t
     report(STAGES["solving"], "solving")

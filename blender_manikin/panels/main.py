@@ -121,12 +121,15 @@ class MANIKIN_PT_calibration(_Base, Panel):
             row.operator("manikin.find_tpose", text="", icon='VIEWZOOM')
         elif s.calibration == 'AUTO':
             layout.operator("manikin.find_tpose", icon='VIEWZOOM')
-        if s.calibration == 'MEASURE':
+        if s.calibration == 'MEASURE' or s.floor_mode == 'PERFORMER':
             layout.prop(s, "height")
         else:
             toggled_row(layout, s, "use_height", "height", "Height")
         layout.prop(s, "arm_span")
         layout.prop(s, "sole")
+        layout.prop(s, "floor_mode")
+        if s.floor_mode == 'OFFSET':
+            layout.prop(s, "floor_height")
         layout.separator()
         row = layout.row(align=True)
         row.prop(s, "offsets_preset")
