@@ -202,6 +202,23 @@ def test_tpose_recovers_stature_span_and_rotation_offsets(stature, span, heading
     assert np.linalg.norm(rebuilt[J["left_wrist"]] - rebuilt[J["right_wrist"]]) == pytest.approx(true_span, abs=0.01)
 
 
+@pytest.mark.parametrize("stature,droop", [(1.55, 10.0), (1.75, 15.0), (1.95, 19.0)])
+def test_a_tpose_with_the_arms_below_horizontal_measures_the_whole_span(stature, droop):
+    """Performers rarely hold a T-pose level: with the arms up to 19° below horizontal (still a
+    T-pose) the span is measured along the arms, from the shoulders, not as the wrists'
+    distance, which is 1.6-7.1 cm short at 10-19° (the arms came out that much too short)."""
+    body = make_body(stature)
+    rest = body.rest_positions()
+    true_span = np.linalg.norm(rest[J["left_wrist"]] - rest[J["right_wrist"]])
+    pos, rot = body_frames(body, 60, heading=25.0, arm_down=droop)
+    targets, *_ = device_targets(pos, rot, get_preset("none"), "none")
+    res = calibrate(targets, time=0.5)
+    assert res.plausible, res.problems
+    assert res.pose == "T" and res.arm_angle_deg == pytest.approx(droop, abs=0.5)
+    assert res.measured["wrist_distance"] < true_span - 0.015          # what the wrists alone say
+    assert res.measurements.arm_span == pytest.approx(true_span, abs=0.003)
+
+
 def test_apose_is_classified_and_tilts_the_wrists():
     body = make_body(BodyMeasurements(stature=1.80, arm_span=1.62))
     pos, rot = body_frames(body, 60, heading=15.0, arm_down=40.0)
