@@ -39,6 +39,10 @@ def ry(a_deg):
     return axis_angle_rotation(np.array([0, 1.0, 0]), np.deg2rad(a_deg))
 
 
+def rx(a_deg):
+    return axis_angle_rotation(np.array([1.0, 0, 0]), np.deg2rad(a_deg))
+
+
 # --------------------------------------------------------------------------
 # synthetic performer
 def body_frames(body, n, heading=0.0, arm_down=0.0, shift=(0.3, -0.2), moving=None):
@@ -294,6 +298,30 @@ def test_find_tpose_picks_the_still_tpose_moment():
     assert res.plausible and res.measurements.stature == pytest.approx(1.70, abs=0.01)
     # default time: find_tpose is used
     assert calibrate(targets).frame == cand.frame
+
+
+def test_arms_spread_while_lying_or_crouching_are_not_a_tpose():
+    """Arms out at shoulder height are a T-pose only when the head stands as high as a standing
+    performer's: lying on the back with the arms spread on the floor (HDM05's lie-down takes,
+    which once calibrated a 7 cm body and failed the solve) or crouching with the arms out is
+    not one; in a take with both, the standing T-pose is found."""
+    body = make_body(1.75)
+    n = 60
+    pos, rot = body_frames(body, n)
+    on_back = rx(-90.0)                                             # face up, the feet along -y
+    pelvis = pos[0, 0]
+    lying_pos = (pos - pelvis) @ on_back.T + [pelvis[0], pelvis[1], 0.12]
+    lying_rot = on_back @ rot
+    for p_, r_ in ((lying_pos, lying_rot), (pos - [0.0, 0.0, 0.6], rot)):
+        targets, *_ = device_targets(p_, r_, get_preset("none"), "none")
+        assert not find_tpose(targets).plausible
+        with pytest.raises(CalibrationError, match="not a usable"):
+            calibrate(targets, strict=True)
+    both, *_ = device_targets(np.concatenate([lying_pos, pos]), np.concatenate([lying_rot, rot]),
+                              get_preset("none"), "none")
+    cand = find_tpose(both)
+    assert cand.plausible and cand.frame >= n
+    assert calibrate(both).measurements.stature == pytest.approx(1.75, abs=0.01)
 
 
 def test_example_recording_calibrates_to_its_body():

@@ -98,6 +98,15 @@ SHOULDER_HEIGHT = PROPORTIONS["shoulder_height"]
 SHOULDER_WIDTH = PROPORTIONS["shoulder_width"]
 ARM_LENGTH = PROPORTIONS["upper_arm"] + PROPORTIONS["forearm"]     # shoulder to wrist, fraction of H
 TPOSE_WRIST_DISTANCE = SHOULDER_WIDTH + 2 * ARM_LENGTH             # 0.873 H
+#: statures (m) the head height of a T-pose candidate may imply (:func:`find_tpose`): a head
+#: lower than a 1.0 m performer's is someone crouching, kneeling or lying with the arms out
+#: (HDM05's lie-down takes: arms spread on the floor, the head 9 cm up, once passed as a T-pose
+#: of a 7 cm performer and failed the solve), or a floor that is not at 0
+TPOSE_STATURE_RANGE = (1.0, 2.5)
+#: wrist distance / the expected T-pose wrist distance (:data:`TPOSE_WRIST_DISTANCE` of the
+#: stature the head height implies) a plausible T-pose keeps within (arm spans are 0.95-1.1
+#: statures; Bandai's short-necked skeleton reads 1.05)
+TPOSE_SPAN_RATIO = (0.8, 1.25)
 
 _Z = np.array([0.0, 0.0, 1.0])
 
@@ -254,7 +263,8 @@ def _window_mean(x, w):
 
 
 def find_tpose(targets: TrackerTargets, window=0.25, t0=0.0) -> TPoseCandidate:
-    """Propose the most T-pose-like moment: hands far apart at shoulder height, still.
+    """Propose the most T-pose-like moment: hands far apart at shoulder height, still, and the
+    head as high as a standing performer's (:data:`TPOSE_STATURE_RANGE`; the floor at z = 0).
 
     targets: joint targets (head, left_hand, right_hand needed).  window:
     half-width in seconds over which the pose must hold.  t0: time of frame
@@ -274,7 +284,9 @@ def find_tpose(targets: TrackerTargets, window=0.25, t0=0.0) -> TPoseCandidate:
     head = targets.pos["head"]
     wl = targets.pos["left_hand"]
     wr = targets.pos["right_hand"]
-    H = np.maximum((head[:, 2] - SOLE) / HEAD_HEIGHT, 0.3)
+    H_head = (head[:, 2] - SOLE) / HEAD_HEIGHT
+    standing = (H_head >= TPOSE_STATURE_RANGE[0]) & (H_head <= TPOSE_STATURE_RANGE[1])
+    H = np.maximum(H_head, 0.3)
     shoulder_z = head[:, 2] - (HEAD_HEIGHT - SHOULDER_HEIGHT) * H
     span_ratio = np.linalg.norm(wl - wr, axis=-1) / (TPOSE_WRIST_DISTANCE * H)
     height_err = 0.5 * (np.abs(wl[:, 2] - shoulder_z) + np.abs(wr[:, 2] - shoulder_z))
@@ -284,13 +296,14 @@ def find_tpose(targets: TrackerTargets, window=0.25, t0=0.0) -> TPoseCandidate:
                      + np.linalg.norm(np.diff(wr, axis=0), axis=-1)) * fps / 2
         speed[0] = speed[1]
     cost = np.abs(1.0 - span_ratio) + 3.0 * height_err / H + 0.5 * speed
-    cost = np.where(ok & np.isfinite(cost), cost, 1e3)
+    cost = np.where(ok & standing & np.isfinite(cost), cost, 1e3)
     mc = _window_mean(cost, w)
     k = int(np.argmin(mc))
     sr = float(_window_mean(span_ratio, w)[k])
     he = float(_window_mean(height_err, w)[k])
     sp = float(_window_mean(speed, w)[k])
-    plausible = bool(mc[k] < 1e2 and sr > 0.8 and he < 0.12 and sp < 0.3)
+    lo, hi = TPOSE_SPAN_RATIO
+    plausible = bool(mc[k] < 1e2 and lo < sr < hi and he < 0.12 and sp < 0.3)
     return TPoseCandidate(time=float(t0 + k / fps), frame=k, cost=float(mc[k]), plausible=plausible,
                           span_ratio=sr, height_error=he, speed=sp)
 
