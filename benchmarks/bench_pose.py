@@ -17,6 +17,9 @@ arm span, as for a real user: the error then includes the skeletons' differences
 the true skeleton.  ``--body tpose`` sizes each performer by the add-on's own calibration
 instead (:func:`tpose_calibration`: the skeleton stood in its rest T-pose, measured from the head's
 height above the floor and the wrists' distance, as a recording that starts with a T-pose is).
+``--body head`` sizes each clip as the add-on sizes a recording with no calibration pose (a game
+replay): the stature from the clip's standing head height (:func:`.solve.body_from_head_height`),
+proportional arms (the add-on then lengthens arms that cannot reach; the benchmark does not).
 
 Methods: (a) the shipped model, network + analytic limbs (``core.pipeline.solve``); (p) the
 previously shipped model, same pipeline; (b) the network-only baseline: the same backbone trained
@@ -91,6 +94,7 @@ from blender_manikin.core.devices import DEVICE_JOINT, REQUIRED_DEVICES  # noqa:
 from blender_manikin.core.model_runner import ModelRunner, MODELS_DIR  # noqa: E402
 from blender_manikin.core.pose_result import TrackerTargets  # noqa: E402
 from blender_manikin.core.smoothing import parse_smoothing, smooth_targets  # noqa: E402
+from blender_manikin.core.solve import body_from_head_height  # noqa: E402
 
 SHARED = os.path.join(os.path.dirname(ROOT), "shared", "data")
 DATASETS = {
@@ -115,7 +119,8 @@ TRACKER_SETS = {
 SHIPPED = "(a) MANIKIN, shipped model"
 #: ``--body`` modes and their table titles
 BODY_TITLES = {"calibrated": "calibrated body (T-pose: stature and arm span)", "gt": "true skeleton",
-               "tpose": "T-pose calibration (the add-on's, from the performer's T-pose)"}
+               "tpose": "T-pose calibration (the add-on's, from the performer's T-pose)",
+               "head": "no calibration pose (the add-on's fallback: stature from the standing head height)"}
 BODY_MODES = tuple(BODY_TITLES)
 TRACKER_COLUMNS = ["MPJPE", "L-PE", "knee", "ankle", "ankle→target", "ankle→target max", "skate",
                    "Jitter", "Jitter-GT", "frames/s"]
@@ -363,7 +368,7 @@ def run_dataset(name, methods, args, body_mode):
                 if (key, d) not in tpose_cache:
                     tpose_cache[key, d] = tpose_calibration(gt_body, d)
             bodies = {d: tpose_cache[key, d][0] for d in sets}
-        else:
+        elif body_mode == "gt":
             bodies = {d: gt_body for d in sets}
         tgs = {d: targets_from_gt(gt_pos, gt_world, fps, d) for d in sets}
         if args.capture:
@@ -377,6 +382,8 @@ def run_dataset(name, methods, args, body_mode):
         if body_mode == "tpose":          # the calibrated device offsets, as the solve applies them
             tgs = {d: with_offsets(tg, tpose_cache[key, d][1]) for d, tg in tgs.items()}
         tgs = {d: smooth_targets(tg, args.smoothing)[0] for d, tg in tgs.items()}     # as the solve does
+        if body_mode == "head":           # each clip a recording without a T-pose, sized by its head
+            bodies = {d: body_from_head_height(tg) for d, tg in tgs.items()}
         frames += T
         all_targets.append((tgs, bodies))
         cls = by_class.setdefault(motion_class(f), {"clips": 0, "frames": 0})
@@ -509,7 +516,9 @@ def main(argv=None):
     ap.add_argument("--body", default="calibrated,gt",
                     help="bodies to solve with, comma-separated: calibrated (the body model at the "
                          "skeleton's stature and arm span), gt (the true skeleton) and/or tpose (what the "
-                         "add-on's calibration builds from the performer standing in a T-pose)")
+                         "add-on's calibration builds from the performer standing in a T-pose) and/or "
+                         "head (no calibration pose: each clip sized by its standing head height, "
+                         "proportional arms, as a game replay is)")
     ap.add_argument("--max-clips", type=int, default=0, help="limit the clips per dataset (0: all)")
     ap.add_argument("--repeats", type=int, default=3,
                     help="timed solves of the whole set per method; frames/s is the best (default 3)")

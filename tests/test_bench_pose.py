@@ -129,3 +129,38 @@ def test_tpose_offsets_put_the_foot_targets_where_the_calibrated_body_has_its_an
         assert np.abs(out.pos[d] - raw.pos[d]).max() < 1e-9
     same = bp.with_offsets(raw, "none")
     assert all(np.array_equal(same.pos[d], raw.pos[d]) and np.allclose(same.rot[d], raw.rot[d]) for d in devices)
+
+
+def test_head_body_sizes_each_clip_by_its_standing_head_height(monkeypatch):
+    """--body head: each clip is solved with the body a recording without a calibration pose
+    gets (core.solve.body_from_head_height of the clip's own trackers), whatever its skeleton;
+    two clips of one performer standing at different heights get different bodies."""
+    import argparse
+    import numpy as np
+    from blender_manikin.core import skeleton as sk
+    from blender_manikin.core.solve import body_from_head_height
+    performer = sk.make_body(1.80)
+    clips = {}
+    for name, dz in (("a_walk_000.npz", 0.0), ("b_walk_001.npz", -0.10)):
+        T = 40
+        local = np.tile(np.eye(3), (T, sk.NUM_JOINTS, 1, 1))
+        root = np.tile(performer.root_rest + [0.0, 0.0, dz], (T, 1))
+        pos, world = sk.forward_kinematics(local, root, performer)
+        clips[name] = (performer, local, np.asarray(pos), np.asarray(world), 30.0, np.ones((T, 2), bool))
+    monkeypatch.setattr(bp, "dataset_files", lambda name, max_clips=0: (list(clips), "fake"))
+    monkeypatch.setattr(bp, "load_clip_with_contacts", lambda f: clips[f])
+    seen = []
+
+    def method(targets, body):
+        seen.append((targets, body))
+        from blender_manikin.core import baselines
+        return baselines.classic_ik(targets, body)
+    args = argparse.Namespace(max_clips=0, capture=None, smoothing=0.0, markdown=True, repeats=1)
+    r = bp.run_dataset("hdm05", {"(c) classic IK": method}, args, "head")
+    assert r["clips"] == 2 and r["body"] == "head"
+    first, second = seen[0], seen[1]                  # the two clips (the timed runs come after)
+    for targets, body in (first, second):
+        assert body.stature == body_from_head_height(targets).stature
+    assert abs(first[1].stature - 1.80) < 0.01                     # stood at its own height
+    assert abs(first[1].stature - second[1].stature - 0.10 / sk.PROPORTIONS["head_height"]) < 1e-6
+    assert "head" in bp.BODY_MODES and set(bp.BODY_TITLES) == set(bp.BODY_MODES)
