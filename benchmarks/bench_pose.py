@@ -232,8 +232,7 @@ def captured_targets(targets, capture, seed):
         streams[d] = TrackerStream(d, logged, pos, rot.quat_mul(noise, q))
     times, pos, quat, valid, _ = resample(Recording(streams=streams, source="captured"), fps,
                                           t_start=0.0, t_end=float(logged[-1]), required=tuple(streams),
-                                          check_units=False)      # metres by construction; lying-down
-                                                                  # clips hold the head near the floor
+                                          check_units=False)      # metres by construction
     return (TrackerTargets(fps=fps, pos={d: pos[d] for d in streams},
                            rot={d: rot.quat_to_matrix(quat[d]) for d in streams},
                            valid={d: valid[d] for d in streams}), int(times.shape[0]))

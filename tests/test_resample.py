@@ -163,6 +163,22 @@ def test_units_check_message_for_millimetres(tmp_path):
     times, *_ = resample(bad, 30, check_units=False)                 # opt-out
 
 
+def test_a_take_spent_mostly_on_the_floor_passes_the_units_check():
+    """The check takes the head's standing height (its 90th percentile), not its median: a
+    performer lying on the floor for most of the take (the head 0.2 m up, as in HDM05's lie-down
+    clips) and standing for the rest is no units error; a head never above 0.2 m still is."""
+    rec = make_recording(duration=3.0)
+    head = rec.streams["head"]
+    low = head.time < 0.8 * head.time[-1]
+    head.pos[low, 2] = 0.2
+    assert np.median(head.pos[:, 2]) < 0.5
+    times, pos, *_ = resample(rec, 30)
+    assert pos["head"][:, 2].min() < 0.25
+    head.pos[:, 2] = np.minimum(head.pos[:, 2], 0.2)
+    with pytest.raises(RecordingError, match="head is only 0.20 m above the floor"):
+        resample(rec, 30)
+
+
 def test_units_check_other_cases():
     with pytest.raises(RecordingError, match="positions look like centimetres; pass units=cm"):
         check_head_height(165.0)

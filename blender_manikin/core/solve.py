@@ -182,9 +182,11 @@ def make_targets(times, pos, quat, valid, fps, offsets="none"):
 
 
 def standing_head_height(targets: TrackerTargets) -> float:
-    """The head joint's standing height (metres, the recording's z): the 90th percentile of the
-    head target's z over the take (a performer who mostly stands, robust to jumps and noise)."""
-    return float(np.nanpercentile(np.asarray(targets.pos["head"])[:, 2], 90))
+    """The head joint's standing height (metres, the recording's z): the
+    :data:`.resample.STANDING_PERCENTILE` (90th) percentile of the head target's z over the take
+    (the performer stands for a tenth of it at least; robust to jumps and noise)."""
+    from .resample import STANDING_PERCENTILE
+    return float(np.nanpercentile(np.asarray(targets.pos["head"])[:, 2], STANDING_PERCENTILE))
 
 
 def head_height_for(stature, sole=None) -> float:
