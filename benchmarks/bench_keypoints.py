@@ -3,7 +3,7 @@ naive HybrIK, ``core/keypoint_solve.py``) against a Blender Damped-Track rig, on
 made from mocap, side by side, in one run.
 
     python benchmarks/bench_keypoints.py [--datasets bandai,hdm05]
-        [--layouts coco17,mediapipe33,h36m17,body25,smpl24] [--noise 0,1,2,4] [--drop 0.05]
+        [--layouts coco17,mediapipe33,h36m17,body25,smpl24] [--noise 0,1,2,4] [--drop 0.05] [--swap 0.05]
         [--max-clips 20] [--max-frames 600] [--smoothing auto|S] [--target-noise 2] [--seed 0] [--markdown]
 
 Data: the clips of ``bench_pose.py`` (Bandai Namco held-out takes, HDM05 validation clips; the
@@ -18,7 +18,11 @@ Noise: for every clip and layout one draw ``z ~ N(0, 1)`` per coordinate and one
 the same numbers); noise level σ (cm) gives ``clean + σ z`` (σ per coordinate: a point moves
 σ√3 on average in 3D), the same draw scaled for every σ.  Then ``--drop`` of the points are
 set to NaN at every σ (0 included), to mimic tracking loss: half of them in runs of 3-10 frames
-on random points, the rest as single random points.
+on random points, the rest as single random points.  ``--swap`` (default 0) first exchanges the
+legs' left/right labels on that fraction of the frames, and the arms' on as many, in episodes
+of 2-15 frames, as a markerless detector swaps sides (:func:`swap_masks`); the solve undoes such
+swaps (``core/keypoint_sides.py``), and the row ``adaptive, sides as read`` shows what they cost
+without that.
 
 Methods, each on the same noisy input, as a ``KeypointRecording`` (no axis conversion, solved at
 the clip's frame rate, so the solve's frames are the clip's frames):
@@ -124,16 +128,48 @@ def describe_smoothing(smoothing):
             else f"{smoothing:g} s (Savitzky-Golay)")
 
 
-def make_methods(smoothing=DEFAULT_SMOOTHING):
-    """method name -> ``(kind, adaptive, smoothing: "auto" or seconds)``, in table order."""
-    return {
-        "adaptive": ("solve", True, smoothing),
-        "naive": ("solve", False, smoothing),
-        "damped-track": ("damped", None, smoothing),
-        f"adaptive, {FIXED_WINDOW:g} s window": ("solve", True, FIXED_WINDOW),
-        "naive, no smoothing": ("solve", False, 0.0),
-        "adaptive, no smoothing": ("solve", True, 0.0),
+def make_methods(smoothing=DEFAULT_SMOOTHING, swaps=False):
+    """method name -> ``(kind, adaptive, smoothing: "auto" or seconds, fix_sides)``, in table
+    order; with ``swaps`` (the input has left/right label swaps) also the adaptive solve that
+    keeps the labels as read."""
+    methods = {
+        "adaptive": ("solve", True, smoothing, True),
+        "naive": ("solve", False, smoothing, True),
+        "damped-track": ("damped", None, smoothing, True),
+        f"adaptive, {FIXED_WINDOW:g} s window": ("solve", True, FIXED_WINDOW, True),
+        "naive, no smoothing": ("solve", False, 0.0, True),
+        "adaptive, no smoothing": ("solve", True, 0.0, True),
     }
+    if swaps:
+        methods["adaptive, sides as read"] = ("solve", True, smoothing, False)
+    return methods
+
+
+def swap_masks(rng, T, fraction):
+    """``{"legs": (T,) bool, "arms": (T,) bool}``: about ``fraction`` of the frames of each limb
+    pair in episodes of 2-15 frames whose left/right labels are exchanged (a detector's swaps)."""
+    out = {}
+    for part in ("legs", "arms"):
+        mask = np.zeros(T, bool)
+        while T > 2 and mask.mean() < min(max(fraction, 0.0), 0.5):
+            n = int(rng.integers(2, 16))
+            a = int(rng.integers(1, max(T - n, 2)))
+            mask[a:a + n] = True
+        out[part] = mask
+    return out
+
+
+def swap_sides(points, layout, masks):
+    """``points`` ``(T, K, 3)`` with each limb pair's left and right labels exchanged on its
+    ``masks`` frames (:func:`swap_masks`); a new array."""
+    from blender_manikin.core.keypoint_sides import limb_pairs
+    out = np.array(points, copy=True)
+    for part, mask in masks.items():
+        li, ri = limb_pairs(kl.LAYOUTS[layout].points, part)
+        sub = out[mask]
+        sub[:, li], sub[:, ri] = sub[:, ri].copy(), sub[:, li].copy()
+        out[mask] = sub
+    return out
 
 
 # --------------------------------------------------------------------------
@@ -204,13 +240,14 @@ def damped_track_baseline(rec: KeypointRecording, fps, smoothing=DEFAULT_SMOOTHI
 def run_method(spec, rec, fps):
     """``(PoseResult, floor moved to z = 0, seconds)`` of a method ``spec`` (:func:`make_methods`);
     seconds: the method (solve + FK) only."""
-    kind, adaptive, smoothing = spec
+    kind, adaptive, smoothing, fix_sides = spec
     t = time.perf_counter()
     if kind == "damped":
         res, floor = damped_track_baseline(rec, fps, smoothing)
         res.fk()
         return res, floor, time.perf_counter() - t
-    settings = SolveSettings(fps=fps, ik="adaptive" if adaptive else "naive", smoothing=smoothing)
+    settings = SolveSettings(fps=fps, ik="adaptive" if adaptive else "naive", smoothing=smoothing,
+                             fix_sides=fix_sides)
     out = ks.solve_keypoints(rec, settings)
     out.result.fk()
     seconds = time.perf_counter() - t
@@ -306,12 +343,15 @@ def run_dataset(name, args, layouts, noises, methods):
             rng = np.random.default_rng([args.seed, ds_index, ci, list(kl.LAYOUTS).index(lay)])
             z = rng.standard_normal(clean.shape)
             mask = drop_mask(rng, n, clean.shape[1], args.drop)
+            swaps = swap_masks(rng, n, args.swap) if args.swap > 0 else None
             if not warm:        # one untimed call of each method first (lazy imports, caches)
                 for spec in methods.values():
                     run_method(spec, KeypointRecording(times[:30], clean[:30], lay), fps)
                 warm = True
             for s in noises:
                 noisy = clean + (s / 100.0) * z
+                if swaps is not None:
+                    noisy = swap_sides(noisy, lay, swaps)
                 noisy[mask] = np.nan
                 drift_in = input_limb_drift_mm(noisy, lay)
                 rec = KeypointRecording(times, noisy, lay, source=os.path.basename(f))
@@ -380,6 +420,9 @@ def main(argv=None):
                     help="comma-separated: " + ",".join(kl.LAYOUTS))
     ap.add_argument("--noise", default="0,1,2,4", help="comma-separated σ per coordinate, cm")
     ap.add_argument("--drop", type=float, default=0.05, help="fraction of the points set missing (NaN)")
+    ap.add_argument("--swap", type=float, default=0.0,
+                    help="fraction of the frames whose legs' (and as many whose arms') left/right labels "
+                         "are exchanged, in episodes of 2-15 frames (default 0); adds the 'sides as read' row")
     ap.add_argument("--max-clips", type=int, default=20, help="clips per dataset (0: all)")
     ap.add_argument("--max-frames", type=int, default=600, help="frames per clip (0: all)")
     ap.add_argument("--smoothing", type=parse_smoothing, default=DEFAULT_SMOOTHING,
@@ -399,7 +442,7 @@ def main(argv=None):
         print(f"{SHARED} not found (a fresh clone has no datasets): nothing to benchmark", file=sys.stderr)
         return []
 
-    methods = make_methods(args.smoothing)
+    methods = make_methods(args.smoothing, swaps=args.swap > 0)
     results = [r for r in (run_dataset(n, args, layouts, noises, methods) for n in names) if r is not None]
     if not results:
         print("no dataset found: nothing to benchmark", file=sys.stderr)
@@ -408,7 +451,9 @@ def main(argv=None):
         print(f"machine: {platform.processor() or platform.machine()}, {os.cpu_count()} CPUs, numpy {np.__version__}")
     print(f"noise: Gaussian, σ per coordinate in cm (a point's mean 3D error is 1.60 σ; the same draw scaled "
           f"for every σ), seed {args.seed}; "
-          f"then {100 * args.drop:g} % of the points missing (NaN: half in runs of 3-10 frames, half single); "
+          + (f"legs' and arms' left/right labels exchanged on {100 * args.swap:g} % of the frames each "
+             f"(episodes of 2-15 frames); " if args.swap > 0 else "")
+          + f"then {100 * args.drop:g} % of the points missing (NaN: half in runs of 3-10 frames, half single); "
           f"smoothing {describe_smoothing(args.smoothing)} unless the method says otherwise")
     cols = [f"{c} [{UNITS[c]}]" if UNITS[c] else c for c in COLUMNS]
     fmt = {(f"{c} [{UNITS[c]}]" if UNITS[c] else c): v for c, v in FORMATS.items()}

@@ -45,6 +45,8 @@ Options of ``solve`` (they mirror the panel; ``--help`` has them all):
 --overlap 2|3|4               network windows seeing each frame: 2 (default, fastest), 3 or 4
                               (a little more accurate at 1.5 and 2 times the network time)
 --ik adaptive|naive           keypoints: HybrIK adaptive (default) or naive IK
+--keep-sides                  keypoints: keep left/right labels as read (default: swap
+                              back a limb the detector labelled as the other side)
 --mapping FILE.json           keypoints: a CSV's column names for the layout's points
 --save-layout FILE.json       write the layout detected in the first wide CSV
 --format blend,fbx,bvh,json,npz  one or several (default blend,fbx,json); without blend
@@ -130,6 +132,9 @@ def _add_solve_options(s):
                         "or one window in seconds for all (0: off)")
     s.add_argument("--ik", choices=("adaptive", "naive"), default="adaptive",
                    help="keypoints: HybrIK adaptive (default) or naive twist-and-swing IK")
+    s.add_argument("--keep-sides", action="store_true",
+                   help="keypoints: keep the left/right labels as read (default: a leg's or arm's points "
+                        "the detector gave the other side's labels for a few frames get their own back)")
     s.add_argument("--mapping", default=None, metavar="FILE.json",
                    help="keypoints: a CSV's columns for the layout's points "
                         '({"layout": "coco17", "columns": {"nose": "Nose", ...}})')
@@ -290,7 +295,7 @@ def solve_settings(args):
                        up=getattr(args, "up", None), smoothing=getattr(args, "smoothing", "auto"),
                        ik=getattr(args, "ik", "adaptive"), mapping=getattr(args, "mapping", None),
                        model=getattr(args, "model", None), sole=getattr(args, "sole", None),
-                       floor=getattr(args, "floor", 0.0),
+                       floor=getattr(args, "floor", 0.0), fix_sides=not getattr(args, "keep_sides", False),
                        overlap=getattr(args, "overlap", SolveSettings.overlap))
     if args.calibration_time is not None:
         st.calibration, st.tpose_time = "TPOSE", float(args.calibration_time)

@@ -145,6 +145,10 @@ class MANIKIN_Settings(PropertyGroup):
     smoothing: FloatProperty(name="Window", default=0.4, min=0.0, max=3.0, unit='TIME_ABSOLUTE',
                              description="Savitzky-Golay window over the tracker poses or keypoints, seconds "
                                          "(0: off); longer removes more noise and more fast detail")
+    fix_sides: BoolProperty(name="Fix Left/Right Swaps", default=True,
+                            description="Give a leg's or arm's points back their side where the detector "
+                                        "labelled them as the other side's for a few frames (the knees "
+                                        "would cross); off: the labels as read")
     ik: EnumProperty(name="IK", default='ADAPTIVE',
                      items=[('ADAPTIVE', "Adaptive", "HybrIK adaptive: each bone aims at its keypoint from "
                              "where the chain actually is, so errors do not accumulate"),
@@ -303,6 +307,7 @@ def config_from_settings(context):
         cfg.up = None if s.keypoint_up == 'AUTO' else s.keypoint_up.lower()
         cfg.rate = float(s.keypoint_rate) if s.use_keypoint_rate else None
         cfg.ik = s.ik.lower()
+        cfg.fix_sides = bool(s.fix_sides)
     cfg.smoothing = "auto" if s.smoothing_mode == 'AUTO' else float(s.smoothing)
     cfg.layout = bpy.path.abspath(s.layout_file) if s.layout_file else None
     cfg.axes = None if s.axes == 'AUTO' else s.axes.lower()

@@ -7,7 +7,9 @@
 Stages (each a function, for tests and benchmarks):
 
 1. read (:func:`.io_keypoints.read_keypoints`): metres, Blender axes, NaN = missing;
-2. :func:`bridge_gaps`: every point's missing stretches filled by linear interpolation in
+2. :func:`.keypoint_sides.fix_side_swaps`: legs' and arms' points that took the other side's
+   labels for a few frames (a markerless detector's left/right swaps) get their own back;
+   :func:`bridge_gaps`: every point's missing stretches filled by linear interpolation in
    time (held at the ends), reported as :class:`.resample.Gap` s;
 3. smoothing: by default (``smoothing="auto"``) :func:`.smoothing.smooth_auto`: each point's own
    Savitzky-Golay filter, chosen by Stein's unbiased risk estimate from the noise measured on
@@ -34,6 +36,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from . import hybrik
+from .keypoint_sides import fix_side_swaps
 from . import keypoint_layouts as kl
 from . import pipeline
 from . import rotations as rot
@@ -334,7 +337,7 @@ class PreparedKeypoints:
     keypoints (metres); gaps: the bridged :class:`.resample.Gap` s; never: points never seen;
     derived_spine: the layout has no spine points (:func:`rigid_trunk` applies); windows: with
     ``smoothing="auto"``, the window (seconds, 0: none) :func:`.smoothing.smooth_auto` chose for each point
-    seen, else None."""
+    seen, else None; sides: the :class:`.keypoint_sides.SideSwaps` undone (None: not looked for)."""
     times: np.ndarray
     P: np.ndarray
     b22: kl.Body22
@@ -344,17 +347,21 @@ class PreparedKeypoints:
     never: list
     derived_spine: bool = False
     windows: list = None
+    sides: object = None
 
 
-def prepare_keypoints(rec, fps, smoothing, height=None, max_frames=None, sole=None) -> PreparedKeypoints:
-    """Stages 2-7 of the module docstring on a :class:`.io_keypoints.KeypointRecording`: gaps
-    bridged, smoothed (``smoothing``: ``"auto"`` for :func:`.smoothing.smooth_auto`, else a Savitzky-Golay
-    window in seconds, 0: none), resampled to ``fps``, the 22 joints placed, the
-    body sized (scaled to ``height`` metres when given, on ``sole`` metres of shoe sole, None:
-    :data:`.skeleton.SOLE`) and the floor moved to z = 0.  Raises
+def prepare_keypoints(rec, fps, smoothing, height=None, max_frames=None, sole=None,
+                      fix_sides=True) -> PreparedKeypoints:
+    """Stages 2-7 of the module docstring on a :class:`.io_keypoints.KeypointRecording`: left/right
+    label swaps undone (``fix_sides``), gaps bridged, smoothed (``smoothing``: ``"auto"`` for
+    :func:`.smoothing.smooth_auto`, else a Savitzky-Golay window in seconds, 0: none),
+    resampled to ``fps``, the 22 joints placed, the body sized (scaled to ``height`` metres when
+    given, on ``sole`` metres of shoe sole, None: :data:`.skeleton.SOLE`) and the floor moved
+    to z = 0.  Raises
     :class:`.solve.SolveError` when a joint cannot be placed (a point it needs was never seen)."""
     lay = kl.LAYOUTS[rec.layout]
-    X, gaps = bridge_gaps(rec.time, rec.points, lay.points)
+    points, sides = fix_side_swaps(rec.points, lay.points) if fix_sides else (rec.points, None)
+    X, gaps = bridge_gaps(rec.time, points, lay.points)
     never = [lay.points[k] for k in range(X.shape[1]) if not np.isfinite(X[:, k]).any()]
     rate = 1.0 / float(np.median(np.diff(rec.time)))
     smoothing = parse_smoothing(smoothing)
@@ -377,7 +384,7 @@ def prepare_keypoints(rec, fps, smoothing, height=None, max_frames=None, sole=No
     body = size_body(P, height, derived_spine=derived_spine, sole=sole)
     floor = estimate_floor(P, body)
     return PreparedKeypoints(times, P - np.array([0.0, 0.0, floor]), b22, body, floor, gaps, never, derived_spine,
-                             chosen)
+                             chosen, sides)
 
 
 def solve_keypoints(source, settings: SolveSettings | None = None, progress=None) -> SolveOutcome:
@@ -413,7 +420,8 @@ def solve_keypoints(source, settings: SolveSettings | None = None, progress=None
     report(0.1, "preparing keypoints")
     fps = float(s.fps) if s.fps else 1.0 / float(np.median(np.diff(rec.time)))
     smoothing = parse_smoothing(s.smoothing)
-    prep = prepare_keypoints(rec, fps, smoothing, height=s.height, max_frames=s.max_frames, sole=s.sole)
+    prep = prepare_keypoints(rec, fps, smoothing, height=s.height, max_frames=s.max_frames, sole=s.sole,
+                             fix_sides=s.fix_sides)
     lay, b22, never = kl.LAYOUTS[rec.layout], prep.b22, prep.never
     out.report = GapReport(fps=fps, t0=float(prep.times[0]), t_end=float(prep.times[-1]),
                            num_frames=len(prep.times), devices=lay.points, gaps=prep.gaps)
@@ -429,6 +437,9 @@ def solve_keypoints(source, settings: SolveSettings | None = None, progress=None
     out.info.append(f"keypoints: {'adaptive' if adaptive else 'naive'} HybrIK, floor at {prep.floor:+.3f} m "
                     f"moved to 0")
     out.info.append(told)
+    swapped = prep.sides.note(1.0 / float(np.median(np.diff(rec.time)))) if prep.sides is not None else None
+    if swapped:
+        out.info.append(swapped)
     if parse_floor(s.floor) != 0.0:
         out.info.append(f"the floor setting ({s.floor!r}) is for trackers: keypoints find the floor under the feet")
     if b22.no_twist:

@@ -62,7 +62,8 @@ class SolveSettings:
     Keypoint inputs (:mod:`.keypoint_solve`) also use: keypoint_layout (a
     :mod:`.keypoint_layouts` name; None: told from the file), up (the file's up axis, ``+y``
     ...; None: told from the body), ik
-    (``"adaptive"`` or ``"naive"`` HybrIK) and mapping (a keypoint CSV's column mapping file).
+    (``"adaptive"`` or ``"naive"`` HybrIK), mapping (a keypoint CSV's column mapping file) and
+    fix_sides (undo a detector's left/right label swaps, :mod:`.keypoint_sides`; default on).
     Tracker inputs also use model (the pose network) and overlap (how many network windows see
     each frame: 2, the default, keeps 10,000 frames/s; 3 and 4 are a little more accurate at 1.5
     and 2 times the network time; :data:`.pipeline.OVERLAP_CHOICES`).
@@ -85,6 +86,7 @@ class SolveSettings:
     smoothing: object = "auto"        # "auto" or a window in seconds (0: off); trackers and keypoints
     ik: str = "adaptive"
     mapping: object = None
+    fix_sides: bool = True            # keypoints: undo left/right label swaps (keypoint_sides)
     model: str | None = None          # None / "auto": by the recording's trackers; a shipped name or .onnx
     overlap: int = DEFAULT_OVERLAP    # windows seeing each frame: 2, 3 or 4 (pipeline.OVERLAP_CHOICES)
 
@@ -120,6 +122,7 @@ class SolveOutcome:
             parts.append(f"stature {self.body.stature:.2f} m")
         for note in self.info:
             if note.startswith(("calibrated", "arm span", "estimated stature", "head stands", "floor at",
+                                "left/right labels swapped back",
                                 "no twist information",
                                 "point(s) never seen", "retarget:", "smoothing", "no smoothing")) \
                     or " tracker offset" in note:

@@ -50,6 +50,7 @@ class MANIKIN_PT_solve(_Base, Panel):
             toggled_row(col, s, "use_keypoint_rate", "keypoint_rate", "Rate")
             col.separator()
             smoothing_rows(col, s)
+            col.prop(s, "fix_sides")
             col.prop(s, "ik")
             toggled_row(col, s, "use_height", "height", "Height")
         else:
