@@ -234,17 +234,22 @@ def test_scene_objects_as_trackers(addon):
     np.testing.assert_allclose(head[:3], res.targets.pos["head"][11], atol=1e-4)
 
 
-def test_find_tpose_and_offsets_preset(addon, tmp_path):
+def write_tpose_recording(path, lift=0.0):
+    """A 3 s recording at 24 fps (a 1.8 m body) holding a clean T-pose on frames 20-50 (arms
+    straight out, identity rotations: more than 1 s), every device moved up by ``lift`` metres."""
     res = synthetic_result(T=72, fps=24.0)
-    # frames 20-50: arms straight out (identity rotations): a clean T-pose held > 1 s
     res.local_rot[20:51] = np.eye(3)
     res.root_pos[20:51] = res.body.root_rest
     res._fk = None
     pos, wr = res.fk()
     for dev, j in (("head", "head"), ("left_hand", "left_wrist"), ("right_hand", "right_wrist")):
-        res.targets.pos[dev] = pos[:, sk.J[j]].copy()
+        res.targets.pos[dev] = pos[:, sk.J[j]] + np.array([0.0, 0.0, lift])
         res.targets.rot[dev] = wr[:, sk.J[j]].copy()
-    path = write_recording_csv(tmp_path / "tpose.csv", res)
+    return write_recording_csv(path, res)
+
+
+def test_find_tpose_and_offsets_preset(addon, tmp_path):
+    path = write_tpose_recording(tmp_path / "tpose.csv")
     s = _settings(str(path))
     s.calibration = 'AUTO'
     assert bpy.ops.manikin.find_tpose() == {'FINISHED'}
@@ -282,15 +287,7 @@ def test_floor_setting_finds_the_tpose_and_stands_the_body_on_the_ground(addon, 
     from blender_manikin.panels import main as panels
     from blender_manikin.blender.properties import config_from_settings
     from types import SimpleNamespace
-    res = synthetic_result(T=72, fps=24.0)
-    res.local_rot[20:51] = np.eye(3)
-    res.root_pos[20:51] = res.body.root_rest
-    res._fk = None
-    pos, wr = res.fk()
-    for dev, j in (("head", "head"), ("left_hand", "left_wrist"), ("right_hand", "right_wrist")):
-        res.targets.pos[dev] = pos[:, sk.J[j]] - np.array([0.0, 0.0, 1.5])
-        res.targets.rot[dev] = wr[:, sk.J[j]].copy()
-    s = _settings(str(write_recording_csv(tmp_path / "eyes.csv", res)))
+    s = _settings(str(write_tpose_recording(tmp_path / "eyes.csv", lift=-1.5)))
     s.calibration = 'AUTO'
     assert s.floor_mode == 'ZERO' and config_from_settings(bpy.context).floor == 0.0
     with pytest.raises(RuntimeError, match="head is only"):
