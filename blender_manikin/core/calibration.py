@@ -13,9 +13,10 @@ window (default ±0.25 s) we measure
   measurements give ``sole``); from a raw HMD eye height use
   :func:`stature_from_eye_height`, eyes at ~0.936 H;
 * arm span (wrist to wrist, what :class:`.skeleton.BodyMeasurements` calls
-  ``arm_span``): the wrist distance in a T-pose; in an A-pose the shoulder
-  breadth (0.209 H) plus both shoulder-to-wrist distances, the shoulders
-  placed 0.870 H - 0.818 H below the head joint;
+  ``arm_span``): the shoulder breadth (0.209 H) plus both shoulder-to-wrist
+  distances, the shoulders placed 0.870 H - 0.818 H below the head joint, in
+  a T-pose as in an A-pose (a level T-pose's wrist distance; arms held a
+  little low do not shorten it);
 * the constant rotation between each device and its joint: in the pose the
   joint orientation is known - head, pelvis and ankles face the body heading
   (identity rotated by the heading yaw), a wrist's rest orientation (hand
