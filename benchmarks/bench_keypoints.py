@@ -4,6 +4,7 @@ made from mocap, side by side, in one run.
 
     python benchmarks/bench_keypoints.py [--datasets bandai,hdm05]
         [--layouts coco17,mediapipe33,h36m17,body25,smpl24] [--noise 0,1,2,4] [--drop 0.05] [--swap 0.05]
+        [--spikes 0.005]
         [--max-clips 20] [--max-frames 600] [--smoothing auto|S] [--target-noise 2] [--seed 0] [--markdown]
 
 Data: the clips of ``bench_pose.py`` (Bandai Namco held-out takes, HDM05 validation clips; the
@@ -22,7 +23,10 @@ on random points, the rest as single random points.  ``--swap`` (default 0) firs
 legs' left/right labels on that fraction of the frames, and the arms' on as many, in episodes
 of 2-15 frames, as a markerless detector swaps sides (:func:`swap_masks`); the solve undoes such
 swaps (``core/keypoint_sides.py``), and the row ``adaptive, sides as read`` shows what they cost
-without that.
+without that.  ``--spikes`` (default 0) then moves that fraction of the samples 0.3-0.8 m in a
+random direction, as a detector misplaces points (:func:`spike_offsets`, the same at every σ);
+the solve removes such spikes (``core/keypoint_spikes.py``), and the row ``adaptive, spikes
+kept`` shows what they cost without that.
 
 Methods, each on the same noisy input, as a ``KeypointRecording`` (no axis conversion, solved at
 the clip's frame rate, so the solve's frames are the clip's frames):
@@ -128,21 +132,32 @@ def describe_smoothing(smoothing):
             else f"{smoothing:g} s (Savitzky-Golay)")
 
 
-def make_methods(smoothing=DEFAULT_SMOOTHING, swaps=False):
-    """method name -> ``(kind, adaptive, smoothing: "auto" or seconds, fix_sides)``, in table
-    order; with ``swaps`` (the input has left/right label swaps) also the adaptive solve that
-    keeps the labels as read."""
+def make_methods(smoothing=DEFAULT_SMOOTHING, swaps=False, spikes=False):
+    """method name -> ``(kind, adaptive, smoothing: "auto" or seconds, fix_sides, despike)``, in
+    table order; with ``swaps`` (the input has left/right label swaps) also the adaptive solve
+    that keeps the labels as read, with ``spikes`` the one that keeps every sample."""
     methods = {
-        "adaptive": ("solve", True, smoothing, True),
-        "naive": ("solve", False, smoothing, True),
-        "damped-track": ("damped", None, smoothing, True),
-        f"adaptive, {FIXED_WINDOW:g} s window": ("solve", True, FIXED_WINDOW, True),
-        "naive, no smoothing": ("solve", False, 0.0, True),
-        "adaptive, no smoothing": ("solve", True, 0.0, True),
+        "adaptive": ("solve", True, smoothing, True, True),
+        "naive": ("solve", False, smoothing, True, True),
+        "damped-track": ("damped", None, smoothing, True, True),
+        f"adaptive, {FIXED_WINDOW:g} s window": ("solve", True, FIXED_WINDOW, True, True),
+        "naive, no smoothing": ("solve", False, 0.0, True, True),
+        "adaptive, no smoothing": ("solve", True, 0.0, True, True),
     }
     if swaps:
-        methods["adaptive, sides as read"] = ("solve", True, smoothing, False)
+        methods["adaptive, sides as read"] = ("solve", True, smoothing, False, True)
+    if spikes:
+        methods["adaptive, spikes kept"] = ("solve", True, smoothing, True, False)
     return methods
+
+
+def spike_offsets(rng, shape, fraction):
+    """``(T, K, 3)`` metres: 0 but on ``fraction`` of the samples, moved 0.3-0.8 m in a random
+    direction there (a detector's misplacements); ``shape`` the keypoints' ``(T, K, 3)``."""
+    hit = rng.random(shape[:2]) < fraction
+    d = rng.standard_normal(shape)
+    d /= np.linalg.norm(d, axis=-1, keepdims=True)
+    return np.where(hit[..., None], rng.uniform(0.3, 0.8, shape[:2] + (1,)) * d, 0.0)
 
 
 def swap_masks(rng, T, fraction):
@@ -240,14 +255,14 @@ def damped_track_baseline(rec: KeypointRecording, fps, smoothing=DEFAULT_SMOOTHI
 def run_method(spec, rec, fps):
     """``(PoseResult, floor moved to z = 0, seconds)`` of a method ``spec`` (:func:`make_methods`);
     seconds: the method (solve + FK) only."""
-    kind, adaptive, smoothing, fix_sides = spec
+    kind, adaptive, smoothing, fix_sides, despike = spec
     t = time.perf_counter()
     if kind == "damped":
         res, floor = damped_track_baseline(rec, fps, smoothing)
         res.fk()
         return res, floor, time.perf_counter() - t
     settings = SolveSettings(fps=fps, ik="adaptive" if adaptive else "naive", smoothing=smoothing,
-                             fix_sides=fix_sides)
+                             fix_sides=fix_sides, despike=despike)
     out = ks.solve_keypoints(rec, settings)
     out.result.fk()
     seconds = time.perf_counter() - t
@@ -344,6 +359,8 @@ def run_dataset(name, args, layouts, noises, methods):
             z = rng.standard_normal(clean.shape)
             mask = drop_mask(rng, n, clean.shape[1], args.drop)
             swaps = swap_masks(rng, n, args.swap) if args.swap > 0 else None
+            spikes = (spike_offsets(np.random.default_rng([args.seed, ds_index, ci, list(kl.LAYOUTS).index(lay), 1]),
+                                    clean.shape, args.spikes) if args.spikes > 0 else 0.0)
             if not warm:        # one untimed call of each method first (lazy imports, caches)
                 for spec in methods.values():
                     run_method(spec, KeypointRecording(times[:30], clean[:30], lay), fps)
@@ -352,6 +369,7 @@ def run_dataset(name, args, layouts, noises, methods):
                 noisy = clean + (s / 100.0) * z
                 if swaps is not None:
                     noisy = swap_sides(noisy, lay, swaps)
+                noisy = noisy + spikes
                 noisy[mask] = np.nan
                 drift_in = input_limb_drift_mm(noisy, lay)
                 rec = KeypointRecording(times, noisy, lay, source=os.path.basename(f))
@@ -423,6 +441,9 @@ def main(argv=None):
     ap.add_argument("--swap", type=float, default=0.0,
                     help="fraction of the frames whose legs' (and as many whose arms') left/right labels "
                          "are exchanged, in episodes of 2-15 frames (default 0); adds the 'sides as read' row")
+    ap.add_argument("--spikes", type=float, default=0.0,
+                    help="fraction of the samples moved 0.3-0.8 m in a random direction, as a detector "
+                         "misplaces points (default 0); adds the 'spikes kept' row")
     ap.add_argument("--max-clips", type=int, default=20, help="clips per dataset (0: all)")
     ap.add_argument("--max-frames", type=int, default=600, help="frames per clip (0: all)")
     ap.add_argument("--smoothing", type=parse_smoothing, default=DEFAULT_SMOOTHING,
@@ -442,7 +463,7 @@ def main(argv=None):
         print(f"{SHARED} not found (a fresh clone has no datasets): nothing to benchmark", file=sys.stderr)
         return []
 
-    methods = make_methods(args.smoothing, swaps=args.swap > 0)
+    methods = make_methods(args.smoothing, swaps=args.swap > 0, spikes=args.spikes > 0)
     results = [r for r in (run_dataset(n, args, layouts, noises, methods) for n in names) if r is not None]
     if not results:
         print("no dataset found: nothing to benchmark", file=sys.stderr)
@@ -453,6 +474,7 @@ def main(argv=None):
           f"for every σ), seed {args.seed}; "
           + (f"legs' and arms' left/right labels exchanged on {100 * args.swap:g} % of the frames each "
              f"(episodes of 2-15 frames); " if args.swap > 0 else "")
+          + (f"{100 * args.spikes:g} % of the samples moved 0.3-0.8 m (spikes); " if args.spikes > 0 else "")
           + f"then {100 * args.drop:g} % of the points missing (NaN: half in runs of 3-10 frames, half single); "
           f"smoothing {describe_smoothing(args.smoothing)} unless the method says otherwise")
     cols = [f"{c} [{UNITS[c]}]" if UNITS[c] else c for c in COLUMNS]

@@ -47,6 +47,8 @@ Options of ``solve`` (they mirror the panel; ``--help`` has them all):
 --ik adaptive|naive           keypoints: HybrIK adaptive (default) or naive IK
 --keep-sides                  keypoints: keep left/right labels as read (default: swap
                               back a limb the detector labelled as the other side)
+--keep-spikes                 keypoints: keep every sample (default: remove samples
+                              30 cm or more off their point's local median)
 --mapping FILE.json           keypoints: a CSV's column names for the layout's points
 --save-layout FILE.json       write the layout detected in the first wide CSV
 --format blend,fbx,bvh,json,npz  one or several (default blend,fbx,json); without blend
@@ -135,6 +137,9 @@ def _add_solve_options(s):
     s.add_argument("--keep-sides", action="store_true",
                    help="keypoints: keep the left/right labels as read (default: a leg's or arm's points "
                         "the detector gave the other side's labels for a few frames get their own back)")
+    s.add_argument("--keep-spikes", action="store_true",
+                   help="keypoints: keep every sample as read (default: samples 30 cm or more off their "
+                        "point's local median, a detector's misplacements, are removed and bridged)")
     s.add_argument("--mapping", default=None, metavar="FILE.json",
                    help="keypoints: a CSV's columns for the layout's points "
                         '({"layout": "coco17", "columns": {"nose": "Nose", ...}})')
@@ -296,6 +301,7 @@ def solve_settings(args):
                        ik=getattr(args, "ik", "adaptive"), mapping=getattr(args, "mapping", None),
                        model=getattr(args, "model", None), sole=getattr(args, "sole", None),
                        floor=getattr(args, "floor", 0.0), fix_sides=not getattr(args, "keep_sides", False),
+                       despike=not getattr(args, "keep_spikes", False),
                        overlap=getattr(args, "overlap", SolveSettings.overlap))
     if args.calibration_time is not None:
         st.calibration, st.tpose_time = "TPOSE", float(args.calibration_time)

@@ -75,17 +75,20 @@ def test_panel_solves_a_coco_array_with_gaps_into_a_new_armature(addon, tmp_path
     assert "no twist information: left_wrist, right_wrist, left_foot, right_foot" in s.last_report
     fcs = keying.action_fcurves(obj.animation_data.action, obj)
     assert all(len(fc.keyframe_points) == 90 for fc in fcs)
-    # the left/right swap fix is on by default, shown with the keypoint options and reaches the solve
+    # the left/right swap fix and the spike removal are on by default, shown with the keypoint
+    # options, and reach the solve
     from types import SimpleNamespace
     from blender_manikin.blender.properties import config_from_settings
     from blender_manikin.panels import main as panels
     from blender_util import PanelLayout
     log = []
     panels.MANIKIN_PT_solve.draw(SimpleNamespace(layout=PanelLayout(log)), bpy.context)
-    assert ("prop", "fix_sides") in log
-    assert s.fix_sides and config_from_settings(bpy.context).fix_sides is True
-    s.fix_sides = False
-    assert config_from_settings(bpy.context).fix_sides is False
+    assert ("prop", "fix_sides") in log and ("prop", "despike") in log
+    cfg = config_from_settings(bpy.context)
+    assert s.fix_sides and s.despike and cfg.fix_sides is True and cfg.despike is True
+    s.fix_sides = s.despike = False
+    cfg = config_from_settings(bpy.context)
+    assert cfg.fix_sides is False and cfg.despike is False
 
 
 def test_cli_in_blender_writes_a_blend_from_a_coco_array(tmp_path, motion):

@@ -149,6 +149,10 @@ class MANIKIN_Settings(PropertyGroup):
                             description="Give a leg's or arm's points back their side where the detector "
                                         "labelled them as the other side's for a few frames (the knees "
                                         "would cross); off: the labels as read")
+    despike: BoolProperty(name="Remove Spikes", default=True,
+                          description="Remove samples that stand 30 cm or more off their point's path for "
+                                      "one to three frames (a detector's misplacements) and bridge them; "
+                                      "off: every sample as read")
     ik: EnumProperty(name="IK", default='ADAPTIVE',
                      items=[('ADAPTIVE', "Adaptive", "HybrIK adaptive: each bone aims at its keypoint from "
                              "where the chain actually is, so errors do not accumulate"),
@@ -308,6 +312,7 @@ def config_from_settings(context):
         cfg.rate = float(s.keypoint_rate) if s.use_keypoint_rate else None
         cfg.ik = s.ik.lower()
         cfg.fix_sides = bool(s.fix_sides)
+        cfg.despike = bool(s.despike)
     cfg.smoothing = "auto" if s.smoothing_mode == 'AUTO' else float(s.smoothing)
     cfg.layout = bpy.path.abspath(s.layout_file) if s.layout_file else None
     cfg.axes = None if s.axes == 'AUTO' else s.axes.lower()

@@ -9,6 +9,8 @@ Stages (each a function, for tests and benchmarks):
 1. read (:func:`.io_keypoints.read_keypoints`): metres, Blender axes, NaN = missing;
 2. :func:`.keypoint_sides.fix_side_swaps`: legs' and arms' points that took the other side's
    labels for a few frames (a markerless detector's left/right swaps) get their own back;
+   :func:`.keypoint_spikes.remove_spikes`: samples far off their point's local median (a
+   detector's one- to three-frame misplacements) set missing;
    :func:`bridge_gaps`: every point's missing stretches filled by linear interpolation in
    time (held at the ends), reported as :class:`.resample.Gap` s;
 3. smoothing: by default (``smoothing="auto"``) :func:`.smoothing.smooth_auto`: each point's own
@@ -37,6 +39,7 @@ import numpy as np
 
 from . import hybrik
 from .keypoint_sides import fix_side_swaps
+from .keypoint_spikes import remove_spikes, spike_threshold
 from . import keypoint_layouts as kl
 from . import pipeline
 from . import rotations as rot
@@ -337,7 +340,8 @@ class PreparedKeypoints:
     keypoints (metres); gaps: the bridged :class:`.resample.Gap` s; never: points never seen;
     derived_spine: the layout has no spine points (:func:`rigid_trunk` applies); windows: with
     ``smoothing="auto"``, the window (seconds, 0: none) :func:`.smoothing.smooth_auto` chose for each point
-    seen, else None; sides: the :class:`.keypoint_sides.SideSwaps` undone (None: not looked for)."""
+    seen, else None; sides: the :class:`.keypoint_sides.SideSwaps` undone (None: not looked for);
+    spikes: ``(T_read, K)`` bool, the samples removed as spikes (None: not looked for)."""
     times: np.ndarray
     P: np.ndarray
     b22: kl.Body22
@@ -348,22 +352,25 @@ class PreparedKeypoints:
     derived_spine: bool = False
     windows: list = None
     sides: object = None
+    spikes: np.ndarray = None
 
 
 def prepare_keypoints(rec, fps, smoothing, height=None, max_frames=None, sole=None,
-                      fix_sides=True) -> PreparedKeypoints:
+                      fix_sides=True, despike=True) -> PreparedKeypoints:
     """Stages 2-7 of the module docstring on a :class:`.io_keypoints.KeypointRecording`: left/right
-    label swaps undone (``fix_sides``), gaps bridged, smoothed (``smoothing``: ``"auto"`` for
-    :func:`.smoothing.smooth_auto`, else a Savitzky-Golay window in seconds, 0: none),
+    label swaps undone (``fix_sides``), spikes removed (``despike``), gaps bridged, smoothed
+    (``smoothing``: ``"auto"`` for :func:`.smoothing.smooth_auto`, else a Savitzky-Golay window
+    in seconds, 0: none),
     resampled to ``fps``, the 22 joints placed, the body sized (scaled to ``height`` metres when
     given, on ``sole`` metres of shoe sole, None: :data:`.skeleton.SOLE`) and the floor moved
     to z = 0.  Raises
     :class:`.solve.SolveError` when a joint cannot be placed (a point it needs was never seen)."""
     lay = kl.LAYOUTS[rec.layout]
+    rate = 1.0 / float(np.median(np.diff(rec.time)))
     points, sides = fix_side_swaps(rec.points, lay.points) if fix_sides else (rec.points, None)
+    points, spikes = remove_spikes(points, rate) if despike else (points, None)
     X, gaps = bridge_gaps(rec.time, points, lay.points)
     never = [lay.points[k] for k in range(X.shape[1]) if not np.isfinite(X[:, k]).any()]
-    rate = 1.0 / float(np.median(np.diff(rec.time)))
     smoothing = parse_smoothing(smoothing)
     chosen = None
     if smoothing == "auto":
@@ -384,7 +391,7 @@ def prepare_keypoints(rec, fps, smoothing, height=None, max_frames=None, sole=No
     body = size_body(P, height, derived_spine=derived_spine, sole=sole)
     floor = estimate_floor(P, body)
     return PreparedKeypoints(times, P - np.array([0.0, 0.0, floor]), b22, body, floor, gaps, never, derived_spine,
-                             chosen, sides)
+                             chosen, sides, spikes)
 
 
 def solve_keypoints(source, settings: SolveSettings | None = None, progress=None) -> SolveOutcome:
@@ -397,8 +404,8 @@ def solve_keypoints(source, settings: SolveSettings | None = None, progress=None
     units, up, rate, mapping (see :func:`.io_keypoints.read_keypoints`), smoothing (``"auto"`` or
     a window in seconds, see :func:`prepare_keypoints`),
     ik (``adaptive`` / ``naive``), height (scales the measured body to this stature, metres),
-    max_frames.  Tracker options (axes, offsets, calibration, floor) do not apply: the floor is
-    found under the feet (:func:`estimate_floor`).
+    max_frames, fix_sides, despike.  Tracker options (axes, offsets, calibration, floor) do not
+    apply: the floor is found under the feet (:func:`estimate_floor`).
     progress: ``(fraction, stage)`` callback; an exception raised from it stops the solve."""
     from .io_keypoints import KeypointRecording, read_keypoints
     s = settings or SolveSettings()
@@ -421,7 +428,7 @@ def solve_keypoints(source, settings: SolveSettings | None = None, progress=None
     fps = float(s.fps) if s.fps else 1.0 / float(np.median(np.diff(rec.time)))
     smoothing = parse_smoothing(s.smoothing)
     prep = prepare_keypoints(rec, fps, smoothing, height=s.height, max_frames=s.max_frames, sole=s.sole,
-                             fix_sides=s.fix_sides)
+                             fix_sides=s.fix_sides, despike=s.despike)
     lay, b22, never = kl.LAYOUTS[rec.layout], prep.b22, prep.never
     out.report = GapReport(fps=fps, t0=float(prep.times[0]), t_end=float(prep.times[-1]),
                            num_frames=len(prep.times), devices=lay.points, gaps=prep.gaps)
@@ -440,6 +447,11 @@ def solve_keypoints(source, settings: SolveSettings | None = None, progress=None
     swapped = prep.sides.note(1.0 / float(np.median(np.diff(rec.time)))) if prep.sides is not None else None
     if swapped:
         out.info.append(swapped)
+    if prep.spikes is not None and prep.spikes.any():
+        out.info.append(f"spikes removed: {int(prep.spikes.sum())} sample(s) of "
+                        f"{int(prep.spikes.any(0).sum())} point(s) off their neighbours by "
+                        f"{100 * spike_threshold(1.0 / float(np.median(np.diff(rec.time)))):.0f} cm or more "
+                        f"(bridged)")
     if parse_floor(s.floor) != 0.0:
         out.info.append(f"the floor setting ({s.floor!r}) is for trackers: keypoints find the floor under the feet")
     if b22.no_twist:

@@ -62,8 +62,9 @@ class SolveSettings:
     Keypoint inputs (:mod:`.keypoint_solve`) also use: keypoint_layout (a
     :mod:`.keypoint_layouts` name; None: told from the file), up (the file's up axis, ``+y``
     ...; None: told from the body), ik
-    (``"adaptive"`` or ``"naive"`` HybrIK), mapping (a keypoint CSV's column mapping file) and
-    fix_sides (undo a detector's left/right label swaps, :mod:`.keypoint_sides`; default on).
+    (``"adaptive"`` or ``"naive"`` HybrIK), mapping (a keypoint CSV's column mapping file),
+    fix_sides (undo a detector's left/right label swaps, :mod:`.keypoint_sides`; default on) and
+    despike (remove a detector's misplaced samples, :mod:`.keypoint_spikes`; default on).
     Tracker inputs also use model (the pose network) and overlap (how many network windows see
     each frame: 2, the default, keeps 10,000 frames/s; 3 and 4 are a little more accurate at 1.5
     and 2 times the network time; :data:`.pipeline.OVERLAP_CHOICES`).
@@ -87,6 +88,7 @@ class SolveSettings:
     ik: str = "adaptive"
     mapping: object = None
     fix_sides: bool = True            # keypoints: undo left/right label swaps (keypoint_sides)
+    despike: bool = True              # keypoints: remove samples far off their point's path (keypoint_spikes)
     model: str | None = None          # None / "auto": by the recording's trackers; a shipped name or .onnx
     overlap: int = DEFAULT_OVERLAP    # windows seeing each frame: 2, 3 or 4 (pipeline.OVERLAP_CHOICES)
 
@@ -122,7 +124,7 @@ class SolveOutcome:
             parts.append(f"stature {self.body.stature:.2f} m")
         for note in self.info:
             if note.startswith(("calibrated", "arm span", "estimated stature", "head stands", "floor at",
-                                "left/right labels swapped back",
+                                "left/right labels swapped back", "spikes removed",
                                 "no twist information",
                                 "point(s) never seen", "retarget:", "smoothing", "no smoothing")) \
                     or " tracker offset" in note:

@@ -51,6 +51,7 @@ class MANIKIN_PT_solve(_Base, Panel):
             col.separator()
             smoothing_rows(col, s)
             col.prop(s, "fix_sides")
+            col.prop(s, "despike")
             col.prop(s, "ik")
             toggled_row(col, s, "use_height", "height", "Height")
         else:
