@@ -16,7 +16,7 @@ calibration ``AUTO``) once per model, and the table prints, per recording and mo
 * foot skating: mean horizontal ankle speed (cm/s) on the frames a foot is planted;
 * hands off: share of frames on which a wrist misses its tracker by more than 1 cm, and the
   largest miss (cm); *inside elbow fold*: the share of frames on which a hand misses because its
-  tracker is closer to the shoulder than the most-flexed elbow (150°) puts the wrist, even after
+  tracker is closer to the shoulder than the most-flexed elbow (160°) puts the wrist, even after
   the collar's swing (:meth:`.PoseResult.misses`; the rest of the misses are out of reach);
 * the estimated stature (metres) and how the body was sized.
 

@@ -52,8 +52,12 @@ pronation part), clamped to the forearm's range; the wrist keeps the swing
 
 Limits (degrees)
 ----------------
-Elbow flexion 0-150 (AAOS: Greene & Heckman 1994 give 0-150), knee 0-145
-(ibid.: 0-135 active, ~145 passive).  Forearm pronation 80 / supination 80
+Elbow flexion 0-160, knee 0-145: the passive ranges (AAOS, Greene & Heckman 1994: elbow
+0-150 active, about 10° more passive, where the forearm meets the upper arm; knee 0-135
+active, ~145 passive).  The elbow's passive 160° matters where a player holds a controller at
+the shoulder: on the shared Beat Saber replays a 150° elbow left a hand off its controller on
+43.8 % and 13.7 % of the frames, 160° on 6.3 % and 3.5 % (``benchmarks/bench_plausibility.py``);
+the mocap benchmarks never reach past 150° and do not move.  Forearm pronation 80 / supination 80
 from the T-pose neutral (palm down, elbow crease forward; AAOS).  Shoulder
 internal/external rotation 70/90 (+20 passive, widening above 60° of arm
 elevation) and hip 45/45 (AAOS) are measured clinically, from the limb
@@ -84,8 +88,8 @@ H0 = np.array([[0, 0, -1.0], [0, 0, 1.0], [1.0, 0, 0], [1.0, 0, 0]])
 #: neutral base→end axis (parent frame) and its zero-swivel mid direction
 N0 = rot.normalize(np.array([[1.0, -1, -1], [-1.0, -1, -1], [0, -0.2, -1], [0, -0.2, -1]]))
 U0 = rot.normalize(np.array([[1.0, 2, -1], [-1.0, 2, -1], [0, -1, -0.2], [0, -1, -0.2]]))
-#: maximum flexion of the hinge (elbow 150°, knee 145°), radians
-FLEX_MAX = np.radians([150.0, 150.0, 145.0, 145.0])
+#: maximum flexion of the hinge (elbow 160°, knee 145°: passive ranges), radians
+FLEX_MAX = np.radians([160.0, 160.0, 145.0, 145.0])
 #: twist about the forearm: (min, max) radians, arms only (legs 0)
 #: pronation is +about +X for the left arm and -about -X for the right.
 TWIST_RANGE = np.radians([[-80.0, 80.0], [-80.0, 80.0], [0.0, 0.0], [0.0, 0.0]])
