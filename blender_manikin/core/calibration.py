@@ -105,8 +105,9 @@ TPOSE_WRIST_DISTANCE = SHOULDER_WIDTH + 2 * ARM_LENGTH             # 0.873 H
 #: of a 7 cm performer and failed the solve), or a floor that is not at 0
 TPOSE_STATURE_RANGE = (1.0, 2.5)
 #: wrist distance / the expected T-pose wrist distance (:data:`TPOSE_WRIST_DISTANCE` of the
-#: stature the head height implies) a plausible T-pose keeps within (arm spans are 0.95-1.1
-#: statures; Bandai's short-necked skeleton reads 1.05)
+#: stature the head height implies) a plausible T-pose keeps within (the body model's T-pose
+#: reads 1.0, the Bandai-like and the five HDM05 skeletons' 0.85-0.93; crouching with the arms
+#: out, the head 0.6 m lower, 1.66)
 TPOSE_SPAN_RATIO = (0.8, 1.25)
 
 _Z = np.array([0.0, 0.0, 1.0])
