@@ -107,7 +107,7 @@ TPOSE_STATURE_RANGE = (1.0, 2.5)
 #: wrist distance / the expected T-pose wrist distance (:data:`TPOSE_WRIST_DISTANCE` of the
 #: stature the head height implies) a plausible T-pose keeps within (the body model's T-pose
 #: reads 1.0, the Bandai-like and the five HDM05 skeletons' 0.85-0.93; crouching with the arms
-#: out, the head 0.6 m lower, 1.66)
+#: out, the head 0.6 m lower, 1.65)
 TPOSE_SPAN_RATIO = (0.8, 1.25)
 
 _Z = np.array([0.0, 0.0, 1.0])
