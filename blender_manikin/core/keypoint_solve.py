@@ -360,10 +360,9 @@ def prepare_keypoints(rec, fps, smoothing, height=None, max_frames=None, sole=No
     """Stages 2-7 of the module docstring on a :class:`.io_keypoints.KeypointRecording`: left/right
     label swaps undone (``fix_sides``), spikes removed (``despike``), gaps bridged, smoothed
     (``smoothing``: ``"auto"`` for :func:`.smoothing.smooth_auto`, else a Savitzky-Golay window
-    in seconds, 0: none),
-    resampled to ``fps``, the 22 joints placed, the body sized (scaled to ``height`` metres when
-    given, on ``sole`` metres of shoe sole, None: :data:`.skeleton.SOLE`) and the floor moved
-    to z = 0.  Raises
+    in seconds, 0: none), resampled to ``fps``, the 22 joints placed, the body sized (scaled to
+    ``height`` metres when given, on ``sole`` metres of shoe sole, None: :data:`.skeleton.SOLE`)
+    and the floor moved to z = 0.  Raises
     :class:`.solve.SolveError` when a joint cannot be placed (a point it needs was never seen)."""
     lay = kl.LAYOUTS[rec.layout]
     rate = 1.0 / float(np.median(np.diff(rec.time)))
@@ -444,14 +443,14 @@ def solve_keypoints(source, settings: SolveSettings | None = None, progress=None
     out.info.append(f"keypoints: {'adaptive' if adaptive else 'naive'} HybrIK, floor at {prep.floor:+.3f} m "
                     f"moved to 0")
     out.info.append(told)
-    swapped = prep.sides.note(1.0 / float(np.median(np.diff(rec.time)))) if prep.sides is not None else None
+    rate = 1.0 / float(np.median(np.diff(rec.time)))          # the file's samples per second
+    swapped = prep.sides.note(rate) if prep.sides is not None else None
     if swapped:
         out.info.append(swapped)
     if prep.spikes is not None and prep.spikes.any():
         out.info.append(f"spikes removed: {int(prep.spikes.sum())} sample(s) of "
                         f"{int(prep.spikes.any(0).sum())} point(s) off their neighbours by "
-                        f"{100 * spike_threshold(1.0 / float(np.median(np.diff(rec.time)))):.0f} cm or more "
-                        f"(bridged)")
+                        f"{100 * spike_threshold(rate):.0f} cm or more (bridged)")
     if parse_floor(s.floor) != 0.0:
         out.info.append(f"the floor setting ({s.floor!r}) is for trackers: keypoints find the floor under the feet")
     if b22.no_twist:
