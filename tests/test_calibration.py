@@ -396,6 +396,8 @@ def test_stature_warning_names_the_likely_cause():
     low = stature_warning(0.35, 0.32, "head height")
     assert low.startswith("estimated stature 0.35 m is outside 1.40-2.10 m") and "floor" in low
     assert "0.32 m above height 0" in low and "set the performer's height" in low and "--floor" in low
+    assert "performer sits" in low                           # sized by the head: seated is a cause
+    assert "sits" not in stature_warning(0.35, 0.32, "T-pose")           # a T-pose is stood
     # centimetres read as metres: the unit factor that makes it plausible is named
     cm = stature_warning(175.0, 159.0, "head height", units="m")
     assert "--units cm" in cm and "1.75 m" in cm

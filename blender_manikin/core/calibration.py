@@ -169,7 +169,8 @@ def stature_warning(stature, head_height, sized_by, units="m", plausible=PLAUSIB
     units: the units the positions were read in.  Likely causes: a typed height; positions in
     other units than read (a factor of 100 or 1000 would make the stature plausible); a floor
     that is not at height 0 (a tracking origin at eye level or on a desk makes the body too
-    small, one below the floor too big; the solve's ``floor`` setting moves it)."""
+    small, one below the floor too big; the solve's ``floor`` setting moves it); a body sized
+    by the head height of a seated performer is too small."""
     lo, hi = plausible
     s = float(stature)
     if lo <= s <= hi:
@@ -186,6 +187,8 @@ def stature_warning(stature, head_height, sized_by, units="m", plausible=PLAUSIB
                           f"--units {name})")
     causes.append(f"the floor (the head stands {float(head_height):.2f} m above height 0; set the Floor, "
                   "--floor, to the floor's height, or to 'height' to put it under a performer of the typed height)")
+    if s < lo and sized_by == "head height":
+        causes.append("whether the performer sits (the body is sized and solved standing)")
     causes.append("or set the performer's height")
     return text + "check " + ", ".join(causes)
 
