@@ -37,6 +37,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from .runs import runs
+
 #: the points of each limb pair, by name after ``left_`` / ``right_`` (those a layout has; the
 #: first, the knee or elbow, votes on the sides in step 2)
 LIMB_POINTS = {
@@ -81,12 +83,6 @@ def limb_pairs(points, part):
             left.append(index[f"left_{name}"])
             right.append(index[f"right_{name}"])
     return left, right
-
-
-def _runs(mask):
-    """``[(start, stop), ...]`` of the runs of True in a ``(T,)`` bool array."""
-    d = np.diff(np.concatenate([[0], mask.astype(np.int8), [0]]))
-    return list(zip(np.nonzero(d == 1)[0], np.nonzero(d == -1)[0]))
 
 
 def _chain_distances(a, b):
@@ -198,7 +194,7 @@ def fix_side_swaps(points, names) -> tuple:
         swapped = oriented(swap_states(L, R)) & oriented(swap_states(L[::-1], R[::-1])[::-1])
         # step 4: a run of swapped frames stays swapped only if, where its chains are clearly
         # apart, its labels as read mostly put the left chain on the right
-        for a, b in _runs(swapped):
+        for a, b in runs(swapped):
             wrong, right = np.sum(sure[a:b] & (side[a:b] < 0)), np.sum(sure[a:b] & (side[a:b] > 0))
             if right > wrong:
                 swapped[a:b] = False

@@ -26,6 +26,7 @@ import numpy as np
 
 from .devices import DEVICES, EXTRA_DEVICES, LABELS, REQUIRED_DEVICES
 from .model_runner import MODELS_DIR, ModelError, load_model
+from .runs import runs
 
 #: name → (file in ``models/``, input devices), smallest set first; the sets are nested
 SHIPPED_MODELS = {
@@ -96,13 +97,6 @@ def resolve_model(spec):
     raise ValueError(f"model {s!r}: not a file, nor one of auto, {', '.join(SHIPPED_MODELS)}")
 
 
-def _runs(mask):
-    """``[(start, stop), ...]`` of runs of True in a 1-D bool array."""
-    m = np.concatenate([[False], np.asarray(mask, bool), [False]]).astype(np.int8)
-    d = np.diff(m)
-    return list(zip(np.nonzero(d == 1)[0].tolist(), np.nonzero(d == -1)[0].tolist()))
-
-
 def tracked_frames(targets, device, bridge_s=TRACKER_BRIDGE_S):
     """``(T,)`` bool: frames where ``device`` is tracked, its gaps of at most ``bridge_s``
     seconds included (they are bridged; at either end of the take the nearest pose is held).
@@ -115,7 +109,7 @@ def tracked_frames(targets, device, bridge_s=TRACKER_BRIDGE_S):
         valid = np.ones(T, bool)
     out = valid.copy()
     limit = bridge_s * float(targets.fps)
-    for a, b in _runs(~valid):
+    for a, b in runs(~valid):
         if (b - a) <= limit and (a > 0 or b < T):
             out[a:b] = True
     return out
@@ -204,10 +198,10 @@ def plan_models(targets, model=None, threads=None, bridge_s=TRACKER_BRIDGE_S, bl
     for k in used[:-1]:
         # the stretches this smaller model solves (with the lost trackers that pushed it there)
         lost = [d for d in levels[k + 1][2] if d not in levels[k][2] and not tracked[d].all()]
-        runs = _runs(weights[k] > 0.999)
-        if not runs:
+        stretches = runs(weights[k] > 0.999)
+        if not stretches:
             continue
-        spans = ", ".join(_span(a, b, fps) for a, b in runs[:4]) + (" ..." if len(runs) > 4 else "")
+        spans = ", ".join(_span(a, b, fps) for a, b in stretches[:4]) + (" ..." if len(stretches) > 4 else "")
         why = f"{_device_words(lost)} tracker lost over {bridge_s:g} s" if lost else "trackers lost"
         notes.append(f"{why}: the {MODEL_LABELS.get(levels[k][0], levels[k][0])} model on {spans} "
                      f"(blended over {blend_s:g} s)")

@@ -42,6 +42,7 @@ from .plain import shown
 from . import rotations as rot
 from .devices import REQUIRED_DEVICES
 from .pose_result import PoseResult, TrackerTargets
+from .runs import runs
 from .skeleton import Body, J, NUM_JOINTS, PARENTS, forward_kinematics, mirror_name
 
 #: a foot is planted (reported and locked) where the network is this confident
@@ -333,13 +334,6 @@ def run_network(targets: TrackerTargets, body: Body, runner, progress=None, stri
     return out
 
 
-def _segments(mask):
-    """``[(start, stop), ...]`` of runs of True in a 1-D bool array."""
-    m = np.concatenate([[False], mask, [False]]).astype(np.int8)
-    d = np.diff(m)
-    return list(zip(np.nonzero(d == 1)[0], np.nonzero(d == -1)[0]))
-
-
 def _plant_pieces(path, a, b, tol):
     """Split the contact run ``[a, b)`` of a ``(T, k)`` path into pieces that each stay
     within ``tol`` of their first frame (greedy).  Returns ``[(start, stop), ...]``."""
@@ -396,7 +390,7 @@ def lock_planted_feet(ankle_pos, contact, threshold=CONTACT_THRESHOLD, blend_s=N
         # every plant piece of this foot, in time order; ``joined``: it continues the previous
         # piece of the same contact run (the ease between them happens inside the run)
         pieces = []
-        for a, b in _segments(contact[:, k] > threshold):
+        for a, b in runs(contact[:, k] > threshold):
             for n, (pa, pb) in enumerate(_plant_pieces(src[:, k, ax], a, b, max_drift)):
                 if pb - pa >= 2:
                     pieces.append((pa, pb, n > 0))

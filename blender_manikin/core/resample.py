@@ -37,6 +37,7 @@ from .plain import shown
 from .devices import DEVICES, REQUIRED_DEVICES
 from .recording import Recording, RecordingError, increasing_mask
 from .rotations import normalize, quat_continuous, quat_slerp
+from .runs import run_bounds
 
 
 #: head-joint/HMD height range (metres above the floor) accepted by the units check
@@ -161,9 +162,7 @@ def _frozen(t, pos, quat, others, freeze_s, move_tol):
             & np.all(np.abs(quat[1:] - quat[:-1]) <= 1e-9, -1))
     if not same.any():
         return np.zeros(0, dtype=np.int64)
-    edges = np.diff(np.concatenate([[0], same.astype(np.int8), [0]]))
-    starts = np.nonzero(edges == 1)[0]          # same[i] True from starts ...
-    ends = np.nonzero(edges == -1)[0]           # ... to ends-1: samples starts..ends identical
+    starts, ends = run_bounds(same)             # same[i] True from starts to ends-1: samples starts..ends identical
     dur = t[ends] - t[starts]
     long_ = np.nonzero(dur > freeze_s)[0]
     out = []
