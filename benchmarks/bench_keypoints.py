@@ -102,6 +102,7 @@ from blender_manikin.core import keypoint_layouts as kl, keypoint_solve as ks  #
 from blender_manikin.core.smoothing import parse_smoothing  # noqa: E402
 from blender_manikin.core import limb_solver as ls, skeleton as sk  # noqa: E402
 from blender_manikin.core.io_keypoints import KeypointRecording  # noqa: E402
+from blender_manikin.core.keypoint_sides import limb_pairs  # noqa: E402
 from blender_manikin.core.pose_result import PoseResult  # noqa: E402
 from blender_manikin.core.solve import SolveError, SolveSettings  # noqa: E402
 
@@ -177,7 +178,6 @@ def swap_masks(rng, T, fraction):
 def swap_sides(points, layout, masks):
     """``points`` ``(T, K, 3)`` with each limb pair's left and right labels exchanged on its
     ``masks`` frames (:func:`swap_masks`); a new array."""
-    from blender_manikin.core.keypoint_sides import limb_pairs
     out = np.array(points, copy=True)
     for part, mask in masks.items():
         li, ri = limb_pairs(kl.LAYOUTS[layout].points, part)
