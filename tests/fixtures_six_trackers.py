@@ -151,16 +151,16 @@ def true_offsets(mounts):
 
 
 def device_poses(t, body, mounts, heading=0.0, shift=(0.0, 0.0), lift_left_foot=False, stance=0.0,
-                 noise_m=0.0015, noise_deg=0.5, seed=0, devices=DEVICES6):
+                 noise_m=0.0015, noise_deg=0.5, seed=0, devices=DEVICES6, preset="openxr_generic"):
     """Device poses at times ``t`` (s): ``{device: (pos (N, 3) m, quat (N, 4) wxyz)}`` in Blender axes.
 
-    Head and hands through the ``openxr_generic`` offsets, extra trackers through ``mounts``;
+    Head and hands through the ``preset`` offsets, extra trackers through ``mounts``;
     Gaussian noise of ``noise_m`` metres per axis on positions and a random rotation of about
     ``noise_deg`` degrees on orientations, per sample."""
     rng = np.random.default_rng(seed)
     local, root = motion(t, body, heading, shift, lift_left_foot, stance)
     pos, rot = forward_kinematics(local, root, body)
-    preset = get_preset("openxr_generic")["devices"]
+    preset = get_preset(preset)["devices"]
     out = {}
     for d in devices:
         j = J[JOINT_OF_DEVICE[d]]

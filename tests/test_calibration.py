@@ -143,6 +143,30 @@ def test_openxr_grip_semantics_in_a_tpose(side):
     assert (p - wrist)[2] == pytest.approx(-0.02, abs=1e-6)
 
 
+@pytest.mark.parametrize("side", ["left", "right"])
+def test_openxr_hand_tracking_wrist_semantics_in_a_tpose(side):
+    """A tracked hand in a T-pose (palm down): the XR_EXT_hand_tracking wrist joint pose is the
+    wrist itself, -Z towards the fingers, +Y out of the back of the hand, +X to the thumb (left)
+    or to the little finger (right)."""
+    e = get_preset("openxr_hand_tracking")["devices"][f"{side}_hand"]
+    wrist = np.array([0.75 if side == "left" else -0.75, 0.0, 1.43])
+    p, R = remove_offsets(wrist, np.eye(3), e)
+    np.testing.assert_allclose(p, wrist, atol=1e-9)
+    _, q_xr = from_blender(None, matrix_to_quat(R), "openxr")
+    Rxr = quat_to_matrix(q_xr)
+    out_xr = np.array([-1.0 if side == "left" else 1.0, 0, 0])   # the wearer's left is OpenXR -X
+    up_xr, fwd_xr = np.array([0, 1.0, 0]), np.array([0, 0, -1.0])
+    np.testing.assert_allclose(-Rxr[:, 2], out_xr, atol=1e-9)       # fingers
+    np.testing.assert_allclose(Rxr[:, 1], up_xr, atol=1e-9)         # back of the hand
+    thumb = fwd_xr                                                   # palm down: thumbs forward
+    np.testing.assert_allclose(Rxr[:, 0], thumb if side == "left" else -thumb, atol=1e-9)
+    # the same in Unity axes (Meta's hand constants: distal +Z, dorsal +Y, left thumb side +X)
+    _, q_u = from_blender(None, matrix_to_quat(R), "unity")
+    Ru = quat_to_matrix(q_u)
+    np.testing.assert_allclose(Ru[:, 2], [-1.0 if side == "left" else 1.0, 0, 0], atol=1e-9)
+    np.testing.assert_allclose(Ru[:, 1], [0, 1.0, 0], atol=1e-9)
+
+
 def test_apply_remove_offsets_vectorised_and_quaternion_form():
     rng = np.random.default_rng(0)
     R = axis_angle_rotation(rng.normal(size=(50, 3)), rng.uniform(0, 3, 50))

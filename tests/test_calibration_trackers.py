@@ -299,3 +299,34 @@ def test_solve_recording_of_a_six_tracker_csv(tmp_path):
     for name in ("pelvis", "left_ankle", "right_ankle", "left_hip", "right_hip"):
         err = np.linalg.norm(sp[:, J[name]] - pos[:, J[name]], axis=-1)
         assert err.max() < 0.015, (name, err.max())
+
+
+@pytest.mark.parametrize("offsets,exact", [("openxr_hand_tracking", True), ("openxr_generic", False)])
+def test_a_hand_tracking_recording_solves_with_its_preset(tmp_path, offsets, exact):
+    """Hands tracked without controllers (OpenXR hand-tracking wrist joints), written in Unity axes
+    with the preset named in the file: the solved wrists land on the performer's wrists, turned as
+    they are.  Read as controller grip poses (the wrong preset), they miss by centimetres."""
+    from blender_manikin.core.recording import Recording, TrackerStream
+    from fixtures_six_trackers import device_poses
+
+    body = make_body(cs.sk.BodyMeasurements(stature=1.70))
+    t = np.arange(int(6.0 * 72)) / 72.0
+    poses = device_poses(t, body, {}, devices=("head", "left_hand", "right_hand"), noise_m=0.0, noise_deg=0.0,
+                         preset="openxr_hand_tracking")
+    rec = Recording(streams={d: TrackerStream(d, t, p, q) for d, (p, q) in poses.items()},
+                    metadata={"offsets": offsets})
+    path = os.path.join(tmp_path, "hands.csv")
+    write_csv(path, rec, axes="unity", units="m")
+    out = cs.solve_recording(path, cs.SolveSettings(fps=30.0))
+    assert out.offsets["name"].startswith(offsets)
+    res = out.result
+    times = res.t0 + np.arange(res.num_frames) / res.fps
+    pos, rot = joint_truth(times, body)
+    for side in ("left", "right"):
+        j = J[f"{side}_wrist"]
+        miss = np.linalg.norm(res.positions[:, j] - pos[:, j], axis=-1)
+        turn = np.degrees(geodesic_angle(res.world_rot[:, j], rot[:, j]))
+        if exact:
+            assert miss.max() < 0.002 and np.median(turn) < 1.0, (side, miss.max(), np.median(turn))
+        else:
+            assert np.median(miss) > 0.03, (side, np.median(miss))

@@ -73,6 +73,16 @@ collected by the xrizer project, ``src/input/profiles/*.rs``):
 * ``beat_saber_touch``: BSOR saber poses, Touch controllers:
   ``raw · R_x(-4.3°) · T(0, -0.008, 0)`` (Unity), then ``quest_touch``'s
   raw → grip.
+* ``openxr_hand_tracking``: hands tracked without controllers, recorded as
+  the ``XR_HAND_JOINT_WRIST_EXT`` joint of OpenXR hand tracking
+  (``XR_EXT_hand_tracking``; Quest hand tracking through OpenXR, Ultraleap):
+  the joint sits at the wrist's pivot, so no translation; its -Z runs
+  towards the fingers, +Y out of the back of the hand, and +X towards the
+  thumb on the left hand and towards the little finger on the right (the
+  same axes as Meta's Interaction SDK hand constants, in Unity axes: distal
+  +Z, dorsal +Y, left thumb side +X, right thumb side -X; so a recording in
+  Unity axes, ``--axes unity``, takes this preset too).  The head is the
+  headset's view pose, as for controllers.
 
 The Beat Saber numbers are the game's built-in controller adjustments
 before version 1.29.4 (``OpenVRHelper.AdjustControllerTransform``, as
@@ -142,6 +152,19 @@ def _grip_to_wrist(side):
     return R, p
 
 
+def _hand_joint_to_wrist(side):
+    """Wrist joint relative to the OpenXR hand-tracking wrist joint, in its local axes.
+
+    Returns ``(R, p)`` as :func:`_grip_to_wrist`: ``R`` columns are the body model's wrist axes
+    (hand along +X left / -X right, palm down at rest), ``p`` = 0 (both sit at the wrist pivot).
+    """
+    X, Y, Z = np.eye(3)
+    fingers, dorsal = -Z, Y
+    radial = X if side == "left" else -X
+    hand_x = fingers if side == "left" else -fingers
+    return np.stack([hand_x, -radial, dorsal], axis=-1), np.zeros(3)
+
+
 def _head_from_hmd():
     # Blender-convention head axes in OpenXR view-local coords: X (wearer's left) = -X_o,
     # Y (back) = +Z_o, Z (up) = +Y_o  -> the matrix M itself.
@@ -202,10 +225,12 @@ _DESCRIPTIONS = {
                   "default offsets.",
     "beat_saber_touch": "Beat Saber replay (BSOR) saber poses, Touch controllers, game <= 1.29.1 default "
                         "offsets.",
+    "openxr_hand_tracking": "Hand tracking without controllers: OpenXR hand-tracking wrist joint poses "
+                            "(XR_EXT_hand_tracking) and an OpenXR view pose for the head.",
 }
 
 PRESET_NAMES = ("none", "openxr_generic", "quest_touch", "index_knuckles", "vive_wand", "beat_saber",
-                "beat_saber_touch")
+                "beat_saber_touch", "openxr_hand_tracking")
 
 
 def _entry(R_blender, p_blender):
@@ -226,7 +251,10 @@ def _build_preset(name):
         R, p = _head_from_hmd()
         devices["head"] = _entry(_M @ R, _M @ p)
         for side in ("left", "right"):
-            R, p = _compose(_RAW_TO_GRIP[name][side], _grip_to_wrist(side))
+            if name == "openxr_hand_tracking":
+                R, p = _hand_joint_to_wrist(side)
+            else:
+                R, p = _compose(_RAW_TO_GRIP[name][side], _grip_to_wrist(side))
             devices[f"{side}_hand"] = _entry(_M @ R, _M @ p)
         for d in ("pelvis", "left_foot", "right_foot"):
             devices[d] = _identity_entry()
