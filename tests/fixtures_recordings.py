@@ -187,13 +187,14 @@ def synthetic_bsor(n=180, rate=90.0, placeholder=True, repeated_zero_times=2, ba
 XROR_POSE_AXES = ["x", "y", "z", "i", "j", "k", "1"]
 
 
-def xror_bytes(t, pose, joints=("HEAD", "HAND_LEFT", "HAND_RIGHT"), app="Some App", axes=None, width=None):
+def xror_bytes(t, pose, joints=("HEAD", "HAND_LEFT", "HAND_RIGHT"), app="Some App", axes=None, width=None,
+               names=None):
     """An XROR document (BSON, fpzip-compressed float32 frames), as the xror repository writes it.
 
     t ``(n,)`` seconds; pose ``(n, D, 7)`` position x, y, z and quaternion x, y, z, w per device
     (Unity axes, metres); joints: the XROR joint name of each device.  axes / width: corrupt the
     device axes list or cut the frame width (for error tests).  Needs pymongo's bson and fpzip
-    (requirements-xror.txt)."""
+    (requirements-xror.txt).  names: each device's hardware name (default: its joint name)."""
     import bson
     import fpzip
     n = len(t)
@@ -202,8 +203,8 @@ def xror_bytes(t, pose, joints=("HEAD", "HAND_LEFT", "HAND_RIGHT"), app="Some Ap
     if width is not None:
         rows = rows[:, :width]
     doc = {"$schema": "https://metaguard.github.io/xror/schema/v1.0.0/schema.json",
-           "info": {"hardware": {"devices": [{"name": j, "type": "x", "joint": j, "axes": axes or XROR_POSE_AXES}
-                                             for j in joints]},
+           "info": {"hardware": {"devices": [{"name": nm, "type": "x", "joint": j, "axes": axes or XROR_POSE_AXES}
+                                             for j, nm in zip(joints, names or joints)]},
                     "software": {"app": {"name": app, "version": "1"}}},
            "frames": fpzip.compress(np.ascontiguousarray(rows[None, None])), "events": []}
     return bson.encode(doc)

@@ -262,3 +262,17 @@ def test_a_head_far_from_the_typed_height_is_noted():
     assert "0.30 m higher than a standing 1.75 m performer's (1.55 m)" in note and "floor" in note
     assert note in off.summary()
     assert cs.head_height_note(cs.SolveSettings(), off) is None           # no typed height: sized by the head
+
+
+def test_the_summary_names_the_offsets_auto_chose(tmp_path):
+    """--offsets auto says what it chose and why; a preset the user typed is not repeated back."""
+    from fixtures_recordings import synthetic_bsor
+    data, _ = synthetic_bsor(n=400, controller="Oculus Touch", hmd="Quest 2")
+    path = tmp_path / "quest.bsor"
+    path.write_bytes(data)
+    out = cs.solve_recording(path, cs.SolveSettings(fps=30.0))
+    assert "offsets beat_saber_touch (auto: from the file)" in out.summary()
+    out = cs.solve_recording(path, cs.SolveSettings(fps=30.0, offsets="beat_saber"))
+    assert "offsets " not in out.summary() and out.offsets["name"].startswith("beat_saber")
+    assert cs.offsets_note("auto", "openxr_generic") == "offsets openxr_generic (auto: the format's default)"
+    assert cs.offsets_note("auto", "none") is None and cs.offsets_note("quest_touch", "quest_touch") is None

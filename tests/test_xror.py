@@ -15,14 +15,15 @@ ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 VR = os.path.join(os.path.dirname(ROOT), "shared", "data", "vr")
 
 
-def _xror(n=120, devices=("HEAD", "HAND_LEFT", "HAND_RIGHT"), app="Some App", axes=None, width=None, seed=0):
+def _xror(n=120, devices=("HEAD", "HAND_LEFT", "HAND_RIGHT"), app="Some App", axes=None, width=None, seed=0,
+          names=None):
     rng = np.random.default_rng(seed)
     t = np.arange(n) / 90.0
     pose = np.zeros((n, len(devices), 7))
     pose[..., :3] = rng.normal(size=(n, len(devices), 3)) * 0.1 + [0, 1.5, 0]
     q = rng.normal(size=(n, len(devices), 4))
     pose[..., 3:] = q / np.linalg.norm(q, axis=-1, keepdims=True)
-    return xror_bytes(t, pose, devices, app=app, axes=axes, width=width), t, pose
+    return xror_bytes(t, pose, devices, app=app, axes=axes, width=width, names=names), t, pose
 
 
 def test_synthetic_xror_reads_in_blender_axes(tmp_path):
@@ -56,6 +57,18 @@ def test_auto_offsets_of_an_xror_take_by_its_app(tmp_path):
         assert cs.resolve_offsets("auto", rec) == want, app
         assert cs.resolve_offsets("none", rec) == "none"           # what the user sets is kept
     assert formats.default_offsets("x.xror") == "openxr_generic" and formats.default_offsets("x.csv") == "none"
+
+
+@pytest.mark.parametrize("names,want", [
+    (("VIVE Pro 2", "OpenVR Controller(Knuckles Left) - Left", "OpenVR Controller(Knuckles Right) - Right"),
+     "beat_saber"),
+    (("Oculus Quest2", "Oculus Touch Controller - Left", "Oculus Touch Controller - Right"), "beat_saber_touch"),
+    (("Meta Quest 3", "Left Controller", "Right Controller"), "beat_saber_touch"),
+])
+def test_a_beat_saber_session_on_touch_controllers_gets_the_touch_preset(tmp_path, names, want):
+    data, _, _ = _xror(app="Beat Saber", names=names)
+    (tmp_path / "bs.xror").write_bytes(data)
+    assert formats.load_recording(tmp_path / "bs.xror").metadata["offsets"] == want
 
 
 def test_six_devices(tmp_path):

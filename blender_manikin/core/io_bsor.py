@@ -25,8 +25,12 @@ little-endian; checked against a real replay, version 1, game 1.29.1)::
     (notes, walls, heights, pauses ... blocks follow; not read)
 
 Poses are in Unity axes (left-handed, +Y up, +Z forward), metres; the hand
-poses are the game's *saber* poses (see the ``beat_saber`` device-offset
-preset), the head pose is the HMD (eye centre).
+poses are the game's *saber* poses, the head pose is the HMD (eye centre).
+The game holds the saber differently on Touch controllers than on Valve ones,
+so the reader names the device-offset preset in ``metadata["offsets"]`` from the
+header's ``controller`` (and ``hmd``, ``platform``, ``trackingSystem``) text
+(:func:`beat_saber_offsets`): ``beat_saber_touch`` for Oculus/Meta Touch
+controllers, else ``beat_saber`` (Valve Index and other SteamVR controllers).
 
 Repairs (each reported in :attr:`Recording.warnings`):
 
@@ -66,6 +70,11 @@ _INFO_STRINGS_1 = ("version", "gameVersion", "timestamp", "playerID", "playerNam
                    "trackingSystem", "hmd", "controller", "hash", "songName", "mapper", "difficulty")
 _INFO_STRINGS_2 = ("mode", "environment", "modifiers")
 _PRIVATE = ("playerID", "playerName")
+#: words in a replay's controller or headset names that mean Oculus/Meta Touch controllers (lower case)
+TOUCH_WORDS = ("touch", "oculus", "quest", "rift", "meta")
+#: words that mean Valve or HTC controllers, whatever the headset (a Quest streamed to SteamVR
+#: with Index controllers is rare, an Index headset with Touch controllers rarer still)
+VALVE_WORDS = ("knuckles", "index", "vive", "wand")
 _SPEED_MODIFIERS = {"SS": 0.85, "FS": 1.2, "SF": 1.5}
 _MAX_STRING = 1 << 20
 
@@ -160,6 +169,30 @@ def pose_frame_masks(t, pose, warnings, devices=FRAME_DEVICES, time_name="song t
     return ok, keep
 
 
+def beat_saber_offsets(controller="", *headset) -> str:
+    """The device-offset preset of a Beat Saber recording from its hardware names.
+
+    controller: the controller's name as the recorder wrote it (BSOR ``controller``, e.g.
+    ``"OpenVR Controller(Knuckles Right) - Right"``; XROR's controller device names).
+    headset: other names (``hmd``, ``platform``, ``trackingSystem``) that decide when the
+    controller's name does not.  Returns ``"beat_saber_touch"`` when the controller (or, failing
+    that, the headset or platform) names Oculus/Meta Touch hardware, else ``"beat_saber"``.
+    """
+    def has(text, words):
+        text = str(text or "").lower()
+        return any(w in text for w in words)
+
+    if has(controller, VALVE_WORDS):
+        return "beat_saber"
+    if has(controller, TOUCH_WORDS):
+        return "beat_saber_touch"
+    if any(has(h, VALVE_WORDS) for h in headset):
+        return "beat_saber"
+    if any(has(h, TOUCH_WORDS) for h in headset):
+        return "beat_saber_touch"
+    return "beat_saber"
+
+
 def pose_frames_to_streams(t, pose, ok, devices, axes, units):
     """``{device: TrackerStream}`` (Blender axes, metres) from pose frames ``(N, D, 7)``
     (position, quaternion x, y, z, w) in ``axes`` and ``units``, times ``t`` ``(N,)`` seconds."""
@@ -234,6 +267,8 @@ def parse_bsor(data: bytes, path="<bytes>", axes=None, units=None) -> Recording:
     meta.update(format="bsor", bsor_version=int(version), axes=axes, units=units,
                 frames_in_file=int(n), frames_kept=int(keep.sum()), time_scale=float(speed),
                 game_fps_median=float(np.median(fps[keep])) if keep.any() else float("nan"))
+    meta["offsets"] = beat_saber_offsets(info.get("controller"), info.get("hmd"), info.get("platform"),
+                                         info.get("trackingSystem"))
     if info.get("leftHanded"):
         warnings.append("the replay was played in left-handed mode: check that left and right are not swapped")
     return Recording(streams=streams, source=path, metadata=meta, warnings=warnings)

@@ -12,7 +12,8 @@ Schema this reader relies on (checked on ``../shared/data/vr/xror-beatsaber-samp
   frame the time in seconds, then 7 numbers per device in ``info.hardware.devices`` order;
 * Unity axes (left-handed, +Y up, +Z forward) and metres, by the format's convention;
 * ``info.software.app.name`` names the application (``Beat Saber``: the hand poses are saber
-  poses, so the ``beat_saber`` device offsets apply, as for ``.bsor``; any other app: the
+  poses, so the ``beat_saber`` device offsets apply, or ``beat_saber_touch`` when the
+  controllers' names say Oculus/Meta Touch, as for ``.bsor``, :func:`.io_bsor.beat_saber_offsets`; any other app: the
   format's default, ``openxr_generic``: the HEAD device is the headset's pose between the eyes,
   as XR runtimes report it, and the hands are taken as controller grip poses;
   :mod:`.formats`);
@@ -27,7 +28,7 @@ import os
 
 import numpy as np
 
-from .io_bsor import pose_frame_masks, pose_frames_to_streams
+from .io_bsor import beat_saber_offsets, pose_frame_masks, pose_frames_to_streams
 from .recording import Recording, RecordingError, canonical_axes, canonical_units, read_file_bytes
 
 #: XROR joint names -> devices
@@ -181,6 +182,10 @@ def parse_xror(data: bytes, path="<bytes>", axes=None, units=None) -> Recording:
     if "height" in activity:
         meta["height"] = float(activity["height"])
     offsets = APP_OFFSETS.get(meta["app"].strip().lower())
+    if offsets == "beat_saber":            # Touch or Valve controllers: the game holds the saber differently
+        hands = [str(d.get("name", "")) for d, n in zip(devices, names) if n.endswith("_hand")]
+        heads = [str(d.get("name", "")) for d, n in zip(devices, names) if n == "head"]
+        offsets = beat_saber_offsets(" ".join(hands), *heads, meta["runtime"], meta["api"])
     if offsets:
         meta["offsets"] = offsets
     return Recording(streams=streams, source=path, metadata=meta, warnings=warnings)

@@ -123,7 +123,7 @@ class SolveOutcome:
         if self.body is not None:
             parts.append(f"stature {self.body.stature:.2f} m")
         for note in self.info:
-            if note.startswith(("calibrated", "arm span", "estimated stature", "head stands", "floor at",
+            if note.startswith(("offsets ", "calibrated", "arm span", "estimated stature", "head stands", "floor at",
                                 "left/right labels swapped back", "spikes removed",
                                 "no twist information",
                                 "point(s) never seen", "retarget:", "smoothing", "no smoothing")) \
@@ -173,6 +173,22 @@ def resolve_offsets(offsets, recording):
     if isinstance(meta, str) and meta.strip() in device_offsets.PRESET_NAMES:
         return meta.strip()
     return formats.default_offsets(str(getattr(recording, "source", "")))
+
+
+def offsets_note(setting, resolved, recording=None):
+    """The summary's note on the device offsets: ``"offsets beat_saber_touch (auto: from the file)"``.
+
+    setting: what the user chose (``"auto"``, a preset name, a file's offsets dict ...);
+    resolved: what :func:`resolve_offsets` made of it.  ``None`` when nothing needs saying: a
+    typed preset or offsets the user gave (they know what they chose), or ``auto`` giving ``none``
+    for a format whose poses are the joints' own."""
+    if not (isinstance(setting, str) and setting.lower() == "auto") or not isinstance(resolved, str):
+        return None
+    if resolved == "none":
+        return None
+    meta = (getattr(recording, "metadata", None) or {}).get("offsets")
+    why = "from the file" if isinstance(meta, str) and meta.strip() == resolved else "the format's default"
+    return f"offsets {resolved} (auto: {why})"
 
 
 def make_targets(times, pos, quat, valid, fps, offsets="none"):
@@ -477,14 +493,17 @@ def solve_recording(source, settings: SolveSettings | None = None, solver=None, 
     smoothing = parse_smoothing(settings.smoothing)
     pos, quat, windows = smooth_device_poses(pos, quat, settings.fps, smoothing)
     smoothed = smoothing_note(smoothing, list(windows.values()) if windows else None, "device")
-    out.targets, offsets = make_targets(times, pos, quat, valid, settings.fps,
-                                        resolve_offsets(settings.offsets, out.recording))
+    resolved = resolve_offsets(settings.offsets, out.recording)
+    out.targets, offsets = make_targets(times, pos, quat, valid, settings.fps, resolved)
+    note = offsets_note(settings.offsets, resolved, out.recording)
     out.floor = floor_height(settings, out.targets)
     out.targets = move_floor(out.targets, out.floor)
     out.timings["resample"] = _time.perf_counter() - t
     report(STAGES["calibrating"], "calibrating")
     t = _time.perf_counter()
     out.body, out.offsets, out.info = calibrate(settings, out.targets, times, offsets)
+    if note:
+        out.info.append(note)
     if out.offsets is not offsets:     # calibration refined the device rotations
         out.targets = move_floor(make_targets(times, pos, quat, valid, settings.fps, out.offsets)[0], out.floor)
     for note in (floor_note(settings, out.floor), stature_note(settings, out), head_height_note(settings, out)):
