@@ -44,6 +44,10 @@ Options of ``solve`` (they mirror the panel; ``--help`` has them all):
                               are) or one Savitzky-Golay window in seconds (0: off)
 --overlap 2|3|4               network windows seeing each frame: 2 (default, fastest), 3 or 4
                               (a little more accurate at 1.5 and 2 times the network time)
+--teleports keep|remove|ignore  trackers: an app's teleports and snap turns (the tracking
+                              space jumping) are solved as one motion and put back on the
+                              body (keep, default), left out (remove: a continuous path),
+                              or not looked for (ignore)
 --ik adaptive|naive           keypoints: HybrIK adaptive (default) or naive IK
 --keep-sides                  keypoints: keep left/right labels as read (default: swap
                               back a limb the detector labelled as the other side)
@@ -121,6 +125,11 @@ def _add_solve_options(s):
     s.add_argument("--overlap", type=int, choices=OVERLAP_CHOICES, default=DEFAULT_OVERLAP,
                    help="network windows that see each frame: 2 (default, fastest), 3 or 4 (a little "
                         "more accurate at 1.5 and 2 times the network time)")
+    from .core.teleports import TELEPORT_CHOICES
+    s.add_argument("--teleports", choices=TELEPORT_CHOICES, default="keep",
+                   help="trackers: an app's teleports and snap turns are solved as one motion and put back "
+                        "on the body (keep, default), left out (remove: the path continuous), or not looked "
+                        "for (ignore)")
     s.add_argument("--layout", default=None, metavar="FILE.json|KEYPOINTS",
                    help="the columns, time, units and axes of wide-layout CSV inputs (default: detected); "
                         "or the layout of keypoint inputs: " + "|".join(_keypoint_layouts()))
@@ -302,7 +311,8 @@ def solve_settings(args):
                        model=getattr(args, "model", None), sole=getattr(args, "sole", None),
                        floor=getattr(args, "floor", 0.0), fix_sides=not getattr(args, "keep_sides", False),
                        despike=not getattr(args, "keep_spikes", False),
-                       overlap=getattr(args, "overlap", SolveSettings.overlap))
+                       overlap=getattr(args, "overlap", SolveSettings.overlap),
+                       teleports=getattr(args, "teleports", SolveSettings.teleports))
     if args.calibration_time is not None:
         st.calibration, st.tpose_time = "TPOSE", float(args.calibration_time)
         st.height, st.arm_span = args.height, args.arm_span

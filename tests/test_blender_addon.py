@@ -452,3 +452,45 @@ def test_modal_progress_cancel_and_finish(addon, recording, monkeypatch):
     job.join(5)
     assert op.modal(bpy.context, timer) == {'CANCELLED'}
     assert op.reports[-1] == ({'ERROR'}, "MANIKIN: boom") and len(bpy.data.objects) == n
+
+
+def test_panel_teleports_keep_the_body_where_the_recording_jumps(addon, tmp_path, monkeypatch):
+    """A take whose app teleported the player 2 m at 3.5 s: with Teleports at Keep (the default)
+    the solved body jumps with it, its pose unbroken; at Remove its path is continuous."""
+    from types import SimpleNamespace
+    from blender_manikin.core.formats import load_recording
+    from blender_manikin.core.io_csv import write_csv
+    from blender_manikin.core.recording import Recording, TrackerStream
+    from blender_manikin.panels import main as panels
+    from blender_manikin.blender.properties import config_from_settings
+    monkeypatch.setattr(solve_job, "run_solver", solve_job.core_solve.default_solver)   # the real network
+    ex = load_recording(os.path.join(os.path.dirname(os.path.dirname(__file__)), "examples", "example_recording.csv"))
+    t0 = ex.time_range()[0]
+    streams = {}
+    for d, st in ex.streams.items():
+        p = st.pos.copy()
+        p[st.time >= t0 + 3.5] += [2.0, 0.0, 0.0]
+        streams[d] = TrackerStream(d, st.time, p, st.quat, st.valid)
+    path = tmp_path / "teleport.csv"
+    write_csv(path, Recording(streams=streams, metadata=dict(ex.metadata)))
+    s = bpy.context.scene.manikin
+    s.source, s.filepath, s.live_rig = 'FILE', str(path), False
+    log = []
+    panels.MANIKIN_PT_solve.draw(SimpleNamespace(layout=PanelLayout(log)), bpy.context)
+    assert ("prop", "teleports") in log and s.teleports == 'KEEP'
+    assert config_from_settings(bpy.context).teleports == "keep"
+    sc = bpy.context.scene
+    travel = {}
+    for mode in ('KEEP', 'REMOVE'):
+        s.teleports = mode
+        assert bpy.ops.manikin.solve_full_body() == {'FINISHED'}
+        assert ("1 teleport (first at" in s.last_report) and ("put back" in s.last_report) == (mode == 'KEEP')
+        arm = bpy.context.view_layer.objects.active
+        fps = sc.render.fps / sc.render.fps_base
+        xs = []
+        for f in (1 + int(3.3 * fps), 1 + int(3.7 * fps)):
+            sc.frame_set(f)
+            xs.append((arm.matrix_world @ arm.pose.bones["pelvis"].head).x)
+        travel[mode] = xs[1] - xs[0]
+    assert travel['KEEP'] == pytest.approx(2.0 + travel['REMOVE'], abs=0.05)
+    assert abs(travel['REMOVE']) < 0.3

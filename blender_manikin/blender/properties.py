@@ -223,6 +223,15 @@ class MANIKIN_Settings(PropertyGroup):
                 "1.5 times the network time"),
                ('4', "4 Windows", "Each frame is seen by four network windows: twice the network time")],
         description="How many network windows see each frame; more average more views of it")
+    teleports: EnumProperty(
+        name="Teleports", default='KEEP',
+        items=[('KEEP', "Keep", "Teleports and snap turns of the app (the tracking space jumping) are "
+                "solved as one motion and put back: the body jumps where the recording does, its pose "
+                "unbroken"),
+               ('REMOVE', "Remove", "Teleports and snap turns are left out: the body's path is continuous"),
+               ('IGNORE', "Ignore", "Solve the recording as it stands (a jump then tears the pose apart "
+                "around it)")],
+        description="What to do where the app moved the tracking space (teleports, snap turns)")
     model_file: StringProperty(name="Model File", subtype='FILE_PATH', default="",
                                description="A pose network trained with blender_manikin.training (.onnx)")
     offsets_preset: EnumProperty(name="Offsets", items=_preset_items,
@@ -343,6 +352,7 @@ def config_from_settings(context):
     else:
         cfg.model = s.model.lower()
     cfg.overlap = int(s.overlap)
+    cfg.teleports = s.teleports.lower()
     cfg.create_trackers = s.create_trackers
     cfg.live_rig = s.live_rig
     cfg.set_scene_range = s.set_scene_range

@@ -21,7 +21,9 @@ import numpy as np
 
 from . import skeleton as sk
 from .pipeline import DEFAULT_OVERLAP, overlap_windows
+from .plain import shown
 from .pose_result import PoseResult, TrackerTargets
+from .teleports import TELEPORT_CHOICES, find_rig_jumps, remove_rig_jumps, restore_rig_jumps, rig_jumps_note
 
 
 class SolveError(RuntimeError):
@@ -67,7 +69,11 @@ class SolveSettings:
     despike (remove a detector's misplaced samples, :mod:`.keypoint_spikes`; default on).
     Tracker inputs also use model (the pose network) and overlap (how many network windows see
     each frame: 2, the default, keeps 10,000 frames/s; 3 and 4 are a little more accurate at 1.5
-    and 2 times the network time; :data:`.pipeline.OVERLAP_CHOICES`).
+    and 2 times the network time; :data:`.pipeline.OVERLAP_CHOICES`), and teleports (what to
+    do with the teleports and snap turns of an app that moves the tracking space,
+    :mod:`.teleports`: ``"keep"``, the default, solves the take as one motion and puts them back
+    on the solved body; ``"remove"`` leaves them out, the character's path continuous;
+    ``"ignore"`` solves the recording as it stands).
     """
     axes: str | None = None
     units: str | None = None
@@ -91,6 +97,7 @@ class SolveSettings:
     despike: bool = True              # keypoints: remove samples far off their point's path (keypoint_spikes)
     model: str | None = None          # None / "auto": by the recording's trackers; a shipped name or .onnx
     overlap: int = DEFAULT_OVERLAP    # windows seeing each frame: 2, 3 or 4 (pipeline.OVERLAP_CHOICES)
+    teleports: str = "keep"           # "keep", "remove" or "ignore" (teleports.TELEPORT_CHOICES)
 
 
 @dataclass
@@ -127,7 +134,7 @@ class SolveOutcome:
                                 "left/right labels swapped back", "spikes removed",
                                 "no twist information",
                                 "point(s) never seen", "retarget:", "smoothing", "no smoothing")) \
-                    or " tracker offset" in note:
+                    or " tracker offset" in note or " teleport" in note or " snap turn" in note:
                 parts.append(note)
         if self.report is not None:
             gaps = getattr(self.report, "gaps", [])
@@ -467,6 +474,9 @@ def solve_recording(source, settings: SolveSettings | None = None, solver=None, 
     if settings.fps is None or not settings.fps > 0:
         raise SolveError("no frame rate: set fps")
     parse_floor(settings.floor)                  # a bad floor setting fails before the file is read
+    mode = str(settings.teleports or "keep").strip().lower()
+    if mode not in TELEPORT_CHOICES:
+        raise SolveError(f"teleports {shown(settings.teleports)}: expected one of {', '.join(TELEPORT_CHOICES)}")
     from .io_keypoints import KeypointRecording, is_keypoint_input
     if isinstance(source, KeypointRecording) or (
             (isinstance(source, str) or hasattr(source, "__fspath__")) and is_keypoint_input(source)):
@@ -482,7 +492,11 @@ def solve_recording(source, settings: SolveSettings | None = None, solver=None, 
         out.recording = source
     report(STAGES["resampling"], "resampling")
     t = _time.perf_counter()
-    times, pos, quat, valid, out.report = resample_recording(out.recording, settings.fps, settings.floor)
+    jumps, continuous = [], out.recording
+    if mode != "ignore":
+        jumps = find_rig_jumps(out.recording)
+        continuous = remove_rig_jumps(out.recording, jumps)
+    times, pos, quat, valid, out.report = resample_recording(continuous, settings.fps, settings.floor)
     if settings.max_frames is not None and settings.max_frames > 0 and len(times) > settings.max_frames:
         n = int(settings.max_frames)
         times = times[:n]
@@ -510,6 +524,8 @@ def solve_recording(source, settings: SolveSettings | None = None, solver=None, 
         if note:
             out.info.append(note)
     out.info.append(smoothed)
+    if jumps:
+        out.info.append(rig_jumps_note(jumps, mode))
     out.timings["calibrate"] = _time.perf_counter() - t
     report(STAGES["solving"], "solving")
     t = _time.perf_counter()
@@ -527,6 +543,9 @@ def solve_recording(source, settings: SolveSettings | None = None, solver=None, 
     result.t0 = float(times[0])
     if result.targets is None:
         result.targets = out.targets
+    if jumps and mode == "keep":         # the solved body goes where the recording went
+        result = restore_rig_jumps(result, jumps)
+        out.targets = result.targets
     out.result = result
     out.timings["solve"] = _time.perf_counter() - t
     stage_times = dict(getattr(first, "timings", None) or {})      # network / solver split

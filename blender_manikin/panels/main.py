@@ -68,6 +68,7 @@ class MANIKIN_PT_solve(_Base, Panel):
             if s.model == 'FILE':
                 col.prop(s, "model_file")
             col.prop(s, "overlap")
+            col.prop(s, "teleports")
         row = layout.row()
         row.scale_y = 1.6
         row.operator("manikin.solve_full_body", icon='ARMATURE_DATA')

@@ -1,0 +1,286 @@
+"""Teleports and snap turns: VR apps that move the tracking space under the player.
+
+Never imports bpy.
+
+A VR app with locomotion logs world poses: when the player teleports, every device moves by the
+same translation between two samples; on a snap turn (or a recentre) every device turns by the
+same angle about the vertical axis.  No body moves so, but solved as they stand, such jumps tear
+the pose apart around each (the bundled example moved 2.2 m at 3.5 s: the planted feet dragged
+up to 2.2 m over 0.3 s, the knees 5-7 cm off for 2 s after, a hand 38 cm out of reach;
+``tests/test_teleports.py``).
+
+So before the solve :func:`find_rig_jumps` finds them and :func:`remove_rig_jumps` takes them out:
+the motion after each jump is moved back by its inverse, so the take is one continuous motion.
+After the solve :func:`restore_rig_jumps` puts them back on the solved body (its root, and the
+tracker targets), so the character lands where the recording is, with the pose untouched; or
+they stay out (the character's path continuous), as the user chooses.
+
+A jump between two consecutive valid head samples ``a`` and ``b`` (times ``ta < tb``) is:
+
+* a *teleport*: the head moves more than :data:`TELEPORT_MIN_M` and faster than
+  :data:`TELEPORT_MIN_SPEED` (no head moves 0.3 m in one sample at 30-120 Hz: a sprint is
+  about 8 m/s, 0.07 m a sample at 120 Hz, 0.27 m at 30 Hz);
+* a *snap turn*: the head turns about the vertical more than :data:`TURN_MIN_DEG` and faster than
+  :data:`TURN_MIN_RATE` (the fastest head turns reach about 800°/s; snap turns are 15-90° in
+  one sample, so a 45° turn is found at 30 Hz and above, a 15° one at 80 Hz and above);
+
+and it is kept when the head stays where it jumped (the next sample is nearer the new place
+than the old: a tracking glitch of one sample comes back, and :mod:`.resample` removes it), and
+the hands jumped with it: each tracked hand's first sample after the jump is nearer where the
+jump would take its last sample before it than where it was (within :data:`HAND_TOLERANCE_M`
+plus what a hand moves in that time).  A head that jumps alone is a tracking error, not the
+space moving; with no hand tracked around the jump the head decides alone.
+
+The jump's transform (``x -> R x + t``, R a turn about +Z; Blender axes, metres) is taken from
+the head: its pose at ``tb`` against its pose at ``ta`` carried on by its velocity and turn rate
+before the jump.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .recording import Recording, TrackerStream
+from .rotations import axis_angle_rotation, matrix_to_quat, quat_to_matrix
+
+#: a teleport moves the head at least this far in one step (metres) ...
+TELEPORT_MIN_M = 0.3
+#: ... and faster than this (m/s), so that a step across a gap of lost tracking is not one
+TELEPORT_MIN_SPEED = 8.0
+#: a snap turn turns the head at least this much about the vertical (degrees) ...
+TURN_MIN_DEG = 10.0
+#: ... and faster than this (degrees/s)
+TURN_MIN_RATE = 1200.0
+#: consecutive head samples further apart than this (s) are not searched for jumps
+MAX_STEP_S = 0.5
+#: a hand's sample after a jump must be within this (metres) of where the jump takes it ...
+HAND_TOLERANCE_M = 0.10
+#: ... plus what a hand can move in the time between its two samples (m/s)
+HAND_SPEED = 5.0
+#: the samples on either side of a jump the head's velocity is taken from (s)
+VELOCITY_SPAN_S = 0.1
+#: what a solve does with them (:class:`.solve.SolveSettings` ``teleports``)
+TELEPORT_CHOICES = ("keep", "remove", "ignore")
+
+
+@dataclass(frozen=True)
+class RigJump:
+    """One jump of the tracking space.
+
+    time: the first head sample after it (s, the recording clock); start: the last one before
+    it.  rot: ``(3, 3)`` its turn about +Z; trans: ``(3,)`` metres; a point that stood still is
+    at ``rot @ x + trans`` after it (Blender axes).  kind: ``"teleport"``, ``"snap turn"`` or
+    ``"teleport and turn"``.
+    """
+    time: float
+    start: float
+    rot: np.ndarray
+    trans: np.ndarray
+    kind: str
+
+    @property
+    def turn_deg(self) -> float:
+        return float(np.degrees(np.arctan2(self.rot[1, 0], self.rot[0, 0])))
+
+
+def _yaw(R):
+    """The turn about +Z that best fits rotation(s) ``R`` (..., 3, 3), radians."""
+    return np.arctan2(R[..., 1, 0] - R[..., 0, 1], R[..., 0, 0] + R[..., 1, 1])
+
+
+def _rz(angle):
+    return axis_angle_rotation(np.array([0.0, 0.0, 1.0]), float(angle))
+
+
+def _wrap(a):
+    return (a + np.pi) % (2 * np.pi) - np.pi
+
+
+def _valid_samples(stream):
+    ok = stream.valid & np.all(np.isfinite(stream.pos), -1) & np.all(np.isfinite(stream.quat), -1)
+    return np.nonzero(ok)[0]
+
+
+def _head_motion_before(t, p, R, k):
+    """Head velocity (m/s) and turn rate about +Z (rad/s) over the samples before index ``k``."""
+    j = k - 1
+    i = j
+    while i > 0 and t[j] - t[i - 1] <= VELOCITY_SPAN_S:
+        i -= 1
+    if i == j:
+        return np.zeros(3), 0.0
+    dt = t[j] - t[i]
+    v = (p[j] - p[i]) / dt
+    w = _wrap(_yaw(R[j] @ R[i].T)) / dt
+    return v, w
+
+
+def _hand_check(stream, ta, tb, rot, trans):
+    """``True`` / ``False`` when a hand around ``(ta, tb)`` moved with / against the jump, ``None``
+    when it has no valid samples close enough to tell."""
+    idx = _valid_samples(stream)
+    if idx.size < 2:
+        return None
+    t = stream.time[idx]
+    before = idx[(t <= ta + 1e-9) & (t >= ta - MAX_STEP_S)]
+    after = idx[(t >= tb - 1e-9) & (t <= tb + MAX_STEP_S)]
+    if before.size == 0 or after.size == 0:
+        return None
+    i, j = before[-1], after[0]
+    h0, h1 = stream.pos[i], stream.pos[j]
+    reach = HAND_TOLERANCE_M + HAND_SPEED * (stream.time[j] - stream.time[i])
+    jumped = np.linalg.norm(rot @ h0 + trans - h1)
+    stayed = np.linalg.norm(h1 - h0)
+    return bool(jumped < reach and jumped < stayed)
+
+
+def find_rig_jumps(recording: Recording) -> list:
+    """The teleports and snap turns of ``recording`` (see the module docstring), in time order:
+    a list of :class:`RigJump`.  Empty without a head stream."""
+    head = recording.streams.get("head")
+    if head is None or len(head) < 3:
+        return []
+    idx = _valid_samples(head)
+    if idx.size < 3:
+        return []
+    t = head.time[idx]
+    p = head.pos[idx]
+    R = quat_to_matrix(head.quat[idx])
+    hands = [recording.streams[d] for d in ("left_hand", "right_hand") if d in recording.streams]
+    jumps = []
+    dt = np.diff(t)
+    step = np.linalg.norm(p[1:] - p[:-1], axis=-1)
+    turn = np.abs(_wrap(_yaw(R[1:] @ np.swapaxes(R[:-1], -1, -2))))
+    candidate = (dt <= MAX_STEP_S) & (
+        ((step > TELEPORT_MIN_M) & (step > TELEPORT_MIN_SPEED * dt))
+        | ((turn > np.radians(TURN_MIN_DEG)) & (turn > np.radians(TURN_MIN_RATE) * dt)))
+    for c in np.nonzero(candidate)[0]:
+        a, b = c, c + 1
+        v, w = _head_motion_before(t, p, R, b)
+        h = t[b] - t[a]
+        yaw = _wrap(_yaw(R[b] @ R[a].T) - w * h)
+        rot = _rz(yaw)
+        trans = p[b] - rot @ (p[a] + v * h)
+        moved = np.linalg.norm(p[b] - (p[a] + v * h))
+        teleport = moved > TELEPORT_MIN_M
+        turned = abs(np.degrees(yaw)) > TURN_MIN_DEG
+        if not (teleport or turned):
+            continue
+        if b + 1 < len(t) and t[b + 1] - t[b] <= MAX_STEP_S:     # the head stays where it jumped
+            back_p = np.linalg.norm(p[b + 1] - p[a]) < np.linalg.norm(p[b + 1] - p[b])
+            back_r = abs(_wrap(_yaw(R[b + 1] @ R[a].T))) < abs(_wrap(_yaw(R[b + 1] @ R[b].T)))
+            if (teleport and back_p) or (turned and not teleport and back_r):
+                continue
+        checks = [_hand_check(s, t[a], t[b], rot, trans) for s in hands]
+        if any(c is False for c in checks):
+            continue
+        kind = "teleport and turn" if teleport and turned else ("teleport" if teleport else "snap turn")
+        jumps.append(RigJump(float(t[b]), float(t[a]), rot, trans, kind))
+    return jumps
+
+
+def _segment_transforms(jumps):
+    """Cumulative ``(R, t)`` of the space after each jump: ``[(I, 0), after jump 1, ...]``."""
+    out = [(np.eye(3), np.zeros(3))]
+    for j in jumps:
+        R0, t0 = out[-1]
+        out.append((j.rot @ R0, j.rot @ t0 + j.trans))
+    return out
+
+
+def _segments(times, jumps):
+    """Index of the space each time is in: the number of jumps at or before it."""
+    edges = np.array([j.time for j in jumps])
+    return np.searchsorted(edges, np.asarray(times) + 1e-9, side="right")
+
+
+def remove_rig_jumps(recording: Recording, jumps) -> Recording:
+    """A copy of ``recording`` with the motion after each jump moved back by it: one continuous
+    motion in the space of the first sample.  A hand or foot sample between the head's two
+    samples around a jump goes with whichever side it is nearer to."""
+    if not jumps:
+        return recording
+    W = _segment_transforms(jumps)
+    streams = {}
+    for d, s in recording.streams.items():
+        seg = _segments(s.time, jumps)
+        pos = s.pos.copy()
+        quat = s.quat.copy()
+        if d != "head":            # samples between the head's two around a jump: the nearer side
+            for k, j in enumerate(jumps, start=1):
+                Ra, ta = W[k - 1]
+                Rb, tb = W[k]
+                for i in np.nonzero((s.time > j.start + 1e-9) & (s.time < j.time - 1e-9))[0]:
+                    if i == 0 or not np.all(np.isfinite(s.pos[i - 1])):
+                        continue
+                    Rp, tp = W[seg[i - 1]]
+                    ref = Rp.T @ (s.pos[i - 1] - tp)
+                    if np.linalg.norm(Rb.T @ (s.pos[i] - tb) - ref) < np.linalg.norm(Ra.T @ (s.pos[i] - ta) - ref):
+                        seg[i] = k
+        for k in range(len(W)):
+            m = seg == k
+            if k == 0 or not m.any():
+                continue
+            Rk, tk = W[k]
+            pos[m] = (pos[m] - tk) @ Rk           # Rk.T @ (x - tk), row-wise
+            q = quat[m]
+            ok = np.all(np.isfinite(q), -1)
+            if ok.any():
+                quat[np.nonzero(m)[0][ok]] = matrix_to_quat(Rk.T @ quat_to_matrix(q[ok]))
+        streams[d] = TrackerStream(d, s.time.copy(), pos, quat, s.valid.copy())
+    return Recording(streams=streams, source=recording.source, metadata=dict(recording.metadata),
+                     warnings=list(recording.warnings))
+
+
+def restore_rig_jumps(result, jumps):
+    """Put ``jumps`` back on a :class:`.pose_result.PoseResult` solved without them: each frame
+    after a jump moved by it (the root's position and orientation, and the tracker targets), the
+    pose itself untouched.  Returns a new result; ``result`` is not changed."""
+    import dataclasses
+    from .pose_result import TrackerTargets
+    from .skeleton import J
+    if not jumps:
+        return result
+    W = _segment_transforms(jumps)
+    T = result.num_frames
+    frame_times = result.t0 + np.arange(T) / result.fps
+    seg = _segments(frame_times, jumps)
+    root_pos = result.root_pos.copy()
+    local_rot = result.local_rot.copy()
+    targets = result.targets
+    if targets is not None:
+        tpos = {d: v.copy() for d, v in targets.pos.items()}
+        trot = {d: v.copy() for d, v in targets.rot.items()}
+    for k in range(1, len(W)):
+        m = seg == k
+        if not m.any():
+            continue
+        Rk, tk = W[k]
+        root_pos[m] = root_pos[m] @ Rk.T + tk
+        local_rot[m, J["pelvis"]] = Rk @ local_rot[m, J["pelvis"]]
+        if targets is not None:
+            for d in tpos:
+                tpos[d][m] = tpos[d][m] @ Rk.T + tk
+                trot[d][m] = Rk @ trot[d][m]
+    out = dataclasses.replace(result, root_pos=root_pos, local_rot=local_rot, _fk=None)
+    if targets is not None:
+        out.targets = TrackerTargets(fps=targets.fps, pos=tpos, rot=trot, valid=dict(targets.valid))
+    return out
+
+
+def rig_jumps_note(jumps, mode="keep"):
+    """The summary's note: ``"2 teleports and 3 snap turns (first at 12.40 s) solved as one motion
+    and put back"``; ``None`` without jumps."""
+    if not jumps:
+        return None
+    n_tel = sum(1 for j in jumps if "teleport" in j.kind)
+    n_turn = sum(1 for j in jumps if "turn" in j.kind)
+    parts = []
+    if n_tel:
+        parts.append(f"{n_tel} teleport{'s' if n_tel > 1 else ''}")
+    if n_turn:
+        parts.append(f"{n_turn} snap turn{'s' if n_turn > 1 else ''}")
+    what = " and ".join(parts)
+    how = "solved as one motion and put back" if mode == "keep" else "taken out (the path is continuous)"
+    return f"{what} (first at {jumps[0].time:.2f} s) {how}"

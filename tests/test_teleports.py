@@ -1,0 +1,136 @@
+"""Teleports and snap turns (core/teleports.py): found, solved as one motion, put back.
+
+The bundled example recording, with jumps of the tracking space put in by hand: every device
+moved (a teleport) or turned about the headset's vertical (a snap turn) from a given time on.
+"""
+import os
+
+import numpy as np
+import pytest
+
+from blender_manikin.core import solve as cs
+from blender_manikin.core.formats import load_recording
+from blender_manikin.core.recording import Recording, TrackerStream
+from blender_manikin.core.rotations import axis_angle_rotation, matrix_to_quat, quat_to_matrix
+from blender_manikin.core.teleports import find_rig_jumps, remove_rig_jumps
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+EXAMPLE = os.path.join(ROOT, "examples", "example_recording.csv")
+Z = np.array([0.0, 0.0, 1.0])
+
+
+@pytest.fixture(scope="module")
+def example():
+    rec = load_recording(EXAMPLE)
+    return rec, cs.solve_recording(rec, cs.SolveSettings(fps=30.0))
+
+
+def head_at(rec, t):
+    s = rec.streams["head"]
+    return s.pos[np.searchsorted(s.time, t)]
+
+
+def moved(rec, jumps, devices=None):
+    """``rec`` with its space jumped: ``jumps`` = [(time, turn_deg, (dx, dy, dz))], each turn about
+    the vertical through the head's place at that time, applied to every sample at or after it
+    (only ``devices``' samples when given).  Returns the recording and the composite transforms
+    ``[(time, R, t)]`` (x -> R x + t) in force from each time on."""
+    streams = {d: (s.time, s.pos.copy(), quat_to_matrix(s.quat)) for d, s in rec.streams.items()}
+    composite = []
+    R_all, t_all = np.eye(3), np.zeros(3)
+    for time, turn, shift in jumps:
+        pivot = head_at(rec, time)
+        pivot = R_all @ pivot + t_all
+        R = axis_angle_rotation(Z, np.radians(turn))
+        t = pivot - R @ pivot + np.asarray(shift, float)
+        for d, (tt, p, Rm) in streams.items():
+            if devices is not None and d not in devices:
+                continue
+            m = tt >= time
+            p[m] = p[m] @ R.T + t
+            Rm[m] = R @ Rm[m]
+        R_all, t_all = R @ R_all, R @ t_all + t
+        composite.append((time, R_all.copy(), t_all.copy()))
+    out = Recording(streams={d: TrackerStream(d, tt, p, matrix_to_quat(Rm), rec.streams[d].valid)
+                             for d, (tt, p, Rm) in streams.items()},
+                    source="moved", metadata=dict(rec.metadata))
+    return out, composite
+
+
+def expected_positions(base, composite, starts):
+    """The base solve's joint positions moved as the recording was, frame by frame: from each
+    jump's first moved sample (``starts``) on."""
+    P = base.result.positions.copy()
+    times = base.result.t0 + np.arange(base.result.num_frames) / base.result.fps
+    for (_, R, t), start in zip(composite, starts):
+        m = times >= start
+        P[m] = (base.result.positions[m] @ R.T) + t
+    return P
+
+
+@pytest.mark.parametrize("jumps,kinds", [
+    ([(3.5, 0.0, (2.0, -1.0, 0.0))], ["teleport"]),
+    ([(2.5, 45.0, (0, 0, 0)), (4.6, -30.0, (0, 0, 0))], ["snap turn", "snap turn"]),
+    ([(3.0, 90.0, (-1.5, 0.5, 0.2))], ["teleport and turn"]),
+])
+def test_jumps_are_found_solved_as_one_motion_and_put_back(example, jumps, kinds):
+    rec, base = example
+    jumped, composite = moved(rec, jumps)
+    found = find_rig_jumps(jumped)
+    assert [j.kind for j in found] == kinds
+    for j, (time, turn, _) in zip(found, jumps):
+        assert j.time == pytest.approx(time, abs=0.015) and j.turn_deg == pytest.approx(turn, abs=1.0)
+    # taken out, the take is the original motion again (within the head's motion in one sample)
+    back = remove_rig_jumps(jumped, found)
+    for d, s in back.streams.items():
+        assert np.abs(s.pos - rec.streams[d].pos).max() < 0.02, d
+
+    keep = cs.solve_recording(jumped, cs.SolveSettings(fps=30.0))
+    assert f"(first at {found[0].time:.2f} s) solved as one motion and put back" in keep.summary()
+    err = np.linalg.norm(keep.result.positions - expected_positions(base, composite, [j.time for j in found]), axis=-1)
+    assert np.median(err) < 0.005 and err.max() < 0.03, (np.median(err), err.max())
+    # the hands still land on their trackers, which are where the recording has them
+    for d, j in (("left_hand", "left_wrist"), ("right_hand", "right_wrist")):
+        from blender_manikin.core.skeleton import J
+        miss = np.linalg.norm(keep.result.positions[:, J[j]] - keep.result.targets.pos[d], axis=-1)
+        assert np.median(miss) < 1e-4, d
+
+    removed = cs.solve_recording(jumped, cs.SolveSettings(fps=30.0, teleports="remove"))
+    assert "taken out (the path is continuous)" in removed.summary()
+    err = np.linalg.norm(removed.result.positions - base.result.positions, axis=-1)
+    assert np.median(err) < 0.005 and err.max() < 0.03
+
+    # solved as recorded, the jump tears the pose apart around it
+    ignored = cs.solve_recording(jumped, cs.SolveSettings(fps=30.0, teleports="ignore"))
+    starts = [j.time for j in found]
+    err = np.linalg.norm(ignored.result.positions - expected_positions(base, composite, starts), axis=-1)
+    assert err.max() > 0.10 and "teleport" not in ignored.summary()
+
+
+def test_what_is_not_a_jump_of_the_space(example):
+    rec, _ = example
+    assert find_rig_jumps(rec) == []
+    # the head alone jumps (a tracking error of the headset): the hands did not move with it
+    alone, _ = moved(rec, [(3.5, 0.0, (0.8, 0.0, 0.0))], devices=("head",))
+    assert find_rig_jumps(alone) == []
+    # one head sample off by 1 m that comes back (a glitch; the resampler drops it)
+    s = rec.streams["head"]
+    pos = s.pos.copy()
+    pos[300] += [1.0, 0.0, 0.0]
+    glitch = Recording(streams={**rec.streams, "head": TrackerStream("head", s.time, pos, s.quat, s.valid)})
+    assert find_rig_jumps(glitch) == []
+    # a whole-body spin up to 1,500 deg/s (a pirouette) turns as fast as a snap turn, but smoothly
+    spin_streams = {}
+    for d, st in rec.streams.items():
+        t = st.time - 3.0
+        angle = np.radians(np.where(t > 0, 1500.0 * np.minimum(t, 0.3) ** 2 / 0.6 + 1500.0 * np.maximum(t - 0.3, 0), 0))
+        pivot = head_at(rec, 3.0) * [1, 1, 0]
+        R = axis_angle_rotation(np.tile(Z, (len(t), 1)), angle)
+        p = np.einsum("nij,nj->ni", R, st.pos - pivot) + pivot
+        spin_streams[d] = TrackerStream(d, st.time, p, matrix_to_quat(R @ quat_to_matrix(st.quat)), st.valid)
+    assert find_rig_jumps(Recording(streams=spin_streams)) == []
+
+
+def test_a_bad_teleports_setting_is_refused():
+    with pytest.raises(cs.SolveError, match="teleports 'sometimes': expected one of keep, remove, ignore"):
+        cs.solve_recording(EXAMPLE, cs.SolveSettings(teleports="sometimes"))
