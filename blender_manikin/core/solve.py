@@ -21,6 +21,7 @@ import numpy as np
 
 from . import skeleton as sk
 from .pipeline import DEFAULT_OVERLAP, overlap_windows
+from .lost_hands import relax_lost_hands
 from .plain import shown
 from .pose_result import PoseResult, TrackerTargets
 from .teleports import TELEPORT_CHOICES, find_rig_jumps, remove_rig_jumps, restore_rig_jumps, rig_jumps_note
@@ -134,7 +135,8 @@ class SolveOutcome:
                                 "left/right labels swapped back", "spikes removed",
                                 "no twist information",
                                 "point(s) never seen", "retarget:", "smoothing", "no smoothing")) \
-                    or " tracker offset" in note or " teleport" in note or " snap turn" in note:
+                    or " tracker offset" in note or " teleport" in note or " snap turn" in note \
+                    or note.endswith("the arm hangs relaxed there"):
                 parts.append(note)
         if self.report is not None:
             gaps = getattr(self.report, "gaps", [])
@@ -520,6 +522,8 @@ def solve_recording(source, settings: SolveSettings | None = None, solver=None, 
         out.info.append(note)
     if out.offsets is not offsets:     # calibration refined the device rotations
         out.targets = move_floor(make_targets(times, pos, quat, valid, settings.fps, out.offsets)[0], out.floor)
+    out.targets, lost = relax_lost_hands(out.targets, out.body)     # long hand gaps: the arm hangs
+    out.info.extend(lost)
     for note in (floor_note(settings, out.floor), stature_note(settings, out), head_height_note(settings, out)):
         if note:
             out.info.append(note)
