@@ -44,6 +44,8 @@ Options of ``solve`` (they mirror the panel; ``--help`` has them all):
                               are) or one Savitzky-Golay window in seconds (0: off)
 --overlap 2|3|4               network windows seeing each frame: 2 (default, fastest), 3 or 4
                               (a little more accurate at 1.5 and 2 times the network time)
+--start SECONDS, --end SECONDS  solve only this part of the take (seconds from its first
+                              sample; a tracker take is still calibrated on the whole)
 --teleports keep|remove|ignore  trackers: an app's teleports and snap turns (the tracking
                               space jumping) are solved as one motion and put back on the
                               body (keep, default), left out (remove: a continuous path),
@@ -125,6 +127,11 @@ def _add_solve_options(s):
     s.add_argument("--overlap", type=int, choices=OVERLAP_CHOICES, default=DEFAULT_OVERLAP,
                    help="network windows that see each frame: 2 (default, fastest), 3 or 4 (a little "
                         "more accurate at 1.5 and 2 times the network time)")
+    s.add_argument("--start", type=_seconds_arg, default=None, metavar="SECONDS",
+                   help="solve from this time on (seconds from the recording's first sample; a tracker take "
+                        "is still calibrated on its T-pose wherever it is)")
+    s.add_argument("--end", type=_seconds_arg, default=None, metavar="SECONDS",
+                   help="solve up to this time (seconds from the recording's first sample)")
     from .core.teleports import TELEPORT_CHOICES
     s.add_argument("--teleports", choices=TELEPORT_CHOICES, default="keep",
                    help="trackers: an app's teleports and snap turns are solved as one motion and put back "
@@ -193,6 +200,17 @@ def append_character(spec):
         else:
             bpy.data.objects.remove(o)
     return arm
+
+
+def _seconds_arg(text):
+    """argparse type of ``--start`` / ``--end``: seconds >= 0."""
+    try:
+        v = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a number of seconds") from None
+    if not (v >= 0 and v != float("inf")):
+        raise argparse.ArgumentTypeError(f"{text!r}: expected seconds >= 0")
+    return v
 
 
 def _smoothing_arg(text):
@@ -312,7 +330,8 @@ def solve_settings(args):
                        floor=getattr(args, "floor", 0.0), fix_sides=not getattr(args, "keep_sides", False),
                        despike=not getattr(args, "keep_spikes", False),
                        overlap=getattr(args, "overlap", SolveSettings.overlap),
-                       teleports=getattr(args, "teleports", SolveSettings.teleports))
+                       teleports=getattr(args, "teleports", SolveSettings.teleports),
+                       start=getattr(args, "start", None), end=getattr(args, "end", None))
     if args.calibration_time is not None:
         st.calibration, st.tpose_time = "TPOSE", float(args.calibration_time)
         st.height, st.arm_span = args.height, args.arm_span

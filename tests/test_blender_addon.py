@@ -494,3 +494,27 @@ def test_panel_teleports_keep_the_body_where_the_recording_jumps(addon, tmp_path
         travel[mode] = xs[1] - xs[0]
     assert travel['KEEP'] == pytest.approx(2.0 + travel['REMOVE'], abs=0.05)
     assert abs(travel['REMOVE']) < 0.3
+
+
+def test_panel_trim_reaches_the_solve(addon, monkeypatch):
+    """Frames and Output's Trim Start / Trim End solve a part of a recording, in seconds."""
+    from types import SimpleNamespace
+    from blender_manikin.panels import main as panels
+    from blender_manikin.blender.properties import config_from_settings
+    monkeypatch.setattr(solve_job, "run_solver", solve_job.core_solve.default_solver)
+    s = bpy.context.scene.manikin
+    s.source = 'FILE'
+    s.filepath = os.path.join(os.path.dirname(os.path.dirname(__file__)), "examples", "example_recording.csv")
+    s.live_rig = False
+    log = []
+    panels.MANIKIN_PT_output.draw(SimpleNamespace(layout=PanelLayout(log)), bpy.context)
+    assert ("prop", "use_trim_start") in log and ("prop", "trim_end") in log
+    cfg = config_from_settings(bpy.context)
+    assert cfg.start is None and cfg.end is None
+    s.use_trim_start, s.trim_start, s.use_trim_end, s.trim_end = True, 2.0, True, 5.0
+    cfg = config_from_settings(bpy.context)
+    assert (cfg.start, cfg.end) == (2.0, 5.0)
+    assert bpy.ops.manikin.solve_full_body() == {'FINISHED'}
+    assert "trimmed to 2.00-5.00 s" in s.last_report
+    fps = bpy.context.scene.render.fps / bpy.context.scene.render.fps_base
+    assert f"{int(round(3.0 * fps)) + 1} frames at {fps:g} fps" in s.last_report

@@ -355,3 +355,18 @@ def test_dataset_conversion_takes_a_freemocap_folder_as_one_input(tmp_path, moti
     write_layout_npy(root / "day1" / "clip.npy", "coco17", body, pos, world)
     found = convert.collect_inputs([str(root)])
     assert found == [os.path.abspath(root / "day1" / "clip.npy"), os.path.abspath(folder)]
+
+
+def test_keypoints_trimmed_to_a_part_of_the_take(tmp_path, motion):
+    """--start / --end cut keypoints too: the frames of that part, the times kept."""
+    from blender_manikin.core import solve as cs
+    body, pos, world = motion
+    folder, _ = write_freemocap(str(tmp_path / "session"), body, pos, world, sigma=0.005)
+    full = cs.solve_recording(folder, cs.SolveSettings(fps=30.0))
+    part = cs.solve_recording(folder, cs.SolveSettings(fps=30.0, start=2.0, end=4.0))
+    assert part.result.num_frames == 61 and part.result.t0 == pytest.approx(full.result.t0 + 2.0)
+    assert "trimmed to 2.00-4.00 s" in part.info
+    e = np.linalg.norm(part.result.positions - full.result.positions[60:121], axis=-1)
+    assert np.median(e) < 0.02
+    with pytest.raises(cs.SolveError, match="past the recording's end"):
+        cs.solve_recording(folder, cs.SolveSettings(fps=30.0, start=60.0))

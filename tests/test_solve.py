@@ -276,3 +276,35 @@ def test_the_summary_names_the_offsets_auto_chose(tmp_path):
     assert "offsets " not in out.summary() and out.offsets["name"].startswith("beat_saber")
     assert cs.offsets_note("auto", "openxr_generic") == "offsets openxr_generic (auto: the format's default)"
     assert cs.offsets_note("auto", "none") is None and cs.offsets_note("quest_touch", "quest_touch") is None
+
+
+def test_a_trimmed_solve_is_the_whole_take_solve_cut():
+    """--start / --end: the part of the take asked for, calibrated on the whole take's T-pose and
+    solved with the network's context around the cut: the same poses as the whole solve's."""
+    full = cs.solve_recording(EXAMPLE, cs.SolveSettings(fps=30.0))
+    part = cs.solve_recording(EXAMPLE, cs.SolveSettings(fps=30.0, start=2.0, end=5.0))
+    assert part.result.num_frames == 91 and part.result.t0 == pytest.approx(full.result.t0 + 2.0)
+    assert any(n.startswith("calibrated on a T-pose at 0.53 s") for n in part.info)        # before the cut
+    assert "trimmed to 2.00-5.00 s" in part.summary()
+    e = np.linalg.norm(part.result.positions - full.result.positions[60:151], axis=-1)
+    assert e.max() < 0.01 and np.median(e) < 1e-6
+    assert part.result.targets.pos["head"].shape == (91, 3)
+    np.testing.assert_allclose(part.result.targets.pos["head"], full.result.targets.pos["head"][60:151])
+    tail = cs.solve_recording(EXAMPLE, cs.SolveSettings(fps=30.0, start=5.5))
+    assert tail.result.num_frames == full.result.num_frames - 165
+    for kw, msg in (({"start": 9.0}, "start 9 s is past the recording's end"),
+                    ({"start": 3.0, "end": 2.0}, "end 2 s is not after start 3 s"),
+                    ({"start": -1.0}, "start -1.0: expected seconds >= 0")):
+        with pytest.raises(cs.SolveError, match=msg):
+            cs.solve_recording(EXAMPLE, cs.SolveSettings(fps=30.0, **kw))
+
+
+def test_cli_start_and_end(tmp_path):
+    r = subprocess.run([sys.executable, "-m", "blender_manikin", "solve", EXAMPLE, "--out", str(tmp_path),
+                        "--format", "json", "--start", "1.5", "--end", "4"], capture_output=True, text=True,
+                       cwd=ROOT)
+    assert r.returncode == 0, r.stderr
+    assert "76 frames at 30 fps" in r.stdout and "trimmed to 1.50-4.00 s" in r.stdout
+    r = subprocess.run([sys.executable, "-m", "blender_manikin", "solve", EXAMPLE, "--out", str(tmp_path),
+                        "--end", "soon"], capture_output=True, text=True, cwd=ROOT)
+    assert r.returncode == 2 and "'soon' is not a number of seconds" in r.stderr

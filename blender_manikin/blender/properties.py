@@ -247,6 +247,15 @@ class MANIKIN_Settings(PropertyGroup):
                            description="Last frame (scene objects; recordings when Limit is on)")
     limit_frames: BoolProperty(name="Limit", default=False,
                                description="Recordings: stop at the End frame")
+    use_trim_start: BoolProperty(name="Trim Start", default=False,
+                                 description="Recordings: solve from this time on (the T-pose is still "
+                                             "looked for in the whole take)")
+    trim_start: FloatProperty(name="From", default=0.0, min=0.0, unit='TIME_ABSOLUTE', subtype='TIME_ABSOLUTE',
+                              description="Seconds from the recording's first sample")
+    use_trim_end: BoolProperty(name="Trim End", default=False,
+                               description="Recordings: solve up to this time")
+    trim_end: FloatProperty(name="To", default=10.0, min=0.0, unit='TIME_ABSOLUTE', subtype='TIME_ABSOLUTE',
+                            description="Seconds from the recording's first sample")
 
     live_rig: BoolProperty(name="Live Swivel Rig", default=True,
                            description="Elbows and knees follow the swivel properties and the "
@@ -369,6 +378,8 @@ def config_from_settings(context):
         cfg.fps = scene_fps(scene)      # scene sources are sampled on scene frames
     else:
         cfg.frame_start = s.frame_start if not s.use_scene_range else scene.frame_start
+        cfg.start = float(s.trim_start) if s.use_trim_start else None
+        cfg.end = float(s.trim_end) if s.use_trim_end else None
         if s.limit_frames:
             cfg.max_frames = max(1, s.frame_end - cfg.frame_start + 1)
     return cfg

@@ -47,7 +47,7 @@ from . import skeleton as sk
 from .pose_result import PoseResult
 from .resample import Gap, GapReport
 from .smoothing import AUTO_FILTERS, parse_smoothing, smooth, smooth_auto, smoothing_note
-from .solve import SolveError, SolveOutcome, SolveSettings, parse_floor
+from .solve import SolveError, SolveOutcome, SolveSettings, parse_floor, trim_span
 
 #: left / right joint pairs whose bone lengths are averaged
 _PAIRS = [(sk.J[f"left_{n}"], sk.J[f"right_{n}"]) for n in
@@ -356,13 +356,14 @@ class PreparedKeypoints:
 
 
 def prepare_keypoints(rec, fps, smoothing, height=None, max_frames=None, sole=None,
-                      fix_sides=True, despike=True) -> PreparedKeypoints:
+                      fix_sides=True, despike=True, start=None, end=None) -> PreparedKeypoints:
     """Stages 2-7 of the module docstring on a :class:`.io_keypoints.KeypointRecording`: left/right
     label swaps undone (``fix_sides``), spikes removed (``despike``), gaps bridged, smoothed
     (``smoothing``: ``"auto"`` for :func:`.smoothing.smooth_auto`, else a Savitzky-Golay window
     in seconds, 0: none), resampled to ``fps``, the 22 joints placed, the body sized (scaled to
     ``height`` metres when given, on ``sole`` metres of shoe sole, None: :data:`.skeleton.SOLE`)
-    and the floor moved to z = 0.  Raises
+    and the floor moved to z = 0.  start / end: the part kept, seconds from the first sample
+    (:func:`.solve.trim_span`; cut after smoothing, so the filter sees the motion around it).  Raises
     :class:`.solve.SolveError` when a joint cannot be placed (a point it needs was never seen)."""
     lay = kl.LAYOUTS[rec.layout]
     rate = 1.0 / float(np.median(np.diff(rec.time)))
@@ -378,6 +379,9 @@ def prepare_keypoints(rec, fps, smoothing, height=None, max_frames=None, sole=No
     elif smoothing:
         X = smooth(X, rate, smoothing)
     times, X = resample_points(rec.time, X, fps)
+    span = trim_span(times, start, end)
+    if span is not None:
+        times, X = times[span[0]:span[1]], X[span[0]:span[1]]
     if max_frames and len(times) > max_frames:
         times, X = times[:max_frames], X[:max_frames]
     b22 = _finite_orientations(kl.body22_from_keypoints(X, lay))
@@ -427,7 +431,7 @@ def solve_keypoints(source, settings: SolveSettings | None = None, progress=None
     fps = float(s.fps) if s.fps else 1.0 / float(np.median(np.diff(rec.time)))
     smoothing = parse_smoothing(s.smoothing)
     prep = prepare_keypoints(rec, fps, smoothing, height=s.height, max_frames=s.max_frames, sole=s.sole,
-                             fix_sides=s.fix_sides, despike=s.despike)
+                             fix_sides=s.fix_sides, despike=s.despike, start=s.start, end=s.end)
     lay, b22, never = kl.LAYOUTS[rec.layout], prep.b22, prep.never
     out.report = GapReport(fps=fps, t0=float(prep.times[0]), t_end=float(prep.times[-1]),
                            num_frames=len(prep.times), devices=lay.points, gaps=prep.gaps)
@@ -443,6 +447,8 @@ def solve_keypoints(source, settings: SolveSettings | None = None, progress=None
     out.info.append(f"keypoints: {'adaptive' if adaptive else 'naive'} HybrIK, floor at {prep.floor:+.3f} m "
                     f"moved to 0")
     out.info.append(told)
+    if s.start is not None or s.end is not None:
+        out.info.append(f"trimmed to {prep.times[0] - rec.time[0]:.2f}-{prep.times[-1] - rec.time[0]:.2f} s")
     rate = 1.0 / float(np.median(np.diff(rec.time)))          # the file's samples per second
     swapped = prep.sides.note(rate) if prep.sides is not None else None
     if swapped:

@@ -44,6 +44,12 @@ class TrackerTargets:
     def devices(self):
         return tuple(d for d in DEVICES if d in self.pos)
 
+    def frames(self, sl: slice) -> "TrackerTargets":
+        """The targets of the frames ``sl`` (a slice), as a new object (the arrays are views)."""
+        return TrackerTargets(fps=self.fps, pos={d: v[sl] for d, v in self.pos.items()},
+                              rot={d: v[sl] for d, v in self.rot.items()},
+                              valid={d: v[sl] for d, v in self.valid.items()})
+
 
 @dataclass
 class PoseResult:
@@ -78,6 +84,19 @@ class PoseResult:
     @property
     def num_frames(self) -> int:
         return int(self.local_rot.shape[0])
+
+    def frames(self, sl: slice) -> "PoseResult":
+        """The frames ``sl`` (a slice with step 1) of this result, as a new result whose ``t0`` is
+        its first frame's time (the arrays are views; ``with_body`` is not carried over)."""
+        start = range(self.num_frames)[sl].start if self.num_frames else 0
+
+        def cut(a):
+            return None if a is None else a[sl]
+        return PoseResult(fps=self.fps, body=self.body, local_rot=self.local_rot[sl], root_pos=self.root_pos[sl],
+                          swivel=self.swivel[sl], contacts=cut(self.contacts), reach_error=cut(self.reach_error),
+                          at_limit=cut(self.at_limit),
+                          targets=None if self.targets is None else self.targets.frames(sl),
+                          t0=self.t0 + start / self.fps, timings=dict(self.timings), notes=list(self.notes))
 
     def fk(self):
         """``(positions (T,22,3), world_rot (T,22,3,3))``, cached."""

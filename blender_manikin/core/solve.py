@@ -55,7 +55,11 @@ class SolveSettings:
     vertical axis (0, the default: at its zero), or ``"height"``: under a performer of
     ``height`` standing in the take (:func:`floor_height`); the solve moves it to z = 0.
     offsets: a device-offsets preset name, ``"none"``, ``"auto"`` (see :func:`resolve_offsets`)
-    or an offsets dict (:mod:`.device_offsets`).  max_frames: crop.
+    or an offsets dict (:mod:`.device_offsets`).  max_frames: crop.  start / end: the part of
+    the take to solve, seconds from its first sample (None: from the start / to the end); a
+    tracker take is still calibrated on the whole recording (its T-pose is usually at the start)
+    and solved :data:`TRIM_MARGIN_S` beyond either end (from a multiple of :data:`TRIM_ALIGN_S`),
+    so that the network sees the motion around the cut as in the whole take's solve.
     smoothing: ``"auto"`` (default: each device's, or keypoint's, track gets the Savitzky-Golay
     filter its own measured noise calls for, so clean tracks stay as they are) or one window in
     seconds for all (0: off); see :mod:`.smoothing`.
@@ -99,6 +103,8 @@ class SolveSettings:
     model: str | None = None          # None / "auto": by the recording's trackers; a shipped name or .onnx
     overlap: int = DEFAULT_OVERLAP    # windows seeing each frame: 2, 3 or 4 (pipeline.OVERLAP_CHOICES)
     teleports: str = "keep"           # "keep", "remove" or "ignore" (teleports.TELEPORT_CHOICES)
+    start: float | None = None        # seconds from the first sample: solve from here (None: the start)
+    end: float | None = None          # seconds from the first sample: solve up to here (None: the end)
 
 
 @dataclass
@@ -131,7 +137,8 @@ class SolveOutcome:
         if self.body is not None:
             parts.append(f"stature {self.body.stature:.2f} m")
         for note in self.info:
-            if note.startswith(("offsets ", "calibrated", "arm span", "estimated stature", "head stands", "floor at",
+            if note.startswith(("offsets ", "trimmed to", "calibrated", "arm span", "estimated stature",
+                                "head stands", "floor at",
                                 "left/right labels swapped back", "spikes removed",
                                 "no twist information",
                                 "point(s) never seen", "retarget:", "smoothing", "no smoothing")) \
@@ -166,6 +173,38 @@ def resample_recording(recording, fps, floor=0.0):
     from .resample import resample
     floor = parse_floor(floor)
     return resample(recording, fps, floor=None if floor == FLOOR_FROM_HEIGHT else floor)
+
+
+#: a trimmed tracker take is solved this many seconds beyond either end of the part kept (the
+#: network's half window), then cut ...
+TRIM_MARGIN_S = 1.0
+#: ... from a multiple of this many seconds of the take: the network's windows (every second one
+#: mirrored) then fall where they fall in the whole take's solve, for the shipped models at every
+#: overlap but the four-tracker and six-tracker networks' 3 (their window periods divide 4 s)
+TRIM_ALIGN_S = 4.0
+
+
+def trim_span(times, start=None, end=None):
+    """``(first, stop)`` frame indices of the part ``[start, end]`` seconds (from ``times[0]``;
+    None: from the first / to the last frame) of frames at ``times`` ``(T,)``, or None when the
+    whole take is kept.  Raises :class:`SolveError` for a part outside the take or empty."""
+    if start is None and end is None:
+        return None
+    T = len(times)
+    length = float(times[-1] - times[0]) if T else 0.0
+    for name, v in (("start", start), ("end", end)):
+        if v is not None and not (np.isfinite(v) and v >= 0):
+            raise SolveError(f"{name} {shown(v)}: expected seconds >= 0 from the recording's first sample")
+    if start is not None and start > length:
+        raise SolveError(f"start {start:g} s is past the recording's end ({length:.2f} s long)")
+    if start is not None and end is not None and end <= start:
+        raise SolveError(f"end {end:g} s is not after start {start:g} s")
+    rel = np.asarray(times) - times[0]
+    first = 0 if start is None else int(np.searchsorted(rel, float(start) - 1e-9, side="left"))
+    stop = T if end is None else int(np.searchsorted(rel, float(end) + 1e-9, side="right"))
+    if stop - first < 2:
+        raise SolveError(f"the part {start or 0:g}-{end if end is not None else length:g} s holds fewer than 2 frames")
+    return first, stop
 
 
 def resolve_offsets(offsets, recording):
@@ -528,6 +567,14 @@ def solve_recording(source, settings: SolveSettings | None = None, solver=None, 
         if note:
             out.info.append(note)
     out.info.append(smoothed)
+    span = trim_span(times, settings.start, settings.end)
+    solve_times = times
+    if span is not None:             # calibrated on the whole take; solved with a margin, then cut
+        margin = int(round(TRIM_MARGIN_S * settings.fps))
+        align = max(int(round(TRIM_ALIGN_S * settings.fps)), 1)
+        solved = slice(max(0, (span[0] - margin) // align * align), min(len(times), span[1] + margin))
+        out.targets, solve_times = out.targets.frames(solved), times[solved]
+        out.info.append(f"trimmed to {times[span[0]] - times[0]:.2f}-{times[span[1] - 1] - times[0]:.2f} s")
     if jumps:
         out.info.append(rig_jumps_note(jumps, mode))
     out.timings["calibrate"] = _time.perf_counter() - t
@@ -544,9 +591,13 @@ def solve_recording(source, settings: SolveSettings | None = None, solver=None, 
                         progress=lambda f: report(lo + (hi - lo) * (0.5 + 0.5 * float(f)),
                                                   "solving again with arms for the reach"))
     result.with_body = None      # frees the network output (long takes)
-    result.t0 = float(times[0])
+    result.t0 = float(solve_times[0])
     if result.targets is None:
         result.targets = out.targets
+    if span is not None:
+        keep = slice(span[0] - solved.start, span[1] - solved.start)
+        result = result.frames(keep)
+        out.targets = out.targets.frames(keep)
     if jumps and mode == "keep":         # the solved body goes where the recording went
         result = restore_rig_jumps(result, jumps)
         out.targets = result.targets

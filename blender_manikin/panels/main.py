@@ -161,6 +161,8 @@ class MANIKIN_PT_output(_Base, Panel):
         col.prop(s, "frame_start")
         if s.source in ('FILE', 'KEYPOINTS'):
             toggled_row(layout, s, "limit_frames", "frame_end", "Limit", "End")
+            toggled_row(layout, s, "use_trim_start", "trim_start", "Trim Start", "From")
+            toggled_row(layout, s, "use_trim_end", "trim_end", "Trim End", "To")
         else:
             col.prop(s, "frame_end")
         layout.separator()
