@@ -138,8 +138,6 @@ BAD_FILES = [
     ("0.0,head,0,0,0,1,0,0,0\n", "wrong header", 1),
     ("time,device,px,py,pz,qw,qx,qy\n0,head,0,0,0,1,0,0\n", "missing column(s) qz", 1),
     ("time,device,px,py,pz,qw,qx,qy,qz\n", "no data rows", 1),
-    ("time,device,px,py,pz,qw,qx,qy,qz\n0,head,0,1.6,0,1,0,0,0\n0.01,elbow_l,0,0,0,1,0,0,0\n",
-     "unknown device 'elbow_l'", 3),
     ("# note\ntime,device,px,py,pz,qw,qx,qy,qz\n0,head,0,1.6,0,1,0,0,0\n0.01,head,0,abc,0,1,0,0,0\n",
      "column 'py': 'abc' is not a number", 4),
     ("time,device,px,py,pz,qw,qx,qy,qz\n0,head,0,1.6,0,1,0,0,0\n0.01,head,0,1.6,0,1,0,0\n",
@@ -432,6 +430,27 @@ def test_csv_read_in_blocks_equals_read_whole(tmp_path, monkeypatch):
             np.testing.assert_array_equal(getattr(slow.streams[d], k), getattr(s, k))
 
 
+def test_csv_rows_of_other_trackers_are_left_out_and_named(tmp_path):
+    """Extra trackers (a chest, elbows) or a misspelt device: their rows are left out with a
+    warning naming each and its first line; a needed device missing names them too."""
+    from blender_manikin.core.resample import resample
+    text = ("time,device,px,py,pz,qw,qx,qy,qz\n"
+            "0,head,0,1.6,0,1,0,0,0\n0,chest,0,1.3,0,1,0,0,0\n0,left_hand,0.3,1.0,0,1,0,0,0\n"
+            "0,right_hand,-0.3,1.0,0,1,0,0,0\n0.02,chest,0,1.3,0,1,0,0,0\n0.02,left_elbow,0.2,1.1,0,1,0,0,0\n")
+    for bb in (None, 40):
+        p = tmp_path / "extra.csv"
+        p.write_text(text)
+        rec = read_csv(p, block_bytes=bb)
+        assert rec.devices == ("head", "left_hand", "right_hand")
+        assert "device 'chest': 2 row(s) from line 3 ignored (not one of head, left_hand" in rec.warnings[0]
+        assert rec.warnings[1].startswith("device 'left_elbow': 1 row(s) from line 7 ignored")
+        assert rec.metadata["ignored_devices"] == ["chest", "left_elbow"]
+    p.write_text(text.replace("left_hand", "lefthnd"))
+    with pytest.raises(RecordingError, match=r"no left_hand samples \(devices present: head, right_hand; rows of "
+                                             r"'chest', 'lefthnd', 'left_elbow' were left out: not device names\)"):
+        resample(read_csv(p), 30.0)
+
+
 def test_csv_error_deep_in_a_big_file_names_its_line(tmp_path):
     path = _csv_with_everything(tmp_path)
     lines = path.read_text(encoding="utf-8").split("\n")
@@ -442,8 +461,7 @@ def test_csv_error_deep_in_a_big_file_names_its_line(tmp_path):
         row[1] = "elbow"
 
     for change, problem in ((oops, "column 'py': 'oops' is not a number"),
-                            (list.pop, "expected 11 comma-separated fields"),
-                            (unknown, "unknown device 'elbow'")):
+                            (list.pop, "expected 11 comma-separated fields")):
         row = lines[1800].split(",")
         change(row)
         p = tmp_path / "broken.csv"

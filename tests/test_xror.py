@@ -71,6 +71,36 @@ def test_a_beat_saber_session_on_touch_controllers_gets_the_touch_preset(tmp_pat
     assert formats.load_recording(tmp_path / "bs.xror").metadata["offsets"] == want
 
 
+def test_devices_the_solve_does_not_use_are_left_out(tmp_path):
+    """An elbow tracker and an eye-gaze direction (3 numbers a frame) between the head and hands:
+    their numbers are skipped, the head and hands read as they are, each left-out device named."""
+    n = 60
+    rng = np.random.default_rng(3)
+    t = np.arange(n) / 90.0
+    pose = np.zeros((n, 3, 7))
+    pose[..., :3] = rng.normal(size=(n, 3, 3)) * 0.1 + [0, 1.5, 0]
+    q = rng.normal(size=(n, 3, 4))
+    pose[..., 3:] = q / np.linalg.norm(q, axis=-1, keepdims=True)
+    elbow = rng.normal(size=(n, 7))
+    gaze = rng.normal(size=(n, 3))
+    rows = np.concatenate([t[:, None], pose[:, 0], elbow, gaze, pose[:, 1], pose[:, 2]], 1).astype(np.float32)
+    devs = [("HEAD", AXES), ("ELBOW_LEFT", AXES), ("EYES", ["x", "y", "z"]), ("HAND_LEFT", AXES),
+            ("HAND_RIGHT", AXES)]
+    doc = {"$schema": "x", "info": {"hardware": {"devices": [{"name": j, "joint": j, "axes": a} for j, a in devs]},
+                                    "software": {"app": {"name": "Some App"}}},
+           "frames": fpzip.compress(np.ascontiguousarray(rows[None, None])), "events": []}
+    path = tmp_path / "extra.xror"
+    path.write_bytes(bson.encode(doc))
+    rec = formats.load_recording(path)
+    assert rec.devices == ("head", "left_hand", "right_hand")
+    for j, dev in enumerate(("head", "left_hand", "right_hand")):
+        quat = np.concatenate([pose[:, j, 6:7], pose[:, j, 3:6]], -1)
+        p_b, _ = to_blender(pose[:, j, :3], quat, "unity")
+        assert np.allclose(rec.streams[dev].pos, p_b, atol=1e-6), dev
+    assert any("devices[1] (joint 'ELBOW_LEFT': not one the solve uses) left out" in w for w in rec.warnings)
+    assert any("devices[2] (EYES" in w or "devices[2] (joint 'EYES'" in w for w in rec.warnings)
+
+
 def test_six_devices(tmp_path):
     data, _, _ = _xror(devices=("HEAD", "HAND_LEFT", "HAND_RIGHT", "WAIST", "FOOT_LEFT", "FOOT_RIGHT"))
     (tmp_path / "six.xror").write_bytes(data)
@@ -82,7 +112,7 @@ def test_six_devices(tmp_path):
     (lambda: _xror()[0][:-7], "declares"),
     (lambda: b"\x05\x00\x00\x00\x99", "not a valid BSON"),
     (lambda: _xror(axes=["x", "y", "z"])[0], "axes"),
-    (lambda: _xror(devices=("HEAD", "ELBOW"))[0], "joint 'ELBOW'"),
+    (lambda: _xror(devices=("ELBOW",))[0], r"no device the solve can read: devices\[0\] \(joint 'ELBOW'"),
     (lambda: _xror(width=15)[0], "frames have 15 numbers"),
     (lambda: bson.encode({"info": {}}), "missing field info.hardware"),
     (lambda: bson.encode({"info": {"hardware": {"devices": [{"joint": "HEAD", "axes": AXES}]}},

@@ -16,7 +16,10 @@ Format (UTF-8, optional BOM)::
   interleave in any order).
 * ``device``: ``head``, ``left_hand``, ``right_hand``, and optionally
   ``pelvis``, ``left_foot``, ``right_foot`` (case-insensitive; aliases such as
-  ``hmd`` are accepted, see :data:`.recording.DEVICE_ALIASES`).
+  ``hmd`` are accepted, see :data:`.recording.DEVICE_ALIASES`).  Rows of other names (extra
+  trackers: chest, elbows, knees) are left out, each name counted in a warning with its first
+  line, and listed in ``metadata["ignored_devices"]``; a solve missing a device it needs then
+  names them too.
 * ``px, py, pz``: position in ``units`` (default metres); ``qw, qx, qy, qz``:
   orientation quaternion (normalised on reading).  ``nan`` marks lost
   tracking.
@@ -29,7 +32,7 @@ Format (UTF-8, optional BOM)::
   :mod:`.recording`), ``units`` (``m``, ``cm``, ``mm``), ``source`` (free
   text); other keys are kept in :attr:`Recording.metadata`.
 
-Problems (empty file, wrong header, missing column, unknown device,
+Problems (empty file, wrong header, missing column,
 non-numeric field, wrong field count, non-increasing time within a device)
 raise :class:`~.recording.RecordingError` naming the file, line and problem.
 """
@@ -205,9 +208,10 @@ def _parse_fast(rows, lines, header, text=None):
     return b
 
 
-def _device_codes(block, path):
-    """``(n,)`` int8 index into :data:`DEVICES` of each row's device name; an unknown name raises
-    :class:`RecordingError` with its line.  One vectorised comparison per distinct name."""
+def _device_codes(block, unknown):
+    """``(n,)`` int8 index into :data:`DEVICES` of each row's device name, -1 for a name that is
+    not a device (an extra tracker: chest, elbows, knees; or a typo), counted in ``unknown``
+    (name → ``[rows, first line]``).  One vectorised comparison per distinct name."""
     names = np.asarray(block.names)
     codes = np.empty(len(names), dtype=np.int8)
     todo = np.ones(len(names), dtype=bool)
@@ -215,11 +219,13 @@ def _device_codes(block, path):
         k = int(np.argmax(todo))
         name = names[k].decode("utf-8", "replace") if isinstance(names[k], bytes) else str(names[k])
         d = canonical_device(name)
-        if d is None:
-            raise RecordingError(f"unknown device {shown(name.strip())} (expected one of "
-                                 f"{', '.join(DEVICES)})", path=path, line=int(block.lines[k]))
         same = names == names[k]
-        codes[same] = DEVICES.index(d)
+        if d is None:
+            seen = unknown.setdefault(name.strip(), [0, int(block.lines[k])])
+            seen[0] += int(same.sum())
+            codes[same] = -1
+        else:
+            codes[same] = DEVICES.index(d)
         todo &= ~same
     return codes
 
@@ -241,6 +247,7 @@ def read_csv(path, axes=None, units=None, block_bytes=None) -> Recording:
     metadata, meta_line = {}, {}
     header = header_line = None
     blocks = []
+    unknown = {}                             # rows of names that are not devices
     any_text = False
     first = 1                                # line number of the block's first line
     for text in _text_blocks(path, max(int(block_bytes or BLOCK_BYTES), 1)):
@@ -250,7 +257,7 @@ def read_csv(path, axes=None, units=None, block_bytes=None) -> Recording:
             n = text.count("\n") + (not text.endswith("\n"))
             block = _parse_fast(None, np.arange(first, first + n, dtype=np.int64), header, text=text)
             if block is not None:
-                block.names = _device_codes(block, path)
+                block.names = _device_codes(block, unknown)
                 blocks.append(block)
                 first += n
                 continue
@@ -286,7 +293,7 @@ def read_csv(path, axes=None, units=None, block_bytes=None) -> Recording:
             if rows:
                 block = _parse_fast(rows, lines, header) or _parse_exact(rows, lines, header, path)
         if block is not None:
-            block.names = _device_codes(block, path)     # int8 codes from here on (names are 24 bytes a row)
+            block.names = _device_codes(block, unknown)     # int8 codes from here on (names are 24 bytes a row)
             blocks.append(block)
             any_text = True
         first += len(block_lines)
@@ -355,6 +362,11 @@ def read_csv(path, axes=None, units=None, block_bytes=None) -> Recording:
         del rows
         streams[d] = TrackerStream(d, td, pos_d, quat_d, valid[idx])
 
+    for name, (rows, line) in unknown.items():
+        warnings.append(f"device {shown(name)}: {rows} row(s) from line {line} ignored (not one of "
+                        f"{', '.join(DEVICES)})")
+    if unknown:
+        metadata["ignored_devices"] = list(unknown)
     metadata["axes"] = axes_used
     metadata["units"] = units_used
     return Recording(streams=streams, source=path, metadata=metadata, warnings=warnings)

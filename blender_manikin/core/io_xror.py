@@ -9,7 +9,9 @@ Schema this reader relies on (checked on ``../shared/data/vr/xror-beatsaber-samp
   ``name``, ``type`` and ``axes``, the per-frame numbers of the device:
   ``["x", "y", "z", "i", "j", "k", "1"]`` = position then quaternion x, y, z, w;
 * ``frames``: bytes, an fpzip-compressed float32 array of shape ``(1, 1, N, 1 + 7 D)``: per
-  frame the time in seconds, then 7 numbers per device in ``info.hardware.devices`` order;
+  frame the time in seconds, then each device's ``axes`` numbers in ``info.hardware.devices``
+  order.  A device whose joint is not one of those above (an elbow or chest tracker, eye gaze)
+  or whose axes are not a pose is left out with a warning, its numbers skipped;
 * Unity axes (left-handed, +Y up, +Z forward) and metres, by the format's convention;
 * ``info.software.app.name`` names the application (``Beat Saber``: the hand poses are saber
   poses, so the ``beat_saber`` device offsets apply, or ``beat_saber_touch`` when the
@@ -135,18 +137,28 @@ def parse_xror(data: bytes, path="<bytes>", axes=None, units=None) -> Recording:
     devices = field(doc, "info", "hardware", "devices")
     if not isinstance(devices, list) or not devices:
         raise RecordingError("info.hardware.devices lists no device", path=path)
-    names = []
+    names, columns, skipped = [], [], []       # the devices read, their first column, what was left out
+    width = 1
     for i, d in enumerate(devices):
         if not isinstance(d, dict):
             raise RecordingError(f"info.hardware.devices[{i}] is not an object", path=path)
         joint = str(d.get("joint", ""))
+        axes_d = d.get("axes", [])
+        if not isinstance(axes_d, (list, tuple)) or not axes_d:
+            raise RecordingError(f"info.hardware.devices[{i}] ({joint}): axes {axes_d!r} is not a list of "
+                                 "the device's numbers per frame", path=path)
         if joint.upper() not in JOINTS:
-            raise RecordingError(f"info.hardware.devices[{i}]: joint {joint!r} is not one of "
-                                 f"{', '.join(JOINTS)}", path=path)
-        if list(d.get("axes", [])) != POSE_AXES:
-            raise RecordingError(f"info.hardware.devices[{i}] ({joint}): axes {d.get('axes')!r}, expected "
-                                 f"{POSE_AXES} (position, quaternion x y z w)", path=path)
-        names.append(JOINTS[joint.upper()])
+            skipped.append(f"devices[{i}] (joint {joint!r}: not one the solve uses)")
+        elif list(axes_d) != POSE_AXES:
+            skipped.append(f"devices[{i}] ({joint}: axes {list(axes_d)!r}, not {POSE_AXES}, position and "
+                           "quaternion x y z w)")
+        else:
+            names.append(JOINTS[joint.upper()])
+            columns.append(width)
+        width += len(axes_d)
+    if not names:
+        raise RecordingError("info.hardware.devices has no device the solve can read: "
+                             + "; ".join(skipped), path=path)
     if len(set(names)) != len(names):
         raise RecordingError(f"info.hardware.devices names a device twice: {names}", path=path)
 
@@ -157,15 +169,14 @@ def parse_xror(data: bytes, path="<bytes>", axes=None, units=None) -> Recording:
     if arr.nbytes > MAX_EXPANSION * max(len(data), 1) or arr.ndim != 4:
         raise RecordingError(f"frames: an array of shape {arr.shape} is not plausible for this file", path=path)
     frames = np.asarray(arr, dtype=np.float64).reshape(-1, arr.shape[-1])
-    width = 1 + 7 * len(names)
     if frames.shape[1] != width:
-        raise RecordingError(f"frames have {frames.shape[1]} numbers each; {len(names)} device(s) need {width} "
-                             "(time, then 7 per device)", path=path)
+        raise RecordingError(f"frames have {frames.shape[1]} numbers each; the {len(devices)} device(s) need "
+                             f"{width} (time, then each device's axes)", path=path)
     if frames.shape[0] == 0:
         raise RecordingError("the recording has no frames", path=path)
     t = frames[:, 0]
-    pose = frames[:, 1:].reshape(-1, len(names), 7)
-    warnings = []
+    pose = np.stack([frames[:, c:c + 7] for c in columns], axis=1)
+    warnings = [f"info.hardware.{s} left out" for s in skipped]
     ok, keep = pose_frame_masks(t, pose, warnings, devices=names, time_name="time")
     if not keep.any():
         raise RecordingError("no frame has a valid pose", path=path)
@@ -183,8 +194,10 @@ def parse_xror(data: bytes, path="<bytes>", axes=None, units=None) -> Recording:
         meta["height"] = float(activity["height"])
     offsets = APP_OFFSETS.get(meta["app"].strip().lower())
     if offsets == "beat_saber":            # Touch or Valve controllers: the game holds the saber differently
-        hands = [str(d.get("name", "")) for d, n in zip(devices, names) if n.endswith("_hand")]
-        heads = [str(d.get("name", "")) for d, n in zip(devices, names) if n == "head"]
+        read = [d for d in devices if str(d.get("joint", "")).upper() in JOINTS
+                and list(d.get("axes", [])) == POSE_AXES]
+        hands = [str(d.get("name", "")) for d, n in zip(read, names) if n.endswith("_hand")]
+        heads = [str(d.get("name", "")) for d, n in zip(read, names) if n == "head"]
         offsets = beat_saber_offsets(" ".join(hands), *heads, meta["runtime"], meta["api"])
     if offsets:
         meta["offsets"] = offsets

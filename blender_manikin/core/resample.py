@@ -221,8 +221,10 @@ def resample(recording: Recording, fps, t_start=None, t_end=None, required=REQUI
         raise ValueError(f"fps must be positive, got {shown(fps)}")
     missing = [d for d in required if d not in recording.streams]
     if missing:
+        ignored = (recording.metadata or {}).get("ignored_devices") or []
+        also = f"; rows of {', '.join(shown(n) for n in ignored)} were left out: not device names" if ignored else ""
         raise RecordingError(f"the recording has no {', '.join(missing)} samples "
-                             f"(devices present: {', '.join(recording.devices) or 'none'})", path=path)
+                             f"(devices present: {', '.join(recording.devices) or 'none'}{also})", path=path)
     warnings = list(recording.warnings)
 
     # --- usable samples per device
