@@ -308,3 +308,18 @@ def test_cli_start_and_end(tmp_path):
     r = subprocess.run([sys.executable, "-m", "blender_manikin", "solve", EXAMPLE, "--out", str(tmp_path),
                         "--end", "soon"], capture_output=True, text=True, cwd=ROOT)
     assert r.returncode == 2 and "'soon' is not a number of seconds" in r.stderr
+
+
+def test_the_summary_says_what_reading_repaired_or_left_out(tmp_path):
+    """Warnings of the reader and the resampler reach the user (panel, CLI), each once."""
+    rec = load_recording(EXAMPLE)
+    from blender_manikin.core.io_csv import write_csv
+    path = tmp_path / "with_chest.csv"
+    write_csv(path, rec)
+    lines = path.read_text().splitlines()
+    k = next(i for i, ln in enumerate(lines) if ",head," in ln)
+    lines.insert(k + 1, lines[k].replace(",head,", ",chest,"))
+    path.write_text("\n".join(lines) + "\n")
+    out = cs.solve_recording(path, cs.SolveSettings(fps=30.0))
+    s = out.summary()
+    assert f"device 'chest': 1 row(s) from line {k + 2} ignored" in s and s.count("device 'chest'") == 1

@@ -149,6 +149,8 @@ class SolveOutcome:
             gaps = getattr(self.report, "gaps", [])
             if gaps:
                 parts.append(f"{len(gaps)} gap(s) bridged")
+            # what the reader and the resampler repaired or left out (each said once)
+            parts.extend(dict.fromkeys(getattr(self.report, "warnings", None) or []))
         timings = dict(self.timings, **(extra_timings or {}))
         if timings:
             parts.append(", ".join(f"{k} {v:.2f}s" for k, v in timings.items()))
