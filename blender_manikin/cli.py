@@ -44,6 +44,8 @@ Options of ``solve`` (they mirror the panel; ``--help`` has them all):
                               are) or one Savitzky-Golay window in seconds (0: off)
 --overlap 2|3|4               network windows seeing each frame: 2 (default, fastest), 3 or 4
                               (a little more accurate at 1.5 and 2 times the network time)
+--posture standing|seated     trackers: seated sits the legs on a chair, feet on the floor
+                              (the stature from --height, a standing T-pose or the seated head)
 --start SECONDS, --end SECONDS  solve only this part of the take (seconds from its first
                               sample; a tracker take is still calibrated on the whole)
 --teleports keep|remove|ignore  trackers: an app's teleports and snap turns (the tracking
@@ -127,6 +129,10 @@ def _add_solve_options(s):
     s.add_argument("--overlap", type=int, choices=OVERLAP_CHOICES, default=DEFAULT_OVERLAP,
                    help="network windows that see each frame: 2 (default, fastest), 3 or 4 (a little "
                         "more accurate at 1.5 and 2 times the network time)")
+    from .core.seated import POSTURES
+    s.add_argument("--posture", choices=POSTURES, default="standing",
+                   help="trackers: standing (default) or seated: the legs sit on a chair, feet on the floor "
+                        "(the stature from --height, a standing T-pose, or the seated head height)")
     s.add_argument("--start", type=_seconds_arg, default=None, metavar="SECONDS",
                    help="solve from this time on (seconds from the recording's first sample; a tracker take "
                         "is still calibrated on its T-pose wherever it is)")
@@ -331,7 +337,8 @@ def solve_settings(args):
                        despike=not getattr(args, "keep_spikes", False),
                        overlap=getattr(args, "overlap", SolveSettings.overlap),
                        teleports=getattr(args, "teleports", SolveSettings.teleports),
-                       start=getattr(args, "start", None), end=getattr(args, "end", None))
+                       start=getattr(args, "start", None), end=getattr(args, "end", None),
+                       posture=getattr(args, "posture", "standing"))
     if args.calibration_time is not None:
         st.calibration, st.tpose_time = "TPOSE", float(args.calibration_time)
         st.height, st.arm_span = args.height, args.arm_span

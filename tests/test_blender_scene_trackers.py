@@ -40,7 +40,7 @@ def test_fcurve_path_equals_frame_set(mode):
     sc = bpy.context.scene
     sc.frame_set(7)
     fast = scene_trackers.sample_sources(sc, {"head": (obj, "")}, 1, N)
-    assert fast.metadata["method"]["head"] == "fcurves"
+    assert fast.metadata["method"]["head"] == "fcurves" and fast.metadata["exact"] is True
     assert sc.frame_current == 7
     slow = scene_trackers.sample_sources(sc, {"head": (obj, "")}, 1, N, force_frame_set=True)
     assert slow.metadata["method"]["head"] == "frame_set"

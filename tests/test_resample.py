@@ -121,6 +121,29 @@ def test_short_frozen_or_all_still_is_not_a_gap():
     assert resample(Recording(streams), 60)[4].gaps == []
 
 
+def test_exactly_held_keys_of_scene_objects_are_not_frozen():
+    """Keyed scene objects (metadata ``exact``) hold still exactly: not a lost tracker."""
+    rec = make_recording(duration=3.0, frozen=("right_hand", 1.0, 2.0))
+    assert [g.reason for g in resample(rec, 60)[4].gaps] == ["frozen"]
+    rec.metadata["exact"] = True
+    times, pos, quat, valid, report = resample(rec, 60)
+    assert report.gaps == [] and valid["right_hand"].all()
+
+
+def test_a_hand_lost_before_the_end_does_not_cut_the_take():
+    """The take ends with the head: a hand lost for its last second is held (and a solve lets that
+    arm hang); one whose last sample is only a few milliseconds early still ends the grid."""
+    rec = make_recording(duration=3.0, invalid=("left_hand", 2.0, 3.1))
+    times, pos, quat, valid, report = resample(rec, 60)
+    head_last = rec.streams["head"].time[-1]
+    assert times[-1] == pytest.approx(head_last, abs=1 / 60)
+    assert [g.reason for g in report.for_device("left_hand")] == ["end"]
+    assert not valid["left_hand"][times > 2.05].any()
+    rec = make_recording(duration=3.0)
+    times = resample(rec, 60)[0]
+    assert times[-1] <= min(rec.streams[d].time[-1] for d in rec.devices) + 1e-9
+
+
 def test_hold_at_ends_for_a_late_optional_device():
     rates = {"head": 90.0, "left_hand": 72.0, "right_hand": 72.0, "pelvis": 60.0}
     rec = make_recording(duration=2.0, rates=rates, starts={"pelvis": 0.5})

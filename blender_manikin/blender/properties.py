@@ -223,6 +223,12 @@ class MANIKIN_Settings(PropertyGroup):
                 "1.5 times the network time"),
                ('4', "4 Windows", "Each frame is seen by four network windows: twice the network time")],
         description="How many network windows see each frame; more average more views of it")
+    posture: EnumProperty(
+        name="Posture", default='STANDING',
+        items=[('STANDING', "Standing", "The performer stands, walks, crouches or lies (the network's legs)"),
+               ('SEATED', "Seated", "The performer sits on a chair: thighs forward, shins upright, feet on the "
+                "floor; the stature from the height, a standing T-pose or the seated head")],
+        description="Whether the performer stands or sits on a chair")
     teleports: EnumProperty(
         name="Teleports", default='KEEP',
         items=[('KEEP', "Keep", "Teleports and snap turns of the app (the tracking space jumping) are "
@@ -362,6 +368,7 @@ def config_from_settings(context):
         cfg.model = s.model.lower()
     cfg.overlap = int(s.overlap)
     cfg.teleports = s.teleports.lower()
+    cfg.posture = s.posture.lower()
     cfg.create_trackers = s.create_trackers
     cfg.live_rig = s.live_rig
     cfg.set_scene_range = s.set_scene_range

@@ -188,7 +188,7 @@ def stature_warning(stature, head_height, sized_by, units="m", plausible=PLAUSIB
     causes.append(f"the floor (the head stands {float(head_height):.2f} m above height 0; set the Floor, "
                   "--floor, to the floor's height, or to 'height' to put it under a performer of the typed height)")
     if s < lo and sized_by == "head height":
-        causes.append("whether the performer sits (the body is sized and solved standing)")
+        causes.append("whether the performer sits (set the Posture, --posture, to seated)")
     causes.append("or set the performer's height")
     return text + "check " + ", ".join(causes)
 

@@ -153,6 +153,11 @@ def check_head_height(height, path=None, units=None, floor=0.0):
     raise RecordingError(msg, path=path)
 
 
+#: a required device whose last usable sample comes this many seconds or more before the head's
+#: no longer ends the take (:func:`resample`)
+END_HOLD_S = 0.25
+
+
 def _frozen(t, pos, quat, others, freeze_s, move_tol):
     """Indices (into the usable-sample arrays) of stale repeats."""
     n = t.shape[0]
@@ -198,13 +203,17 @@ def resample(recording: Recording, fps, t_start=None, t_end=None, required=REQUI
     recording: a :class:`Recording` (Blender axes, metres).
     fps: frames per second of the grid.
     t_start, t_end: grid limits in seconds of the recording clock; default:
-    the first usable sample of any device, and the last time covered by all
-    ``required`` devices (the earliest of their last usable samples).
+    the first usable sample of any device, and the earliest last usable sample
+    of the ``required`` devices, or the head's when a hand's last sample is
+    more than :data:`END_HOLD_S` before it (the hand is held, and a solve lets
+    its arm hang, :mod:`.lost_hands`: no head motion is dropped).
     required: devices that must be present (default head and both hands).
     gap_factor: a step between usable samples longer than this many nominal
     intervals (median step of the device) is a gap.
     freeze_s, move_tol: a pose repeated exactly for more than ``freeze_s``
-    seconds while another device moves more than ``move_tol`` metres is frozen.
+    seconds while another device moves more than ``move_tol`` metres is frozen
+    (not looked for when ``recording.metadata["exact"]``: keyed scene objects
+    hold still exactly).
     jump_m: metres a sample may stand off both neighbours before it is a jump.
     check_units: raise when the standing head height (:data:`STANDING_PERCENTILE`) above
     ``floor`` (the floor's height in the recording, metres; None: not known yet, no check) is
@@ -261,6 +270,8 @@ def resample(recording: Recording, fps, t_start=None, t_end=None, required=REQUI
     for d, P in prep.items():
         idx = np.nonzero(P["ok"])[0]
         others = [(Q["t"][Q["ok"]], Q["pos"][Q["ok"]]) for e, Q in prep.items() if e != d]
+        if (recording.metadata or {}).get("exact"):
+            break                                # a keyed pose held still is not a lost tracker
         fr = _frozen(P["t"][idx], P["pos"][idx], P["quat"][idx], others, freeze_s, move_tol)
         if fr.size:
             P["ok"][idx[fr]] = False
@@ -278,6 +289,8 @@ def resample(recording: Recording, fps, t_start=None, t_end=None, required=REQUI
     t0 = float(min(firsts.values())) if t_start is None else float(t_start)
     if t_end is None:
         t1 = float(min(lasts[d] for d in required)) if required else float(max(lasts.values()))
+        if "head" in required and "head" in lasts and lasts["head"] - t1 > END_HOLD_S:
+            t1 = float(lasts["head"])            # a hand lost before the end: held, not the take cut
     else:
         t1 = float(t_end)
     if not (t1 >= t0):

@@ -23,6 +23,7 @@ from . import skeleton as sk
 from .pipeline import DEFAULT_OVERLAP, overlap_windows
 from .lost_hands import relax_lost_hands
 from .plain import shown
+from .seated import POSTURES, SEATED_HEAD_HEIGHT, seat_legs, stature_from_seated_head
 from .pose_result import PoseResult, TrackerTargets
 from .teleports import TELEPORT_CHOICES, find_rig_jumps, remove_rig_jumps, restore_rig_jumps, rig_jumps_note
 
@@ -78,7 +79,9 @@ class SolveSettings:
     do with the teleports and snap turns of an app that moves the tracking space,
     :mod:`.teleports`: ``"keep"``, the default, solves the take as one motion and puts them back
     on the solved body; ``"remove"`` leaves them out, the character's path continuous;
-    ``"ignore"`` solves the recording as it stands).
+    ``"ignore"`` solves the recording as it stands), and posture (``"standing"``, the default,
+    or ``"seated"``: the legs sit on a chair, feet on the floor, the stature from the typed
+    height, a standing T-pose, or the seated head height; :mod:`.seated`).
     """
     axes: str | None = None
     units: str | None = None
@@ -103,6 +106,7 @@ class SolveSettings:
     model: str | None = None          # None / "auto": by the recording's trackers; a shipped name or .onnx
     overlap: int = DEFAULT_OVERLAP    # windows seeing each frame: 2, 3 or 4 (pipeline.OVERLAP_CHOICES)
     teleports: str = "keep"           # "keep", "remove" or "ignore" (teleports.TELEPORT_CHOICES)
+    posture: str = "standing"         # "standing" or "seated" (seated.POSTURES): seated legs on a chair
     start: float | None = None        # seconds from the first sample: solve from here (None: the start)
     end: float | None = None          # seconds from the first sample: solve up to here (None: the end)
 
@@ -375,6 +379,16 @@ def calibrate(settings: SolveSettings, targets: TrackerTargets, times, offsets):
         t = t0 + float(settings.tpose_time)
     else:   # AUTO: the most T-pose-like moment, if it is plausible
         cand = cal.find_tpose(targets, t0=t0)
+        if str(settings.posture or "").lower() == "seated" and not settings.height:
+            seated = _seated_stature(targets, times, cand)
+            if seated is not None:          # no standing T-pose: the seated head sizes the body
+                info.append(f"stature {seated:.2f} m from the seated head height (its "
+                            f"{SEATED_HEAD_HEIGHT:.3f}; type the height to be sure)")
+                meas = {**(meas or {}), "stature": seated}
+                if not cand.plausible:
+                    if untyped:
+                        info.append(no_pose_note)
+                    return body_from_head_height(targets, seated, settings.arm_span, settings.sole), offsets, info
         if not cand.plausible:
             info.append("no T-pose found: stature from the standing head height")
             if untyped:
@@ -409,6 +423,25 @@ def calibrate(settings: SolveSettings, targets: TrackerTargets, times, offsets):
         info.append(text)
     info += [f"calibration: {p}" for p in res.problems]
     return body, res.offsets, info
+
+
+#: a T-pose whose head stands this much (metres) above the take's median head height was made
+#: standing: with the *Seated* posture it still sizes the body
+STANDING_TPOSE_RISE = 0.15
+
+
+def _seated_stature(targets, times, cand):
+    """The stature (metres) a seated take's head implies (:func:`.seated.stature_from_seated_head`
+    of its median height), or None when ``cand`` is a T-pose made standing (its head
+    :data:`STANDING_TPOSE_RISE` above the median): that one sizes the body as usual."""
+    z = targets.pos["head"][:, 2]
+    ok = np.asarray(targets.valid.get("head", np.ones(len(z), bool)), bool) & np.isfinite(z)
+    median = float(np.median(z[ok] if ok.any() else z))
+    if cand.plausible:
+        k = int(np.clip(np.searchsorted(times, cand.time), 0, len(z) - 1))
+        if z[k] - median > STANDING_TPOSE_RISE:
+            return None
+    return stature_from_seated_head(median)
 
 
 #: metres the standing head may stand above or below where a typed height puts it before the
@@ -517,6 +550,9 @@ def solve_recording(source, settings: SolveSettings | None = None, solver=None, 
     if settings.fps is None or not settings.fps > 0:
         raise SolveError("no frame rate: set fps")
     parse_floor(settings.floor)                  # a bad floor setting fails before the file is read
+    posture = str(settings.posture or "standing").strip().lower()
+    if posture not in POSTURES:
+        raise SolveError(f"posture {shown(settings.posture)}: expected one of {', '.join(POSTURES)}")
     mode = str(settings.teleports or "keep").strip().lower()
     if mode not in TELEPORT_CHOICES:
         raise SolveError(f"teleports {shown(settings.teleports)}: expected one of {', '.join(TELEPORT_CHOICES)}")
@@ -565,7 +601,9 @@ def solve_recording(source, settings: SolveSettings | None = None, solver=None, 
         out.targets = move_floor(make_targets(times, pos, quat, valid, settings.fps, out.offsets)[0], out.floor)
     out.targets, lost = relax_lost_hands(out.targets, out.body)     # long hand gaps: the arm hangs
     out.info.extend(lost)
-    for note in (floor_note(settings, out.floor), stature_note(settings, out), head_height_note(settings, out)):
+    notes = (floor_note(settings, out.floor),) if posture == "seated" else \
+        (floor_note(settings, out.floor), stature_note(settings, out), head_height_note(settings, out))
+    for note in notes:
         if note:
             out.info.append(note)
     out.info.append(smoothed)
@@ -600,6 +638,8 @@ def solve_recording(source, settings: SolveSettings | None = None, solver=None, 
         keep = slice(span[0] - solved.start, span[1] - solved.start)
         result = result.frames(keep)
         out.targets = out.targets.frames(keep)
+    if posture == "seated":
+        result = seat_legs(result)
     if jumps and mode == "keep":         # the solved body goes where the recording went
         result = restore_rig_jumps(result, jumps)
         out.targets = result.targets

@@ -63,6 +63,7 @@ class MANIKIN_PT_solve(_Base, Panel):
                     col.prop_search(src, "bone", src.object.data, "bones", text="Bone")
         if s.source != 'KEYPOINTS':           # keypoints are solved by HybrIK, no network
             col.separator()
+            col.prop(s, "posture")
             smoothing_rows(col, s)
             col.prop(s, "model")
             if s.model == 'FILE':

@@ -1,0 +1,103 @@
+"""Seated performers (core/seated.py): the legs sit on a chair, the feet on the floor."""
+import numpy as np
+import pytest
+
+from blender_manikin.core import solve as cs
+from blender_manikin.core.seated import SEATED_HEAD_HEIGHT, seated_leg_targets
+from blender_manikin.core.skeleton import J, make_body
+
+from fixtures_seated import seated_recording
+
+
+def _flex(P, a, b, c):
+    u, v = P[:, J[b]] - P[:, J[a]], P[:, J[c]] - P[:, J[b]]
+    return np.degrees(np.arccos(np.sum(u * v, -1) / np.linalg.norm(u, axis=-1) / np.linalg.norm(v, axis=-1)))
+
+
+@pytest.fixture(scope="module")
+def take():
+    body = make_body(1.75)
+    rec, pos, world = seated_recording(body)
+    return body, rec, pos
+
+
+def _truth_at(result, pos, rate=72.0):
+    t = result.t0 + np.arange(result.num_frames) / result.fps
+    return pos[np.clip(np.round(t * rate).astype(int), 0, len(pos) - 1)]
+
+
+@pytest.mark.parametrize("height", [None, 1.75])
+def test_a_seated_take_solved_seated(take, height):
+    body, rec, pos = take
+    out = cs.solve_recording(rec, cs.SolveSettings(fps=30.0, posture="seated", height=height,
+                                                   calibration="MEASURE" if height else "AUTO"))
+    if height is None:         # sized by the seated head: a seat at knee height, within 1 %
+        assert out.body.stature == pytest.approx(1.75, rel=0.01)
+        assert any(n.startswith("stature 1.74 m from the seated head height") for n in out.info)
+    P = out.result.positions
+    G = _truth_at(out.result, pos)
+    err = np.linalg.norm(P - G, axis=-1)
+    legs = [J[n] for n in ("left_knee", "right_knee", "left_ankle", "right_ankle")]
+    assert err.mean() < 0.04 and err[:, legs].mean() < 0.08, (err.mean(), err[:, legs].mean())
+    for side in ("left", "right"):
+        knee = _flex(P, f"{side}_hip", f"{side}_knee", f"{side}_ankle")
+        assert 75 < np.median(knee) < 105
+        ankle_z = P[:, J[f"{side}_ankle"], 2]
+        assert np.abs(ankle_z - body.rest_positions()[J[f"{side}_ankle"], 2]).max() < 0.005   # on the floor
+    assert out.result.contacts.all()
+    for d, j in (("left_hand", "left_wrist"), ("right_hand", "right_wrist")):
+        assert np.median(np.linalg.norm(P[:, J[j]] - out.result.targets.pos[d], axis=-1)) < 1e-4
+    assert "estimated stature" not in out.summary()
+
+
+def test_the_same_take_solved_standing_is_a_short_standing_body(take):
+    """What the setting is for: solved standing, the seated take becomes a 1.26 m standing body
+    with its legs far off, and the summary points at the posture."""
+    body, rec, pos = take
+    out = cs.solve_recording(rec, cs.SolveSettings(fps=30.0))
+    assert out.body.stature < 1.40 and "set the Posture, --posture, to seated" in out.summary()
+    err = np.linalg.norm(out.result.positions - _truth_at(out.result, pos), axis=-1)
+    assert err[:, [J["left_knee"], J["right_knee"]]].mean() > 0.25
+
+
+def test_a_standing_t_pose_before_sitting_sizes_the_body():
+    body = make_body(1.62)
+    rec, pos, _ = seated_recording(body, stand_first=True)
+    out = cs.solve_recording(rec, cs.SolveSettings(fps=30.0, posture="seated"))
+    assert any(n.startswith("calibrated on a T-pose at 1.") for n in out.info), out.info
+    assert not any("seated head height" in n for n in out.info)
+    assert out.body.stature == pytest.approx(1.62, abs=0.02)
+    late = out.result.positions[int(4 * 30):]
+    assert np.abs(late[:, J["left_ankle"], 2] - body.rest_positions()[J["left_ankle"], 2]).max() < 0.005
+
+
+def test_seated_leg_targets_follow_the_seat_height():
+    body = make_body(1.75)
+    rest = body.rest_positions()
+    thigh, shank = body.limb_lengths()[2]
+    pelvis = np.tile(np.eye(3), (3, 1, 1))
+    knee_h = rest[J["left_ankle"], 2] + shank
+    hips = np.stack([np.stack([rest[J["left_hip"]], rest[J["right_hip"]]])] * 3)
+    for k, z in enumerate((knee_h, knee_h - 0.10, knee_h + thigh + 0.2)):      # knee height, lower, standing
+        hips[k, :, 2] = z
+    knees, ankles, rot = seated_leg_targets(hips, pelvis, body)
+    np.testing.assert_allclose(np.linalg.norm(knees - hips, axis=-1), thigh, atol=1e-9)
+    np.testing.assert_allclose(np.linalg.norm(ankles - knees, axis=-1), shank, atol=1e-9)
+    np.testing.assert_allclose(ankles[:2, :, 2], rest[J["left_ankle"], 2], atol=1e-9)        # on the floor
+    assert knees[0, 0, 1] < hips[0, 0, 1] - 0.9 * thigh            # thigh level, forward (-Y)
+    assert knees[1, 0, 2] > hips[1, 0, 2]                            # a low seat: knees above the hips
+    np.testing.assert_allclose(knees[2, :, :2], hips[2, :, :2], atol=1e-9)     # too high to sit: hanging,
+    np.testing.assert_allclose(ankles[2, :, 2], hips[2, :, 2] - thigh - shank, atol=1e-9)    # 0.2 m up
+    np.testing.assert_allclose(rot, np.tile(np.eye(3), (3, 2, 1, 1)), atol=1e-9)   # flat, ahead
+    assert SEATED_HEAD_HEIGHT == pytest.approx(0.257 + 0.05 + 0.870 - 0.530)
+
+
+def test_a_bad_posture_is_refused():
+    with pytest.raises(cs.SolveError, match="posture 'kneeling': expected one of standing, seated"):
+        cs.solve_recording(*_example_and(posture="kneeling"))
+
+
+def _example_and(**kw):
+    import os
+    root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+    return os.path.join(root, "examples", "example_recording.csv"), cs.SolveSettings(fps=30.0, **kw)
