@@ -518,3 +518,27 @@ def test_panel_trim_reaches_the_solve(addon, monkeypatch):
     assert "trimmed to 2.00-5.00 s" in s.last_report
     fps = bpy.context.scene.render.fps / bpy.context.scene.render.fps_base
     assert f"{int(round(3.0 * fps)) + 1} frames at {fps:g} fps" in s.last_report
+
+
+def test_panel_posture_reaches_the_solve(addon, recording):
+    from types import SimpleNamespace
+    from blender_manikin.panels import main as panels
+    from blender_manikin.blender.properties import config_from_settings
+    s = _settings(recording)
+    log = []
+    panels.MANIKIN_PT_solve.draw(SimpleNamespace(layout=PanelLayout(log)), bpy.context)
+    assert ("prop", "posture") in log and s.posture == 'STANDING'
+    assert config_from_settings(bpy.context).posture == "standing"
+    s.posture = 'SEATED'
+    assert config_from_settings(bpy.context).posture == "seated"
+    s.live_rig = False
+    assert bpy.ops.manikin.solve_full_body() == {'FINISHED'}
+    arm = bpy.context.view_layer.objects.active
+    sc = bpy.context.scene
+    sc.frame_set(10)
+    for side in ("left", "right"):          # seated: thigh forward and level-ish, shin upright
+        hip = arm.matrix_world @ arm.pose.bones[f"{side}_hip"].head
+        knee = arm.matrix_world @ arm.pose.bones[f"{side}_knee"].head
+        ankle = arm.matrix_world @ arm.pose.bones[f"{side}_ankle"].head
+        assert abs(knee.x - ankle.x) < 0.02 and abs(knee.y - ankle.y) < 0.02
+        assert (knee - hip).length > 0.3 and abs(knee.z - hip.z) < (knee - hip).length
