@@ -101,3 +101,14 @@ def _example_and(**kw):
     import os
     root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
     return os.path.join(root, "examples", "example_recording.csv"), cs.SolveSettings(fps=30.0, **kw)
+
+
+def test_a_tracked_foot_stays_on_its_tracker_when_seated():
+    from fixtures_six_trackers import random_mounts, six_tracker_recording
+    body = make_body(1.70)
+    rec = six_tracker_recording(body, random_mounts(4))
+    out = cs.solve_recording(rec, cs.SolveSettings(fps=30.0, posture="seated"))
+    P = out.result.positions
+    for d, j in (("left_foot", "left_ankle"), ("right_foot", "right_ankle")):
+        miss = np.linalg.norm(P[:, J[j]] - out.result.targets.pos[d], axis=-1)
+        assert np.median(miss) < 1e-3, (d, np.median(miss))

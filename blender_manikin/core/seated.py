@@ -70,17 +70,22 @@ def seated_leg_targets(hips, pelvis_rot, body, floor=0.0):
     return knees, ankles, ankle_rot
 
 
-def seat_legs(result, floor=0.0):
+def seat_legs(result, floor=0.0, legs=(0, 1)):
     """A :class:`.pose_result.PoseResult` with its legs seated (see the module docstring): the
-    torso, arms and root as in ``result``, the legs solved onto :func:`seated_leg_targets`, both
-    feet planted.  Returns a new result; ``result`` is not changed."""
+    torso, arms and root as in ``result``, the legs ``legs`` (0 left, 1 right; a leg whose foot
+    has a tracker stays on it) solved onto :func:`seated_leg_targets`, their feet planted.
+    Returns a new result; ``result`` is not changed."""
+    legs = tuple(int(k) for k in legs)
+    if not legs:
+        return result
     pos, world = result.fk()
     body = result.body
-    ids = np.array(_LEGS)
+    ids = np.array([_LEGS[k] for k in legs])
     base = ls.LIMB_BASE[ids]
     hips = pos[:, base]
     parent = world[:, ls.LIMB_PARENT[ids]]
-    knees, ankles, ankle_rot = seated_leg_targets(hips, world[:, J["pelvis"]], body, floor)
+    knees, ankles, ankle_rot = (a[:, list(legs)] for a in seated_leg_targets(
+        pos[:, ls.LIMB_BASE[np.array(_LEGS)]], world[:, J["pelvis"]], body, floor))
     swivel_legs = ls.swivel_from_positions(hips, knees, ankles, parent, limb_ids=ids)
     sol = ls.solve_limbs(hips, ankles, swivel_legs, body.limb_lengths()[ids], parent, end_rot=ankle_rot,
                          limb_ids=ids)
@@ -96,7 +101,8 @@ def seat_legs(result, floor=0.0):
     at_limit = None if result.at_limit is None else result.at_limit.copy()
     if at_limit is not None:
         at_limit[:, ids] = False
-    contacts = np.ones((result.num_frames, 2), bool)
+    contacts = np.ones((result.num_frames, 2), bool) if result.contacts is None else result.contacts.copy()
+    contacts[:, list(legs)] = True
     return dataclasses.replace(result, local_rot=local, swivel=swivel, reach_error=reach, at_limit=at_limit,
                                contacts=contacts, with_body=None, _fk=None)
 

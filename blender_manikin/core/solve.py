@@ -638,8 +638,9 @@ def solve_recording(source, settings: SolveSettings | None = None, solver=None, 
         keep = slice(span[0] - solved.start, span[1] - solved.start)
         result = result.frames(keep)
         out.targets = out.targets.frames(keep)
-    if posture == "seated":
-        result = seat_legs(result)
+    if posture == "seated":              # a leg whose foot has a tracker stays on it
+        result = seat_legs(result, legs=[k for k, d in enumerate(("left_foot", "right_foot"))
+                                         if d not in out.targets.pos])
     if jumps and mode == "keep":         # the solved body goes where the recording went
         result = restore_rig_jumps(result, jumps)
         out.targets = result.targets
