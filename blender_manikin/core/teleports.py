@@ -173,7 +173,7 @@ def find_rig_jumps(recording: Recording) -> list:
             if (teleport and back_p) or (turned and not teleport and back_r):
                 continue
         checks = [_hand_check(s, t[a], t[b], rot, trans) for s in hands]
-        if any(c is False for c in checks):
+        if any(check is False for check in checks):
             continue
         kind = "teleport and turn" if teleport and turned else ("teleport" if teleport else "snap turn")
         jumps.append(RigJump(float(t[b]), float(t[a]), rot, trans, kind))
