@@ -136,6 +136,8 @@ BAD_FILES = [
     ("", "file is empty", None),
     ("# only comments\n", "no column header", None),
     ("0.0,head,0,0,0,1,0,0,0\n", "wrong header", 1),
+    ("time;device;px;py;pz;qw;qx;qy;qz\n0;head;0;1.6;0;1;0;0;0\n",
+     "separated by semicolons, this format by commas", 1),
     ("time,device,px,py,pz,qw,qx,qy\n0,head,0,0,0,1,0,0\n", "missing column(s) qz", 1),
     ("time,device,px,py,pz,qw,qx,qy,qz\n", "no data rows", 1),
     ("# note\ntime,device,px,py,pz,qw,qx,qy,qz\n0,head,0,1.6,0,1,0,0,0\n0.01,head,0,abc,0,1,0,0,0\n",

@@ -277,3 +277,23 @@ def test_controller_dropping_to_the_origin_and_jumps_are_bridged_and_reported():
     assert np.abs(pos["left_hand"][60:70] - truth_left[60:70]).max() < 0.01       # bridged, not at 0
     assert not valid["left_hand"][62] and valid["left_hand"][40]
     assert abs(pos["right_hand"][120, 2] - 1.2 - 0.05 * np.cos(t[120])) < 0.01
+
+
+@pytest.mark.parametrize("unit,factor", [("milliseconds", 1e3), ("microseconds", 1e6), ("nanoseconds", 1e9)])
+def test_times_written_in_other_units_are_read_as_seconds(unit, factor):
+    """A recorder that wrote milliseconds (or Unity's / Android's micro- and nanoseconds, from an
+    epoch) would turn a 3 s take into hours: the steps tell, the times are scaled, a warning says."""
+    from blender_manikin.core.resample import seconds_from_time_units
+    rec = make_recording(duration=3.0)
+    scaled = Recording({d: TrackerStream(d, (s.time + 1.7e9) * factor, s.pos, s.quat, s.valid)
+                        for d, s in rec.streams.items()})
+    back = seconds_from_time_units(scaled)
+    assert back.warnings[-1].startswith(f"times read as {unit}: samples every ")
+    for d, s in rec.streams.items():
+        np.testing.assert_allclose(back.streams[d].time - 1.7e9, s.time, atol=1e-5 if factor < 1e9 else 1e-4)
+    times = resample(back, 60)[0]
+    assert times[-1] - times[0] == pytest.approx(3.0, abs=0.05)
+    # seconds, and a slow recording in seconds (1 Hz), are left as they are
+    assert seconds_from_time_units(rec) is rec
+    slow = Recording({d: TrackerStream(d, np.arange(10.0), s.pos[:10], s.quat[:10]) for d, s in rec.streams.items()})
+    assert seconds_from_time_units(slow) is slow

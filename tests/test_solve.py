@@ -323,3 +323,14 @@ def test_the_summary_says_what_reading_repaired_or_left_out(tmp_path):
     out = cs.solve_recording(path, cs.SolveSettings(fps=30.0))
     s = out.summary()
     assert f"device 'chest': 1 row(s) from line {k + 2} ignored" in s and s.count("device 'chest'") == 1
+
+
+def test_a_recording_timed_in_milliseconds_solves_at_its_length(tmp_path):
+    lines = open(EXAMPLE).read().splitlines()
+    k = next(i for i, ln in enumerate(lines) if ln.startswith("time,"))
+    rows = [ln.split(",") for ln in lines[k + 1:]]
+    path = tmp_path / "ms.csv"
+    path.write_text("\n".join(lines[:k + 1] + [",".join([f"{float(r[0]) * 1000:.3f}"] + r[1:]) for r in rows]) + "\n")
+    out = cs.solve_recording(path, cs.SolveSettings(fps=30.0))
+    assert out.result.num_frames == 210 and "times read as milliseconds: samples every" in out.summary()
+    assert any(n.startswith("calibrated on a T-pose at 0.53 s") for n in out.info)

@@ -393,8 +393,12 @@ def _check_header(header, header_line, path):
             pass
         expected = ",".join(REQUIRED_COLUMNS)
         if looks_like_data or len(missing) == len(REQUIRED_COLUMNS):
+            found = ",".join(header)
+            sep = next((name for ch, name in ((";", "semicolons"), ("\t", "tabs"), ("|", "bars"))
+                        if len(header) == 1 and found.count(ch) >= len(REQUIRED_COLUMNS) - 1), None)
+            hint = f": the fields are separated by {sep}, this format by commas" if sep else ""
             raise RecordingError(f"wrong header: expected the column names {expected!r} "
-                                 f"(any order), found {','.join(header)!r}", path=path, line=header_line)
+                                 f"(any order), found {found!r}{hint}", path=path, line=header_line)
         raise RecordingError(f"header is missing column(s) {', '.join(missing)} (expected {expected!r})",
                              path=path, line=header_line)
     dup = sorted({c for c in header if header.count(c) > 1 and c in REQUIRED_COLUMNS + ("valid",)})

@@ -35,7 +35,7 @@ import numpy as np
 
 from .plain import shown
 from .devices import DEVICES, REQUIRED_DEVICES
-from .recording import Recording, RecordingError, increasing_mask
+from .recording import Recording, RecordingError, TrackerStream, increasing_mask
 from .rotations import normalize, quat_continuous, quat_slerp
 from .runs import run_bounds
 
@@ -151,6 +151,35 @@ def check_head_height(height, path=None, units=None, floor=0.0):
                    f"pose, not on the floor): set the Floor (--floor) to its height, or to 'height' "
                    f"to put it under a performer of the typed height")
     raise RecordingError(msg, path=path)
+
+
+#: median sample steps (in the file's time unit) read as milliseconds, microseconds, nanoseconds:
+#: 5-500 Hz trackers; steps of 0.2-2 (0.5-5 Hz in seconds) are left as seconds
+TIME_UNIT_STEPS = (("milliseconds", 1e-3, (2.0, 200.0)), ("microseconds", 1e-6, (2e3, 2e5)),
+                   ("nanoseconds", 1e-9, (2e6, 2e8)))
+
+
+def seconds_from_time_units(recording: Recording) -> Recording:
+    """``recording`` with its times in seconds: a recorder that wrote milliseconds (or micro-,
+    nanoseconds: Unity's and Android's clocks) has its tracker samples 11 "seconds" apart, and
+    solved as they stand a 7 s take becomes a 2-hour one.  When the devices' median sample step
+    falls in one of :data:`TIME_UNIT_STEPS` the times are scaled to seconds, on a copy, with a
+    warning naming the unit and the rate (the solve summary shows it); otherwise ``recording``
+    is returned as it is."""
+    steps = [float(np.median(np.diff(s.time))) for s in recording.streams.values() if len(s) > 2]
+    steps = [x for x in steps if np.isfinite(x) and x > 0]
+    if not steps:
+        return recording
+    step = float(np.median(steps))
+    for name, factor, (lo, hi) in TIME_UNIT_STEPS:
+        if lo <= step <= hi:
+            streams = {d: TrackerStream(d, s.time * factor, s.pos, s.quat, s.valid)
+                       for d, s in recording.streams.items()}
+            note = (f"times read as {name}: samples every {step:g} of them ({1.0 / (step * factor):.0f} Hz; "
+                    f"as seconds they would be {1.0 / step:.2g} Hz); write seconds to be sure")
+            return Recording(streams=streams, source=recording.source, metadata=dict(recording.metadata),
+                             warnings=list(recording.warnings) + [note])
+    return recording
 
 
 #: a required device whose last usable sample comes this many seconds or more before the head's

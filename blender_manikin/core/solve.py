@@ -176,9 +176,9 @@ def resample_recording(recording, fps, floor=0.0):
     """``(times, pos, quat, valid, report)`` on a grid at ``fps`` (see :func:`.resample.resample`).
     floor: the floor setting (:func:`parse_floor`): the head-height check measures from a
     floor height and is skipped where the floor will be put under the performer."""
-    from .resample import resample
+    from .resample import resample, seconds_from_time_units
     floor = parse_floor(floor)
-    return resample(recording, fps, floor=None if floor == FLOOR_FROM_HEIGHT else floor)
+    return resample(seconds_from_time_units(recording), fps, floor=None if floor == FLOOR_FROM_HEIGHT else floor)
 
 
 #: a trimmed tracker take is solved this many seconds beyond either end of the part kept (the
@@ -571,6 +571,8 @@ def solve_recording(source, settings: SolveSettings | None = None, solver=None, 
         out.recording = source
     report(STAGES["resampling"], "resampling")
     t = _time.perf_counter()
+    from .resample import seconds_from_time_units
+    out.recording = seconds_from_time_units(out.recording)      # before anything measures speeds
     jumps, continuous = [], out.recording
     if mode != "ignore":
         jumps = find_rig_jumps(out.recording)
