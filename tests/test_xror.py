@@ -101,6 +101,26 @@ def test_devices_the_solve_does_not_use_are_left_out(tmp_path):
     assert any("devices[2] (EYES" in w or "devices[2] (joint 'EYES'" in w for w in rec.warnings)
 
 
+@pytest.mark.parametrize("hand_type,want", [("HAND", "openxr_hand_tracking"), ("HAND_TRACKING", "openxr_hand_tracking"),
+                                             ("CONTROLLER", "openxr_generic")])
+def test_hands_tracked_without_controllers_get_the_hand_tracking_offsets(tmp_path, hand_type, want):
+    from blender_manikin.core import solve as cs
+    n = 30
+    t = np.arange(n) / 90.0
+    pose = np.zeros((n, 3, 7))
+    pose[..., 1] = 1.5
+    pose[..., 6] = 1.0
+    rows = np.concatenate([t[:, None], pose.reshape(n, -1)], 1).astype(np.float32)
+    devs = [("HEAD", "HMD"), ("HAND_LEFT", hand_type), ("HAND_RIGHT", hand_type)]
+    doc = {"$schema": "x", "info": {"hardware": {"devices": [{"name": j, "type": k, "joint": j, "axes": AXES}
+                                                             for j, k in devs]},
+                                    "software": {"app": {"name": "Some App"}}},
+           "frames": fpzip.compress(np.ascontiguousarray(rows[None, None])), "events": []}
+    path = tmp_path / "hands.xror"
+    path.write_bytes(bson.encode(doc))
+    assert cs.resolve_offsets("auto", formats.load_recording(path)) == want
+
+
 def test_six_devices(tmp_path):
     data, _, _ = _xror(devices=("HEAD", "HAND_LEFT", "HAND_RIGHT", "WAIST", "FOOT_LEFT", "FOOT_RIGHT"))
     (tmp_path / "six.xror").write_bytes(data)

@@ -17,7 +17,9 @@ Schema this reader relies on (checked on ``../shared/data/vr/xror-beatsaber-samp
   poses, so the ``beat_saber`` device offsets apply, or ``beat_saber_touch`` when the
   controllers' names say Oculus/Meta Touch, as for ``.bsor``, :func:`.io_bsor.beat_saber_offsets`; any other app: the
   format's default, ``openxr_generic``: the HEAD device is the headset's pose between the eyes,
-  as XR runtimes report it, and the hands are taken as controller grip poses;
+  as XR runtimes report it, and the hands are taken as controller grip poses, or, when every
+  hand device's ``type`` says ``HAND`` (tracked hands, no controller), as OpenXR hand-tracking
+  wrist joints, ``openxr_hand_tracking``;
   :mod:`.formats`);
 * as in BSOR, frame 0 is all zeros and the first frames may share time 0.
 
@@ -52,6 +54,13 @@ _DECOMPRESS = ("import io, sys, fpzip, numpy as np\n"
                "b = io.BytesIO()\n"
                "np.save(b, np.ascontiguousarray(a, dtype=np.float32), allow_pickle=False)\n"
                "sys.stdout.buffer.write(b.getvalue())\n")
+
+
+def _tracked_hand(device) -> bool:
+    """Whether an XROR device entry is a hand tracked without a controller: its ``type`` says
+    ``HAND`` (not ``CONTROLLER``), e.g. ``"HAND"`` or ``"HAND_TRACKING"``."""
+    kind = str(device.get("type", "")).upper()
+    return "HAND" in kind and "CONTROLLER" not in kind
 
 
 def decompress_isolated(blob: bytes, path, limit: int):
@@ -193,12 +202,15 @@ def parse_xror(data: bytes, path="<bytes>", axes=None, units=None) -> Recording:
     if "height" in activity:
         meta["height"] = float(activity["height"])
     offsets = APP_OFFSETS.get(meta["app"].strip().lower())
+    read = [d for d in devices if str(d.get("joint", "")).upper() in JOINTS
+            and list(d.get("axes", [])) == POSE_AXES]
+    hand_devices = [d for d, n in zip(read, names) if n.endswith("_hand")]
     if offsets == "beat_saber":            # Touch or Valve controllers: the game holds the saber differently
-        read = [d for d in devices if str(d.get("joint", "")).upper() in JOINTS
-                and list(d.get("axes", [])) == POSE_AXES]
-        hands = [str(d.get("name", "")) for d, n in zip(read, names) if n.endswith("_hand")]
+        hands = [str(d.get("name", "")) for d in hand_devices]
         heads = [str(d.get("name", "")) for d, n in zip(read, names) if n == "head"]
         offsets = beat_saber_offsets(" ".join(hands), *heads, meta["runtime"], meta["api"])
+    elif hand_devices and all(_tracked_hand(d) for d in hand_devices):
+        offsets = "openxr_hand_tracking"   # hands tracked without controllers: wrist joint poses
     if offsets:
         meta["offsets"] = offsets
     return Recording(streams=streams, source=path, metadata=meta, warnings=warnings)
