@@ -251,6 +251,18 @@ def test_bsor_offsets_preset_from_the_controller(tmp_path, controller, hmd, plat
     assert cs.resolve_offsets("auto", rec) == want and cs.resolve_offsets("quest_touch", rec) == "quest_touch"
 
 
+@pytest.mark.parametrize("version,warned", [("1.29.1_4575554838", False), ("1.27.0_3631158313", False),
+                                             ("1.29.4_123", True), ("1.40.3_999", True), ("oops", False)])
+def test_bsor_from_a_game_newer_than_the_presets_says_so(version, warned):
+    from blender_manikin.core.io_bsor import parse_bsor
+    data, _ = synthetic_bsor(n=30, gameVersion=version)
+    rec = parse_bsor(data)
+    hit = [w for w in rec.warnings if w.startswith("Beat Saber ")]
+    assert bool(hit) == warned
+    if warned:
+        assert "offsets are the game's up to 1.29.1" in hit[0] and version.split("_")[0] in hit[0]
+
+
 def test_bsor_time_jump_back_keeps_strictly_increasing():
     data, t = synthetic_bsor(n=300, backwards=(200, 0.5))      # rewind by 0.5 s at frame 200
     rec = parse_bsor(data, path="rewind.bsor")

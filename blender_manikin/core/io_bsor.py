@@ -193,6 +193,25 @@ def beat_saber_offsets(controller="", *headset) -> str:
     return "beat_saber"
 
 
+#: the last game version whose saber offsets the ``beat_saber`` presets reproduce: the game moved to
+#: OpenXR in 1.29.4 and holds the saber at other, per-controller offsets since
+PRESET_GAME_VERSION = (1, 29, 1)
+
+
+def game_version_warning(version) -> str | None:
+    """A warning when Beat Saber ``version`` (``"1.34.2_1234567"``) is newer than the one the
+    presets describe (:data:`PRESET_GAME_VERSION`), else None (also for an unreadable one)."""
+    try:
+        parts = tuple(int(x) for x in str(version).split("_")[0].split(".")[:3])
+    except ValueError:
+        return None
+    if len(parts) < 2 or parts <= PRESET_GAME_VERSION:
+        return None
+    return (f"Beat Saber {str(version).split('_')[0]}: the beat_saber offsets are the game's up to "
+            f"{'.'.join(map(str, PRESET_GAME_VERSION))} (it holds the saber at other offsets since its move to "
+            f"OpenXR in 1.29.4); if the hands look turned, edit the offsets")
+
+
 def pose_frames_to_streams(t, pose, ok, devices, axes, units):
     """``{device: TrackerStream}`` (Blender axes, metres) from pose frames ``(N, D, 7)``
     (position, quaternion x, y, z, w) in ``axes`` and ``units``, times ``t`` ``(N,)`` seconds."""
@@ -269,6 +288,9 @@ def parse_bsor(data: bytes, path="<bytes>", axes=None, units=None) -> Recording:
                 game_fps_median=float(np.median(fps[keep])) if keep.any() else float("nan"))
     meta["offsets"] = beat_saber_offsets(info.get("controller"), info.get("hmd"), info.get("platform"),
                                          info.get("trackingSystem"))
+    newer = game_version_warning(info.get("gameVersion", ""))
+    if newer:
+        warnings.append(newer)
     if info.get("leftHanded"):
         warnings.append("the replay was played in left-handed mode: check that left and right are not swapped")
     return Recording(streams=streams, source=path, metadata=meta, warnings=warnings)

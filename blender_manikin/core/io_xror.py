@@ -32,7 +32,7 @@ import os
 
 import numpy as np
 
-from .io_bsor import beat_saber_offsets, pose_frame_masks, pose_frames_to_streams
+from .io_bsor import beat_saber_offsets, game_version_warning, pose_frame_masks, pose_frames_to_streams
 from .recording import Recording, RecordingError, canonical_axes, canonical_units, read_file_bytes
 
 #: XROR joint names -> devices
@@ -209,6 +209,9 @@ def parse_xror(data: bytes, path="<bytes>", axes=None, units=None) -> Recording:
         hands = [str(d.get("name", "")) for d in hand_devices]
         heads = [str(d.get("name", "")) for d, n in zip(read, names) if n == "head"]
         offsets = beat_saber_offsets(" ".join(hands), *heads, meta["runtime"], meta["api"])
+        newer = game_version_warning(meta["app_version"])
+        if newer:
+            warnings.append(newer)
     elif hand_devices and all(_tracked_hand(d) for d in hand_devices):
         offsets = "openxr_hand_tracking"   # hands tracked without controllers: wrist joint poses
     if offsets:
