@@ -49,11 +49,12 @@ def test_key_counts_range_and_interpolation(scene):
     act = out.action
     assert keying.is_slotted(act) == hasattr(act, "slots")
     fcs = keying.action_fcurves(act, out.armature)
-    assert len(fcs) == 22 * 4 + 3 + 4
+    assert len(fcs) == 22 * 4 + 3 + 4 + 2
     for fc in fcs:
         assert len(fc.keyframe_points) == T
         assert tuple(fc.range()) == (1.0, float(T))
-        assert fc.keyframe_points[3].interpolation == 'LINEAR'
+        contact = fc.data_path in ('["foot_contact_left"]', '["foot_contact_right"]')
+        assert fc.keyframe_points[3].interpolation == ('CONSTANT' if contact else 'LINEAR')
     paths = {(fc.data_path, fc.array_index) for fc in fcs}
     assert ('pose.bones["pelvis"].location', 2) in paths
     assert ('pose.bones["left_elbow"].rotation_quaternion', 3) in paths
@@ -218,3 +219,20 @@ def test_slotted_path_real(scene):
     assert obj.location[2] == pytest.approx(1.0)
     with pytest.raises(ValueError):
         keying.ensure_fcurve(act, "location", 0)             # slotted needs the owner
+
+
+def test_foot_contacts_are_keyed_as_steps(scene):
+    """Each foot's contact is a keyed 0/1 custom property (footstep events for an engine)."""
+    res = synthetic_result(T=T, fps=24.0)
+    res.contacts = np.zeros((T, 2), bool)
+    res.contacts[3:9, 0] = True
+    res.contacts[6:, 1] = True
+    out = writer.write_result(res)
+    obj = out.armature
+    sc = bpy.context.scene
+    for k in range(T):
+        sc.frame_set(1 + k)
+        assert obj["foot_contact_left"] == pytest.approx(float(res.contacts[k, 0]))
+        assert obj["foot_contact_right"] == pytest.approx(float(res.contacts[k, 1]))
+    fc = next(f for f in keying.action_fcurves(out.action, obj) if f.data_path == '["foot_contact_left"]')
+    assert fc.group.name == writer.CONTACT_GROUP and fc.keyframe_points[0].interpolation == 'CONSTANT'

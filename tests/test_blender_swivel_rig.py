@@ -89,7 +89,7 @@ def test_live_pose_equals_numpy_fk(live):
     assert lr.is_live_rig(obj)
     assert action != solve_action and obj.animation_data.action == action
     assert solve_action.use_fake_user                  # the solve action is kept, unchanged
-    assert len(keying.action_fcurves(solve_action, obj)) == 22 * 4 + 3 + 4
+    assert len(keying.action_fcurves(solve_action, obj)) == 22 * 4 + 3 + 4 + 2
     paths = {fc.data_path for fc in keying.action_fcurves(action, obj)}
     for r in lr.LIMB_RIGS:                             # limbs are driven, not keyed
         assert not any(f'"{n}"' in p for n in (r.base, r.mid, r.end) for p in paths)
@@ -454,7 +454,7 @@ def test_never_writes_into_the_current_action(live):
     keying.assign_action(obj, solve_action)
     with pytest.raises(ValueError):
         lr.build_live_rig(obj, res, action=solve_action)
-    assert len(keying.action_fcurves(solve_action, obj)) == 22 * 4 + 3 + 4
+    assert len(keying.action_fcurves(solve_action, obj)) == 22 * 4 + 3 + 4 + 2
     # the rig can be muted to play the plain FK solve again
     assert lr.set_rig_enabled(obj, False) > 0
     heads, _ = evaluated_heads(obj, frames[:3])

@@ -186,12 +186,14 @@ def key_channels(action, id_owner, frames, channels, interpolation: str = 'LINEA
     """Key many channels of ``id_owner`` in ``action`` at the same ``frames``.
 
     channels: iterable of ``(data_path, index, group, values)`` with ``values``
-    ``(n,)``.  Returns the list of F-curves written.
+    ``(n,)``, or ``(data_path, index, group, values, interpolation)`` for a channel keyed
+    otherwise (e.g. ``'CONSTANT'`` steps).  Returns the list of F-curves written.
     """
     out = []
-    for data_path, index, group, values in channels:
+    for channel in channels:
+        data_path, index, group, values = channel[:4]
         fc = ensure_fcurve(action, data_path, index, group, id_owner)
-        out.append(set_keys(fc, frames, values, interpolation))
+        out.append(set_keys(fc, frames, values, channel[4] if len(channel) > 4 else interpolation))
     return out
 
 

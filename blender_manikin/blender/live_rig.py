@@ -586,6 +586,7 @@ def live_channels(obj, result: PoseResult):
     for li, limb in enumerate(sk.LIMB_NAMES):
         ch.append((f'["{writer.SWIVEL_PROPS[limb]}"]', 0, writer.SWIVEL_GROUP, swivel[:, li]))
         ch.append((f'["{SOLVED_PROPS[limb]}"]', 0, SOLVED_GROUP, swivel[:, li]))
+    ch.extend(writer.contact_channels(result))
     return ch
 
 
@@ -616,6 +617,7 @@ def build_live_rig(armature_obj, result: PoseResult, action=None, frames=None, c
     frames = _frames_for(obj, result, frames, context.scene)
     _create_bones(obj, context)
     writer.ensure_swivel_properties(obj)
+    writer.ensure_contact_properties(obj)
     _ensure_solved_properties(obj)
     _setup_constraints(obj)
     created = action is None

@@ -21,6 +21,9 @@ trackers: the live rig then keys its own action, see ``solve_job.SolveJob.write`
 * ``["swivel_left_arm"]`` ... ``["swivel_right_leg"]``: object custom
   properties, radians, unwrapped over time (so curves are continuous; the
   value modulo 2π is the solver's swivel angle), subtype ANGLE.
+* ``["foot_contact_left"]``, ``["foot_contact_right"]``: object custom properties, 1 while
+  the solve holds that foot planted, else 0, keyed as steps (constant interpolation): footstep
+  events for a game engine or a sound editor.
 * optional tracker empties ``MANIKIN_<device>`` in a new collection
   ``MANIKIN trackers``, each with its own new action keying ``location``
   (metres, world) and ``rotation_quaternion`` (the targeted joint's world
@@ -44,6 +47,9 @@ from . import keying
 #: limb name -> custom property name on the armature object
 SWIVEL_PROPS = {limb: f"swivel_{limb}" for limb in sk.LIMB_NAMES}
 SWIVEL_GROUP = "Swivel"
+#: foot (left, right) -> custom property keyed 1 while that foot is planted
+CONTACT_PROPS = {"left": "foot_contact_left", "right": "foot_contact_right"}
+CONTACT_GROUP = "Contacts"
 #: hard limits of the swivel properties (radians); the soft (UI slider) range is [-pi, pi]
 SWIVEL_HARD_LIMIT = 32.0 * math.pi
 TRACKER_COLLECTION = "MANIKIN trackers"
@@ -107,6 +113,29 @@ def ensure_swivel_properties(obj):
                                  description=desc, subtype='ANGLE')
 
 
+def ensure_contact_properties(obj):
+    """Create (if missing) the two foot-contact custom properties on ``obj`` (0 or 1)."""
+    for side, name in CONTACT_PROPS.items():
+        if name not in obj.keys():
+            obj[name] = 0
+        try:
+            obj.id_properties_ui(name).update(min=0, max=1, default=0,
+                                              description=f"MANIKIN: 1 while the {side} foot is planted")
+        except (AttributeError, TypeError):
+            pass
+
+
+def contact_channels(result):
+    """Keying channels of the feet's contacts: ``(data_path, 0, group, values (T,), 'CONSTANT')``
+    (none when the result has no contacts)."""
+    contacts = getattr(result, "contacts", None)
+    if contacts is None:
+        return []
+    c = np.asarray(contacts, dtype=np.float64).reshape(len(contacts), 2)
+    return [(f'["{name}"]', 0, CONTACT_GROUP, c[:, k], 'CONSTANT')
+            for k, name in enumerate(CONTACT_PROPS.values())]
+
+
 def unwrap_swivel(swivel):
     """``(T, 4)`` swivel angles unwrapped over time, each limb shifted by a multiple of 2π
     so that its median lies in [-π, π] (continuous curves, values near the solver's)."""
@@ -133,6 +162,7 @@ def _pose_channels(obj, result):
     swivel = unwrap_swivel(result.swivel)
     for li, limb in enumerate(sk.LIMB_NAMES):
         yield (f'["{SWIVEL_PROPS[limb]}"]', 0, SWIVEL_GROUP, swivel[:, li])
+    yield from contact_channels(result)
 
 
 def _remove_ids(ids):
@@ -182,6 +212,7 @@ def write_result(result, options: WriteOptions | None = None, context=None) -> W
         else:
             prev_action = obj.animation_data.action if obj.animation_data else None
         ensure_swivel_properties(obj)
+        ensure_contact_properties(obj)
         action = None
         if options.key_pose:
             action = keying.new_action(options.action_name)
