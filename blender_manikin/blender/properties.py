@@ -146,9 +146,11 @@ class MANIKIN_Settings(PropertyGroup):
                              description="Savitzky-Golay window over the tracker poses or keypoints, seconds "
                                          "(0: off); longer removes more noise and more fast detail")
     fix_sides: BoolProperty(name="Fix Left/Right Swaps", default=True,
-                            description="Give a leg's or arm's points back their side where the detector "
-                                        "labelled them as the other side's for a few frames (the knees "
-                                        "would cross); off: the labels as read")
+                            description="Keypoints: give a leg's or arm's points back their side where the "
+                                        "detector labelled them as the other side's for a few frames (the "
+                                        "knees would cross). Trackers: swap the controllers back when the "
+                                        "left one was held on the right for the whole take. Off: the labels "
+                                        "as read")
     despike: BoolProperty(name="Remove Spikes", default=True,
                           description="Remove samples that stand 30 cm or more off their point's path for "
                                       "one to three frames (a detector's misplacements) and bridge them; "
@@ -335,8 +337,8 @@ def config_from_settings(context):
         cfg.up = None if s.keypoint_up == 'AUTO' else s.keypoint_up.lower()
         cfg.rate = float(s.keypoint_rate) if s.use_keypoint_rate else None
         cfg.ik = s.ik.lower()
-        cfg.fix_sides = bool(s.fix_sides)
         cfg.despike = bool(s.despike)
+    cfg.fix_sides = bool(s.fix_sides)
     cfg.smoothing = "auto" if s.smoothing_mode == 'AUTO' else float(s.smoothing)
     cfg.layout = bpy.path.abspath(s.layout_file) if s.layout_file else None
     cfg.axes = None if s.axes == 'AUTO' else s.axes.lower()

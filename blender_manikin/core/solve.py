@@ -21,6 +21,7 @@ import numpy as np
 
 from . import skeleton as sk
 from .pipeline import DEFAULT_OVERLAP, overlap_windows
+from .controller_sides import swapped_hands, swapped_note
 from .lost_hands import relax_lost_hands
 from .plain import shown
 from .seated import POSTURES, SEATED_HEAD_HEIGHT, seat_legs, stature_from_seated_head
@@ -71,7 +72,8 @@ class SolveSettings:
     :mod:`.keypoint_layouts` name; None: told from the file), up (the file's up axis, ``+y``
     ...; None: told from the body), ik
     (``"adaptive"`` or ``"naive"`` HybrIK), mapping (a keypoint CSV's column mapping file),
-    fix_sides (undo a detector's left/right label swaps, :mod:`.keypoint_sides`; default on) and
+    fix_sides (undo a detector's left/right label swaps, :mod:`.keypoint_sides`; default on; for
+    trackers, controllers held in the other hands, :mod:`.controller_sides`) and
     despike (remove a detector's misplaced samples, :mod:`.keypoint_spikes`; default on).
     Tracker inputs also use model (the pose network) and overlap (how many network windows see
     each frame: 2, the default, keeps 10,000 frames/s; 3 and 4 are a little more accurate at 1.5
@@ -101,7 +103,7 @@ class SolveSettings:
     smoothing: object = "auto"        # "auto" or a window in seconds (0: off); trackers and keypoints
     ik: str = "adaptive"
     mapping: object = None
-    fix_sides: bool = True            # keypoints: undo left/right label swaps (keypoint_sides)
+    fix_sides: bool = True            # undo left/right label swaps (keypoint_sides; controller_sides)
     despike: bool = True              # keypoints: remove samples far off their point's path (keypoint_spikes)
     model: str | None = None          # None / "auto": by the recording's trackers; a shipped name or .onnx
     overlap: int = DEFAULT_OVERLAP    # windows seeing each frame: 2, 3 or 4 (pipeline.OVERLAP_CHOICES)
@@ -143,7 +145,8 @@ class SolveOutcome:
         for note in self.info:
             if note.startswith(("offsets ", "trimmed to", "calibrated", "arm span", "estimated stature",
                                 "head stands", "floor at",
-                                "left/right labels swapped back", "spikes removed",
+                                "left/right labels swapped back", "left and right controllers swapped back",
+                                "spikes removed",
                                 "no twist information",
                                 "point(s) never seen", "retarget:", "smoothing", "no smoothing")) \
                     or " tracker offset" in note or " teleport" in note or " snap turn" in note \
@@ -588,6 +591,14 @@ def solve_recording(source, settings: SolveSettings | None = None, solver=None, 
     smoothing = parse_smoothing(settings.smoothing)
     pos, quat, windows = smooth_device_poses(pos, quat, settings.fps, smoothing)
     smoothed = smoothing_note(smoothing, list(windows.values()) if windows else None, "device")
+    sides = None
+    if settings.fix_sides and all(d in pos for d in ("head", "left_hand", "right_hand")):
+        both = valid["head"] & valid["left_hand"] & valid["right_hand"]
+        swapped, share, wide = swapped_hands(quat["head"], pos["left_hand"], pos["right_hand"], both, settings.fps)
+        if swapped:                    # held in the other hands, or mislabelled: swapped back
+            for d in (pos, quat, valid):
+                d["left_hand"], d["right_hand"] = d["right_hand"], d["left_hand"]
+            sides = swapped_note(share, wide, settings.fps)
     resolved = resolve_offsets(settings.offsets, out.recording)
     out.targets, offsets = make_targets(times, pos, quat, valid, settings.fps, resolved)
     note = offsets_note(settings.offsets, resolved, out.recording)
@@ -597,8 +608,9 @@ def solve_recording(source, settings: SolveSettings | None = None, solver=None, 
     report(STAGES["calibrating"], "calibrating")
     t = _time.perf_counter()
     out.body, out.offsets, out.info = calibrate(settings, out.targets, times, offsets)
-    if note:
-        out.info.append(note)
+    for extra in (note, sides):
+        if extra:
+            out.info.append(extra)
     if out.offsets is not offsets:     # calibration refined the device rotations
         out.targets = move_floor(make_targets(times, pos, quat, valid, settings.fps, out.offsets)[0], out.floor)
     out.targets, lost = relax_lost_hands(out.targets, out.body)     # long hand gaps: the arm hangs

@@ -65,6 +65,7 @@ class MANIKIN_PT_solve(_Base, Panel):
             col.separator()
             col.prop(s, "posture")
             smoothing_rows(col, s)
+            col.prop(s, "fix_sides")
             col.prop(s, "model")
             if s.model == 'FILE':
                 col.prop(s, "model_file")
