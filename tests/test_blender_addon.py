@@ -529,6 +529,10 @@ def test_panel_posture_reaches_the_solve(addon, recording):
     panels.MANIKIN_PT_solve.draw(SimpleNamespace(layout=PanelLayout(log)), bpy.context)
     assert ("prop", "posture") in log and s.posture == 'STANDING'
     assert config_from_settings(bpy.context).posture == "standing"
+    assert ("prop", "fix_sides") in log                      # controllers swapped back, for trackers too
+    s.fix_sides = False
+    assert config_from_settings(bpy.context).fix_sides is False
+    s.fix_sides = True
     s.posture = 'SEATED'
     assert config_from_settings(bpy.context).posture == "seated"
     s.live_rig = False
