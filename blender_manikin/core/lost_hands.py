@@ -7,8 +7,7 @@ the sides are, for most inside-out hand tracking), leave a hand without samples 
 The resampler bridges every gap in a straight line between the last and the next sample, which
 for a short gap is right and for a long one is not: a hand lost raised and found raised again
 five seconds later stays raised in mid-air all that time.  People whose hands are not doing
-anything let them hang, and that is what an animator expects to see (VR avatar systems drop
-an untracked arm the same way).
+anything let them hang, and that is what an animator expects to see.
 
 So for a gap longer than :data:`RELAX_AFTER_S`, :func:`relax_lost_hands` eases the wrist target
 from the bridge to a relaxed pose over :data:`EASE_S` after the hand is lost, holds it, and
