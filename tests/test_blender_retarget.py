@@ -16,6 +16,9 @@ T = 30
 
 def _source(stature=1.8):
     res = synthetic_result(T=T, fps=24.0, seed=1, stature=stature)
+    res.contacts = np.zeros((T, 2), bool)
+    res.contacts[4:15, 0] = True                     # footstep curves to carry over
+    res.contacts[10:, 1] = True
     out = writer.write_result(res, writer.WriteOptions(frame_start=1))
     return res, out.armature
 
@@ -43,6 +46,13 @@ def test_retarget_onto_an_a_pose_mixamo_rig(addon):
     assert act != old and act.name.startswith("MANIKIN_retarget_") and old.name in bpy.data.actions
     assert old.use_fake_user and len(keying.action_fcurves(old, char)) == 1
     assert all(len(fc.keyframe_points) == T for fc in keying.action_fcurves(act, char))
+    # the footstep curves come along, as steps
+    contacts = {fc.data_path: fc for fc in keying.action_fcurves(act, char) if "foot_contact" in fc.data_path}
+    assert set(contacts) == {'["foot_contact_left"]', '["foot_contact_right"]'}
+    for k in (0, 7, 19):
+        assert contacts['["foot_contact_left"]'].evaluate(1 + k) == pytest.approx(float(res.contacts[k, 0]))
+    assert contacts['["foot_contact_right"]'].keyframe_points[0].interpolation == 'CONSTANT'
+
     pos, world = res.fk()
     sc = bpy.context.scene
     worst_end = 0.0

@@ -29,7 +29,7 @@ from ..core import retarget as rt
 from ..core import rotations as rot
 from ..core import skeleton as sk
 from . import armature as arm_mod
-from . import keying
+from . import keying, writer
 
 #: action custom property: the keyed bones' rotation modes before the retarget (JSON-like dict)
 PROP_MODES = "manikin_rotation_modes"
@@ -270,6 +270,20 @@ def key_retarget(target_obj, res: rt.RetargetResult, target: rt.TargetRig, frame
     return action
 
 
+def copy_contacts(source_obj, source_action, target_obj, action, frames):
+    """Key the solve's foot contacts (:data:`.writer.CONTACT_PROPS`, step curves) of
+    ``source_action`` onto ``target_obj`` in ``action`` at ``frames``: the character carries the
+    footstep events too.  Nothing when the source has none (a solve from before they were keyed)."""
+    paths = {f'["{name}"]' for name in writer.CONTACT_PROPS.values()}
+    curves = {fc.data_path: fc for fc in keying.action_fcurves(source_action, source_obj) if fc.data_path in paths}
+    if not curves:
+        return
+    writer.ensure_contact_properties(target_obj)
+    channels = [(path, 0, writer.CONTACT_GROUP, [fc.evaluate(float(f)) for f in frames], 'CONSTANT')
+                for path, fc in sorted(curves.items())]
+    keying.key_channels(action, target_obj, np.asarray(frames, np.float64), channels)
+
+
 def retarget_onto(source_obj, target_obj, bone_map="auto", map_path=None, root_motion="scaled",
                   keep_ends=False, context=None, live_swivel=None):
     """Retarget the MANIKIN armature ``source_obj``'s motion onto ``target_obj``: a new action
@@ -314,6 +328,7 @@ def retarget_onto(source_obj, target_obj, bone_map="auto", map_path=None, root_m
     prev = target_obj.animation_data.action if target_obj.animation_data else None
     action = key_retarget(target_obj, res, target, frames, f"MANIKIN_retarget_{src_action.name}",
                           switches=_ik_fk_switches(target_obj, bmap))
+    copy_contacts(source_obj, src_action, target_obj, action, frames)
     if live_swivel:
         try:
             notes += character_swivel.build_character_rig(target_obj, res, frames, wr, swivel, action, context)
