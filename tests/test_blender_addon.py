@@ -516,6 +516,8 @@ def test_panel_trim_reaches_the_solve(addon, monkeypatch):
     assert (cfg.start, cfg.end) == (2.0, 5.0)
     assert bpy.ops.manikin.solve_full_body() == {'FINISHED'}
     assert "trimmed to 2.00-5.00 s" in s.last_report
+    import re
+    assert not re.search(r"\b(read|solve|resample) \d+\.\d+s", s.last_report)     # no timings in the box
     fps = bpy.context.scene.render.fps / bpy.context.scene.render.fps_base
     assert f"{int(round(3.0 * fps)) + 1} frames at {fps:g} fps" in s.last_report
 

@@ -255,11 +255,13 @@ class SolveJob:
         if self._thread is not None:
             self._thread.join(timeout)
 
-    def summary(self) -> str:
-        """One line: frames, fps, stature, devices, gaps, where the solve gave way, timings."""
+    def summary(self, timings=True) -> str:
+        """One line: frames, fps, stature, devices, gaps, where the solve gave way, and (with
+        ``timings``) the seconds per stage."""
         if self.outcome is None:
             return ""
-        return self.outcome.summary({k: v for k, v in self.timings.items() if k not in self.outcome.timings})
+        return self.outcome.summary({k: v for k, v in self.timings.items() if k not in self.outcome.timings},
+                                    timings=timings)
 
 
 def find_tpose_time(config: SolveConfig, context=None):

@@ -130,8 +130,9 @@ class SolveOutcome:
     timings: dict = field(default_factory=dict)
     floor: float | None = None          # the floor's height in the recording (metres), moved to z = 0
 
-    def summary(self, extra_timings=None) -> str:
-        """One line: frames, fps, where the solve gave way, stature, calibration, gaps, timings."""
+    def summary(self, extra_timings=None, timings=True) -> str:
+        """One line: frames, fps, where the solve gave way, stature, calibration, gaps, and (with
+        ``timings``) the seconds per stage."""
         parts = []
         detected = (getattr(self.recording, "metadata", None) or {}).get("detected")
         if detected:
@@ -158,9 +159,9 @@ class SolveOutcome:
                 parts.append(f"{len(gaps)} gap(s) bridged")
             # what the reader and the resampler repaired or left out (each said once)
             parts.extend(dict.fromkeys(getattr(self.report, "warnings", None) or []))
-        timings = dict(self.timings, **(extra_timings or {}))
-        if timings:
-            parts.append(", ".join(f"{k} {v:.2f}s" for k, v in timings.items()))
+        seconds = dict(self.timings, **(extra_timings or {})) if timings else {}
+        if seconds:
+            parts.append(", ".join(f"{k} {v:.2f}s" for k, v in seconds.items()))
         return "; ".join(parts)
 
 

@@ -24,7 +24,7 @@ def _finish_report(op, context, job):
     s = context.scene.manikin
     out = job.output
     summary = job.summary()
-    s.last_report = summary
+    s.last_report = job.summary(timings=False)        # the panel's box: what the animator acts on
     if out is not None:
         s.armature = out.armature
     for note in job.info:
