@@ -279,9 +279,19 @@ def copy_contacts(source_obj, source_action, target_obj, action, frames):
     if not curves:
         return
     writer.ensure_contact_properties(target_obj)
-    channels = [(path, 0, writer.CONTACT_GROUP, [fc.evaluate(float(f)) for f in frames], 'CONSTANT')
-                for path, fc in sorted(curves.items())]
-    keying.key_channels(action, target_obj, np.asarray(frames, np.float64), channels)
+    frames = np.asarray(frames, np.float64)
+    channels = []
+    for path, fc in sorted(curves.items()):
+        n = len(fc.keyframe_points)
+        if n == 0:
+            continue
+        co = np.empty(2 * n, np.float32)
+        fc.keyframe_points.foreach_get("co", co)
+        co = co.reshape(n, 2)
+        # step curves: each frame takes the last key at or before it
+        k = np.clip(np.searchsorted(co[:, 0], frames + 1e-4, side="right") - 1, 0, n - 1)
+        channels.append((path, 0, writer.CONTACT_GROUP, co[k, 1], 'CONSTANT'))
+    keying.key_channels(action, target_obj, frames, channels)
 
 
 def retarget_onto(source_obj, target_obj, bone_map="auto", map_path=None, root_motion="scaled",

@@ -146,7 +146,7 @@ def parse_xror(data: bytes, path="<bytes>", axes=None, units=None) -> Recording:
     devices = field(doc, "info", "hardware", "devices")
     if not isinstance(devices, list) or not devices:
         raise RecordingError("info.hardware.devices lists no device", path=path)
-    names, columns, skipped = [], [], []       # the devices read, their first column, what was left out
+    names, used, columns, skipped = [], [], [], []   # the devices read (name, entry, first column), left out
     width = 1
     for i, d in enumerate(devices):
         if not isinstance(d, dict):
@@ -163,6 +163,7 @@ def parse_xror(data: bytes, path="<bytes>", axes=None, units=None) -> Recording:
                            "quaternion x y z w)")
         else:
             names.append(JOINTS[joint.upper()])
+            used.append(d)
             columns.append(width)
         width += len(axes_d)
     if not names:
@@ -202,12 +203,10 @@ def parse_xror(data: bytes, path="<bytes>", axes=None, units=None) -> Recording:
     if "height" in activity:
         meta["height"] = float(activity["height"])
     offsets = APP_OFFSETS.get(meta["app"].strip().lower())
-    read = [d for d in devices if str(d.get("joint", "")).upper() in JOINTS
-            and list(d.get("axes", [])) == POSE_AXES]
-    hand_devices = [d for d, n in zip(read, names) if n.endswith("_hand")]
+    hand_devices = [d for d, n in zip(used, names) if n.endswith("_hand")]
     if offsets == "beat_saber":            # Touch or Valve controllers: the game holds the saber differently
         hands = [str(d.get("name", "")) for d in hand_devices]
-        heads = [str(d.get("name", "")) for d, n in zip(read, names) if n == "head"]
+        heads = [str(d.get("name", "")) for d, n in zip(used, names) if n == "head"]
         offsets = beat_saber_offsets(" ".join(hands), *heads, meta["runtime"], meta["api"])
         newer = game_version_warning(meta["app_version"])
         if newer:

@@ -64,7 +64,8 @@ def seated_leg_targets(hips, pelvis_rot, body, floor=0.0):
         knee_z = ankle_z + shank
         dz = np.clip(knee_z - hips[:, k, 2], -thigh, thigh)
         run = np.sqrt(np.maximum(thigh ** 2 - dz ** 2, 0.0))
-        knees[:, k] = hips[:, k] + fwd * run[:, None] + np.stack([0 * dz, 0 * dz, dz], -1)
+        knees[:, k] = hips[:, k] + fwd * run[:, None]
+        knees[:, k, 2] += dz
         ankles[:, k] = knees[:, k] - np.array([0.0, 0.0, shank])
     ankle_rot = np.repeat(rot_z(yaw)[:, None], 2, axis=1)           # feet flat, pointing ahead
     return knees, ankles, ankle_rot
@@ -78,14 +79,18 @@ def seat_legs(result, floor=0.0, legs=(0, 1)):
     legs = tuple(int(k) for k in legs)
     if not legs:
         return result
-    pos, world = result.fk()
     body = result.body
     ids = np.array([_LEGS[k] for k in legs])
     base = ls.LIMB_BASE[ids]
-    hips = pos[:, base]
-    parent = world[:, ls.LIMB_PARENT[ids]]
-    knees, ankles, ankle_rot = (a[:, list(legs)] for a in seated_leg_targets(
-        pos[:, ls.LIMB_BASE[np.array(_LEGS)]], world[:, J["pelvis"]], body, floor))
+    # the hips and the pelvis (the legs' parent) only, a chunk at a time: a long take's whole FK
+    # would stay cached on the result
+    T = result.num_frames
+    all_hips, pelvis = np.empty((T, 2, 3)), np.empty((T, 3, 3))
+    for f, p, w in result.fk_chunks():
+        all_hips[f], pelvis[f] = p[:, ls.LIMB_BASE[list(_LEGS)]], w[:, J["pelvis"]]
+    hips = all_hips[:, list(legs)]
+    parent = np.repeat(pelvis[:, None], len(legs), axis=1)
+    knees, ankles, ankle_rot = (a[:, list(legs)] for a in seated_leg_targets(all_hips, pelvis, body, floor))
     swivel_legs = ls.swivel_from_positions(hips, knees, ankles, parent, limb_ids=ids)
     sol = ls.solve_limbs(hips, ankles, swivel_legs, body.limb_lengths()[ids], parent, end_rot=ankle_rot,
                          limb_ids=ids)

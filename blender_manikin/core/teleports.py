@@ -41,8 +41,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .features import rot_z
 from .recording import Recording, TrackerStream
-from .rotations import axis_angle_rotation, matrix_to_quat, quat_to_matrix
+from .rotations import matrix_to_quat, quat_to_matrix, twist_angle
+
+_Z = np.array([0.0, 0.0, 1.0])
 
 #: a teleport moves the head at least this far in one step (metres) ...
 TELEPORT_MIN_M = 0.3
@@ -85,12 +88,8 @@ class RigJump:
 
 
 def _yaw(R):
-    """The turn about +Z that best fits rotation(s) ``R`` (..., 3, 3), radians."""
-    return np.arctan2(R[..., 1, 0] - R[..., 0, 1], R[..., 0, 0] + R[..., 1, 1])
-
-
-def _rz(angle):
-    return axis_angle_rotation(np.array([0.0, 0.0, 1.0]), float(angle))
+    """The turn about +Z of rotation(s) ``R`` (..., 3, 3): its twist about +Z, radians."""
+    return twist_angle(R, _Z)
 
 
 def _wrap(a):
@@ -160,7 +159,7 @@ def find_rig_jumps(recording: Recording) -> list:
         v, w = _head_motion_before(t, p, R, b)
         h = t[b] - t[a]
         yaw = _wrap(_yaw(R[b] @ R[a].T) - w * h)
-        rot = _rz(yaw)
+        rot = rot_z(yaw)
         trans = p[b] - rot @ (p[a] + v * h)
         moved = np.linalg.norm(p[b] - (p[a] + v * h))
         teleport = moved > TELEPORT_MIN_M
