@@ -55,7 +55,8 @@ Options of ``solve`` (they mirror the panel; ``--help`` has them all):
 --ik adaptive|naive           keypoints: HybrIK adaptive (default) or naive IK
 --keep-sides                  keep left/right labels as read (default: keypoints: swap
                               back a limb the detector labelled as the other side;
-                              trackers: swap back controllers held in the other hands)
+                              trackers: swap back controllers held in the other hands
+                              and foot trackers worn on the other feet)
 --keep-spikes                 keypoints: keep every sample (default: remove samples
                               30 cm or more off their point's local median)
 --mapping FILE.json           keypoints: a CSV's column names for the layout's points
@@ -160,7 +161,8 @@ def _add_solve_options(s):
     s.add_argument("--keep-sides", action="store_true",
                    help="keep the left/right labels as read (default: keypoints: a leg's or arm's points "
                         "the detector gave the other side's labels for a few frames get their own back; "
-                        "trackers: controllers held in the other hands for the whole take are swapped back)")
+                        "trackers: controllers held in the other hands, or foot trackers worn on the other feet, "
+                        "for the whole take are swapped back)")
     s.add_argument("--keep-spikes", action="store_true",
                    help="keypoints: keep every sample as read (default: samples 30 cm or more off their "
                         "point's local median, a detector's misplacements, are removed and bridged)")

@@ -148,9 +148,9 @@ class MANIKIN_Settings(PropertyGroup):
     fix_sides: BoolProperty(name="Fix Left/Right Swaps", default=True,
                             description="Keypoints: give a leg's or arm's points back their side where the "
                                         "detector labelled them as the other side's for a few frames (the "
-                                        "knees would cross). Trackers: swap the controllers back when the "
-                                        "left one was held on the right for the whole take. Off: the labels "
-                                        "as read")
+                                        "knees would cross). Trackers: swap the controllers (or foot trackers) "
+                                        "back when the left one was on the right for the whole take. Off: the "
+                                        "labels as read")
     despike: BoolProperty(name="Remove Spikes", default=True,
                           description="Remove samples that stand 30 cm or more off their point's path for "
                                       "one to three frames (a detector's misplacements) and bridge them; "

@@ -21,7 +21,7 @@ import numpy as np
 
 from . import skeleton as sk
 from .pipeline import DEFAULT_OVERLAP, overlap_windows
-from .controller_sides import swapped_hands, swapped_note
+from .tracker_sides import swapped_feet, swapped_hands, swapped_note
 from .lost_hands import relax_lost_hands
 from .plain import shown
 from .seated import POSTURES, SEATED_HEAD_HEIGHT, seat_legs, stature_from_seated_head
@@ -73,7 +73,8 @@ class SolveSettings:
     ...; None: told from the body), ik
     (``"adaptive"`` or ``"naive"`` HybrIK), mapping (a keypoint CSV's column mapping file),
     fix_sides (undo a detector's left/right label swaps, :mod:`.keypoint_sides`; default on; for
-    trackers, controllers held in the other hands, :mod:`.controller_sides`) and
+    trackers, controllers held in the other hands or foot trackers on the other feet,
+    :mod:`.tracker_sides`) and
     despike (remove a detector's misplaced samples, :mod:`.keypoint_spikes`; default on).
     Tracker inputs also use model (the pose network) and overlap (how many network windows see
     each frame: 2, the default, keeps 10,000 frames/s; 3 and 4 are a little more accurate at 1.5
@@ -103,7 +104,7 @@ class SolveSettings:
     smoothing: object = "auto"        # "auto" or a window in seconds (0: off); trackers and keypoints
     ik: str = "adaptive"
     mapping: object = None
-    fix_sides: bool = True            # undo left/right label swaps (keypoint_sides; controller_sides)
+    fix_sides: bool = True            # undo left/right label swaps (keypoint_sides; tracker_sides)
     despike: bool = True              # keypoints: remove samples far off their point's path (keypoint_spikes)
     model: str | None = None          # None / "auto": by the recording's trackers; a shipped name or .onnx
     overlap: int = DEFAULT_OVERLAP    # windows seeing each frame: 2, 3 or 4 (pipeline.OVERLAP_CHOICES)
@@ -147,6 +148,7 @@ class SolveOutcome:
             if note.startswith(("offsets ", "trimmed to", "calibrated", "arm span", "estimated stature",
                                 "head stands", "floor at",
                                 "left/right labels swapped back", "left and right controllers swapped back",
+                                "left and right foot trackers swapped back",
                                 "spikes removed",
                                 "no twist information",
                                 "point(s) never seen", "retarget:", "smoothing", "no smoothing")) \
@@ -215,6 +217,34 @@ def trim_span(times, start=None, end=None):
     if stop - first < 2:
         raise SolveError(f"the part {start or 0:g}-{end if end is not None else length:g} s holds fewer than 2 frames")
     return first, stop
+
+
+def fix_swapped_sides(pos, quat, valid, fps):
+    """Swap the controllers, then the foot trackers, back where the take says they were in the
+    other hands or on the other feet (:mod:`.tracker_sides`).
+
+    pos, quat, valid: device → resampled ``(T, 3)`` metres / ``(T, 4)`` wxyz / ``(T,)`` bool on
+    one grid of ``fps`` frames per second, changed in place.  Returns the summary's notes."""
+    notes = []
+    if all(d in pos for d in ("head", "left_hand", "right_hand")):
+        both = valid["head"] & valid["left_hand"] & valid["right_hand"]
+        swapped, share, wide = swapped_hands(quat["head"], pos["left_hand"], pos["right_hand"], both, fps)
+        if swapped:                    # held in the other hands, or mislabelled: swapped back
+            for d in (pos, quat, valid):
+                d["left_hand"], d["right_hand"] = d["right_hand"], d["left_hand"]
+            notes.append(swapped_note(share, wide, fps))
+    if all(d in pos for d in ("head", "left_foot", "right_foot")):
+        both = valid["head"] & valid["left_foot"] & valid["right_foot"]
+        pelvis = None
+        if "pelvis" in pos:
+            both = both & valid["pelvis"]
+            pelvis = quat["pelvis"]
+        swapped, share, wide = swapped_feet(quat["head"], pos["left_foot"], pos["right_foot"], pelvis, both, fps)
+        if swapped:                    # strapped to the other feet, or the roles mixed up
+            for d in (pos, quat, valid):
+                d["left_foot"], d["right_foot"] = d["right_foot"], d["left_foot"]
+            notes.append(swapped_note(share, wide, fps, "foot trackers"))
+    return notes
 
 
 def resolve_offsets(offsets, recording):
@@ -592,14 +622,9 @@ def solve_recording(source, settings: SolveSettings | None = None, solver=None, 
     smoothing = parse_smoothing(settings.smoothing)
     pos, quat, windows = smooth_device_poses(pos, quat, settings.fps, smoothing)
     smoothed = smoothing_note(smoothing, list(windows.values()) if windows else None, "device")
-    sides = None
-    if settings.fix_sides and all(d in pos for d in ("head", "left_hand", "right_hand")):
-        both = valid["head"] & valid["left_hand"] & valid["right_hand"]
-        swapped, share, wide = swapped_hands(quat["head"], pos["left_hand"], pos["right_hand"], both, settings.fps)
-        if swapped:                    # held in the other hands, or mislabelled: swapped back
-            for d in (pos, quat, valid):
-                d["left_hand"], d["right_hand"] = d["right_hand"], d["left_hand"]
-            sides = swapped_note(share, wide, settings.fps)
+    sides = []
+    if settings.fix_sides:
+        sides = fix_swapped_sides(pos, quat, valid, settings.fps)
     resolved = resolve_offsets(settings.offsets, out.recording)
     out.targets, offsets = make_targets(times, pos, quat, valid, settings.fps, resolved)
     note = offsets_note(settings.offsets, resolved, out.recording)
@@ -609,7 +634,7 @@ def solve_recording(source, settings: SolveSettings | None = None, solver=None, 
     report(STAGES["calibrating"], "calibrating")
     t = _time.perf_counter()
     out.body, out.offsets, out.info = calibrate(settings, out.targets, times, offsets)
-    for extra in (note, sides):
+    for extra in (note, *sides):
         if extra:
             out.info.append(extra)
     if out.offsets is not offsets:     # calibration refined the device rotations

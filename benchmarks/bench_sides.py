@@ -1,0 +1,84 @@
+"""Left/right swap detection on mocap: how far from a false swap every clip stays, and how many
+swapped clips are caught.
+
+For every clip of the Bandai Namco set (all 3,076 takes) and the HDM05 subset, the ground truth's
+head joint stands in for the headset, its wrists for the controllers, its ankles for the foot
+trackers and its pelvis, turned by a random fixed strap rotation per clip, for a pelvis tracker
+(``core/tracker_sides.py``).  Each detector runs on the clip as labelled (a swap found there is
+a false swap) and with the two sides exchanged (a swap found there is caught).  Prints one row
+per detector: clips with enough frames to decide, the largest share of wrong-side frames in any
+clip as labelled (the margin below :data:`SWAPPED_SHARE`), false swaps, swapped clips caught.
+
+    .venv/bin/python benchmarks/bench_sides.py [--max-clips N]
+
+Needs ``../shared/data`` (the dataset cache is built on first use, a few minutes).
+"""
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+
+import numpy as np
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+sys.path.insert(0, ROOT)
+sys.path.insert(0, os.path.join(ROOT, "benchmarks"))
+
+from bench_pose import DATASETS, load_clip  # noqa: E402
+from blender_manikin.core import tracker_sides as ts  # noqa: E402
+from blender_manikin.core.rotations import axis_angle_to_matrix, matrix_to_quat  # noqa: E402
+from blender_manikin.core.skeleton import J  # noqa: E402
+
+
+def detectors(pos, world, fps, rng):
+    """name → ``(as labelled, exchanged)``: each a ``(swapped, share, wide_frames)``."""
+    head = matrix_to_quat(world[:, J["head"]])
+    mount = axis_angle_to_matrix(rng.normal(size=3) * 2.0)         # any strap rotation
+    pelvis = matrix_to_quat(world[:, J["pelvis"]] @ mount)
+    lw, rw, la, ra = (pos[:, J[j]] for j in ("left_wrist", "right_wrist", "left_ankle", "right_ankle"))
+    return {
+        "controllers (headset axis)": (ts.swapped_hands(head, lw, rw, fps=fps),
+                                       ts.swapped_hands(head, rw, lw, fps=fps)),
+        "foot trackers (hips' axis from a pelvis tracker)": (
+            ts.swapped_feet(head, la, ra, pelvis, fps=fps), ts.swapped_feet(head, ra, la, pelvis, fps=fps)),
+        "foot trackers (headset axis, no pelvis tracker)": (
+            ts.swapped_feet(head, la, ra, fps=fps), ts.swapped_feet(head, ra, la, fps=fps)),
+    }
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--max-clips", type=int, default=0, help="per dataset (0: all)")
+    args = ap.parse_args(argv)
+    from blender_manikin.training import dataset
+    rows, clips, worst = {}, 0, {}
+    rng = np.random.default_rng(0)
+    for name, (source, _) in DATASETS.items():
+        if not os.path.exists(source):
+            print(f"{name}: {source} not found, skipped")
+            continue
+        files = dataset.build_cache(source, verbose=False)
+        for f in files[:args.max_clips] if args.max_clips else files:
+            _, _, pos, world, fps = load_clip(f)
+            clips += 1
+            for det, (kept, swapped) in detectors(pos, world, fps, rng).items():
+                r = rows.setdefault(det, dict(decidable=0, false=0, caught=0, max_share=0.0))
+                decided = kept[2] >= (ts.MIN_WIDE_S if det.startswith("controllers") else ts.MIN_WIDE_FEET_S) * fps
+                if decided:
+                    r["decidable"] += 1
+                    if kept[1] > r["max_share"]:
+                        r["max_share"], worst[det] = kept[1], os.path.basename(str(f))
+                r["false"] += bool(kept[0])
+                r["caught"] += bool(swapped[0])
+    print(f"{clips} mocap clips (Bandai Namco, HDM05); swapped at a share of {ts.SWAPPED_SHARE:.0%}")
+    print("| detector | clips decidable | max wrong-side share as labelled | false swaps | swapped clips caught |")
+    print("|---|---:|---:|---:|---:|")
+    for det, r in rows.items():
+        print(f"| {det} | {r['decidable']} | {100 * r['max_share']:.1f} % | {r['false']} | {r['caught']} |")
+    for det, f in worst.items():
+        print(f"largest share, {det}: {f}")
+
+
+if __name__ == "__main__":
+    main()
