@@ -12,11 +12,12 @@ ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 EXAMPLE = os.path.join(ROOT, "examples", "example_recording.csv")
 
 
-def swapped(rec):
+def swapped(rec, left="left_hand", right="right_hand"):
+    """``rec`` with the streams of devices ``left`` and ``right`` exchanged."""
     s = dict(rec.streams)
-    L, R = s["left_hand"], s["right_hand"]
-    s["left_hand"] = TrackerStream("left_hand", R.time, R.pos, R.quat, R.valid)
-    s["right_hand"] = TrackerStream("right_hand", L.time, L.pos, L.quat, L.valid)
+    L, R = s[left], s[right]
+    s[left] = TrackerStream(left, R.time, R.pos, R.quat, R.valid)
+    s[right] = TrackerStream(right, L.time, L.pos, L.quat, L.valid)
     return Recording(streams=s, source="swapped", metadata=dict(rec.metadata))
 
 
@@ -49,11 +50,7 @@ def test_hands_held_close_and_crossed_are_not_swapped():
 
 
 def swapped_feet_recording(rec):
-    s = dict(rec.streams)
-    L, R = s["left_foot"], s["right_foot"]
-    s["left_foot"] = TrackerStream("left_foot", R.time, R.pos, R.quat, R.valid)
-    s["right_foot"] = TrackerStream("right_foot", L.time, L.pos, L.quat, L.valid)
-    return Recording(streams=s, source="feet swapped", metadata=dict(rec.metadata))
+    return swapped(rec, "left_foot", "right_foot")
 
 
 def test_foot_trackers_on_the_other_feet_are_swapped_back():
