@@ -1,4 +1,5 @@
 """Resampling onto a common grid, gap bridging and reporting, units sanity check."""
+import os
 import re
 import time
 
@@ -11,6 +12,8 @@ from blender_manikin.core.resample import check_head_height, resample
 from blender_manikin.core.rotations import axis_angle_to_quat, geodesic_angle, quat_to_matrix
 
 from fixtures_recordings import make_recording, make_streams, truth, write_recording_csv
+
+EXAMPLE = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "examples", "example_recording.csv")
 
 
 def rot_err_deg(qa, qb):
@@ -297,3 +300,16 @@ def test_times_written_in_other_units_are_read_as_seconds(unit, factor):
     assert seconds_from_time_units(rec) is rec
     slow = Recording({d: TrackerStream(d, np.arange(10.0), s.pos[:10], s.quat[:10]) for d, s in rec.streams.items()})
     assert seconds_from_time_units(slow) is slow
+
+
+def test_the_summary_names_the_longest_gap():
+    """A headset lost for 3 s: the summary says which device, how long and from when (seconds
+    from the take's start), not only how many gaps were bridged."""
+    from blender_manikin.core.solve import SolveSettings, solve_recording
+    rec = load_recording(EXAMPLE)
+    h = rec.streams["head"]
+    keep = (h.time < 2.0) | (h.time > 5.0)
+    streams = dict(rec.streams, head=TrackerStream("head", h.time[keep], h.pos[keep], h.quat[keep]))
+    out = solve_recording(Recording(streams=streams, source="head lost", metadata=dict(rec.metadata)),
+                          SolveSettings(fps=30.0))
+    assert "1 gap(s) bridged, the longest head 3.0 s from 2.0 s (no samples)" in out.summary()

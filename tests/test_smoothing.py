@@ -116,3 +116,12 @@ def test_smooth_gives_the_same_on_any_memory_layout():
     np.testing.assert_allclose(sm.smooth(view, FPS, 0.4), sm.smooth(np.ascontiguousarray(view), FPS, 0.4),
                                atol=1e-12)
     np.testing.assert_allclose(sm.smooth(x[::2], FPS, 0.4), sm.smooth(x[::2].copy(), FPS, 0.4), atol=1e-12)
+
+
+def test_the_summary_says_when_no_device_needed_smoothing():
+    from blender_manikin.core.smoothing import smoothing_note
+    assert smoothing_note("auto", [0.0, 0.0, 0.0], "device") == \
+        "smoothing auto (per device, from its measured noise): none needed, every device is clean"
+    assert smoothing_note("auto", [0.0, 0.4, 0.2], "device") == \
+        "smoothing auto (per device, from its measured noise): windows 0-0.4 s, median 0.2 s"
+    assert smoothing_note(0.3) == "smoothing 0.3 s" and smoothing_note(0) == "no smoothing"

@@ -156,6 +156,8 @@ def smoothing_note(smoothing, windows=None, what="point"):
     ``what`` (``"point"``, ``"device"``)."""
     if smoothing == "auto":
         w = np.asarray(windows if windows is not None and len(windows) else [0.0], np.float64)
+        if not np.any(w > 0):
+            return f"smoothing auto (per {what}, from its measured noise): none needed, every {what} is clean"
         return (f"smoothing auto (per {what}, from its measured noise): windows {w.min():g}-{w.max():g} s, "
                 f"median {np.median(w):g} s")
     return f"smoothing {smoothing:g} s" if smoothing else "no smoothing"

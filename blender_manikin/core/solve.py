@@ -158,13 +158,30 @@ class SolveOutcome:
         if self.report is not None:
             gaps = getattr(self.report, "gaps", [])
             if gaps:
-                parts.append(f"{len(gaps)} gap(s) bridged")
+                parts.append(gaps_note(gaps, getattr(self.report, "t0", 0.0)))
             # what the reader and the resampler repaired or left out (each said once)
             parts.extend(dict.fromkeys(getattr(self.report, "warnings", None) or []))
         seconds = dict(self.timings, **(extra_timings or {})) if timings else {}
         if seconds:
             parts.append(", ".join(f"{k} {v:.2f}s" for k, v in seconds.items()))
         return "; ".join(parts)
+
+
+def gaps_note(gaps, t0=0.0):
+    """The summary's line on bridged gaps: ``"3 gap(s) bridged, the longest head 3.0 s from 2.0 s
+    (no samples)"``.  gaps: :class:`.resample.Gap` s (a tracker device or a keypoint name, seconds on
+    the recording's clock); t0: the clock's time of the solve's first frame."""
+    from .devices import LABELS
+    g = max(gaps, key=lambda g: g.duration)
+    what = LABELS[g.device].lower() if g.device in LABELS else g.device
+    why = GAP_REASONS.get(g.reason, g.reason)
+    return f"{len(gaps)} gap(s) bridged, the longest {what} {g.duration:.1f} s from {g.start - t0:.1f} s ({why})"
+
+
+#: :class:`.resample.Gap` reasons in the summary's words
+GAP_REASONS = {"missing": "no samples", "invalid": "marked not tracked", "nan": "not-a-number values",
+               "frozen": "frozen pose", "origin": "at the tracking origin", "jump": "spikes",
+               "start": "not tracked at the start", "end": "not tracked at the end"}
 
 
 # --------------------------------------------------------------------------
