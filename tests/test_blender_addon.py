@@ -358,6 +358,25 @@ def test_panels_draw(addon):
     assert config_from_settings(bpy.context).smoothing == "auto"
 
 
+def test_the_summary_is_wrapped_to_the_sidebar_without_losing_a_word(addon):
+    """Blender labels do not wrap and cut a long one in the middle with "...": the summary box
+    gets lines that fit the region (measured in the UI font where Blender can, else estimated),
+    every word kept, in order; a narrower sidebar gets shorter lines."""
+    from blender_manikin.panels import main as panels
+    from types import SimpleNamespace
+    text = ("168 frames at 24 fps; model head and hands (manikin_s.onnx); stature 1.75 m; calibrated on "
+            "a T-pose at 0.62 s: stature 1.75 m, arm span 1.53 m; offsets openxr_generic (auto: from the file)")
+    prefs = bpy.context.preferences
+    wide = panels.wrapped(text, SimpleNamespace(region=SimpleNamespace(width=400), preferences=prefs))
+    narrow = panels.wrapped(text, SimpleNamespace(region=SimpleNamespace(width=250), preferences=prefs))
+    assert " ".join(wide) == text and " ".join(narrow) == text
+    assert len(narrow) > len(wide) > 1
+    scale = prefs.system.ui_scale or 1.0
+    measure = panels._text_measure(SimpleNamespace(preferences=prefs), scale)
+    assert max(measure(line) for line in narrow) <= 250 - 96 * scale
+    assert panels.wrapped("a\n\nb", SimpleNamespace(region=None, preferences=prefs)) == ["a", "", "b"]
+
+
 def test_panel_overlap_reaches_the_solver(addon, recording, monkeypatch):
     """The panel's Overlap (network windows per frame) is shown with the pose model and reaches
     the solver; the default (2) calls it as before."""

@@ -169,11 +169,12 @@ class SolveOutcome:
 
 def gaps_note(gaps, t0=0.0):
     """The summary's line on bridged gaps: ``"3 gap(s) bridged, the longest head 3.0 s from 2.0 s
-    (no samples)"``.  gaps: :class:`.resample.Gap` s (a tracker device or a keypoint name, seconds on
+    (no samples)"``, ``"... the longest point left wrist 0.2 s from 5.0 s (not seen)"``.  gaps:
+    :class:`.resample.Gap` s (a tracker device or a keypoint name, seconds on
     the recording's clock); t0: the clock's time of the solve's first frame."""
     from .devices import LABELS
     g = max(gaps, key=lambda g: g.duration)
-    what = LABELS[g.device].lower() if g.device in LABELS else g.device
+    what = LABELS[g.device].lower() if g.device in LABELS else f"point {g.device.replace('_', ' ')}"
     why = GAP_REASONS.get(g.reason, g.reason)
     return f"{len(gaps)} gap(s) bridged, the longest {what} {g.duration:.1f} s from {g.start - t0:.1f} s ({why})"
 
@@ -181,7 +182,8 @@ def gaps_note(gaps, t0=0.0):
 #: :class:`.resample.Gap` reasons in the summary's words
 GAP_REASONS = {"missing": "no samples", "invalid": "marked not tracked", "nan": "not-a-number values",
                "frozen": "frozen pose", "origin": "at the tracking origin", "jump": "spikes",
-               "start": "not tracked at the start", "end": "not tracked at the end"}
+               "start": "not tracked at the start", "end": "not tracked at the end",
+               "lost": "not seen"}
 
 
 # --------------------------------------------------------------------------

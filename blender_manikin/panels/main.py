@@ -91,18 +91,44 @@ def toggled_row(layout, s, flag, value, heading, text=""):
 
 
 def wrapped(text, context, min_chars=24):
-    """``text`` cut into lines that fit the sidebar's width (Blender labels do not wrap).  The
-    solve summary is a few sentences; a cut-off label would hide what the solve reports."""
-    import textwrap
+    """``text`` cut into lines that fit the sidebar's width (Blender labels do not wrap; one too
+    long for its row is cut in the middle with "...").  The solve summary is a few sentences; a
+    cut-off label would hide what the solve reports.  Lines are measured in the UI font
+    (:mod:`blf`) where Blender draws one, else estimated from a character width."""
     region = getattr(context, "region", None)
     # Headless (background mode) Blender reports a UI scale of 0 and regions 1 pixel wide.
     scale = (context.preferences.system.ui_scale if context.preferences else 0.0) or 1.0
     width = region.width if region is not None and region.width > 100 else 300
-    chars = max(min_chars, int((width - 50 * scale) / (6.2 * scale)))
+    # less the icon, the panel's, box's and label's margins (measured in Blender 4.3: a line of
+    # 197 px fits a 291 px sidebar, one of 204 px is cut)
+    room = max(min_chars * 6.2 * scale, width - 96 * scale)
+    measure = _text_measure(context, scale)
     lines = []
     for part in text.split("\n"):
-        lines.extend(textwrap.wrap(part, chars) or [""])
+        line = ""
+        for word in part.split():
+            longer = f"{line} {word}" if line else word
+            if line and measure(longer) > room:
+                lines.append(line)
+                line = word
+            else:
+                line = longer
+        lines.append(line)
     return lines
+
+
+def _text_measure(context, scale):
+    """``str -> pixels`` in the sidebar's label font, or an estimate (6.2 px a character at UI
+    scale 1) where no font can be measured (background mode)."""
+    try:
+        import blf
+        points = context.preferences.ui_styles[0].widget.points
+        blf.size(0, points * scale)
+        if blf.dimensions(0, "MANIKIN")[0] > 0:
+            return lambda s: blf.dimensions(0, s)[0]
+    except (ImportError, AttributeError, IndexError, TypeError, ValueError):
+        pass
+    return lambda s: len(s) * 6.2 * scale
 
 
 class MANIKIN_PT_calibration(_Base, Panel):
