@@ -134,3 +134,31 @@ def test_what_is_not_a_jump_of_the_space(example):
 def test_a_bad_teleports_setting_is_refused():
     with pytest.raises(cs.SolveError, match="teleports 'sometimes': expected one of keep, remove, ignore"):
         cs.solve_recording(EXAMPLE, cs.SolveSettings(teleports="sometimes"))
+
+
+def glided(rec, speed, start=1.5):
+    """``rec`` with every device carried forward (-Y) at ``speed`` m/s from ``start`` s: a
+    thumbstick's smooth locomotion, the performer standing in place."""
+    streams = {}
+    for d, s in rec.streams.items():
+        p = s.pos.copy()
+        p[:, 1] -= speed * np.clip(s.time - start, 0.0, None)
+        streams[d] = TrackerStream(d, s.time, p, s.quat, s.valid)
+    return Recording(streams=streams, source="glided", metadata=dict(rec.metadata))
+
+
+def test_smooth_locomotion_is_walked(example):
+    """A player carried along by a thumbstick (no teleport: the space moves smoothly) is solved as
+    a body that walks with it: the feet stride and lift, where the same take in place barely
+    steps; nothing is taken for a teleport."""
+    from blender_manikin.core.skeleton import J
+    rec, base = example
+    strides = []
+    for speed, out in ((0.0, base), (1.0, cs.solve_recording(glided(rec, 1.0), cs.SolveSettings(fps=30.0)))):
+        assert "teleport" not in out.summary() and "snap turn" not in out.summary()
+        P = out.result.positions[75:]                                    # from 2.5 s
+        fwd = [np.ptp(P[:, J[a], 1] - P[:, J["pelvis"], 1]) for a in ("left_ankle", "right_ankle")]
+        lift = [P[:, J[a], 2].max() - np.percentile(P[:, J[a], 2], 5) for a in ("left_ankle", "right_ankle")]
+        strides.append((min(fwd), min(lift)))
+    assert strides[0][0] < 0.15 and strides[1][0] > 0.4           # each foot swings 40 cm or more
+    assert strides[1][1] > 0.08                                   # and lifts
