@@ -281,7 +281,7 @@ def test_freemocap_folder_with_noise_and_gaps_solves_within_targets(tmp_path, mo
     assert abs(out.body.stature - body.stature) < 0.03
     s = out.summary()
     assert s.startswith("keypoints: mediapipe33")
-    assert re.search(r"\d+ gap\(s\) bridged, the longest point [a-z ]+ \d+\.\d s from \d+\.\d s \(not seen\)", s), s
+    assert re.search(r"\d+ gap\(s\) bridged, the longest point [a-z ]+ \d+\.\d\d? s from \d+\.\d s \(not seen\)", s), s
     assert "smoothing auto (per point, from its measured noise): windows " in s
     assert "no twist information: left_foot, right_foot (rest twist)" in s
     # hinges within limits, feet above the floor

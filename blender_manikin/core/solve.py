@@ -176,7 +176,8 @@ def gaps_note(gaps, t0=0.0):
     g = max(gaps, key=lambda g: g.duration)
     what = LABELS[g.device].lower() if g.device in LABELS else f"point {g.device.replace('_', ' ')}"
     why = GAP_REASONS.get(g.reason, g.reason)
-    return f"{len(gaps)} gap(s) bridged, the longest {what} {g.duration:.1f} s from {g.start - t0:.1f} s ({why})"
+    dur = f"{g.duration:.1f}" if g.duration >= 0.95 else f"{g.duration:.2f}"
+    return f"{len(gaps)} gap(s) bridged, the longest {what} {dur} s from {g.start - t0:.1f} s ({why})"
 
 
 #: :class:`.resample.Gap` reasons in the summary's words
