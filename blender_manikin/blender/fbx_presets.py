@@ -162,8 +162,8 @@ def exporter_kwargs(name: str, accepted=None) -> dict:
 
 def units_to_centimetres(scene) -> float:
     """Centimetres per Blender unit of ``scene`` (100 for metres; the exporter's own rule)."""
-    us = scene.unit_settings
-    return 100.0 if us.system == 'NONE' else 100.0 * float(us.scale_length)
+    from .units import metres_per_unit
+    return 100.0 * metres_per_unit(scene)
 
 
 def export_fbx(filepath, armature, preset: str = DEFAULT, extra_objects=(), context=None) -> dict:

@@ -10,6 +10,7 @@ from bpy.types import PropertyGroup
 from ..core import formats
 from ..core.solve import FLOOR_FROM_HEIGHT
 from ..core.devices import DEVICES, LABELS as DEVICE_LABELS  # noqa: F401  (labels: the panel)
+from .units import length_property
 
 _AXES_ITEMS = [
     ('AUTO', "From File", "Axes from the file's metadata, else the format's default "
@@ -188,16 +189,19 @@ class MANIKIN_Settings(PropertyGroup):
                ('MEASURE', "Measurements", "Use the typed height and arm span")])
     tpose_time: FloatProperty(name="T-Pose Time", default=0.0, min=0.0, unit='TIME_ABSOLUTE',
                               description="Seconds after the first tracker sample")
-    height: FloatProperty(name="Height", default=1.75, min=0.5, max=2.8, unit='LENGTH',
-                          description="Performer's stature (metres)")
+    # lengths are kept in metres (the *_m properties) and shown in the scene's unit (units.py)
+    height_m: FloatProperty(default=1.75, min=0.5, max=2.8, options={'HIDDEN'})
+    height: length_property("height_m", "Height", "Performer's stature (barefoot)", 0.5, 2.8)
     use_height: BoolProperty(name="Override Height", default=False,
                              description="Use the typed height instead of the measured stature")
-    arm_span: FloatProperty(name="Arm Span", default=0.0, min=0.0, max=3.0, unit='LENGTH',
-                            description="Wrist-to-wrist distance in a T-pose (0 = from proportions)")
-    sole: FloatProperty(name="Shoe Soles", default=0.03, min=0.0, max=0.2, unit='LENGTH',
-                        description="Thickness of the performer's shoe soles: the feet stand this far "
-                                    "above the floor, and the height measured from the headset is "
-                                    "the barefoot one (0 = barefoot)")
+    arm_span_m: FloatProperty(default=0.0, min=0.0, max=3.0, options={'HIDDEN'})
+    arm_span: length_property("arm_span_m", "Arm Span",
+                              "Wrist-to-wrist distance in a T-pose (0 = from proportions)", 0.0, 3.0)
+    sole_m: FloatProperty(default=0.03, min=0.0, max=0.2, options={'HIDDEN'})
+    sole: length_property("sole_m", "Shoe Soles",
+                          "Thickness of the performer's shoe soles: the feet stand this far above the "
+                          "floor, and the height measured from the headset is the barefoot one (0 = barefoot)",
+                          0.0, 0.2)
     floor_mode: EnumProperty(
         name="Floor", default='ZERO',
         items=[('ZERO', "At Zero", "The recording's height 0 is the floor (room-scale VR: OpenXR stage, "
@@ -206,8 +210,9 @@ class MANIKIN_Settings(PropertyGroup):
                ('PERFORMER', "Under Performer", "The floor is put under a performer of the typed Height "
                 "standing in the take (an origin at eye level or on a desk)")],
         description="Where the recording's floor is; the solve moves it to Blender's ground (z = 0)")
-    floor_height: FloatProperty(name="Floor Height", default=0.0, soft_min=-3.0, soft_max=3.0, unit='LENGTH',
-                                description="Height of the recording's floor on its vertical axis")
+    floor_height_m: FloatProperty(default=0.0, options={'HIDDEN'})
+    floor_height: length_property("floor_height_m", "Floor Height",
+                                  "Height of the recording's floor on its vertical axis")
 
     model: EnumProperty(
         name="Pose Model", default='AUTO',
@@ -349,11 +354,11 @@ def config_from_settings(context):
     cfg.tpose_time = float(s.tpose_time)
     trackers = s.source != 'KEYPOINTS'
     if s.use_height or (trackers and (s.calibration == 'MEASURE' or s.floor_mode == 'PERFORMER')):
-        cfg.height = float(s.height)
-    cfg.arm_span = float(s.arm_span) if s.arm_span > 0 else None
-    cfg.sole = float(s.sole)
+        cfg.height = float(s.height_m)
+    cfg.arm_span = float(s.arm_span_m) if s.arm_span_m > 0 else None
+    cfg.sole = float(s.sole_m)
     if trackers:
-        cfg.floor = {'ZERO': 0.0, 'OFFSET': float(s.floor_height), 'PERFORMER': FLOOR_FROM_HEIGHT}[s.floor_mode]
+        cfg.floor = {'ZERO': 0.0, 'OFFSET': float(s.floor_height_m), 'PERFORMER': FLOOR_FROM_HEIGHT}[s.floor_mode]
     if s.offsets_text is not None:
         try:
             cfg.offsets = json.loads(s.offsets_text.as_string())

@@ -15,8 +15,9 @@ gather → create, as the solve does:
    custom property so it can be restored).  All or nothing: on an error the new action is removed
    and the previous one assigned back.
 
-Frames are scene frames; positions metres; the MANIKIN armature is expected at the world origin
-(its ``matrix_world`` is applied anyway).
+Frames are scene frames; positions in the scene's unit (the solve is written in it,
+:mod:`.units`; the core's "metres" are whatever unit its inputs share); the MANIKIN armature is
+expected at the world origin (its ``matrix_world`` is applied anyway).
 """
 from __future__ import annotations
 
@@ -327,6 +328,8 @@ def retarget_onto(source_obj, target_obj, bone_map="auto", map_path=None, root_m
                                       ends="scaled" if root_motion != "as_is" else "source")
     err = res.reach_error
     if err is not None:
+        from .units import metres_per_unit
+        err = err * metres_per_unit(context.scene)          # scene units → metres
         for li, limb in enumerate(sk.LIMB_NAMES):
             bad = np.isfinite(err[:, li]) & (err[:, li] > 0.005)
             if bad.any():

@@ -2,7 +2,7 @@
 
 The world transform of each source is sampled on every scene frame of a
 range and returned as a :class:`~blender_manikin.core.recording.Recording`
-(Blender axes and metres already), so a scene source goes through the same
+(Blender axes; scene units taken into metres, :mod:`.units`), so a scene source goes through the same
 resampling / offsets / calibration / solve path as a file.
 
 Sampling, per source:
@@ -29,6 +29,7 @@ import numpy as np
 from ..core import rotations as rot
 from ..core.recording import Recording, TrackerStream
 from . import keying
+from .units import metres_per_unit
 
 
 class SceneSourceError(ValueError):
@@ -162,8 +163,10 @@ def sample_sources(scene, sources, frame_start, frame_end, depsgraph=None, progr
         progress(1.0)
 
     times = frames / fps
+    metres = metres_per_unit(scene)          # scene units → the core's metres
     streams = {}
     for dev in resolved:
+        pos[dev] *= metres
         R = rot.orthonormalize(rotm[dev])
         q = rot.quat_continuous(rot.matrix_to_quat(R), axis=0)
         streams[dev] = TrackerStream(dev, times.copy(), pos[dev], q, np.ones(N, dtype=bool))

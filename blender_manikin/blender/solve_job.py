@@ -205,14 +205,16 @@ class SolveJob:
                                    armature_name=cfg.armature_name,
                                    create_trackers=cfg.create_trackers,
                                    set_scene_range=cfg.set_scene_range, key_pose=not cfg.live_rig)
-        out = writer.write_result(self.result, opts, context=context)
+        from .units import result_in_scene_units
+        result = result_in_scene_units(self.result, context.scene)     # metres → the scene's unit
+        out = writer.write_result(result, opts, context=context)
         self.timings["keying"] = _time.perf_counter() - t
         t = _time.perf_counter()
         if cfg.live_rig:
             from . import live_rig
             self.stage = "live rig"
             try:
-                out.live_action = live_rig.build_live_rig(out.armature, self.result, frames=out.frames,
+                out.live_action = live_rig.build_live_rig(out.armature, result, frames=out.frames,
                                                           context=context)
                 out.action = out.live_action
             except BaseException:

@@ -17,7 +17,8 @@ trackers: the live rig then keys its own action, see ``solve_job.SolveJob.write`
 
 * ``pose.bones["<joint>"].rotation_quaternion`` (w, x, y, z), every bone,
   see :mod:`.armature` for the mapping and the bone axes;
-* ``pose.bones["pelvis"].location`` (metres, pelvis bone's rest frame);
+* ``pose.bones["pelvis"].location`` (scene units: the caller passes the result in them,
+  :func:`.units.result_in_scene_units`; pelvis bone's rest frame);
 * ``["swivel_left_arm"]`` ... ``["swivel_right_leg"]``: object custom
   properties, radians, unwrapped over time (so curves are continuous; the
   value modulo 2π is the solver's swivel angle), subtype ANGLE.
@@ -26,7 +27,7 @@ trackers: the live rig then keys its own action, see ``solve_job.SolveJob.write`
   events for a game engine or a sound editor.
 * optional tracker empties ``MANIKIN_<device>`` in a new collection
   ``MANIKIN trackers``, each with its own new action keying ``location``
-  (metres, world) and ``rotation_quaternion`` (the targeted joint's world
+  (scene units, world) and ``rotation_quaternion`` (the targeted joint's world
   orientation, body-model convention) of the device targets after offsets.
 """
 from __future__ import annotations
@@ -43,6 +44,7 @@ from ..core import rotations as rot
 from ..core import skeleton as sk
 from . import armature as arm_mod
 from . import keying
+from .units import metres_per_unit
 
 #: limb name -> custom property name on the armature object
 SWIVEL_PROPS = {limb: f"swivel_{limb}" for limb in sk.LIMB_NAMES}
@@ -252,7 +254,7 @@ def _write_trackers(targets, frames, scene, options, out, created):
         created.append(empty)
         coll.objects.link(empty)
         empty.empty_display_type = 'ARROWS'
-        empty.empty_display_size = 0.1
+        empty.empty_display_size = 0.1 / metres_per_unit(scene)       # 10 cm in the scene's unit
         empty.rotation_mode = 'QUATERNION'
         ch = [("location", i, "Object Transforms", np.nan_to_num(pos[:, i])) for i in range(3)]
         R = targets.rot.get(dev) if targets.rot else None

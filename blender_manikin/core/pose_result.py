@@ -98,6 +98,22 @@ class PoseResult:
                           targets=None if self.targets is None else self.targets.frames(sl),
                           t0=self.t0 + start / self.fps, timings=dict(self.timings), notes=list(self.notes))
 
+    def scaled(self, factor) -> "PoseResult":
+        """This result with every length times ``factor`` (the body, the root path, the reach
+        errors and the tracker targets' positions; rotations, swivels and contacts as they are):
+        e.g. metres into a Blender scene's units.  ``with_body`` is not carried over."""
+        k = float(factor)
+        targets = None
+        if self.targets is not None:
+            t = self.targets
+            targets = TrackerTargets(fps=t.fps, pos={d: np.asarray(v) * k for d, v in t.pos.items()},
+                                     rot=dict(t.rot), valid=dict(t.valid))
+        return PoseResult(fps=self.fps, body=self.body.scaled(k), local_rot=self.local_rot,
+                          root_pos=np.asarray(self.root_pos) * k, swivel=self.swivel, contacts=self.contacts,
+                          reach_error=None if self.reach_error is None else np.asarray(self.reach_error) * k,
+                          at_limit=self.at_limit, targets=targets, t0=self.t0, timings=dict(self.timings),
+                          notes=list(self.notes))
+
     def fk(self):
         """``(positions (T,22,3), world_rot (T,22,3,3))``, cached."""
         if self._fk is None:
