@@ -7,7 +7,10 @@ trackers and its pelvis, turned by a random fixed strap rotation per clip, for a
 (``core/tracker_sides.py``).  Each detector runs on the clip as labelled (a swap found there is
 a false swap) and with the two sides exchanged (a swap found there is caught).  Prints one row
 per detector: clips with enough frames to decide, the largest share of wrong-side frames in any
-clip as labelled (the margin below :data:`SWAPPED_SHARE`), false swaps, swapped clips caught.
+clip as labelled (the margin below :data:`SWAPPED_SHARE`), false swaps, swapped clips caught; and
+for the pelvis/foot roles (:func:`mixed_pelvis_role`): the smallest height of the pelvis above the
+higher ankle (medians over a clip), false swaps, and clips caught with the pelvis and left foot
+exchanged.
 
     .venv/bin/python benchmarks/bench_sides.py [--max-clips N]
 
@@ -29,6 +32,8 @@ from bench_pose import DATASETS, load_clip  # noqa: E402
 from blender_manikin.core import tracker_sides as ts  # noqa: E402
 from blender_manikin.core.rotations import axis_angle_to_matrix, matrix_to_quat  # noqa: E402
 from blender_manikin.core.skeleton import J  # noqa: E402
+
+FEET = {"left_foot": "left_ankle", "right_foot": "right_ankle"}
 
 
 def detectors(pos, world, fps, rng):
@@ -52,7 +57,7 @@ def main(argv=None):
     ap.add_argument("--max-clips", type=int, default=0, help="per dataset (0: all)")
     args = ap.parse_args(argv)
     from blender_manikin.training import dataset
-    rows, clips, worst = {}, 0, {}
+    rows, clips, worst, roles = {}, 0, {}, {}
     rng = np.random.default_rng(0)
     for name, (source, _) in DATASETS.items():
         if not os.path.exists(source):
@@ -62,6 +67,12 @@ def main(argv=None):
         for f in files[:args.max_clips] if args.max_clips else files:
             _, _, pos, world, fps = load_clip(f)
             clips += 1
+            zp, za = pos[:, J["pelvis"], 2], {d: pos[:, J[j], 2] for d, j in FEET.items()}
+            r = roles.setdefault("n", dict(false=0, caught=0, margin=np.inf))
+            r["false"] += ts.mixed_pelvis_role(zp, za) is not None
+            r["caught"] += ts.mixed_pelvis_role(za["left_foot"], {"left_foot": zp, "right_foot": za["right_foot"]}) \
+                == "left_foot"
+            r["margin"] = min(r["margin"], float(np.median(zp) - max(np.median(z) for z in za.values())))
             for det, (kept, swapped) in detectors(pos, world, fps, rng).items():
                 r = rows.setdefault(det, dict(decidable=0, false=0, caught=0, max_share=0.0))
                 decided = kept[2] >= (ts.MIN_WIDE_S if det.startswith("controllers") else ts.MIN_WIDE_FEET_S) * fps
@@ -76,6 +87,11 @@ def main(argv=None):
     print("|---|---:|---:|---:|---:|")
     for det, r in rows.items():
         print(f"| {det} | {r['decidable']} | {100 * r['max_share']:.1f} % | {r['false']} | {r['caught']} |")
+    r = roles.get("n")
+    if r:
+        print(f"\npelvis / foot roles (swapped at a foot {ts.ROLE_DROP_M:.2f} m above the pelvis, medians): "
+              f"the pelvis at least {100 * r['margin']:+.1f} cm above the higher ankle in every clip; "
+              f"false swaps {r['false']}; the pelvis and left foot exchanged, caught in {r['caught']} of {clips}")
     for det, f in worst.items():
         print(f"largest share, {det}: {f}")
 

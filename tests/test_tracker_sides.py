@@ -1,5 +1,7 @@
-"""Controllers held in the other hands (core/tracker_sides.py): swapped back, and only then."""
+"""Controllers in the other hands, foot trackers on the other feet, a waist tracker given a foot's role
+(core/tracker_sides.py): swapped back, and only then."""
 import os
+import re
 
 import numpy as np
 
@@ -108,3 +110,30 @@ def test_a_stride_seen_from_a_turned_head_is_not_a_swap():
     found, share, _ = swapped_feet(turned, left, right, fps=fps)   # the headset's axis alone
     assert found is False and 0.3 < share < 0.7
     assert swapped_feet(head, right, left, pelvis, fps=fps, valid=np.arange(T) < 50)[0] is False   # < 2 s
+
+
+def test_a_waist_tracker_given_a_foot_role_is_swapped_back():
+    """The pelvis tracker's stream labelled as the left foot's and the other way round: swapped
+    back before the calibration, so the solve is the one of the take as worn."""
+    from fixtures_six_trackers import body_with_legs, random_mounts, six_tracker_recording
+    rec = six_tracker_recording(body_with_legs(1.75), random_mounts(1), duration=8.0, seed=1)
+    base = cs.solve_recording(rec, cs.SolveSettings(fps=30.0))
+    out = cs.solve_recording(swapped(rec, "pelvis", "left_foot"), cs.SolveSettings(fps=30.0))
+    assert re.search(r"pelvis and left foot trackers swapped back: the pelvis one was 0\.\d\d m below", out.summary())
+    err = np.linalg.norm(out.result.positions - base.result.positions, axis=-1)
+    assert err.max() < 1e-6
+    kept = cs.solve_recording(swapped(rec, "pelvis", "left_foot"), cs.SolveSettings(fps=30.0, fix_sides=False))
+    # as labelled: offsets of 90 cm measured, the pelvis up to 25 cm off, a foot out of reach
+    assert np.linalg.norm(kept.result.positions - base.result.positions, axis=-1)[:, J["pelvis"]].max() > 0.15
+    assert "left foot out of reach" in kept.summary()
+
+
+def test_legs_raised_while_lying_are_not_a_role_mixup():
+    from blender_manikin.core.tracker_sides import mixed_pelvis_role
+    T = 100
+    lying = mixed_pelvis_role(np.full(T, 0.15), {"left_foot": np.full(T, 0.35), "right_foot": np.full(T, 0.1)})
+    assert lying is None                                   # a foot 20 cm above the hips
+    standing_swapped = {"left_foot": np.full(T, 0.1), "right_foot": np.full(T, 1.0)}
+    assert mixed_pelvis_role(np.full(T, 0.12), standing_swapped) == "right_foot"
+    valid = {"right_foot": np.zeros(T, bool)}              # never tracked: nothing to compare
+    assert mixed_pelvis_role(np.full(T, 0.12), standing_swapped, valid) is None

@@ -21,7 +21,7 @@ import numpy as np
 
 from . import skeleton as sk
 from .pipeline import DEFAULT_OVERLAP, overlap_windows
-from .tracker_sides import swapped_feet, swapped_hands, swapped_note
+from .tracker_sides import mixed_pelvis_role, swapped_feet, swapped_hands, swapped_note
 from .lost_hands import relax_lost_hands
 from .plain import shown
 from .seated import POSTURES, SEATED_HEAD_HEIGHT, seat_legs, stature_from_seated_head
@@ -148,7 +148,8 @@ class SolveOutcome:
             if note.startswith(("offsets ", "trimmed to", "calibrated", "arm span", "estimated stature",
                                 "head stands", "floor at",
                                 "left/right labels swapped back", "left and right controllers swapped back",
-                                "left and right foot trackers swapped back",
+                                "left and right foot trackers swapped back", "pelvis and left foot trackers",
+                                "pelvis and right foot trackers",
                                 "spikes removed",
                                 "no twist information",
                                 "point(s) never seen", "retarget:", "smoothing", "no smoothing")) \
@@ -240,8 +241,9 @@ def trim_span(times, start=None, end=None):
 
 
 def fix_swapped_sides(pos, quat, valid, fps):
-    """Swap the controllers, then the foot trackers, back where the take says they were in the
-    other hands or on the other feet (:mod:`.tracker_sides`).
+    """Swap the controllers, the pelvis tracker and a foot tracker, then the foot trackers, back
+    where the take says they were in the other hands, the roles mixed up, or on the other feet
+    (:mod:`.tracker_sides`).
 
     pos, quat, valid: device → resampled ``(T, 3)`` metres / ``(T, 4)`` wxyz / ``(T,)`` bool on
     one grid of ``fps`` frames per second, changed in place.  Returns the summary's notes."""
@@ -253,6 +255,16 @@ def fix_swapped_sides(pos, quat, valid, fps):
             for d in (pos, quat, valid):
                 d["left_hand"], d["right_hand"] = d["right_hand"], d["left_hand"]
             notes.append(swapped_note(share, wide, fps))
+    feet = [d for d in ("left_foot", "right_foot") if d in pos]
+    if "pelvis" in pos and feet:
+        foot = mixed_pelvis_role(pos["pelvis"][:, 2], {d: pos[d][:, 2] for d in feet}, valid)
+        if foot is not None:           # the waist tracker was given a foot's role
+            drop = float(np.median(pos[foot][valid[foot], 2]) - np.median(pos["pelvis"][valid["pelvis"], 2]))
+            for d in (pos, quat, valid):
+                d["pelvis"], d[foot] = d[foot], d["pelvis"]
+            notes.append(f"pelvis and {foot.replace('_', ' ')} trackers swapped back: the pelvis one was "
+                         f"{drop:.2f} m below the foot one (keep them as labelled with --keep-sides / "
+                         f"Fix Left/Right Swaps off)")
     if all(d in pos for d in ("head", "left_foot", "right_foot")):
         both = valid["head"] & valid["left_foot"] & valid["right_foot"]
         pelvis = None
