@@ -360,6 +360,30 @@ RIG_STYLES = {
          "hip": "thigh_stretch", "knee": "leg_stretch", "ankle": "foot", "foot": "toes_01"},
         lambda s, side: f"{s}.{side[0]}"), root="c_traj", stature=1.70, torso=1.03, arm=1.08, leg=0.97,
         arm_down=50.0, twist={}, facing="-Y", units=1.0, y_up=False, yaw_deg=30.0, location=(1.5, -0.5, 0.0)),
+    # Character Creator 3/4 as an FBX in centimetres lands (+Y up, object 90° about X, 0.01): two
+    # neck bones, CC_Base_Pelvis between the hips bone and the thighs (``hips_parent``), twist
+    # bones under the limbs' segments (``twist_leaves``: not in the preset, they follow their bone)
+    "cc4": dict(names=_sided_names(
+        {"pelvis": "CC_Base_Hip", "spine1": "CC_Base_Waist", "spine2": "CC_Base_Spine01",
+         "spine3": "CC_Base_Spine02", "neck": ["CC_Base_NeckTwist01", "CC_Base_NeckTwist02"], "head": "CC_Base_Head"},
+        {"collar": "Clavicle", "shoulder": "Upperarm", "elbow": "Forearm", "wrist": "Hand", "hip": "Thigh",
+         "knee": "Calf", "ankle": "Foot", "foot": "ToeBase"},
+        lambda s, side: f"CC_Base_{side[0].upper()}_{s}"), root="CC_Base_BoneRoot", stature=1.76, torso=1.02,
+        arm=0.97, leg=1.03, arm_down=30.0, twist={}, facing="-Y", units=100.0, y_up=True,
+        hips_parent="CC_Base_Pelvis",
+        twist_leaves={"shoulder": "UpperarmTwist01", "elbow": "ForearmTwist01", "hip": "ThighTwist01",
+                      "knee": "CalfTwist01"}),
+    # Daz Genesis 8 as Diffeomorphic imports it (decimetres: object scale 0.1, +Z up, facing -Y):
+    # four spine bones, Bend/Twist chains in the limbs (the Twist bone between the Bend bone and the
+    # next segment's), pelvis between hip and the thighs
+    "daz_genesis8": dict(names=_sided_names(
+        {"pelvis": "hip", "spine1": "abdomenLower", "spine2": "abdomenUpper", "spine3": ["chestLower", "chestUpper"],
+         "neck": ["neckLower", "neckUpper"], "head": "head"},
+        {"collar": "Collar", "shoulder": ["ShldrBend", "ShldrTwist"], "elbow": ["ForearmBend", "ForearmTwist"],
+         "wrist": "Hand", "hip": ["ThighBend", "ThighTwist"], "knee": "Shin", "ankle": "Foot", "foot": "Toe"},
+        lambda s, side: [f"{side[0]}{x}" for x in s] if isinstance(s, list) else f"{side[0]}{s}"),
+        root=None, stature=1.68, torso=0.98, arm=1.04, leg=1.0, arm_down=40.0, twist={}, facing="-Y",
+        units=10.0, y_up=False, hips_parent="pelvis"),
 }
 
 
@@ -430,6 +454,38 @@ def _extra_bones(style, P, names):
     return out
 
 
+def _first(v):
+    return v if isinstance(v, str) else v[0]
+
+
+_NEXT_JOINT = {"shoulder": "elbow", "elbow": "wrist", "hip": "knee", "knee": "ankle"}
+
+
+def _tool_bones(st, P, bones):
+    """A style's own extra bones: ``hips_parent`` (a bone between the hips bone and the thighs, as
+    CC's CC_Base_Pelvis and Daz's pelvis are) and ``twist_leaves`` (part -> stem: a twist bone
+    under each side's segment bone, from half-way to 0.8 of the segment; no preset maps them)."""
+    J = sk.J
+    names = st["names"]
+    out = list(bones)
+    hp = st.get("hips_parent")
+    if hp:
+        pelvis, thighs = _first(names["pelvis"]), {_first(names[f"{s}_hip"]) for s in ("left", "right")}
+        mid = 0.5 * (P[J["left_hip"]] + P[J["right_hip"]])
+        tail = mid if np.linalg.norm(mid - P[0]) > 0.02 else P[0] + np.array([0.0, 0.0, -0.05])
+        out = []
+        for b in bones:
+            out.append((b[0], hp if b[0] in thighs else b[1], b[2], b[3]))
+            if b[0] == pelvis:
+                out.append((hp, pelvis, P[0].copy(), tail))
+    for part, stem in st.get("twist_leaves", {}).items():
+        for side in ("left", "right"):
+            a, b = P[J[f"{side}_{part}"]], P[J[f"{side}_{_NEXT_JOINT[part]}"]]
+            out.append((f"CC_Base_{side[0].upper()}_{stem}", _first(names[f"{side}_{part}"]),
+                        a + 0.5 * (b - a), a + 0.8 * (b - a)))
+    return out
+
+
 def styled_character(style, name=None, seed=7):
     """A character named and standing as ``style`` of :data:`RIG_STYLES` gives (A-pose rest,
     randomly rolled bones, its own proportions, the tool's units, up axis and facing), with
@@ -442,6 +498,7 @@ def styled_character(style, name=None, seed=7):
     twist = {f"{side}_{part}": [(f"{b}_{side[0]}", f) for b, f in v]
              for part, v in st["twist"].items() for side in ("left", "right")}
     bones = humanoid_bones(P, st["names"], twist, root=st["root"]) + _extra_bones(style, P, st["names"])
+    bones = _tool_bones(st, P, bones)
     obj = build_armature(name or style, bones, seed, facing=st["facing"], units=st["units"], y_up=st["y_up"],
                          yaw_deg=st.get("yaw_deg", 0.0), location=st.get("location", (0.0, 0.0, 0.0)))
     yaw = np.radians(st.get("yaw_deg", 0.0)) + (np.pi if st["facing"] == "+Y" else 0.0)

@@ -1,6 +1,8 @@
 """Retargeting in Blender onto characters named and standing as the engines and rigging tools
 give them (tests/blender_util.py ``RIG_STYLES``): the Unreal Mannequin (UE4 and UE5, twist bones,
-IK bones, fingers, centimetres, facing +Y), a VRoid / VRM character and an Auto-Rig Pro rig.
+IK bones, fingers, centimetres, facing +Y), a VRoid / VRM character, an Auto-Rig Pro rig, a
+Character Creator 3/4 character (centimetres, +Y up; a pelvis bone between the hips bone and the
+thighs, twist bones) and a Daz Genesis 8 figure (decimetres; Bend/Twist chains, four spine bones).
 
 Every character has an A-pose rest, randomly rolled bones and proportions of its own: within the
 torso, the arms and the legs every segment has one ratio to the performer's (``humanoid_joints``),

@@ -472,6 +472,8 @@ def test_presets_are_valid():
     assert bmaps.preset("rigify").twist["left_shoulder"] == ["DEF-upper_arm.L.001"]
     assert bmaps.preset("vrm").bones["right_foot"] == "J_Bip_R_ToeBase"
     assert bmaps.preset("auto_rig_pro").bones["pelvis"] == "root.x"
+    assert bmaps.preset("cc4").bones["left_elbow"] == "CC_Base_L_Forearm"
+    assert bmaps.preset("daz_genesis8").bones["right_shoulder"] == "rShldrBend"
     with pytest.raises(ValueError, match="unknown bone map preset"):
         bmaps.preset("maya")
 

@@ -34,7 +34,9 @@ of a generated rig are driven by constraints, so keying them needs those constra
 ``rigify_fk`` maps the FK controls instead), ``rigify_fk``, ``rigify_metarig``, ``mixamo``
 (``mixamorig:`` prefix), ``mixamo_plain`` (no prefix), ``ue4``, ``ue5`` (Unreal mannequins; UE5's
 five spine bones get spine1/2/3 on ``spine_01/03/05``), ``vrm`` (VRoid / VRM 0.x ``J_Bip_*``),
-``auto_rig_pro`` (ARP's deforming bones, as exported: ``root.x``, ``arm_stretch.l``, ...).
+``auto_rig_pro`` (ARP's deforming bones, as exported: ``root.x``, ``arm_stretch.l``, ...),
+``cc4`` (Reallusion Character Creator 3/4, ``CC_Base_*``), ``daz_genesis8`` (Daz Genesis 8 and 3:
+``hip``, ``abdomenLower``, ``lShldrBend``, ...).
 
 :func:`guess_bone_map` guesses a map for an unknown rig from bone names and hierarchy.
 """
@@ -285,6 +287,27 @@ def _arp() -> BoneMap:
     return _sided(center, stems, lambda s, side: f"{s}.{'l' if side == 'left' else 'r'}", None, "auto_rig_pro")
 
 
+def _cc4() -> BoneMap:
+    # Reallusion Character Creator 3/4 (``CC_Base_``): CC_Base_Hip carries the root motion; its
+    # child CC_Base_Pelvis (the thighs' parent) is left unmapped, as are the Twist01/02 bones under
+    # the upper arms, forearms, thighs and calves (they follow their segment) and NeckTwist02.
+    center = {"pelvis": "CC_Base_Hip", "spine1": "CC_Base_Waist", "spine2": "CC_Base_Spine01",
+              "spine3": "CC_Base_Spine02", "neck": "CC_Base_NeckTwist01", "head": "CC_Base_Head"}
+    stems = dict(zip(_LIMB_PARTS, ("Clavicle", "Upperarm", "Forearm", "Hand", "Thigh", "Calf", "Foot", "ToeBase")))
+    return _sided(center, stems, lambda s, side: f"CC_Base_{'L' if side == 'left' else 'R'}_{s}", None, "cc4")
+
+
+def _daz_genesis8() -> BoneMap:
+    # Daz Genesis 8 (and 3): hip carries the root motion; pelvis (the thighs' parent), chestUpper
+    # (the collars' parent), neckUpper and the Bend/Twist chains' Twist bones (lShldrTwist between
+    # lShldrBend and lForearmBend, ...) are left unmapped: they keep their rest pose under their
+    # parent, so the Bend bone carries its segment's twist.
+    center = {"pelvis": "hip", "spine1": "abdomenLower", "spine2": "abdomenUpper", "spine3": "chestLower",
+              "neck": "neckLower", "head": "head"}
+    stems = dict(zip(_LIMB_PARTS, ("Collar", "ShldrBend", "ForearmBend", "Hand", "ThighBend", "Shin", "Foot", "Toe")))
+    return _sided(center, stems, lambda s, side: f"{'l' if side == 'left' else 'r'}{s}", None, "daz_genesis8")
+
+
 _PRESET_FACTORIES = {
     "rigify": lambda: _rigify("DEF-", "rigify", True),
     "rigify_fk": _rigify_fk,
@@ -295,6 +318,8 @@ _PRESET_FACTORIES = {
     "ue5": lambda: _ue(5),
     "vrm": _vrm,
     "auto_rig_pro": _arp,
+    "cc4": _cc4,
+    "daz_genesis8": _daz_genesis8,
 }
 #: names of the built-in presets
 PRESETS = tuple(_PRESET_FACTORIES)
