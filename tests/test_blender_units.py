@@ -150,3 +150,39 @@ def test_a_retarget_in_a_centimetre_scene(addon):
     _, out, notes = retarget_apply.retarget_onto(src, short, "mixamo", None, "as_is", True)
     misses = [float(n.rsplit("by up to ", 1)[1].split(" cm")[0]) for n in notes if "out of the character's reach" in n]
     assert misses and all(0.5 < m < 60.0 for m in misses), notes
+
+
+def _export_and_import(tmp_path, preset, scene_setup):
+    """The body of a synthetic solve written in a scene set up by ``scene_setup``, exported with
+    ``preset`` and imported into a fresh metre scene: world heads ``(3 frames, 22, 3)``."""
+    from blender_manikin.blender import fbx_presets
+    from blender_util import synthetic_result
+    from test_blender_fbx_presets import _bone_heads, _import
+    fresh_scene()
+    blender_manikin.register()
+    try:
+        sc = bpy.context.scene
+        scene_setup(sc)
+        sc.render.fps = 24
+        res = synthetic_result(T=10, fps=24.0, stature=1.8)
+        arm = writer.write_result(units.result_in_scene_units(res, sc), writer.WriteOptions(frame_start=1)).armature
+        sc.frame_start, sc.frame_end = 1, 10
+        path = tmp_path / f"body_{preset}_{units.metres_per_unit(sc):g}.fbx"
+        fbx_presets.export_fbx(path, arm, preset)
+    finally:
+        blender_manikin.unregister()
+    back, _ = _import(path)
+    from blender_manikin.core.skeleton import JOINT_NAMES
+    return _bone_heads(back, list(JOINT_NAMES), [2, 5, 9]), res
+
+
+@pytest.mark.parametrize("preset", ["blender", "unreal"])
+def test_an_fbx_from_a_centimetre_scene_keeps_the_real_size(tmp_path, preset):
+    """The solved body exported from a centimetre scene and from a metre scene, each imported
+    into a fresh metre scene (the importer's defaults undo the file's units): the same motion at
+    the same size, in metres."""
+    in_m, res = _export_and_import(tmp_path, preset, lambda sc: None)
+    in_cm, _ = _export_and_import(tmp_path, preset, centimetre_scene)
+    np.testing.assert_allclose(in_cm, in_m, atol=1e-4)
+    pos, _ = res.fk()                                    # and where the performer's joints were
+    np.testing.assert_allclose(in_m[1], pos[4], atol=1e-3)
