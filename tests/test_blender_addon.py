@@ -80,7 +80,8 @@ def test_solve_operator_file(addon, recording):
     obj = s.armature
     assert obj is not None and obj.type == 'ARMATURE'
     act = obj.animation_data.action
-    assert act.name.startswith("MANIKIN_solve")
+    # named after the take, with what was solved on it (the Action editor lists many takes)
+    assert act.name == "MANIKIN_solve_take" and act["manikin_source"] == recording
     fcs = keying.action_fcurves(act, obj)
     n = len(fcs[0].keyframe_points)
     assert n == 48 and all(len(fc.keyframe_points) == n for fc in fcs)
@@ -120,7 +121,8 @@ def test_solve_operator_builds_live_rig_by_default(addon, recording):
     assert bpy.ops.manikin.solve_full_body() == {'FINISHED'}
     obj = s.armature
     live_action = obj.animation_data.action
-    assert live_action.name.startswith("MANIKIN_live") and live_rig.is_live_rig(obj)
+    assert live_action.name == "MANIKIN_live_take" and live_rig.is_live_rig(obj)
+    assert live_action["manikin_source"] == recording
     # the live rig's action is the only one keyed (Bake makes plain FK keys when wanted)
     assert [a.name for a in bpy.data.actions if a.name.startswith(("MANIKIN_solve", "MANIKIN_live"))] == \
         [live_action.name]
@@ -229,6 +231,9 @@ def test_scene_objects_as_trackers(addon):
     assert bpy.ops.manikin.solve_full_body() == {'FINISHED'}
     out = s.armature
     assert out != src.armature
+    act = out.animation_data.action
+    assert act.name.startswith("MANIKIN_live_scene")
+    assert act["manikin_source"].startswith("scene objects: head MANIKIN_head")
     sc.frame_set(12)
     head = np.array(out.matrix_world) @ np.append(np.array(out.pose.bones["head"].head), 1)
     np.testing.assert_allclose(head[:3], res.targets.pos["head"][11], atol=1e-4)

@@ -591,13 +591,13 @@ def live_channels(obj, result: PoseResult):
 
 
 def build_live_rig(armature_obj, result: PoseResult, action=None, frames=None, context=None,
-                   interpolation: str = 'LINEAR'):
+                   interpolation: str = 'LINEAR', action_name: str = "MANIKIN_live"):
     """Convert a solved MANIKIN armature to the live swivel rig and key ``result`` on it.
 
     armature_obj: armature made by :func:`.armature.create_armature` (the
     22 joint bones; the one :func:`.writer.write_result` made, keyed or not).
     result: the :class:`PoseResult` to key.  action: the action to write
-    into; None (default) creates a NEW action ``MANIKIN_live[.NNN]`` -- the
+    into; None (default) creates a NEW action ``action_name[.NNN]`` -- the
     armature's current action, if any, is never modified (it stays in the
     file with a fake user; assign it back, with :func:`set_rig_enabled` off, to
     return to its FK keys).  frames: scene
@@ -626,7 +626,7 @@ def build_live_rig(armature_obj, result: PoseResult, action=None, frames=None, c
         raise ValueError(f"action {action.name!r} is the armature's current (solve / user) action; "
                          f"build_live_rig never overwrites it -- pass action=None for a new one")
     if created:
-        action = keying.new_action("MANIKIN_live")
+        action = keying.new_action(action_name)
         action[PROP_LIVE] = 1
     try:
         keying.assign_action(obj, action)

@@ -22,13 +22,16 @@ after the first tracker sample (what the timeline shows: the solve's frame
 from __future__ import annotations
 
 import functools
-
+import os
 import threading
 import time as _time
 from dataclasses import dataclass, field
 
 
 UNDO_MESSAGE = "MANIKIN: Solve Full Body"
+#: custom property of a solve's actions: what was solved (the recording's path, or the scene
+#: objects), next to the take's name in the action's own name (``MANIKIN_live_<take>``)
+PROP_SOURCE = "manikin_source"
 
 #: stage boundaries of the overall progress fraction
 _P_LOAD, _P_SOLVE = 0.08, 0.92
@@ -67,6 +70,21 @@ class SolveConfig(SolveSettings):
     reuse_armature: object = None
     scene_sources: dict = field(default_factory=dict)
     scene_frames: tuple | None = None
+
+    def take_name(self) -> str:
+        """The take's name for the actions a solve makes (``MANIKIN_live_<take>``): the recording
+        file's (or keypoint folder's) name without its extension, ``scene`` for scene objects."""
+        if self.source.upper() == "SCENE" or not self.filepath:
+            return "scene"
+        path = os.path.normpath(str(self.filepath))
+        return os.path.splitext(os.path.basename(path))[0] or os.path.basename(path)
+
+    def source_description(self) -> str:
+        """What was solved: the recording's path, or the scene objects of each device."""
+        if self.source.upper() == "SCENE":
+            return "scene objects: " + ", ".join(f"{d} {o}{'/' + b if b else ''}"
+                                                 for d, (o, b) in self.scene_sources.items())
+        return str(self.filepath)
 
     def settings(self) -> SolveSettings:
         """The solve options of this configuration (:class:`core.solve.SolveSettings`)."""
@@ -201,8 +219,9 @@ class SolveJob:
         # With the live rig, its action is the only one keyed: the limbs' FK keys would be
         # overridden by its constraints, and a plain FK action is one Bake away (a 60-minute take
         # at 60 fps holds 216,000 keys per F-curve: a second action would double the memory).
+        take = cfg.take_name()
         opts = writer.WriteOptions(frame_start=cfg.frame_start, armature=cfg.reuse_armature,
-                                   armature_name=cfg.armature_name,
+                                   armature_name=cfg.armature_name, action_name=f"MANIKIN_solve_{take}",
                                    create_trackers=cfg.create_trackers,
                                    set_scene_range=cfg.set_scene_range, key_pose=not cfg.live_rig)
         from .units import result_in_scene_units
@@ -215,7 +234,7 @@ class SolveJob:
             self.stage = "live rig"
             try:
                 out.live_action = live_rig.build_live_rig(out.armature, result, frames=out.frames,
-                                                          context=context)
+                                                          context=context, action_name=f"MANIKIN_live_{take}")
                 out.action = out.live_action
             except BaseException:
                 writer.remove_output(out)
@@ -224,6 +243,8 @@ class SolveJob:
             from . import live_rig
             if live_rig.is_live_rig(out.armature):      # re-solved onto a live rig: plain FK wins
                 live_rig.set_rig_enabled(out.armature, False)
+        for act in {a for a in (out.action, out.live_action) if a is not None}:
+            act[PROP_SOURCE] = cfg.source_description()      # which take it is, for the Action editor
         self.output = out
         if cfg.live_rig:
             self.timings["live rig"] = _time.perf_counter() - t
