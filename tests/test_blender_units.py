@@ -186,3 +186,20 @@ def test_an_fbx_from_a_centimetre_scene_keeps_the_real_size(tmp_path, preset):
     np.testing.assert_allclose(in_cm, in_m, atol=1e-4)
     pos, _ = res.fk()                                    # and where the performer's joints were
     np.testing.assert_allclose(in_m[1], pos[4], atol=1e-3)
+
+
+def test_lengths_saved_by_an_earlier_version_are_carried_over(addon, tmp_path):
+    """A .blend saved before the lengths moved behind get/set holds them as ID properties named
+    ``height`` etc. (metres): opening it carries them into the settings instead of losing them."""
+    s = bpy.context.scene.manikin
+    s["height"], s["sole"], s["arm_span"] = 1.82, 0.0, 1.79          # as the earlier version stored them
+    assert s.height == pytest.approx(1.75)                           # not read as they are
+    path = str(tmp_path / "old.blend")
+    bpy.ops.wm.save_as_mainfile(filepath=path)
+    bpy.ops.wm.open_mainfile(filepath=path)                          # the load_post handler runs
+    s = bpy.context.scene.manikin
+    assert s.height_m == pytest.approx(1.82) and s.sole_m == 0.0 and s.arm_span_m == pytest.approx(1.79)
+    assert not any(k in s.keys() for k in units.LENGTH_SETTINGS)
+    assert config_from_settings(bpy.context).sole == 0.0
+    s["height"] = 9.0                                                # out of range: clamped
+    assert units.migrate_length_settings(bpy.data.scenes) == 1 and s.height_m == pytest.approx(2.8)

@@ -49,3 +49,51 @@ def length_property(metres_attr, name, description, lo=None, hi=None):
         setattr(self, metres_attr, v)
 
     return FloatProperty(name=name, unit='LENGTH', get=get, set=set, description=description)
+
+
+#: the length settings kept in metres behind :func:`length_property` (``<name>_m``)
+LENGTH_SETTINGS = ("height", "arm_span", "sole", "floor_height")
+
+
+def migrate_length_settings(scenes) -> int:
+    """Carry length settings saved by an earlier version of the add-on (an ID property
+    ``height`` etc. on ``scene.manikin``, in metres) into their ``<name>_m`` properties, so that
+    a file's typed height is not lost, and drop the old entries.  Returns how many moved."""
+    moved = 0
+    for sc in scenes:
+        group = getattr(sc, "manikin", None)
+        if group is None:
+            continue
+        for name in LENGTH_SETTINGS:
+            if name not in group.keys():
+                continue
+            try:
+                setattr(group, f"{name}_m", float(group[name]))      # clamped to the setting's range
+                moved += 1
+            except (TypeError, ValueError):
+                pass
+            del group[name]
+    return moved
+
+
+def _on_load(_dummy=None):
+    import bpy
+    migrate_length_settings(bpy.data.scenes)
+
+
+def register_migration():
+    """Migrate each file as it is loaded, and the file open now (once Blender can write to it)."""
+    import bpy
+    handler = bpy.app.handlers.persistent(_on_load)
+    if handler not in bpy.app.handlers.load_post:
+        bpy.app.handlers.load_post.append(handler)
+    if not bpy.app.timers.is_registered(_on_load):
+        bpy.app.timers.register(_on_load, first_interval=0.0)
+
+
+def unregister_migration():
+    import bpy
+    while _on_load in bpy.app.handlers.load_post:
+        bpy.app.handlers.load_post.remove(_on_load)
+    if bpy.app.timers.is_registered(_on_load):
+        bpy.app.timers.unregister(_on_load)
