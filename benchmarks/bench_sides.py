@@ -10,7 +10,8 @@ per detector: clips with enough frames to decide, the largest share of wrong-sid
 clip as labelled (the margin below :data:`SWAPPED_SHARE`), false swaps, swapped clips caught; and
 for the pelvis/foot roles (:func:`mixed_pelvis_role`): the smallest height of the pelvis above the
 higher ankle (medians over a clip), false swaps, and clips caught with the pelvis and left foot
-exchanged.
+exchanged; and the clips in which a headset lying off is found (``core/headset_off.py``; none
+should be: every head is worn).
 
     .venv/bin/python benchmarks/bench_sides.py [--max-clips N]
 
@@ -30,6 +31,7 @@ sys.path.insert(0, os.path.join(ROOT, "benchmarks"))
 
 from bench_pose import DATASETS, load_clip  # noqa: E402
 from blender_manikin.core import tracker_sides as ts  # noqa: E402
+from blender_manikin.core.headset_off import headset_off  # noqa: E402
 from blender_manikin.core.rotations import axis_angle_to_matrix, matrix_to_quat  # noqa: E402
 from blender_manikin.core.skeleton import J  # noqa: E402
 
@@ -73,6 +75,7 @@ def main(argv=None):
             r["caught"] += ts.mixed_pelvis_role(za["left_foot"], {"left_foot": zp, "right_foot": za["right_foot"]}) \
                 == "left_foot"
             r["margin"] = min(r["margin"], float(np.median(zp) - max(np.median(z) for z in za.values())))
+            r["headset_off"] = r.get("headset_off", 0) + any(headset_off(pos[:, J["head"]], world[:, J["head"]], fps))
             for det, (kept, swapped) in detectors(pos, world, fps, rng).items():
                 r = rows.setdefault(det, dict(decidable=0, false=0, caught=0, max_share=0.0))
                 decided = kept[2] >= (ts.MIN_WIDE_S if det.startswith("controllers") else ts.MIN_WIDE_FEET_S) * fps
@@ -92,6 +95,8 @@ def main(argv=None):
         print(f"\npelvis / foot roles (swapped at a foot {ts.ROLE_DROP_M:.2f} m above the pelvis, medians): "
               f"the pelvis at least {100 * r['margin']:+.1f} cm above the higher ankle in every clip; "
               f"false swaps {r['false']}; the pelvis and left foot exchanged, caught in {r['caught']} of {clips}")
+        print(f"headset lying off at a clip's start or end (core/headset_off.py; every head is worn): "
+              f"found in {r['headset_off']} of {clips}")
     for det, f in worst.items():
         print(f"largest share, {det}: {f}")
 

@@ -22,6 +22,7 @@ import numpy as np
 from . import skeleton as sk
 from .pipeline import DEFAULT_OVERLAP, overlap_windows
 from .tracker_sides import mixed_pelvis_role, swapped_feet, swapped_hands, swapped_note
+from .headset_off import headset_off, headset_off_note
 from .lost_hands import relax_lost_hands
 from .plain import shown
 from .seated import POSTURES, SEATED_HEAD_HEIGHT, seat_legs, stature_from_seated_head
@@ -149,6 +150,7 @@ class SolveOutcome:
                                 "head stands", "floor at",
                                 "left/right labels swapped back", "left and right controllers swapped back",
                                 "left and right foot trackers swapped back", "pelvis and left foot trackers",
+                                "the headset lay still",
                                 "pelvis and right foot trackers",
                                 "spikes removed",
                                 "no twist information",
@@ -662,11 +664,19 @@ def solve_recording(source, settings: SolveSettings | None = None, solver=None, 
     note = offsets_note(settings.offsets, resolved, out.recording)
     out.floor = floor_height(settings, out.targets)
     out.targets = move_floor(out.targets, out.floor)
+    first, last = headset_off(out.targets.pos["head"], out.targets.rot["head"], settings.fps,
+                              out.targets.valid.get("head"))
+    T, fps = len(times), settings.fps
+    if settings.start is not None and settings.start >= first / fps - 0.05:
+        first = 0                        # trimmed away already
+    if settings.end is not None and settings.end <= (T - last) / fps + 0.05:
+        last = 0
+    off_notes = headset_off_note(first, last, T, fps, out.targets.pos["head"], out.targets.rot["head"])
     out.timings["resample"] = _time.perf_counter() - t
     report(STAGES["calibrating"], "calibrating")
     t = _time.perf_counter()
     out.body, out.offsets, out.info = calibrate(settings, out.targets, times, offsets)
-    for extra in (note, *sides):
+    for extra in (note, *sides, *off_notes):
         if extra:
             out.info.append(extra)
     if out.offsets is not offsets:     # calibration refined the device rotations
