@@ -275,6 +275,10 @@ class MANIKIN_Settings(PropertyGroup):
                                        "hand/foot controls live (constraints + drivers); off: plain FK keys")
     create_trackers: BoolProperty(name="Tracker Empties", default=True,
                                   description="Also create keyed empties at the device targets")
+    mark_problems: BoolProperty(name="Mark Problems", default=True,
+                                description="Timeline markers (\"MANIKIN: ...\") where the solve is worth a look: a "
+                                            "hand or foot out of reach, a swivel at its limit, a device lost, "
+                                            "a teleport; a new solve replaces the ones in its frame range")
     set_scene_range: BoolProperty(name="Set Scene Range", default=True,
                                   description="Set the scene frame range to the solved animation")
     reuse_armature: BoolProperty(name="Reuse Armature", default=True,
@@ -379,6 +383,7 @@ def config_from_settings(context):
     cfg.create_trackers = s.create_trackers
     cfg.live_rig = s.live_rig
     cfg.set_scene_range = s.set_scene_range
+    cfg.mark_problems = s.mark_problems
     cfg.reuse_armature = s.armature if (s.reuse_armature and s.armature is not None
                                         and s.armature.name in scene.objects) else None
     if s.source == 'SCENE':

@@ -57,7 +57,9 @@ class SolveConfig(SolveSettings):
     frame_start: scene frame of the first solved frame.  create_trackers: also key tracker
     empties.  live_rig: convert the solved armature to the live swivel rig (:mod:`.live_rig`):
     elbows/knees follow the swivel properties and the hand/foot controls; False keeps plain FK
-    keys only.  set_scene_range, armature_name, reuse_armature: how the result is written.
+    keys only.  mark_problems: timeline markers where the solve is worth a look
+    (:mod:`core.review_marks`).  set_scene_range, armature_name, reuse_armature: how the result is
+    written.
     """
     fps: float | None = None
     source: str = "FILE"
@@ -66,6 +68,7 @@ class SolveConfig(SolveSettings):
     create_trackers: bool = False
     live_rig: bool = True
     set_scene_range: bool = False
+    mark_problems: bool = True
     armature_name: str = "MANIKIN_body"
     reuse_armature: object = None
     scene_sources: dict = field(default_factory=dict)
@@ -245,6 +248,10 @@ class SolveJob:
                 live_rig.set_rig_enabled(out.armature, False)
         for act in {a for a in (out.action, out.live_action) if a is not None}:
             act[PROP_SOURCE] = cfg.source_description()      # which take it is, for the Action editor
+        if cfg.mark_problems:
+            from ..core.review_marks import review_marks
+            marks = review_marks(self.result, self.report, getattr(self.outcome, "jumps", ()))
+            writer.mark_timeline(context.scene, marks, out.frames)
         self.output = out
         if cfg.live_rig:
             self.timings["live rig"] = _time.perf_counter() - t

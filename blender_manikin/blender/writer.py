@@ -271,6 +271,24 @@ def _write_trackers(targets, frames, scene, options, out, created):
         out.tracker_actions[dev] = action
 
 
+#: the prefix of the timeline markers a solve makes (:func:`mark_timeline`)
+MARKER_PREFIX = "MANIKIN: "
+
+
+def mark_timeline(scene, marks, frames):
+    """Timeline markers ``MANIKIN: <label>`` at the scene frames of ``marks``
+    (:class:`..core.review_marks.ReviewMark`, indices into ``frames``, the scene frame of each
+    result frame).  The scene's ``MANIKIN:`` markers within the frames' range (an earlier solve
+    of the same stretch) are replaced; every other marker is left as it is.  Returns the new
+    markers."""
+    lo, hi = int(math.floor(frames[0])), int(math.ceil(frames[-1]))
+    for m in list(scene.timeline_markers):
+        if m.name.startswith(MARKER_PREFIX) and lo <= m.frame <= hi:
+            scene.timeline_markers.remove(m)
+    return [scene.timeline_markers.new(f"{MARKER_PREFIX}{mk.label}", frame=int(round(frames[mk.frame])))
+            for mk in marks]
+
+
 def remove_output(out: WriteOutput):
     """Delete everything :func:`write_result` created (armature only if it created it)."""
     ids = []

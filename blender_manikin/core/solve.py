@@ -131,6 +131,7 @@ class SolveOutcome:
     result: PoseResult | None = None
     timings: dict = field(default_factory=dict)
     floor: float | None = None          # the floor's height in the recording (metres), moved to z = 0
+    jumps: list = field(default_factory=list)   # the app's teleports and snap turns (teleports.RigJump)
 
     def summary(self, extra_timings=None, timings=True) -> str:
         """One line: frames, fps, where the solve gave way, stature, calibration, gaps, and (with
@@ -699,6 +700,7 @@ def solve_recording(source, settings: SolveSettings | None = None, solver=None, 
         out.info.append(f"trimmed to {times[span[0]] - times[0]:.2f}-{times[span[1] - 1] - times[0]:.2f} s")
     if jumps:
         out.info.append(rig_jumps_note(jumps, mode))
+        out.jumps = list(jumps)
     out.timings["calibrate"] = _time.perf_counter() - t
     report(STAGES["solving"], "solving")
     t = _time.perf_counter()

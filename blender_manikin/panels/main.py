@@ -197,6 +197,7 @@ class MANIKIN_PT_output(_Base, Panel):
         layout.prop(s, "create_trackers")
         layout.prop(s, "live_rig")
         layout.prop(s, "set_scene_range")
+        layout.prop(s, "mark_problems")
         layout.prop(s, "reuse_armature")
         layout.prop(s, "armature")
 

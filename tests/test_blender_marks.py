@@ -1,0 +1,68 @@
+"""Timeline markers where a solve is worth a look (blender/writer.py mark_timeline, the solve's
+Mark Problems): made at the right scene frames, replacing only an earlier solve's in its range."""
+import os
+
+import numpy as np
+import pytest
+
+bpy = pytest.importorskip("bpy")
+
+import blender_manikin  # noqa: E402
+from blender_manikin.blender import writer  # noqa: E402
+from blender_manikin.core.formats import load_recording  # noqa: E402
+from blender_manikin.core.io_csv import write_csv  # noqa: E402
+from blender_manikin.core.recording import Recording, TrackerStream  # noqa: E402
+from blender_manikin.core.review_marks import ReviewMark  # noqa: E402
+
+from blender_util import fresh_scene  # noqa: E402
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+EXAMPLE = os.path.join(ROOT, "examples", "example_recording.csv")
+
+
+@pytest.fixture
+def addon():
+    fresh_scene()
+    blender_manikin.register()
+    yield
+    blender_manikin.unregister()
+
+
+def test_markers_replace_only_an_earlier_solves_in_range(addon):
+    sc = bpy.context.scene
+    mine = sc.timeline_markers.new("my cue", frame=20)                  # the animator's own
+    old = sc.timeline_markers.new("MANIKIN: left hand out of reach", frame=30)
+    far = sc.timeline_markers.new("MANIKIN: teleport", frame=500)       # another take's, elsewhere
+    frames = 10.0 + np.arange(100) * 1.25                                # 24 fps scene, 30 fps solve
+    made = writer.mark_timeline(sc, [ReviewMark(8, "head lost 1.0 s")], frames)
+    names = sorted((m.name, m.frame) for m in sc.timeline_markers)
+    assert names == [("MANIKIN: head lost 1.0 s", 20), ("MANIKIN: teleport", 500), ("my cue", 20)]
+    assert mine.name == "my cue" and far.frame == 500 and len(made) == 1
+    del old
+
+
+def test_a_solve_marks_a_hand_thrown_out_of_reach(addon, tmp_path):
+    """The example with its right controller thrown 1.5 m away for 0.4 s: a marker where it
+    leaves the hand's reach; Mark Problems off: none."""
+    rec = load_recording(EXAMPLE)
+    s = dict(rec.streams)
+    r = s["right_hand"]
+    pos = r.pos.copy()
+    away = (r.time > 3.0) & (r.time < 3.4)
+    pos[away] += np.array([1.5, 0.0, 0.0])
+    s["right_hand"] = TrackerStream("right_hand", r.time, pos, r.quat, r.valid)
+    path = str(tmp_path / "thrown.csv")
+    write_csv(path, Recording(streams=s, source="thrown", metadata=dict(rec.metadata)), axes="openxr", units="m")
+    sc = bpy.context.scene
+    sc.render.fps, sc.render.fps_base = 30, 1.0
+    st = sc.manikin
+    st.source, st.filepath, st.frame_start = 'FILE', path, 1
+    assert bpy.ops.manikin.solve_full_body() == {'FINISHED'}
+    marks = [(m.name, m.frame) for m in sc.timeline_markers]
+    hits = [f for n, f in marks if n == "MANIKIN: right hand out of reach"]
+    assert len(hits) == 1 and abs(hits[0] - (1 + 3.0 * 30)) <= 3, marks
+    st.mark_problems = False
+    for m in list(sc.timeline_markers):
+        sc.timeline_markers.remove(m)
+    assert bpy.ops.manikin.solve_full_body() == {'FINISHED'}
+    assert len(sc.timeline_markers) == 0
