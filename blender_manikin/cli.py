@@ -73,6 +73,7 @@ Options of ``solve`` (they mirror the panel; ``--help`` has them all):
                               --live-swivel|--no-live-swivel: swivel rig on the
                               character, default with --keep-ends)
 --no-live-rig                 plain FK keys only (no live swivel rig)
+--no-marks                    no timeline markers where the solve is worth a look (.blend)
 
 ``convert INPUT... --out DIR`` converts many recordings on Dask (the same solve options, plus
 ``--scheduler`` and ``--workers``; :mod:`blender_manikin.core.convert`).
@@ -279,6 +280,8 @@ def build_parser():
                         "knees follow the swivel, hands / feet stay; default with --keep-ends)")
     s.add_argument("--no-live-swivel", dest="live_swivel", action="store_false",
                    help="retarget: plain keys on the character, no live swivel rig")
+    s.add_argument("--no-marks", dest="marks", action="store_false",
+                   help="no timeline markers ('MANIKIN: ...') where the solve is worth a look")
     s.add_argument("--no-live-rig", dest="live_rig", action="store_false",
                    help="write plain FK keys only (default: the live swivel rig, whose elbows and knees "
                         "follow the swivel properties)")
@@ -359,6 +362,7 @@ def _config(path, args):
     st = solve_settings(args)
     return SolveConfig(source="FILE", filepath=path, frame_start=1, create_trackers=bool(args.trackers),
                        live_rig=bool(args.live_rig), set_scene_range=True, armature_name="MANIKIN_body",
+                       mark_problems=bool(getattr(args, "marks", True)),
                        **{k: getattr(st, k) for k in SolveSettings.__dataclass_fields__})
 
 

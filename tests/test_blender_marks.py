@@ -66,3 +66,10 @@ def test_a_solve_marks_a_hand_thrown_out_of_reach(addon, tmp_path):
         sc.timeline_markers.remove(m)
     assert bpy.ops.manikin.solve_full_body() == {'FINISHED'}
     assert len(sc.timeline_markers) == 0
+
+
+def test_the_command_line_can_leave_the_markers_out():
+    from blender_manikin import cli
+    p = cli.build_parser()
+    assert cli._config("t.csv", p.parse_args(["solve", "t.csv", "--out", "o"])).mark_problems is True
+    assert cli._config("t.csv", p.parse_args(["solve", "t.csv", "--out", "o", "--no-marks"])).mark_problems is False
