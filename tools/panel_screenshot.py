@@ -3,7 +3,8 @@
 Runs inside a windowed Blender (under Xvfb) in which the extension zip was installed and enabled:
 
     blender --python tools/panel_screenshot.py -- --example examples/example_recording.csv \
-            --ready /tmp/ready --done /tmp/done [--frame 60] [--keypoints examples/example_keypoints]
+            --ready /tmp/ready --done /tmp/done [--frame 60] [--keypoints examples/example_keypoints] \
+            [--open calibration,output] [--unit-scale 0.01]
 
 It solves the example through the add-on's own operator (as a click on "Solve full body" does),
 opens the 3D Viewport sidebar, frames the solved body, and, once the window has redrawn, keeps
@@ -29,6 +30,10 @@ def parse_args():
     ap.add_argument("--frame", type=int, default=60)
     ap.add_argument("--keypoints", default=None,
                     help="solve this keypoint file / FreeMoCap folder with the Keypoints source instead")
+    ap.add_argument("--open", default="",
+                    help="comma-separated sub-panels to show open (e.g. calibration,output)")
+    ap.add_argument("--unit-scale", type=float, default=None,
+                    help="the scene's unit scale (0.01: a scene in centimetres)")
     return ap.parse_args(argv)
 
 
@@ -56,6 +61,18 @@ def prepare():
     for obj in list(bpy.data.objects):
         if obj.type == 'MESH':
             bpy.data.objects.remove(obj)
+    for name in filter(None, ARGS.open.split(",")):     # shown open: registered again without
+        cls = getattr(bpy.types, f"MANIKIN_PT_{name.strip()}", None)        # DEFAULT_CLOSED
+        if cls is None:
+            fail(f"no panel MANIKIN_PT_{name}")
+        bpy.utils.unregister_class(cls)
+        cls.bl_options = set(getattr(cls, "bl_options", set())) - {'DEFAULT_CLOSED'}
+        bpy.utils.register_class(cls)
+    if ARGS.unit_scale:
+        us = bpy.context.scene.unit_settings
+        us.system, us.scale_length = 'METRIC', ARGS.unit_scale
+        if ARGS.unit_scale == 0.01:
+            us.length_unit = 'CENTIMETERS'
     settings = bpy.context.scene.manikin
     if ARGS.keypoints:
         settings.source = 'KEYPOINTS'

@@ -4,7 +4,8 @@
 #   bash tools/debian13.sh run bash tools/panel_screenshot.sh [OUT.png] [KEYPOINTS]   # default docs/panel.png
 #
 # With KEYPOINTS (a keypoint file or FreeMoCap folder, e.g. examples/example_keypoints) the panel's
-# Keypoints source solves that instead of the example recording.
+# Keypoints source solves that instead of the example recording.  $MANIKIN_SHOT_ARGS passes more
+# options to tools/panel_screenshot.py (e.g. "--open calibration,output --unit-scale 0.01").
 # Inside the Debian 13 root (Debian's Blender 4.3, Xvfb, ImageMagick): builds the linux-x64
 # extension zip, installs it with Blender's own installer into a fresh user directory, starts
 # Blender in a virtual X server, lets tools/panel_screenshot.py solve the bundled example with
@@ -30,7 +31,8 @@ xvfb-run -a -s "-screen 0 ${W}x${H}x24" bash -c '
   set -euo pipefail
   blender --window-geometry 0 0 '"$W"' '"$H"' --no-window-focus \
       --python tools/panel_screenshot.py -- --example examples/example_recording.csv \
-      --ready "'"$WORK"'/ready" --done "'"$WORK"'/done" '"$KEYPOINTS_ARG"' > "'"$WORK"'/blender.log" 2>&1 &
+      --ready "'"$WORK"'/ready" --done "'"$WORK"'/done" '"$KEYPOINTS_ARG"' '"${MANIKIN_SHOT_ARGS:-}"' \
+      > "'"$WORK"'/blender.log" 2>&1 &
   pid=$!
   for _ in $(seq 1 600); do
     [ -e "'"$WORK"'/ready" ] && break
