@@ -7,25 +7,15 @@ import pytest
 
 bpy = pytest.importorskip("bpy")
 
-import blender_manikin  # noqa: E402
 from blender_manikin.blender import writer  # noqa: E402
 from blender_manikin.core.formats import load_recording  # noqa: E402
 from blender_manikin.core.io_csv import write_csv  # noqa: E402
 from blender_manikin.core.recording import Recording, TrackerStream  # noqa: E402
 from blender_manikin.core.review_marks import ReviewMark  # noqa: E402
 
-from blender_util import fresh_scene  # noqa: E402
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 EXAMPLE = os.path.join(ROOT, "examples", "example_recording.csv")
-
-
-@pytest.fixture
-def addon():
-    fresh_scene()
-    blender_manikin.register()
-    yield
-    blender_manikin.unregister()
 
 
 def test_markers_replace_only_an_earlier_solves_in_range(addon):

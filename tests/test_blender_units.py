@@ -19,14 +19,6 @@ ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 EXAMPLE = os.path.join(ROOT, "examples", "example_recording.csv")
 
 
-@pytest.fixture
-def addon():
-    fresh_scene()
-    blender_manikin.register()
-    yield
-    blender_manikin.unregister()
-
-
 def centimetre_scene(scene):
     scene.unit_settings.system = 'METRIC'
     scene.unit_settings.scale_length = 0.01
