@@ -372,3 +372,17 @@ def test_keypoints_trimmed_to_a_part_of_the_take(tmp_path, motion):
     assert np.median(e) < 0.02
     with pytest.raises(cs.SolveError, match="past the recording's end"):
         cs.solve_recording(folder, cs.SolveSettings(fps=30.0, start=60.0))
+
+
+def test_layouts_are_found_from_point_names():
+    """Object or column names as tools write them are matched to a layout's points."""
+    assert kl.point_key("Body_Left_Wrist.001") == "left_wrist"
+    assert kl.point_key("mediapipe_nose") == "nose" and kl.point_key("left hip_empty") == "left_hip"
+    names = [f"{p}.002" for p in kl.LAYOUTS["coco17"].points] + ["Camera", "origin"]
+    layout, found = kl.layout_from_names(names)
+    assert layout == "coco17" and found["left_ankle"] == "left_ankle.002"
+    mp = list(kl.LAYOUTS["mediapipe33"].points)                  # holds every COCO point too
+    assert kl.layout_from_names(mp)[0] == "mediapipe33"
+    assert kl.layout_from_names(mp[:-1] + ["Cube"]) is not None and \
+        kl.layout_from_names(mp[:-1])[0] == "coco17"             # a mediapipe point short: COCO's 17
+    assert kl.layout_from_names(["nose", "left_wrist"]) is None

@@ -126,6 +126,15 @@ class MANIKIN_Settings(PropertyGroup):
         name="Keypoints", subtype='FILE_PATH', default="",
         description="Keypoint file: FreeMoCap output_data/mediapipe_body_3d_xyz.npy (or the recording "
                     "folder), .npy / .npz array (frames x points x 3), or CSV with time and <point>_x/_y/_z")
+    keypoint_from: EnumProperty(name="From", default='FILE',
+                                items=[('FILE', "File", "A keypoint file or FreeMoCap folder"),
+                                       ('OBJECTS', "Scene Objects", "Animated objects (empties) named after "
+                                        "a layout's points, e.g. FreeMoCap's or a markerless add-on's "
+                                        "left_wrist, left_hip, ...: the objects of a collection")],
+                                description="Where the keypoints come from")
+    keypoint_collection: PointerProperty(type=bpy.types.Collection, name="Collection",
+                                         description="The collection of the keypoint objects (its children's too), "
+                                                     "named after the points of a layout")
     keypoint_layout: EnumProperty(name="Layout", items=_layout_items(), default='AUTO',
                                   description="Keypoint layout of the file")
     keypoint_units: EnumProperty(name="Units", items=[('AUTO', "Detect", "Told from the leg's length"),
@@ -342,6 +351,12 @@ def config_from_settings(context):
     cfg.filepath = bpy.path.abspath(s.filepath) if s.filepath else ""
     if s.source == 'KEYPOINTS':
         cfg.filepath = bpy.path.abspath(s.keypoint_path) if s.keypoint_path else ""
+        if s.keypoint_from == 'OBJECTS':
+            if s.keypoint_collection is None:
+                raise SolveError("choose the collection of the keypoint objects")
+            cfg.filepath = ""
+            cfg.keypoint_collection = s.keypoint_collection.name
+            cfg.scene_frames = None if s.use_scene_range else (s.frame_start, s.frame_end)
         cfg.keypoint_layout = None if s.keypoint_layout == 'AUTO' else s.keypoint_layout.lower()
         cfg.up = None if s.keypoint_up == 'AUTO' else s.keypoint_up.lower()
         cfg.rate = float(s.keypoint_rate) if s.use_keypoint_rate else None

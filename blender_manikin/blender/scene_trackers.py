@@ -95,6 +95,47 @@ def _matrix_parts(m):
     return m[:3, 3].copy(), m[:3, :3].copy()
 
 
+def _sample(scene, resolved, frames, depsgraph=None, progress=None, force_frame_set=False):
+    """World ``pos`` ``{key: (N, 3)}`` (scene units) and ``rotm`` ``{key: (N, 3, 3)}`` of each
+    ``resolved`` ``{key: (object, bone or "")}`` on scene ``frames`` ``(N,)``, and the ``method``
+    per key (``"fcurves"``: a plain keyed object's F-curves evaluated; ``"frame_set"``: the scene
+    stepped, the evaluated world matrix read; one loop for all).  The current frame is restored."""
+    import bpy
+    N = frames.shape[0]
+    pos = {d: np.empty((N, 3)) for d in resolved}
+    rotm = {d: np.empty((N, 3, 3)) for d in resolved}
+    method = {}
+    loop = []
+    for dev, (obj, bone) in resolved.items():
+        if not bone and not force_frame_set and _is_plain_keyed(obj):
+            pos[dev], rotm[dev] = _eval_plain(obj, frames)
+            method[dev] = "fcurves"
+        else:
+            loop.append(dev)
+            method[dev] = "frame_set"
+    if loop:
+        old = (scene.frame_current, scene.frame_subframe)
+        try:
+            for k, f in enumerate(frames):
+                scene.frame_set(int(f))
+                dg = depsgraph or bpy.context.evaluated_depsgraph_get()
+                for dev in loop:
+                    obj, bone = resolved[dev]
+                    ev = obj.evaluated_get(dg)
+                    m = np.array(ev.matrix_world, dtype=np.float64)
+                    if bone:
+                        m = m @ np.array(ev.pose.bones[bone].matrix, dtype=np.float64)
+                    pos[dev][k], rotm[dev][k] = _matrix_parts(m)
+                if progress is not None and (k % 64 == 0 or k == N - 1):
+                    progress((k + 1) / N)
+        finally:
+            scene.frame_set(old[0], subframe=old[1])
+    elif progress is not None:
+        progress(1.0)
+
+    return pos, rotm, method
+
+
 def sample_sources(scene, sources, frame_start, frame_end, depsgraph=None, progress=None,
                    force_frame_set=False):
     """Sample the mapped sources over scene frames ``frame_start..frame_end`` (inclusive).
@@ -131,37 +172,7 @@ def sample_sources(scene, sources, frame_start, frame_end, depsgraph=None, progr
     if not resolved:
         raise SceneSourceError("no scene objects are mapped to devices")
 
-    pos = {d: np.empty((N, 3)) for d in resolved}
-    rotm = {d: np.empty((N, 3, 3)) for d in resolved}
-    method = {}
-    loop = []
-    for dev, (obj, bone) in resolved.items():
-        if not bone and not force_frame_set and _is_plain_keyed(obj):
-            pos[dev], rotm[dev] = _eval_plain(obj, frames)
-            method[dev] = "fcurves"
-        else:
-            loop.append(dev)
-            method[dev] = "frame_set"
-    if loop:
-        old = (scene.frame_current, scene.frame_subframe)
-        try:
-            for k, f in enumerate(frames):
-                scene.frame_set(int(f))
-                dg = depsgraph or bpy.context.evaluated_depsgraph_get()
-                for dev in loop:
-                    obj, bone = resolved[dev]
-                    ev = obj.evaluated_get(dg)
-                    m = np.array(ev.matrix_world, dtype=np.float64)
-                    if bone:
-                        m = m @ np.array(ev.pose.bones[bone].matrix, dtype=np.float64)
-                    pos[dev][k], rotm[dev][k] = _matrix_parts(m)
-                if progress is not None and (k % 64 == 0 or k == N - 1):
-                    progress((k + 1) / N)
-        finally:
-            scene.frame_set(old[0], subframe=old[1])
-    elif progress is not None:
-        progress(1.0)
-
+    pos, rotm, method = _sample(scene, resolved, frames, depsgraph, progress, force_frame_set)
     times = frames / fps
     metres = metres_per_unit(scene)          # scene units → the core's metres
     streams = {}
@@ -174,3 +185,34 @@ def sample_sources(scene, sources, frame_start, frame_end, depsgraph=None, progr
             "objects": {d: (o.name, b) for d, (o, b) in resolved.items()},
             "axes": "blender", "units": "m", "exact": True}     # held keys repeat exactly: not lost
     return Recording(streams=streams, source="scene", metadata=meta)
+
+
+def sample_keypoint_empties(scene, objects, frame_start, frame_end, progress=None, source="scene objects"):
+    """3D keypoints from scene objects named after a layout's points (FreeMoCap's empties, a
+    markerless add-on's, ``left_wrist`` / ``Body_Left_Wrist.001`` / ...: :func:`..core.keypoint_layouts.
+    layout_from_names`), sampled on scene frames ``frame_start..frame_end`` as world positions,
+    scene units taken into metres.  Returns a :class:`..core.io_keypoints.KeypointRecording`;
+    raises :class:`SceneSourceError` when no layout's points are all there."""
+    from ..core import keypoint_layouts as kl
+    from ..core.io_keypoints import keypoints_from_points
+    objects = [o for o in objects if o is not None]
+    found = kl.layout_from_names([o.name for o in objects])
+    if found is None:
+        have = {kl.point_key(o.name) for o in objects}
+        best = min(kl.LAYOUTS.values(), key=lambda lay: sum(p not in have for p in lay.points))
+        missing = [p for p in best.points if p not in have]
+        raise SceneSourceError(f"{source}: {len(objects)} object(s), but no keypoint layout has all its points "
+                               f"among their names (closest, {best.name}, lacks {', '.join(missing[:6])}"
+                               f"{' ...' if len(missing) > 6 else ''})")
+    layout, names = found
+    by_name = {o.name: o for o in objects}
+    frame_start, frame_end = int(frame_start), int(frame_end)
+    if frame_end <= frame_start:
+        raise SceneSourceError(f"frame range {frame_start}..{frame_end} holds fewer than 2 frames")
+    frames = np.arange(frame_start, frame_end + 1, dtype=np.float64)
+    resolved = {p: (by_name[n], "") for p, n in names.items()}
+    pos, _, _ = _sample(scene, resolved, frames, progress=progress)
+    points = np.stack([pos[p] for p in kl.LAYOUTS[layout].points], axis=1) * metres_per_unit(scene)
+    fps = float(scene.render.fps) / float(scene.render.fps_base)
+    return keypoints_from_points(frames / fps, points, layout, source,
+                                 how=f"from the names of {len(names)} scene objects")

@@ -73,10 +73,13 @@ class SolveConfig(SolveSettings):
     reuse_armature: object = None
     scene_sources: dict = field(default_factory=dict)
     scene_frames: tuple | None = None
+    keypoint_collection: str | None = None
 
     def take_name(self) -> str:
         """The take's name for the actions a solve makes (``MANIKIN_live_<take>``): the recording
         file's (or keypoint folder's) name without its extension, ``scene`` for scene objects."""
+        if self.source.upper() == "KEYPOINTS" and self.keypoint_collection:
+            return self.keypoint_collection
         if self.source.upper() == "SCENE" or not self.filepath:
             return "scene"
         path = os.path.normpath(str(self.filepath))
@@ -84,6 +87,8 @@ class SolveConfig(SolveSettings):
 
     def source_description(self) -> str:
         """What was solved: the recording's path, or the scene objects of each device."""
+        if self.source.upper() == "KEYPOINTS" and self.keypoint_collection:
+            return f"keypoint objects of collection {self.keypoint_collection}"
         if self.source.upper() == "SCENE":
             return "scene objects: " + ", ".join(f"{d} {o}{'/' + b if b else ''}"
                                                  for d, (o, b) in self.scene_sources.items())
@@ -157,8 +162,11 @@ class SolveJob:
 
     # -- stage 1 (main thread)
     def gather(self, context):
-        """Sample scene sources (main thread).  No-op for file sources."""
+        """Sample scene sources (main thread): tracker objects, or keypoint objects of a
+        collection.  No-op for file sources."""
         cfg = self.config
+        if cfg.source.upper() == "KEYPOINTS" and cfg.keypoint_collection:
+            return self._gather_keypoints(context)
         if cfg.source.upper() != "SCENE":
             return
         from .scene_trackers import sample_sources, SceneSourceError
@@ -174,6 +182,29 @@ class SolveJob:
             raise SolveError(str(exc)) from exc
         if cfg.fps is None:
             cfg.fps = self.recording.metadata["fps"]
+        cfg.frame_start = int(start)
+        self.timings["read"] = _time.perf_counter() - t
+
+    def _gather_keypoints(self, context):
+        import bpy
+        from ..core.recording import RecordingError
+        from .scene_trackers import sample_keypoint_empties, SceneSourceError
+        cfg = self.config
+        scene = context.scene
+        coll = bpy.data.collections.get(cfg.keypoint_collection)
+        if coll is None:
+            raise SolveError(f"no collection named {cfg.keypoint_collection!r}")
+        start, end = cfg.scene_frames or (scene.frame_start, scene.frame_end)
+        t = _time.perf_counter()
+        self._set(0.0, "sampling keypoint objects")
+        try:
+            self.recording = sample_keypoint_empties(scene, list(coll.all_objects), start, end,
+                                                     progress=lambda f: self._set(_P_LOAD * f),
+                                                     source=f"collection {coll.name!r}")
+        except (SceneSourceError, RecordingError) as exc:
+            raise SolveError(str(exc)) from exc
+        if cfg.fps is None:
+            cfg.fps = float(scene.render.fps) / float(scene.render.fps_base)
         cfg.frame_start = int(start)
         self.timings["read"] = _time.perf_counter() - t
 

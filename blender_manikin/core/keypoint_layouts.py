@@ -114,6 +114,41 @@ def canonical_layout(name) -> str:
     return key
 
 
+#: name parts that tools add around a point's name (FreeMoCap's and others' empties, CSV columns)
+_NAME_AFFIXES = ("mediapipe_", "body_", "pose_", "mp_", "_body", "_empty", "_marker")
+
+
+def point_key(name) -> str:
+    """``name`` (an object's, a column's) as a point name: lower case, Blender's ``.001``
+    duplicate suffix and the affixes of :data:`_NAME_AFFIXES` dropped (``"Body_Left_Wrist.001"``
+    → ``"left_wrist"``)."""
+    key = str(name).strip().lower().replace(" ", "_").replace("-", "_")
+    base, dot, num = key.rpartition(".")
+    if dot and num.isdigit():
+        key = base
+    for a in _NAME_AFFIXES:
+        if a.startswith("_") and key.endswith(a):
+            key = key[:-len(a)]
+        elif not a.startswith("_") and key.startswith(a):
+            key = key[len(a):]
+    return key
+
+
+def layout_from_names(names):
+    """``(layout, {point: name})`` for the layout all of whose points are among ``names``
+    (matched by :func:`point_key`; the layout with the most points wins), or ``None``."""
+    by_key = {}
+    for n in names:
+        by_key.setdefault(point_key(n), n)
+    best = None
+    for lay_name, lay in LAYOUTS.items():
+        if all(p in by_key for p in lay.points) and (best is None or len(lay.points) > len(LAYOUTS[best].points)):
+            best = lay_name
+    if best is None:
+        return None
+    return best, {p: by_key[p] for p in LAYOUTS[best].points}
+
+
 def layouts_with(count: int) -> list:
     """Names of the layouts with ``count`` points (what an unnamed ``(T, count, 3)`` array may be)."""
     return [n for n, f in LAYOUTS.items() if len(f.points) == count]

@@ -43,11 +43,15 @@ class MANIKIN_PT_solve(_Base, Panel):
             col.prop(s, "units")
             col.prop(s, "layout_file")
         elif s.source == 'KEYPOINTS':
-            col.prop(s, "keypoint_path")
-            col.prop(s, "keypoint_layout")
-            col.prop(s, "keypoint_units")
-            col.prop(s, "keypoint_up")
-            toggled_row(col, s, "use_keypoint_rate", "keypoint_rate", "Rate")
+            col.prop(s, "keypoint_from")
+            if s.keypoint_from == 'OBJECTS':
+                col.prop(s, "keypoint_collection")
+            else:
+                col.prop(s, "keypoint_path")
+                col.prop(s, "keypoint_layout")
+                col.prop(s, "keypoint_units")
+                col.prop(s, "keypoint_up")
+                toggled_row(col, s, "use_keypoint_rate", "keypoint_rate", "Rate")
             col.separator()
             smoothing_rows(col, s)
             col.prop(s, "fix_sides")
