@@ -90,3 +90,24 @@ def test_objects_that_are_no_layout_are_refused_with_what_is_missing(addon):
     with pytest.raises(RuntimeError, match="no keypoint layout has all its points among their names "
                                            r"\(closest, coco17, lacks left_ankle\)"):
         bpy.ops.manikin.solve_full_body()
+
+
+def test_the_panel_shows_the_collection_for_scene_objects(addon):
+    from types import SimpleNamespace
+    from blender_manikin.panels import main as panels
+    from blender_util import PanelLayout
+    s = bpy.context.scene.manikin
+    s.source = 'KEYPOINTS'
+    drawn = {}
+    for frm in ('FILE', 'OBJECTS'):
+        s.keypoint_from = frm
+        log = []
+        panels.MANIKIN_PT_solve.draw(SimpleNamespace(layout=PanelLayout(log)), bpy.context)
+        drawn[frm] = {name for kind, name in log if kind == "prop"}
+    assert {"keypoint_from", "keypoint_path", "keypoint_layout"} <= drawn['FILE']
+    assert "keypoint_collection" not in drawn['FILE']
+    assert "keypoint_collection" in drawn['OBJECTS'] and "keypoint_path" not in drawn['OBJECTS']
+    from blender_manikin.blender.properties import config_from_settings
+    from blender_manikin.blender.solve_job import SolveError
+    with pytest.raises(SolveError, match="choose the collection of the keypoint objects"):
+        config_from_settings(bpy.context)
