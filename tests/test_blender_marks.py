@@ -1,5 +1,6 @@
 """Timeline markers where a solve is worth a look (blender/writer.py mark_timeline, the solve's
-Mark Problems): made at the right scene frames, replacing only an earlier solve's in its range."""
+Mark Problems): made at the right scene frames, replacing only an earlier solve's in its range;
+and Solve Several Files, whose takes keep their markers apart."""
 import os
 
 import numpy as np
@@ -63,3 +64,36 @@ def test_the_command_line_can_leave_the_markers_out():
     p = cli.build_parser()
     assert cli._config("t.csv", p.parse_args(["solve", "t.csv", "--out", "o"])).mark_problems is True
     assert cli._config("t.csv", p.parse_args(["solve", "t.csv", "--out", "o", "--no-marks"])).mark_problems is False
+
+
+def test_several_files_are_solved_each_onto_its_own_armature(addon, tmp_path):
+    """Solve Several Files: each recording onto MANIKIN_<file> with MANIKIN_live_<file>, markers
+    per take, one bad file reported without stopping the others; the scene range covers all."""
+    import shutil
+    rec = load_recording(EXAMPLE)
+    shutil.copy(EXAMPLE, tmp_path / "walk.csv")
+    s = dict(rec.streams)
+    r = s["right_hand"]
+    pos = r.pos.copy()
+    pos[(r.time > 3.0) & (r.time < 3.4)] += np.array([1.5, 0.0, 0.0])
+    s["right_hand"] = TrackerStream("right_hand", r.time, pos, r.quat, r.valid)
+    write_csv(str(tmp_path / "thrown.csv"), Recording(streams=s, source="thrown", metadata=dict(rec.metadata)),
+              axes="openxr", units="m")
+    (tmp_path / "broken.csv").write_text("time,device,px\n0,head,1\n")
+    sc = bpy.context.scene
+    sc.render.fps, sc.render.fps_base = 30, 1.0
+    sc.timeline_markers.new("MANIKIN: from an earlier solve", frame=10)
+    res = bpy.ops.manikin.solve_files(directory=str(tmp_path),
+                                      files=[{"name": "walk.csv"}, {"name": "broken.csv"}, {"name": "thrown.csv"}])
+    assert res == {'FINISHED'}
+    arms = sorted(o.name for o in bpy.data.objects if o.type == 'ARMATURE')
+    assert arms == ["MANIKIN_thrown", "MANIKIN_walk"]
+    for take in ("walk", "thrown"):
+        act = bpy.data.objects[f"MANIKIN_{take}"].animation_data.action
+        assert act.name == f"MANIKIN_live_{take}" and act["manikin_source"].endswith(f"{take}.csv")
+    report = sc.manikin.last_report
+    assert report.startswith("2 of 3 files solved") and "failed: broken.csv:" in report
+    names = {m.name for m in sc.timeline_markers}
+    assert "MANIKIN thrown: right hand out of reach" in names and "MANIKIN: from an earlier solve" in names
+    assert (sc.frame_start, sc.frame_end) == (1, 210)
+    assert not [o for o in bpy.data.objects if o.type == 'EMPTY']      # no tracker empties for a batch

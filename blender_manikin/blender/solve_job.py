@@ -74,6 +74,7 @@ class SolveConfig(SolveSettings):
     scene_sources: dict = field(default_factory=dict)
     scene_frames: tuple | None = None
     keypoint_collection: str | None = None
+    marker_take: str | None = None     # timeline markers named "MANIKIN <take>: ..." (several takes)
 
     def take_name(self) -> str:
         """The take's name for the actions a solve makes (``MANIKIN_live_<take>``): the recording
@@ -282,7 +283,7 @@ class SolveJob:
         if cfg.mark_problems:
             from ..core.review_marks import review_marks
             marks = review_marks(self.result, self.report, getattr(self.outcome, "jumps", ()))
-            writer.mark_timeline(context.scene, marks, out.frames)
+            writer.mark_timeline(context.scene, marks, out.frames, cfg.marker_take)
         self.output = out
         if cfg.live_rig:
             self.timings["live rig"] = _time.perf_counter() - t

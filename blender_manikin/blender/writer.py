@@ -275,17 +275,19 @@ def _write_trackers(targets, frames, scene, options, out, created):
 MARKER_PREFIX = "MANIKIN: "
 
 
-def mark_timeline(scene, marks, frames):
-    """Timeline markers ``MANIKIN: <label>`` at the scene frames of ``marks``
+def mark_timeline(scene, marks, frames, take=None):
+    """Timeline markers ``MANIKIN: <label>`` (with ``take``: ``MANIKIN <take>: <label>``, for
+    takes solved side by side) at the scene frames of ``marks``
     (:class:`..core.review_marks.ReviewMark`, indices into ``frames``, the scene frame of each
-    result frame).  The scene's ``MANIKIN:`` markers within the frames' range (an earlier solve
-    of the same stretch) are replaced; every other marker is left as it is.  Returns the new
-    markers."""
+    result frame).  The scene's markers of the same prefix within the frames' range (an earlier
+    solve of the same stretch) are replaced; every other marker is left as it is.  Returns the
+    new markers."""
+    prefix = MARKER_PREFIX if not take else f"MANIKIN {take}: "
     lo, hi = int(math.floor(frames[0])), int(math.ceil(frames[-1]))
     for m in list(scene.timeline_markers):
-        if m.name.startswith(MARKER_PREFIX) and lo <= m.frame <= hi:
+        if m.name.startswith(prefix) and lo <= m.frame <= hi:
             scene.timeline_markers.remove(m)
-    return [scene.timeline_markers.new(f"{MARKER_PREFIX}{mk.label}", frame=int(round(frames[mk.frame])))
+    return [scene.timeline_markers.new(f"{prefix}{mk.label}", frame=int(round(frames[mk.frame])))
             for mk in marks]
 
 

@@ -147,4 +147,77 @@ class MANIKIN_OT_solve_full_body(Operator):
         self._cleanup(context)
 
 
-CLASSES = (MANIKIN_OT_solve_full_body,)
+class MANIKIN_OT_solve_files(Operator):
+    """Solve several recordings (or keypoint files) with the panel's settings, each onto an
+    armature and action of its own, named after the file"""
+    bl_idname = "manikin.solve_files"
+    bl_label = "Solve Several Files"
+    bl_description = ("Choose several recordings or keypoint files: each is solved with the panel's settings "
+                      "onto its own armature (MANIKIN_<file>) and action; one that fails does not stop the others")
+    bl_options = {'REGISTER', 'UNDO'}
+
+    files: bpy.props.CollectionProperty(type=bpy.types.OperatorFileListElement, options={'HIDDEN', 'SKIP_SAVE'})
+    directory: bpy.props.StringProperty(subtype='DIR_PATH', options={'HIDDEN', 'SKIP_SAVE'})
+    filter_glob: bpy.props.StringProperty(default="*.csv;*.bsor;*.xror;*.npy;*.npz", options={'HIDDEN'})
+
+    @classmethod
+    def poll(cls, context):
+        return MANIKIN_OT_solve_full_body.poll(context)
+
+    def invoke(self, context, event):
+        context.window_manager.fileselect_add(self)
+        return {'RUNNING_MODAL'}
+
+    def execute(self, context):
+        import dataclasses
+        import os
+        from ..blender.properties import config_from_settings
+        paths = [os.path.join(self.directory, f.name) for f in self.files if f.name]
+        if not paths:
+            self.report({'ERROR'}, "MANIKIN: choose one or more files")
+            return {'CANCELLED'}
+        try:
+            base = config_from_settings(context)
+        except Exception as exc:
+            self.report({'ERROR'}, f"MANIKIN: {sj.error_message(exc)}")
+            return {'CANCELLED'}
+        source = "KEYPOINTS" if base.source.upper() == "KEYPOINTS" else "FILE"
+        scene, wm = context.scene, context.window_manager
+        solved, failed, span = [], [], []
+        wm.progress_begin(0, len(paths))
+        try:
+            for k, path in enumerate(paths):
+                take = os.path.splitext(os.path.basename(path))[0]
+                cfg = dataclasses.replace(base, source=source, filepath=path, keypoint_collection=None,
+                                          reuse_armature=None, armature_name=f"MANIKIN_{take}",
+                                          set_scene_range=False, create_trackers=False, marker_take=take)
+                try:
+                    job = sj.SolveJob(cfg)
+                    job.run(context)
+                except Exception as exc:             # one bad file does not stop the others
+                    failed.append(f"{os.path.basename(path)}: {sj.error_message(exc)}")
+                    self.report({'WARNING'}, f"MANIKIN: {os.path.basename(path)}: {sj.error_message(exc)}")
+                else:
+                    out = job.output
+                    context.scene.manikin.armature = out.armature     # the swivel panel's: the last
+                    solved.append(f"{out.armature.name} / {out.action.name}")
+                    span.append((out.frames[0], out.frames[-1]))
+                    self.report({'INFO'}, f"MANIKIN: {out.armature.name} / {out.action.name}: "
+                                          f"{job.summary(timings=False)}")
+                wm.progress_update(k + 1)
+        finally:
+            wm.progress_end()
+        if span and base.set_scene_range:
+            scene.frame_start = int(min(a for a, _ in span))
+            scene.frame_end = max(int(max(b for _, b in span) + 0.999), scene.frame_start)
+        s = scene.manikin
+        s.last_report = (f"{len(solved)} of {len(paths)} files solved: " + ", ".join(solved)
+                         + (f"; failed: {'; '.join(failed)}" if failed else ""))
+        if not solved:
+            self.report({'ERROR'}, f"MANIKIN: {s.last_report}")
+            return {'CANCELLED'}
+        self.report({'INFO'}, f"MANIKIN: {s.last_report}")
+        return {'FINISHED'}
+
+
+CLASSES = (MANIKIN_OT_solve_full_body, MANIKIN_OT_solve_files)

@@ -78,6 +78,8 @@ class MANIKIN_PT_solve(_Base, Panel):
         row = layout.row()
         row.scale_y = 1.6
         row.operator("manikin.solve_full_body", icon='ARMATURE_DATA')
+        if s.source == 'FILE' or (s.source == 'KEYPOINTS' and s.keypoint_from == 'FILE'):
+            layout.operator("manikin.solve_files", icon='FILE_FOLDER')
         if s.last_report:
             box = layout.box().column(align=True)
             for i, line in enumerate(wrapped(s.last_report, context)):
