@@ -79,3 +79,23 @@ def test_bone_and_constrained_sources():
         scene_trackers.sample_sources(sc, {"head": (arm, "nope")}, 1, N)
     with pytest.raises(scene_trackers.SceneSourceError, match="no scene objects"):
         scene_trackers.sample_sources(sc, {}, 1, N)
+
+
+def test_devices_are_mapped_by_the_objects_names(addon):
+    """Map by Name: animated objects named after devices fill the empty slots; a slot the user
+    set is kept; the scene's static camera is no headset."""
+    sc = bpy.context.scene
+    cam = bpy.data.objects.new("Camera", bpy.data.cameras.new("Camera"))
+    sc.collection.objects.link(cam)
+    made = {n: _keyed_empty(n, 'QUATERNION', seed=k)
+            for k, n in enumerate(("HMD", "LeftController", "Right Controller.001", "Tracker_LeftFoot",
+                                   "tracker_waist", "Cube"))}
+    mine = _keyed_empty("my_right_foot_thing", 'XYZ', seed=9)
+    s = sc.manikin
+    s.right_foot.object = mine
+    assert bpy.ops.manikin.map_devices() == {'FINISHED'}
+    assert s.head.object == made["HMD"] and s.left_hand.object == made["LeftController"]
+    assert s.right_hand.object == made["Right Controller.001"] and s.left_foot.object == made["Tracker_LeftFoot"]
+    assert s.pelvis.object == made["tracker_waist"] and s.right_foot.object == mine
+    from blender_manikin.core.devices import device_of_object_name
+    assert device_of_object_name("MANIKIN_left_hand.002") == "left_hand" and device_of_object_name("Cube") is None

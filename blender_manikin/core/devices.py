@@ -46,6 +46,28 @@ ALIASES = {
 }
 
 
+#: name parts that scene objects carry around a device's name (this add-on's own empties, tools)
+_OBJECT_AFFIXES = ("manikin_", "tracker_", "vr_", "xr_", "_tracker", "_empty")
+
+
+def device_of_object_name(name):
+    """The device a scene object's ``name`` stands for (``"HMD"``, ``"LeftController"``,
+    ``"MANIKIN_left_hand.001"``, ``"Tracker_LeftFoot"``), or ``None``: :func:`canonical_device`
+    after Blender's ``.001`` suffix and the affixes of :data:`_OBJECT_AFFIXES` are dropped."""
+    key = str(name).strip().lower().replace(" ", "_").replace("-", "_")
+    base, dot, num = key.rpartition(".")
+    if dot and num.isdigit():
+        key = base
+    found = canonical_device(key)
+    for a in _OBJECT_AFFIXES:
+        if found is None:
+            if a.startswith("_") and key.endswith(a):
+                found = canonical_device(key[:-len(a)])
+            elif not a.startswith("_") and key.startswith(a):
+                found = canonical_device(key[len(a):])
+    return found
+
+
 def canonical_device(name):
     """The device named ``name`` (case-, space- and dash-insensitive, or an alias), or ``None``."""
     key = str(name).strip().lower().replace(" ", "_").replace("-", "_")

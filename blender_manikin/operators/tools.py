@@ -1,4 +1,5 @@
-"""Small helper operators of the MANIKIN panel: find the T-pose, load an offsets preset."""
+"""Small helper operators of the MANIKIN panel: find the T-pose, load an offsets preset, map
+scene objects to devices by their names."""
 
 import json
 
@@ -71,4 +72,51 @@ class MANIKIN_OT_load_offsets_preset(Operator):
         return {'FINISHED'}
 
 
-CLASSES = (MANIKIN_OT_find_tpose, MANIKIN_OT_load_offsets_preset)
+def _animated(obj):
+    ad = obj.animation_data
+    return bool((ad is not None and (ad.action is not None or len(ad.drivers) or len(ad.nla_tracks)))
+                or obj.parent is not None or len(obj.constraints))
+
+
+class MANIKIN_OT_map_devices(Operator):
+    """Map the scene's animated objects to the devices they are named after (HMD, LeftController,
+    Tracker_LeftFoot, MANIKIN_head, ...); devices already mapped are kept"""
+    bl_idname = "manikin.map_devices"
+    bl_label = "Map by Name"
+    bl_options = {'REGISTER', 'UNDO'}
+
+    def execute(self, context):
+        from ..core.devices import DEVICES, LABELS, device_of_object_name
+        s = context.scene.manikin
+        found = {}
+        for obj in sorted(context.scene.objects, key=lambda o: o.name):
+            if obj.type in ('CAMERA', 'LIGHT') or not _animated(obj):
+                continue
+            d = device_of_object_name(obj.name)
+            if d is not None:
+                found.setdefault(d, []).append(obj)
+        mapped, kept, doubts = [], [], []
+        for d in DEVICES:
+            slot = getattr(s, d)
+            if slot.object is not None:
+                kept.append(LABELS[d])
+                continue
+            if d in found:
+                slot.object, slot.bone = found[d][0], ""
+                mapped.append(f"{LABELS[d]} {found[d][0].name}")
+                if len(found[d]) > 1:
+                    doubts.append(f"{LABELS[d]}: also {', '.join(o.name for o in found[d][1:])}")
+        if not mapped:
+            self.report({'WARNING'}, "MANIKIN: no animated object is named after an unmapped device "
+                                     "(e.g. HMD, LeftController, Tracker_LeftFoot)")
+            return {'CANCELLED'}
+        msg = "MANIKIN: mapped " + ", ".join(mapped)
+        if kept:
+            msg += f"; kept {', '.join(kept)}"
+        if doubts:
+            msg += f"; more than one object for {'; '.join(doubts)}"
+        self.report({'INFO'}, msg)
+        return {'FINISHED'}
+
+
+CLASSES = (MANIKIN_OT_find_tpose, MANIKIN_OT_load_offsets_preset, MANIKIN_OT_map_devices)

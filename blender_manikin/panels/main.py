@@ -59,6 +59,7 @@ class MANIKIN_PT_solve(_Base, Panel):
             col.prop(s, "ik")
             toggled_row(col, s, "use_height", "height", "Height")
         else:
+            col.operator("manikin.map_devices", icon='LINKED')
             for d in DEVICES:
                 src = getattr(s, d)
                 row = col.row(align=True)
