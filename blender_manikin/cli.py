@@ -22,6 +22,8 @@ Options of ``solve`` (they mirror the panel; ``--help`` has them all):
 --units m|cm|mm               override the file's units metadata
 --fps N                       solve/scene frame rate (default 30)
 --calibration-time SECONDS    T-pose at that time (seconds after the first sample)
+--calibration-take FILE       trackers: calibrate on this recording's T-pose (the
+                              session's calibration take) instead of the input's own
 --height METRES               performer's stature (with --calibration-time it
                               overrides the measured stature; alone it is the
                               body measurement)
@@ -109,6 +111,10 @@ def _add_solve_options(s):
     s.add_argument("--calibration-time", type=float, default=None, metavar="SECONDS",
                    help="calibrate on the T-pose this many seconds after the first sample "
                         "(default: the most T-pose-like moment, else the standing head height)")
+    s.add_argument("--calibration-take", default=None, metavar="FILE",
+                   help="trackers: calibrate on the T-pose of this recording (the session's calibration take: "
+                        "the same performer and trackers) instead of the input's own; --calibration-time is "
+                        "then a time in it")
     s.add_argument("--height", type=float, default=None, metavar="METRES", help="performer's stature")
     s.add_argument("--arm-span", type=float, default=None, metavar="METRES",
                    help="wrist-to-wrist distance in a T-pose")
@@ -345,10 +351,13 @@ def solve_settings(args):
                        overlap=getattr(args, "overlap", SolveSettings.overlap),
                        teleports=getattr(args, "teleports", SolveSettings.teleports),
                        start=getattr(args, "start", None), end=getattr(args, "end", None),
-                       posture=getattr(args, "posture", "standing"))
+                       posture=getattr(args, "posture", "standing"),
+                       calibration_take=getattr(args, "calibration_take", None))
     if args.calibration_time is not None:
         st.calibration, st.tpose_time = "TPOSE", float(args.calibration_time)
         st.height, st.arm_span = args.height, args.arm_span
+    elif args.height is not None and st.calibration_take:      # the take's pose, the typed height
+        st.calibration, st.height, st.arm_span = "AUTO", float(args.height), args.arm_span
     elif args.height is not None:
         st.calibration, st.height, st.arm_span = "MEASURE", float(args.height), args.arm_span
     else:

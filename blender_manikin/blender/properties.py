@@ -196,6 +196,10 @@ class MANIKIN_Settings(PropertyGroup):
                ('TPOSE', "T-Pose Time", "Calibrate body size and device rotations on the T-pose "
                 "at the given time"),
                ('MEASURE', "Measurements", "Use the typed height and arm span")])
+    calibration_take: StringProperty(name="Calibration Take", subtype='FILE_PATH', default="",
+                                     description="Trackers: calibrate on the T-pose of this recording (the "
+                                                 "session's calibration take: the same performer and trackers) "
+                                                 "instead of the solved take's own (empty: its own)")
     tpose_time: FloatProperty(name="T-Pose Time", default=0.0, min=0.0, unit='TIME_ABSOLUTE',
                               description="Seconds after the first tracker sample")
     # lengths are kept in metres (the *_m properties) and shown in the scene's unit (units.py)
@@ -371,6 +375,8 @@ def config_from_settings(context):
     cfg.fps = scene_fps(scene) if s.use_scene_fps else float(s.fps)
     cfg.calibration = s.calibration
     cfg.tpose_time = float(s.tpose_time)
+    cfg.calibration_take = bpy.path.abspath(s.calibration_take) if s.calibration_take and s.source != 'KEYPOINTS' \
+        else None
     trackers = s.source != 'KEYPOINTS'
     if s.use_height or (trackers and (s.calibration == 'MEASURE' or s.floor_mode == 'PERFORMER')):
         cfg.height = float(s.height_m)

@@ -331,9 +331,13 @@ def find_tpose_time(config: SolveConfig, context=None):
 
     Returns ``(seconds after the first tracker sample, candidate)`` where
     candidate is a :class:`core.calibration.TPoseCandidate` (``plausible``
-    tells whether it looks like a still T-pose).
+    tells whether it looks like a still T-pose).  With a calibration take, the moment is the
+    one in that take (which the calibration then uses).
     """
+    import dataclasses
     from ..core import calibration as cal
+    if config.calibration_take:
+        config = dataclasses.replace(config, source="FILE", filepath=config.calibration_take, calibration_take=None)
     job = SolveJob(config)
     if config.source.upper() == "SCENE":
         job.gather(context)

@@ -14,6 +14,7 @@ first tracker sample (what the timeline shows).  No bpy.
 """
 from __future__ import annotations
 
+import os
 import time as _time
 from dataclasses import dataclass, field
 
@@ -113,6 +114,7 @@ class SolveSettings:
     posture: str = "standing"         # "standing" or "seated" (seated.POSTURES): seated legs on a chair
     start: float | None = None        # seconds from the first sample: solve from here (None: the start)
     end: float | None = None          # seconds from the first sample: solve up to here (None: the end)
+    calibration_take: str | None = None   # a recording whose T-pose calibrates this take (body, offsets)
 
 
 @dataclass
@@ -596,6 +598,85 @@ def adapt_arms(settings: SolveSettings, outcome: SolveOutcome, result, solver, p
 STAGES = {"reading recording": 0.0, "resampling": 0.09, "calibrating": 0.16, "solving": 0.22, "done": 1.0}
 
 
+def device_targets(out: SolveOutcome, settings: SolveSettings, teleports="keep"):
+    """The middle stages of :func:`solve_recording` on ``out.recording``: times in seconds,
+    teleports found (``teleports`` mode), resampled onto the ``settings.fps`` grid, smoothed,
+    left/right swaps undone, device offsets, the floor moved to 0, a headset lying off pointed
+    out.  Sets ``out.report``, ``out.targets`` and ``out.floor``.  Returns ``(times, pos, quat,
+    valid, offsets, notes, smoothing_note, jumps)``: the resampled device poses (device → ``(T,
+    3)`` m / ``(T, 4)`` wxyz / ``(T,)`` bool), the validated offsets, the summary's notes so far
+    and the teleports (:class:`.teleports.RigJump`)."""
+    from .resample import seconds_from_time_units
+    out.recording = seconds_from_time_units(out.recording)      # before anything measures speeds
+    jumps, continuous = [], out.recording
+    if teleports != "ignore":
+        jumps = find_rig_jumps(out.recording)
+        continuous = remove_rig_jumps(out.recording, jumps)
+    times, pos, quat, valid, out.report = resample_recording(continuous, settings.fps, settings.floor)
+    if settings.max_frames is not None and settings.max_frames > 0 and len(times) > settings.max_frames:
+        n = int(settings.max_frames)
+        times = times[:n]
+        pos = {d: v[:n] for d, v in pos.items()}
+        quat = {d: v[:n] for d, v in quat.items()}
+        valid = {d: v[:n] for d, v in valid.items()}
+    from .smoothing import parse_smoothing, smooth_device_poses, smoothing_note
+    smoothing = parse_smoothing(settings.smoothing)
+    pos, quat, windows = smooth_device_poses(pos, quat, settings.fps, smoothing)
+    smoothed = smoothing_note(smoothing, list(windows.values()) if windows else None, "device")
+    sides = []
+    if settings.fix_sides:
+        sides = fix_swapped_sides(pos, quat, valid, settings.fps)
+    resolved = resolve_offsets(settings.offsets, out.recording)
+    out.targets, offsets = make_targets(times, pos, quat, valid, settings.fps, resolved)
+    note = offsets_note(settings.offsets, resolved, out.recording)
+    out.floor = floor_height(settings, out.targets)
+    out.targets = move_floor(out.targets, out.floor)
+    first, last = headset_off(out.targets.pos["head"], out.targets.rot["head"], settings.fps,
+                              out.targets.valid.get("head"))
+    T, fps = len(times), settings.fps
+    if settings.start is not None and settings.start >= first / fps - 0.05:
+        first = 0                        # trimmed away already
+    if settings.end is not None and settings.end <= (T - last) / fps + 0.05:
+        last = 0
+    off_notes = headset_off_note(first, last, T, fps, out.targets.pos["head"], out.targets.rot["head"])
+    notes = [n for n in (note, *sides, *off_notes) if n]
+    return times, pos, quat, valid, offsets, notes, smoothed, jumps
+
+
+def calibration_from_take(settings: SolveSettings, teleports="keep"):
+    """``(body, offsets, info)`` calibrated on the T- or A-pose of another recording,
+    ``settings.calibration_take`` (a session's calibration take: the same performer, the same
+    trackers strapped on the same way), read, resampled and calibrated as :func:`calibrate` does
+    with ``settings`` (Auto or T-pose time; typed height and arm span still win).  The notes
+    name the take.  Raises :class:`SolveError` when it holds no usable pose."""
+    import dataclasses
+    import re
+    path = settings.calibration_take
+    name = os.path.basename(os.fspath(path))
+    mode = (settings.calibration or "AUTO").upper()
+    if mode == "MEASURE":
+        raise SolveError("a calibration take needs Auto or T-pose calibration (measurements come from the "
+                         "typed height)")
+    cal_settings = dataclasses.replace(settings, start=None, end=None, max_frames=None, calibration_take=None)
+    from .recording import RecordingError
+    cal = SolveOutcome()
+    try:
+        cal.recording = read_recording(path, cal_settings)
+    except RecordingError as exc:
+        raise SolveError(f"calibration take: {exc}") from exc
+    times, _, _, _, offsets, _, _, _ = device_targets(cal, cal_settings, teleports)
+    body, offsets, info = calibrate(cal_settings, cal.targets, times, offsets)
+    if not any(n.startswith("calibrated on") for n in info):
+        raise SolveError(f"calibration take {name}: no T- or A-pose found in it ({'; '.join(info) or 'no notes'})")
+    out = []
+    for n in info:
+        n = re.sub(r"^(calibrated on an? [TA]-pose at [\d.]+ s)", lambda m: f"{m.group(1)} of {name}", n)
+        n = n.replace("(from the T-pose)", f"(from the T-pose of {name})").replace(
+            "(from the A-pose)", f"(from the A-pose of {name})")
+        out.append(n)
+    return body, offsets, out
+
+
 def solve_recording(source, settings: SolveSettings | None = None, solver=None, progress=None) -> SolveOutcome:
     """Solve a recording: ``source`` is a file path or a :class:`.recording.Recording`
     (e.g. sampled from scene objects).  Keypoint inputs (a FreeMoCap folder, ``.npy`` / ``.npz``,
@@ -640,46 +721,16 @@ def solve_recording(source, settings: SolveSettings | None = None, solver=None, 
         out.recording = source
     report(STAGES["resampling"], "resampling")
     t = _time.perf_counter()
-    from .resample import seconds_from_time_units
-    out.recording = seconds_from_time_units(out.recording)      # before anything measures speeds
-    jumps, continuous = [], out.recording
-    if mode != "ignore":
-        jumps = find_rig_jumps(out.recording)
-        continuous = remove_rig_jumps(out.recording, jumps)
-    times, pos, quat, valid, out.report = resample_recording(continuous, settings.fps, settings.floor)
-    if settings.max_frames is not None and settings.max_frames > 0 and len(times) > settings.max_frames:
-        n = int(settings.max_frames)
-        times = times[:n]
-        pos = {d: v[:n] for d, v in pos.items()}
-        quat = {d: v[:n] for d, v in quat.items()}
-        valid = {d: v[:n] for d, v in valid.items()}
-    from .smoothing import parse_smoothing, smooth_device_poses, smoothing_note
-    smoothing = parse_smoothing(settings.smoothing)
-    pos, quat, windows = smooth_device_poses(pos, quat, settings.fps, smoothing)
-    smoothed = smoothing_note(smoothing, list(windows.values()) if windows else None, "device")
-    sides = []
-    if settings.fix_sides:
-        sides = fix_swapped_sides(pos, quat, valid, settings.fps)
-    resolved = resolve_offsets(settings.offsets, out.recording)
-    out.targets, offsets = make_targets(times, pos, quat, valid, settings.fps, resolved)
-    note = offsets_note(settings.offsets, resolved, out.recording)
-    out.floor = floor_height(settings, out.targets)
-    out.targets = move_floor(out.targets, out.floor)
-    first, last = headset_off(out.targets.pos["head"], out.targets.rot["head"], settings.fps,
-                              out.targets.valid.get("head"))
-    T, fps = len(times), settings.fps
-    if settings.start is not None and settings.start >= first / fps - 0.05:
-        first = 0                        # trimmed away already
-    if settings.end is not None and settings.end <= (T - last) / fps + 0.05:
-        last = 0
-    off_notes = headset_off_note(first, last, T, fps, out.targets.pos["head"], out.targets.rot["head"])
+    times, pos, quat, valid, offsets, pre_notes, smoothed, jumps = device_targets(out, settings, mode)
     out.timings["resample"] = _time.perf_counter() - t
     report(STAGES["calibrating"], "calibrating")
     t = _time.perf_counter()
-    out.body, out.offsets, out.info = calibrate(settings, out.targets, times, offsets)
-    for extra in (note, *sides, *off_notes):
-        if extra:
-            out.info.append(extra)
+    if settings.calibration_take:       # calibrated on another take's T-pose (the session's)
+        out.body, out.offsets, out.info = calibration_from_take(settings, mode)
+    else:
+        out.body, out.offsets, out.info = calibrate(settings, out.targets, times, offsets)
+    for extra in pre_notes:
+        out.info.append(extra)
     if out.offsets is not offsets:     # calibration refined the device rotations
         out.targets = move_floor(make_targets(times, pos, quat, valid, settings.fps, out.offsets)[0], out.floor)
     out.targets, lost = relax_lost_hands(out.targets, out.body)     # long hand gaps: the arm hangs

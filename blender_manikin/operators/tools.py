@@ -30,8 +30,9 @@ class MANIKIN_OT_find_tpose(Operator):
             return {'CANCELLED'}
         s.tpose_time = seconds
         s.calibration = 'TPOSE'
+        where = " of the calibration take" if s.calibration_take and s.source != 'KEYPOINTS' else ""
         if cand.plausible:
-            self.report({'INFO'}, f"MANIKIN: T-pose at {seconds:.2f} s")
+            self.report({'INFO'}, f"MANIKIN: T-pose at {seconds:.2f} s{where}")
         else:
             self.report({'WARNING'}, f"MANIKIN: best candidate at {seconds:.2f} s does not look like a "
                         f"still T-pose (hand span {100 * cand.span_ratio:.0f}% of expected, "

@@ -153,6 +153,8 @@ class MANIKIN_PT_calibration(_Base, Panel):
         layout.use_property_split = True
         layout.use_property_decorate = False
         layout.prop(s, "calibration")
+        if s.calibration != 'MEASURE':
+            layout.prop(s, "calibration_take")
         if s.calibration == 'TPOSE':
             row = layout.row(align=True)
             row.prop(s, "tpose_time")

@@ -1,0 +1,62 @@
+"""A session's calibration take (SolveSettings.calibration_take, --calibration-take): the T-pose of
+one recording calibrates another that has none (body, hand device rotations, the pelvis and foot
+trackers' mounts)."""
+import os
+
+import numpy as np
+import pytest
+
+from blender_manikin.core import solve as cs
+from blender_manikin.core.io_csv import write_csv
+from blender_manikin.core.recording import Recording, TrackerStream
+
+from fixtures_six_trackers import TPOSE_END, body_with_legs, random_mounts, six_tracker_recording
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+EXAMPLE = os.path.join(ROOT, "examples", "example_recording.csv")
+
+
+def without_tpose(rec, cut=1.8):
+    """``rec`` from ``cut`` seconds on: the T-pose (0-1.2 s) and the arms coming down left out."""
+    streams = {}
+    for d, s in rec.streams.items():
+        k = s.time >= cut
+        streams[d] = TrackerStream(d, s.time[k], s.pos[k], s.quat[k])
+    return Recording(streams=streams, source="no T-pose", metadata=dict(rec.metadata))
+
+
+def test_a_take_without_a_tpose_is_calibrated_on_the_sessions_calibration_take(tmp_path):
+    body = body_with_legs(1.82, 1.05)                     # legs 5 % longer than proportional
+    rec = six_tracker_recording(body, random_mounts(4), duration=8.0, seed=4)
+    cal_path = str(tmp_path / "calibration.csv")
+    write_csv(cal_path, rec, axes="openxr", units="m")
+    take = without_tpose(rec)
+    assert TPOSE_END < 1.8
+    whole = cs.solve_recording(rec, cs.SolveSettings(fps=30.0))
+    alone = cs.solve_recording(take, cs.SolveSettings(fps=30.0))
+    assert "tracker offsets not measured (no T-pose)" in alone.summary()
+    with_cal = cs.solve_recording(take, cs.SolveSettings(fps=30.0, calibration_take=cal_path))
+    s = with_cal.summary()
+    assert "calibrated on a T-pose at 0.67 s of calibration.csv: stature 1.82 m" in s, s
+    assert "pelvis tracker offset" in s and "(from the T-pose of calibration.csv)" in s
+    assert "not measured" not in s
+    assert with_cal.body.stature == pytest.approx(whole.body.stature, abs=1e-5)
+    np.testing.assert_allclose(with_cal.body.offsets, whole.body.offsets, atol=1e-6)   # CSV decimals
+    # the take's frames solved as the whole recording solves them (its network windows start later)
+    T = with_cal.result.num_frames
+    err = np.linalg.norm(with_cal.result.positions - whole.result.positions[-T:], axis=-1)
+    err_alone = np.linalg.norm(alone.result.positions - whole.result.positions[-T:], axis=-1)
+    assert np.median(err) < 0.01 and np.median(err_alone) > 3 * np.median(err), (np.median(err), np.median(err_alone))
+
+
+def test_a_calibration_take_must_hold_a_pose(tmp_path):
+    rec = six_tracker_recording(body_with_legs(1.7), random_mounts(1), duration=6.0, seed=1)
+    no_pose = str(tmp_path / "no_pose.csv")
+    write_csv(no_pose, without_tpose(rec), axes="openxr", units="m")
+    with pytest.raises(cs.SolveError, match="calibration take no_pose.csv: no T- or A-pose found in it"):
+        cs.solve_recording(rec, cs.SolveSettings(fps=30.0, calibration_take=no_pose))
+    with pytest.raises(cs.SolveError, match="a calibration take needs Auto or T-pose calibration"):
+        cs.solve_recording(rec, cs.SolveSettings(fps=30.0, calibration_take=no_pose, calibration="MEASURE",
+                                                 height=1.7))
+    with pytest.raises(cs.SolveError, match="nowhere.csv"):
+        cs.solve_recording(rec, cs.SolveSettings(fps=30.0, calibration_take=str(tmp_path / "nowhere.csv")))
