@@ -259,3 +259,25 @@ def test_retarget_onto_an_fbx_character_in_centimetres_facing_y(addon):
         sc.frame_set(1)
         hips0, _ = _bone_world(char, "mixamorig:Hips")
         np.testing.assert_allclose(np.linalg.norm(hips - hips0), np.linalg.norm(pos[k, 0] - pos[0, 0]), atol=1e-4)
+
+
+def test_several_selected_takes_are_each_retargeted(addon):
+    """Two solved armatures selected: each take becomes an action of its own on the character
+    (plain keys), the last assigned, the first kept; the character's own action untouched."""
+    res_a, src_a = _source()
+    res_b = synthetic_result(T=T, fps=24.0, seed=7, stature=1.7)
+    src_b = writer.write_result(res_b, writer.WriteOptions(frame_start=1, armature_name="MANIKIN_take_b")).armature
+    char = mixamo_style_character(stature=1.9)
+    s = bpy.context.scene.manikin
+    s.retarget_target, s.retarget_map, s.retarget_keep_ends = char, 'AUTO', False
+    for o in bpy.context.view_layer.objects:
+        o.select_set(o in (src_a, src_b))
+    bpy.context.view_layer.objects.active = src_a
+    assert bpy.ops.manikin.retarget() == {'FINISHED'}
+    made = sorted(a.name for a in bpy.data.actions if a.name.startswith("MANIKIN_retarget_"))
+    assert len(made) == 2
+    last = f"MANIKIN_retarget_{src_b.animation_data.action.name}"         # sorted by name: take_b last
+    assert char.animation_data.action.name.startswith(last)
+    assert all(bpy.data.actions[n].use_fake_user or bpy.data.actions[n] == char.animation_data.action for n in made)
+    from blender_manikin.blender import character_swivel
+    assert not character_swivel.has_rig_parts(char)                   # plain keys for several takes

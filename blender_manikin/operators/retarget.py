@@ -21,7 +21,8 @@ def _source(context):
 
 
 class MANIKIN_OT_retarget(Operator):
-    """Put the solved motion onto the chosen character as a new action (its own actions are kept)"""
+    """Put the solved motion onto the chosen character as a new action (its own actions are kept);
+    with several solved armatures selected, each take as an action of its own"""
     bl_idname = "manikin.retarget"
     bl_label = "Retarget to Character"
     bl_options = {'REGISTER', 'UNDO'}
@@ -35,31 +36,47 @@ class MANIKIN_OT_retarget(Operator):
         import bpy
         from ..blender import retarget_apply
         s = context.scene.manikin
-        src = _source(context)
-        try:
-            if s.retarget_map == 'EDITED':
-                action, res, notes = _retarget_with_edited_list(src, s, context)
-            else:
-                action, res, notes = retarget_apply.retarget_onto(
-                    src, s.retarget_target, s.retarget_map.lower(), bpy.path.abspath(s.retarget_map_file),
-                    s.retarget_root.lower(), s.retarget_keep_ends, context,
-                    live_swivel=s.retarget_keep_ends and s.retarget_live_swivel)
-        except (ValueError, KeyError, TypeError, OSError) as exc:
-            self.report({'ERROR'}, f"retarget: {exc}")
-            return {'CANCELLED'}
-        msg = f"MANIKIN: {src.name} -> {s.retarget_target.name} / {action.name}"
-        self.report({'WARNING'} if notes else {'INFO'}, msg + ("; " + "; ".join(notes) if notes else ""))
+        sources = _selected_sources(context) or [_source(context)]
+        # several takes: one action each on the character, plain keys (a live swivel rig is the
+        # character's, one at a time, and would drive only the last)
+        live = s.retarget_keep_ends and s.retarget_live_swivel and len(sources) == 1
+        made = []
+        for src in sources:
+            try:
+                if s.retarget_map == 'EDITED':
+                    action, res, notes = _retarget_with_edited_list(src, s, context, live)
+                else:
+                    action, res, notes = retarget_apply.retarget_onto(
+                        src, s.retarget_target, s.retarget_map.lower(), bpy.path.abspath(s.retarget_map_file),
+                        s.retarget_root.lower(), s.retarget_keep_ends, context, live_swivel=live)
+            except (ValueError, KeyError, TypeError, OSError) as exc:
+                self.report({'ERROR'}, f"retarget of {src.name}: {exc}")
+                return {'CANCELLED'}
+            made.append(action.name)
+            msg = f"MANIKIN: {src.name} -> {s.retarget_target.name} / {action.name}"
+            self.report({'WARNING'} if notes else {'INFO'}, msg + ("; " + "; ".join(notes) if notes else ""))
+        if len(made) > 1:
+            self.report({'INFO'}, f"MANIKIN: {len(made)} takes retargeted onto {s.retarget_target.name}: "
+                                  f"{', '.join(made)} (the last assigned; the others kept with a fake user)")
         return {'FINISHED'}
 
 
-def _retarget_with_edited_list(src, s, context):
+def _retarget_with_edited_list(src, s, context, live_swivel):
     """The retarget with the bone map list as edited, checked against the character first (a bone
     it lacks is an error naming the joint and the bone)."""
     from ..blender import bone_map_list, retarget_apply
     bmap = bone_map_list.checked_bone_map(s, s.retarget_target)
     return retarget_apply.retarget_onto(src, s.retarget_target, bmap, None, s.retarget_root.lower(),
-                                        s.retarget_keep_ends, context,
-                                        live_swivel=s.retarget_keep_ends and s.retarget_live_swivel)
+                                        s.retarget_keep_ends, context, live_swivel=live_swivel)
+
+
+def _selected_sources(context):
+    """The selected MANIKIN armatures when there are several (each take retargeted in turn,
+    sorted by name), else ``[]``."""
+    from ..blender.armature import PROP_BODY
+    sel = [o for o in (getattr(context, "selected_objects", None) or [])
+           if o.type == 'ARMATURE' and PROP_BODY in o.keys()]
+    return sorted(sel, key=lambda o: o.name) if len(sel) > 1 else []
 
 
 class MANIKIN_OT_load_bone_map(Operator):
