@@ -60,3 +60,16 @@ def test_a_calibration_take_must_hold_a_pose(tmp_path):
                                                  height=1.7))
     with pytest.raises(cs.SolveError, match="nowhere.csv"):
         cs.solve_recording(rec, cs.SolveSettings(fps=30.0, calibration_take=str(tmp_path / "nowhere.csv")))
+
+
+def test_trackers_the_calibration_take_lacks_are_said(tmp_path):
+    """A calibration take made without the foot trackers: the take's foot trackers are not
+    measured, and the summary says so."""
+    rec = six_tracker_recording(body_with_legs(1.75), random_mounts(3), duration=6.0, seed=3)
+    cal = Recording(streams={d: s for d, s in rec.streams.items() if d not in ("left_foot", "right_foot")},
+                    source="no feet", metadata=dict(rec.metadata))
+    path = str(tmp_path / "cal_no_feet.csv")
+    write_csv(path, cal, axes="openxr", units="m")
+    out = cs.solve_recording(without_tpose(rec), cs.SolveSettings(fps=30.0, calibration_take=path))
+    assert "left foot, right foot tracker offsets not measured (not in the calibration take cal_no_feet.csv)" \
+        in " ".join(out.info)

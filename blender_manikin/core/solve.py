@@ -643,12 +643,13 @@ def device_targets(out: SolveOutcome, settings: SolveSettings, teleports="keep")
     return times, pos, quat, valid, offsets, notes, smoothed, jumps
 
 
-def calibration_from_take(settings: SolveSettings, teleports="keep"):
+def calibration_from_take(settings: SolveSettings, teleports="keep", devices=()):
     """``(body, offsets, info)`` calibrated on the T- or A-pose of another recording,
     ``settings.calibration_take`` (a session's calibration take: the same performer, the same
     trackers strapped on the same way), read, resampled and calibrated as :func:`calibrate` does
     with ``settings`` (Auto or T-pose time; typed height and arm span still win).  The notes
-    name the take.  Raises :class:`SolveError` when it holds no usable pose."""
+    name the take, and the solved take's ``devices`` the calibration take lacks (their offsets
+    are not measured).  Raises :class:`SolveError` when it holds no usable pose."""
     import dataclasses
     import re
     path = settings.calibration_take
@@ -674,6 +675,10 @@ def calibration_from_take(settings: SolveSettings, teleports="keep"):
         n = n.replace("(from the T-pose)", f"(from the T-pose of {name})").replace(
             "(from the A-pose)", f"(from the A-pose of {name})")
         out.append(n)
+    missing = [d for d in devices if d in ("pelvis", "left_foot", "right_foot") and d not in cal.targets.pos]
+    if missing:
+        out.append(f"{', '.join(d.replace('_', ' ') for d in missing)} tracker offsets not measured (not in "
+                   f"the calibration take {name}): their poses are taken as the joints'")
     return body, offsets, out
 
 
@@ -726,7 +731,7 @@ def solve_recording(source, settings: SolveSettings | None = None, solver=None, 
     report(STAGES["calibrating"], "calibrating")
     t = _time.perf_counter()
     if settings.calibration_take:       # calibrated on another take's T-pose (the session's)
-        out.body, out.offsets, out.info = calibration_from_take(settings, mode)
+        out.body, out.offsets, out.info = calibration_from_take(settings, mode, tuple(out.targets.pos))
     else:
         out.body, out.offsets, out.info = calibrate(settings, out.targets, times, offsets)
     for extra in pre_notes:
