@@ -30,7 +30,7 @@ clips caught).  :func:`swapped_feet` says the foot trackers are swapped at :data
 *Pelvis and foot roles* mixed up (the waist tracker given a foot's role): a pelvis tracker whose
 median height over the take is :data:`ROLE_DROP_M` or more below a foot tracker's is that foot's,
 and the two are swapped back (:func:`mixed_pelvis_role`).  Over the 3,363 clips the pelvis's median
-height is at most 7 cm below the higher ankle's (HDM05's lie-down clips, legs raised; no false
+height is at most 7.2 cm below the higher ankle's (HDM05's lie-down clips, legs raised; no false
 swap), and with the pelvis and left foot exchanged 3,343 of them are caught (the rest lie down).
 
 The solve then swaps the two streams back (``fix_sides``, on by default; ``--keep-sides`` keeps
