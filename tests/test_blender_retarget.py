@@ -1,4 +1,6 @@
 """Retargeting in Blender: a solved take onto a Mixamo-named character in an A-pose with rolled bones."""
+import os
+
 import numpy as np
 import pytest
 
@@ -156,6 +158,8 @@ def test_cli_retargets_onto_a_character_from_a_blend_and_the_fbx_round_trip_hold
 
 _RIGIFY_CHILD = r"""
 import json, sys
+import os
+
 import numpy as np
 import bpy, addon_utils
 import blender_manikin
@@ -281,3 +285,31 @@ def test_several_selected_takes_are_each_retargeted(addon):
     assert all(bpy.data.actions[n].use_fake_user or bpy.data.actions[n] == char.animation_data.action for n in made)
     from blender_manikin.blender import character_swivel
     assert not character_swivel.has_rig_parts(char)                   # plain keys for several takes
+
+
+def test_each_retargeted_take_is_exported_as_its_own_fbx(addon, tmp_path):
+    """Two takes retargeted onto a character, exported one FBX each (<character>_<take>.fbx) with
+    the take's frames; the character's action and the scene's range as they were."""
+    from blender_manikin.blender import fbx_presets
+    res_a, src_a = _source()
+    res_b = synthetic_result(T=T + 10, fps=24.0, seed=7, stature=1.7)
+    src_b = writer.write_result(res_b, writer.WriteOptions(frame_start=1, armature_name="MANIKIN_take_b")).armature
+    char = mixamo_style_character(stature=1.9)
+    for src in (src_a, src_b):
+        retarget_apply.retarget_onto(src, char, "mixamo", None, "scaled", False)
+    sc = bpy.context.scene
+    sc.frame_start, sc.frame_end = 5, 7
+    current = char.animation_data.action
+    assert [a.name for a in fbx_presets.take_actions(char)] == sorted(
+        a.name for a in bpy.data.actions if a.name.startswith("MANIKIN_retarget_"))
+    paths = fbx_presets.export_fbx_takes(str(tmp_path / "takes"), char, "unity")
+    assert len(paths) == 2 and all(os.path.exists(p) and os.path.basename(p).startswith(char.name + "_")
+                                   for p in paths)
+    assert char.animation_data.action == current and (sc.frame_start, sc.frame_end) == (5, 7)
+    from test_blender_fbx_presets import _import
+    lengths = []
+    for p in paths:
+        _import(p)
+        act = [a for a in bpy.data.actions if a.users][0]
+        lengths.append(int(round(act.frame_range[1] - act.frame_range[0])) + 1)
+    assert sorted(lengths) == [T, T + 10]

@@ -273,3 +273,58 @@ def _centimetre_stand_in(armature, meshes, factor, context, made, renamed):
         copy.name = name
     context.view_layer.update()
     return obj, copies
+
+
+def take_actions(obj):
+    """The takes of the character ``obj`` to export one by one: the ``MANIKIN_retarget_*``
+    actions that key it, sorted by name."""
+    import bpy
+    from . import keying
+    out = []
+    for act in bpy.data.actions:
+        if act.name.startswith("MANIKIN_retarget_") and keying.action_fcurves(
+                act, obj if keying.is_slotted(act) else None):
+            out.append(act)
+    return sorted(out, key=lambda a: a.name)
+
+
+def export_fbx_takes(directory, armature, preset: str = DEFAULT, context=None, actions=None) -> list:
+    """One FBX per take (:func:`take_actions`, or ``actions``) of the character ``armature`` in ``directory``:
+    ``<armature>_<take>.fbx``, each with its action assigned and the scene's frame range set to
+    the action's keys while it is written (:func:`export_fbx`).  The armature's action and the
+    frame range are as before afterwards.  Returns the paths written."""
+    import os
+    import bpy
+    from . import keying
+    from . import character_swivel
+    context = context or bpy.context
+    scene = context.scene
+    if armature is None or armature.type != 'ARMATURE':
+        raise ValueError("choose the character (an armature) whose takes to export")
+    if character_swivel.has_rig_parts(armature):
+        raise ValueError(f"{armature.name!r} carries the live swivel rig of one take, which would drive every "
+                         f"take: retarget the takes with plain keys (several selected, or Keep Hands and Feet off)")
+    actions = list(actions) if actions is not None else take_actions(armature)
+    if not actions:
+        raise ValueError(f"{armature.name!r} has no retargeted takes (MANIKIN_retarget_* actions) to export")
+    os.makedirs(directory, exist_ok=True)
+    ad = armature.animation_data
+    before = ad.action if ad is not None else None
+    frames = (scene.frame_start, scene.frame_end)
+    written = []
+    try:
+        for act in actions:
+            keying.assign_action(armature, act)
+            a, b = act.frame_range
+            scene.frame_start, scene.frame_end = int(round(a)), max(int(round(b)), int(round(a)))
+            take = act.name.replace("MANIKIN_retarget_", "").replace("MANIKIN_", "")
+            path = os.path.join(directory, bpy.path.clean_name(f"{armature.name}_{take}") + ".fbx")
+            export_fbx(path, armature, preset, context=context)
+            written.append(path)
+    finally:
+        if before is not None:
+            keying.assign_action(armature, before)
+        elif armature.animation_data is not None:
+            armature.animation_data.action = None
+        scene.frame_start, scene.frame_end = frames
+    return written

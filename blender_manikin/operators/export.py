@@ -2,6 +2,7 @@
 Unreal (``manikin.export_fbx``; the settings are :mod:`..blender.fbx_presets`)."""
 from __future__ import annotations
 
+import bpy
 from bpy.props import EnumProperty, StringProperty
 from bpy.types import Operator
 from bpy_extras.io_utils import ExportHelper
@@ -54,4 +55,39 @@ class MANIKIN_OT_export_fbx(Operator, ExportHelper):
         return {'FINISHED'}
 
 
-CLASSES = (MANIKIN_OT_export_fbx,)
+class MANIKIN_OT_export_fbx_takes(Operator):
+    """Export each take retargeted onto the character as an FBX of its own (<character>_<take>.fbx),
+    with the chosen preset"""
+    bl_idname = "manikin.export_fbx_takes"
+    bl_label = "Export Each Take"
+    bl_options = {'REGISTER'}
+    directory: StringProperty(subtype='DIR_PATH', options={'HIDDEN', 'SKIP_SAVE'})
+    filter_folder: bpy.props.BoolProperty(default=True, options={'HIDDEN'})
+    preset: EnumProperty(name="Preset", items=fbx_preset_items(), default='BLENDER',
+                         description="Axes, units and bones of the files, for the application that reads them")
+
+    @classmethod
+    def poll(cls, context):
+        s = getattr(context.scene, "manikin", None)
+        return s is not None and s.retarget_target is not None
+
+    def invoke(self, context, event):
+        if not self.properties.is_property_set("preset"):
+            self.preset = context.scene.manikin.export_fbx_preset
+        context.window_manager.fileselect_add(self)
+        return {'RUNNING_MODAL'}
+
+    def execute(self, context):
+        from ..blender import fbx_presets
+        char = context.scene.manikin.retarget_target
+        try:
+            paths = fbx_presets.export_fbx_takes(self.directory, char, self.preset.lower(), context=context)
+        except (ValueError, RuntimeError, OSError) as exc:
+            self.report({'ERROR'}, f"export takes: {exc}")
+            return {'CANCELLED'}
+        self.report({'INFO'}, f"{len(paths)} take(s) of {char.name} written to {self.directory} "
+                              f"({self.preset.lower()} preset)")
+        return {'FINISHED'}
+
+
+CLASSES = (MANIKIN_OT_export_fbx, MANIKIN_OT_export_fbx_takes)

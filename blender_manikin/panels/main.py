@@ -267,6 +267,8 @@ class MANIKIN_PT_retarget(_Base, Panel):
         layout.separator()
         layout.prop(s, "export_fbx_preset")
         layout.operator("manikin.export_fbx", icon='EXPORT')
+        if s.retarget_target is not None:
+            layout.operator("manikin.export_fbx_takes", icon='EXPORT')
 
 
 CLASSES = (MANIKIN_PT_solve, MANIKIN_PT_calibration, MANIKIN_PT_output, MANIKIN_UL_bone_map, MANIKIN_PT_retarget)
