@@ -51,10 +51,11 @@ def test_a_headset_on_a_table_is_pointed_out_with_its_trim():
     assert out.result.num_frames == base.result.num_frames + 90        # nothing cut by itself
     trimmed = cs.solve_recording(with_headset_on_a_table(rec), cs.SolveSettings(fps=30.0, start=3.0))
     assert "headset lay still" not in trimmed.summary()
-    # the trimmed solve is the example's (the same T-pose, calibration and frames)
+    # the trimmed solve is the example's (the same T-pose, calibration and frames): the network's
+    # context stops where the headset lay (with the table in its first windows: up to 38 cm off)
     assert trimmed.result.num_frames == base.result.num_frames
     err = np.linalg.norm(trimmed.result.positions - base.result.positions, axis=-1)
-    assert np.median(err) < 0.01
+    assert np.median(err) < 0.002 and err.max() < 0.05
     end = cs.solve_recording(with_headset_on_a_table(rec, 2.5, at_end=True), cs.SolveSettings(fps=30.0))
     assert "for the last 2.5 s (taken off?): Trim End 7.0 s (--end 7.0) leaves it out" in end.summary()
 

@@ -134,6 +134,7 @@ class SolveOutcome:
     timings: dict = field(default_factory=dict)
     floor: float | None = None          # the floor's height in the recording (metres), moved to z = 0
     jumps: list = field(default_factory=list)   # the app's teleports and snap turns (teleports.RigJump)
+    headset_off: tuple = (0, 0)         # frames at the start / end where the headset lay off (headset_off.py)
 
     def summary(self, extra_timings=None, timings=True) -> str:
         """One line: frames, fps, where the solve gave way, stature, calibration, gaps, and (with
@@ -633,6 +634,7 @@ def device_targets(out: SolveOutcome, settings: SolveSettings, teleports="keep")
     out.targets = move_floor(out.targets, out.floor)
     first, last = headset_off(out.targets.pos["head"], out.targets.rot["head"], settings.fps,
                               out.targets.valid.get("head"))
+    out.headset_off = (first, last)
     T, fps = len(times), settings.fps
     if settings.start is not None and settings.start >= first / fps - 0.05:
         first = 0                        # trimmed away already
@@ -751,7 +753,13 @@ def solve_recording(source, settings: SolveSettings | None = None, solver=None, 
     if span is not None:             # calibrated on the whole take; solved with a margin, then cut
         margin = int(round(TRIM_MARGIN_S * settings.fps))
         align = max(int(round(TRIM_ALIGN_S * settings.fps)), 1)
-        solved = slice(max(0, (span[0] - margin) // align * align), min(len(times), span[1] + margin))
+        lo, hi = max(0, (span[0] - margin) // align * align), min(len(times), span[1] + margin)
+        off_first, off_last = out.headset_off        # the context stops where a headset lay off
+        if off_first and span[0] >= off_first:
+            lo = max(lo, off_first)
+        if off_last and span[1] <= len(times) - off_last:
+            hi = min(hi, len(times) - off_last)
+        solved = slice(lo, hi)
         out.targets, solve_times = out.targets.frames(solved), times[solved]
         out.info.append(f"trimmed to {times[span[0]] - times[0]:.2f}-{times[span[1] - 1] - times[0]:.2f} s")
     if jumps:
