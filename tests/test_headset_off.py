@@ -65,6 +65,9 @@ def test_what_is_not_a_headset_lying_off():
     pos = np.tile([0.0, 0.0, 0.75], (T, 1))
     tipped = np.tile(np.array([[1.0, 0, 0], [0, 0, -1.0], [0, 1.0, 0]]), (T, 1, 1))   # 90° about X
     assert headset_off(pos, tipped, fps) == (T, T)                  # the whole take lay there
+    from blender_manikin.core.headset_off import headset_off_note
+    assert headset_off_note(T, T, T, fps) == ["the headset lay still, tipped over, for the whole take (5.0 s): "
+                                              "never worn?"]
     upright = np.tile(np.eye(3), (T, 1, 1))
     assert headset_off(pos, upright, fps) == (0, 0)                 # worn, standing still
     low = pos.copy()

@@ -69,6 +69,8 @@ def headset_off(pos, rot, fps, valid=None):
 
 def headset_off_note(first, last, T, fps, pos=None, rot=None):
     """The summary's lines for :func:`headset_off`'s stretches (none when both are 0)."""
+    if first >= T and T:
+        return [f"the headset lay still, tipped over, for the whole take ({T / fps:.1f} s): never worn?"]
     notes = []
     for n, at_start in ((first, True), (last, False)):
         if not n:
