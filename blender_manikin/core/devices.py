@@ -50,22 +50,27 @@ ALIASES = {
 _OBJECT_AFFIXES = ("manikin_", "tracker_", "vr_", "xr_", "_tracker", "_empty")
 
 
-def device_of_object_name(name):
-    """The device a scene object's ``name`` stands for (``"HMD"``, ``"LeftController"``,
-    ``"MANIKIN_left_hand.001"``, ``"Tracker_LeftFoot"``), or ``None``: :func:`canonical_device`
-    after Blender's ``.001`` suffix and the affixes of :data:`_OBJECT_AFFIXES` are dropped."""
+def name_key(name, affixes=()) -> str:
+    """An object's or column's ``name`` as a key: lower case, spaces and dashes as underscores,
+    Blender's ``.001`` duplicate suffix dropped, then each prefix (``"body_"``) and suffix
+    (``"_empty"``, written with its leading underscore) of ``affixes`` it has, in order."""
     key = str(name).strip().lower().replace(" ", "_").replace("-", "_")
     base, dot, num = key.rpartition(".")
     if dot and num.isdigit():
         key = base
-    found = canonical_device(key)
-    for a in _OBJECT_AFFIXES:
-        if found is None:
-            if a.startswith("_") and key.endswith(a):
-                found = canonical_device(key[:-len(a)])
-            elif not a.startswith("_") and key.startswith(a):
-                found = canonical_device(key[len(a):])
-    return found
+    for a in affixes:
+        if a.startswith("_") and key.endswith(a):
+            key = key[:-len(a)]
+        elif not a.startswith("_") and key.startswith(a):
+            key = key[len(a):]
+    return key
+
+
+def device_of_object_name(name):
+    """The device a scene object's ``name`` stands for (``"HMD"``, ``"LeftController"``,
+    ``"MANIKIN_left_hand.001"``, ``"Tracker_LeftFoot"``), or ``None``: :func:`canonical_device`
+    of its :func:`name_key`, else of that key without the affixes of :data:`_OBJECT_AFFIXES`."""
+    return canonical_device(name_key(name)) or canonical_device(name_key(name, _OBJECT_AFFIXES))
 
 
 def canonical_device(name):

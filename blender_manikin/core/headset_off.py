@@ -19,6 +19,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from .rotations import geodesic_angle
+
 #: seconds a stretch must last
 MIN_OFF_S = 2.0
 #: metres per second the head target may move and still count as lying still
@@ -51,8 +53,7 @@ def headset_off(pos, rot, fps, valid=None):
     a, b = np.maximum(k - half, 0), np.minimum(k + half, T - 1)
     dt = (b - a) / fps                       # how far it went over the window, not the sum of
     speed = np.linalg.norm(pos[b] - pos[a], axis=-1) / dt        # its noisy steps
-    cosang = np.clip(0.5 * np.einsum("tij,tij->t", rot[b], rot[a]) - 0.5, -1.0, 1.0)
-    turn = np.degrees(np.arccos(cosang)) / dt
+    turn = np.degrees(geodesic_angle(rot[a], rot[b])) / dt
     tilt = np.degrees(np.arccos(np.clip(rot[:, 2, 2], -1.0, 1.0)))
     off = (speed < STILL_M_S) & (turn < STILL_DEG_S) & (tilt > TILT_DEG) & (pos[:, 2] >= MIN_HEIGHT_M)
     need = int(np.ceil(MIN_OFF_S * fps))

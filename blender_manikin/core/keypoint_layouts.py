@@ -119,19 +119,10 @@ _NAME_AFFIXES = ("mediapipe_", "body_", "pose_", "mp_", "_body", "_empty", "_mar
 
 
 def point_key(name) -> str:
-    """``name`` (an object's, a column's) as a point name: lower case, Blender's ``.001``
-    duplicate suffix and the affixes of :data:`_NAME_AFFIXES` dropped (``"Body_Left_Wrist.001"``
-    → ``"left_wrist"``)."""
-    key = str(name).strip().lower().replace(" ", "_").replace("-", "_")
-    base, dot, num = key.rpartition(".")
-    if dot and num.isdigit():
-        key = base
-    for a in _NAME_AFFIXES:
-        if a.startswith("_") and key.endswith(a):
-            key = key[:-len(a)]
-        elif not a.startswith("_") and key.startswith(a):
-            key = key[len(a):]
-    return key
+    """``name`` (an object's, a column's) as a point name: :func:`.devices.name_key` with the
+    affixes of :data:`_NAME_AFFIXES` (``"Body_Left_Wrist.001"`` → ``"left_wrist"``)."""
+    from .devices import name_key
+    return name_key(name, _NAME_AFFIXES)
 
 
 def layout_from_names(names):

@@ -22,6 +22,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .devices import LABELS
+from .runs import run_bounds
 from .skeleton import LIMB_NAMES
 
 #: a miss or a limit must last this many frames to be marked
@@ -47,10 +48,8 @@ class ReviewMark:
 
 def _runs(mask, min_len):
     """Start indices of the runs of True in ``mask`` (``(T,)`` bool) at least ``min_len`` long."""
-    m = np.concatenate([[False], np.asarray(mask, bool), [False]])
-    d = np.diff(m.astype(np.int8))
-    starts, ends = np.nonzero(d == 1)[0], np.nonzero(d == -1)[0]
-    return [int(a) for a, b in zip(starts, ends) if b - a >= min_len]
+    starts, stops = run_bounds(mask)
+    return [int(a) for a, b in zip(starts, stops) if b - a >= min_len]
 
 
 def review_marks(result, report=None, jumps=(), reach_tolerance=0.005) -> list:

@@ -40,7 +40,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .rotations import quat_to_matrix
+from .rotations import normalize, quat_to_matrix
 
 #: hands at least this far apart sideways (metres, along the headset's left axis) are counted
 WIDE_M = 0.30
@@ -78,7 +78,7 @@ def _decide(side, wide_m, valid, min_frames):
 def _horizontal_unit(v):
     v = np.array(v, dtype=np.float64)
     v[..., 2] = 0.0
-    return v / np.maximum(np.linalg.norm(v, axis=-1, keepdims=True), 1e-9)
+    return normalize(v)
 
 
 def swapped_hands(head_quat, left_pos, right_pos, valid=None, fps=30.0):

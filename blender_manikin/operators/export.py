@@ -22,6 +22,12 @@ def export_object(context):
     return _source(context)
 
 
+def _preset_from_panel(op, context):
+    """The panel's FBX preset for an export operator whose preset was not given."""
+    if not op.properties.is_property_set("preset"):
+        op.preset = context.scene.manikin.export_fbx_preset
+
+
 class MANIKIN_OT_export_fbx(Operator, ExportHelper):
     """Export the character (or, with none chosen, the solved armature) and its animation as FBX,
     with the axes, units and bones the chosen application expects"""
@@ -38,8 +44,7 @@ class MANIKIN_OT_export_fbx(Operator, ExportHelper):
         return export_object(context) is not None
 
     def invoke(self, context, event):
-        if not self.properties.is_property_set("preset"):
-            self.preset = context.scene.manikin.export_fbx_preset
+        _preset_from_panel(self, context)
         return ExportHelper.invoke(self, context, event)
 
     def execute(self, context):
@@ -72,8 +77,7 @@ class MANIKIN_OT_export_fbx_takes(Operator):
         return s is not None and s.retarget_target is not None
 
     def invoke(self, context, event):
-        if not self.properties.is_property_set("preset"):
-            self.preset = context.scene.manikin.export_fbx_preset
+        _preset_from_panel(self, context)
         context.window_manager.fileselect_add(self)
         return {'RUNNING_MODAL'}
 
