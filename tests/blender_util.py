@@ -127,6 +127,36 @@ def stub_solver(targets, body, progress=None):
     return res
 
 
+def modal_operator(cls, **props):
+    """An instance standing in for a registered solve operator ``cls`` (Blender makes those), to
+    drive its ``modal()`` in background mode: it has the operator's methods, ``props`` as
+    attributes (``files``, ``directory``, ...) and collects ``report()`` calls in ``reports``.
+    ``start_modal()`` does what ``_run_modal`` does less the window's timer and handler (there is
+    no window in background mode) and returns the :class:`SolveQueue`."""
+    from blender_manikin.operators import solve as solve_op
+
+    class ModalOperator:
+        def __init__(self):
+            self._timer, self.reports = None, []
+            for k, v in props.items():
+                setattr(self, k, v)
+
+        def report(self, kind, msg):
+            self.reports.append((kind, msg))
+
+        def start_modal(self):
+            import bpy
+            self._queue = self._make_queue(bpy.context, self._configs(bpy.context))
+            assert self._queue.start(bpy.context)
+            solve_op._ACTIVE["job"] = self._queue
+            return self._queue
+
+    for name in ("_make_queue", "_status", "_cleanup", "modal", "cancel", "_configs", "_queue_done",
+                 "_queue_failed", "_queue_finish"):
+        setattr(ModalOperator, name, getattr(cls, name))
+    return ModalOperator()
+
+
 # A real Blender binary: CI's Debian 13 job has Debian's blender 4.3 and sets
 # BLENDER_MANIKIN_REQUIRE_BLENDER_BINARY=1, so there a missing or too old binary fails the tests
 # instead of skipping them.

@@ -11,7 +11,8 @@ import blender_manikin  # noqa: E402
 from blender_manikin.blender import keying, solve_job  # noqa: E402
 from blender_manikin.core import skeleton as sk  # noqa: E402
 
-from blender_util import PanelLayout, fresh_scene, stub_solver, synthetic_result, write_recording_csv  # noqa: E402
+from blender_util import (PanelLayout, fresh_scene, modal_operator, stub_solver, synthetic_result,  # noqa: E402
+                          write_recording_csv)
 
 
 @pytest.fixture
@@ -412,26 +413,13 @@ def test_panel_overlap_reaches_the_solver(addon, recording, monkeypatch):
 def test_modal_progress_cancel_and_finish(addon, recording, monkeypatch):
     """Drive the operator's modal() with timer / Esc events (no UI event loop in background)."""
     from types import SimpleNamespace
-    from blender_manikin.blender.properties import config_from_settings
     from blender_manikin.operators import solve as solve_op
     cls = solve_op.MANIKIN_OT_solve_full_body
-
-    class FakeOp:
-        _status = cls._status
-        _cleanup = cls._cleanup
-        modal = cls.modal
-        cancel = cls.cancel
-
-        def __init__(self, job):
-            self._job, self._timer, self.reports = job, None, []
-
-        def report(self, kind, msg):
-            self.reports.append((kind, msg))
-
-    gate = threading.Event()
+    gate, started = threading.Event(), threading.Event()
 
     def gated_solver(targets, body, progress=None):
         progress(0.3)
+        started.set()
         gate.wait(5)
         return stub_solver(targets, body, progress)
 
@@ -443,26 +431,23 @@ def test_modal_progress_cancel_and_finish(addon, recording, monkeypatch):
     before = len(bpy.data.objects)
 
     # cancelled while the worker runs
-    job = solve_job.SolveJob(config_from_settings(bpy.context))
-    op = FakeOp(job)
-    solve_op._ACTIVE["job"] = job
-    job.start_background()
+    op = modal_operator(cls)
+    queue = op.start_modal()
     assert not cls.poll(bpy.context)                       # one solve at a time
+    assert started.wait(5)
     assert op.modal(bpy.context, timer) == {'RUNNING_MODAL'}
+    assert 0.0 < queue.progress < 1.0
     assert op.modal(bpy.context, mouse) == {'PASS_THROUGH'}
     assert op.modal(bpy.context, esc) == {'CANCELLED'}
     gate.set()
-    job.join(5)
     assert solve_op._ACTIVE["job"] is None and cls.poll(bpy.context)
     assert len(bpy.data.objects) == before
     assert op.reports[-1][0] == {'WARNING'} and "nothing was written" in op.reports[-1][1]
 
     # runs to the end: the timer tick after the worker finishes writes the result
-    job = solve_job.SolveJob(config_from_settings(bpy.context))
-    op = FakeOp(job)
-    solve_op._ACTIVE["job"] = job
-    job.start_background()
-    job.join(5)
+    op = modal_operator(cls)
+    queue = op.start_modal()
+    queue.job.join(5)
     assert op.modal(bpy.context, timer) == {'FINISHED'}
     assert len(bpy.data.objects) > before and solve_op._ACTIVE["job"] is None
     assert op.reports[-1][0] == {'INFO'} and "MANIKIN_live" in op.reports[-1][1]      # the live rig (default)
@@ -470,10 +455,9 @@ def test_modal_progress_cancel_and_finish(addon, recording, monkeypatch):
     # a failing worker is reported as an error
     monkeypatch.setattr(solve_job, "run_solver", lambda *a, **k: (_ for _ in ()).throw(ValueError("boom")))
     n = len(bpy.data.objects)
-    job = solve_job.SolveJob(config_from_settings(bpy.context))
-    op = FakeOp(job)
-    job.start_background()
-    job.join(5)
+    op = modal_operator(cls)
+    queue = op.start_modal()
+    queue.job.join(5)
     assert op.modal(bpy.context, timer) == {'CANCELLED'}
     assert op.reports[-1] == ({'ERROR'}, "MANIKIN: boom") and len(bpy.data.objects) == n
 

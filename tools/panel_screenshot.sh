@@ -15,17 +15,7 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 OUT="${1:-docs/panel.png}"
 KEYPOINTS_ARG="${2:+--keypoints $2}"
-WORK="$(mktemp -d)"
-trap 'rm -rf "$WORK"' EXIT
-export HOME="$WORK/home" BLENDER_USER_RESOURCES="$WORK/home/resources" \
-       BLENDER_USER_CONFIG="$WORK/home/config" BLENDER_USER_SCRIPTS="$WORK/home/scripts"
-mkdir -p "$BLENDER_USER_RESOURCES" "$BLENDER_USER_CONFIG" "$BLENDER_USER_SCRIPTS"
-python build_addon.py --platform linux-x64 --out "$WORK/dist" >/dev/null
-ZIP="$(ls "$WORK"/dist/blender_manikin-*-linux_x64.zip)"
-blender --command extension install-file -r user_default -e "$ZIP" >/dev/null
-# No splash screen over the viewport (saved into the fresh user preferences).
-blender -b --python-exit-code 1 --python-expr \
-  "import bpy; bpy.context.preferences.view.show_splash = False; bpy.ops.wm.save_userpref()" >/dev/null
+source tools/blender_gui_env.sh
 W=1600; H=1000
 xvfb-run -a -s "-screen 0 ${W}x${H}x24" bash -c '
   set -euo pipefail

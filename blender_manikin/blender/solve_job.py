@@ -326,6 +326,120 @@ class SolveJob:
                                     timings=timings)
 
 
+class SolveQueue:
+    """Solves one after another, as the solve operators run them: one (*Solve Full Body*) or
+    one per file (*Solve Several Files*).
+
+    configs: the :class:`SolveConfig` of each solve.  on_done(job) is called after a job was
+    written, on_failed(job, exc) when one failed (its file unreadable, its solve or its writing
+    raising); both on the main thread.  A failed job leaves nothing behind and the queue goes on
+    with the next.
+
+    Modal use (the operators' timer): :meth:`start`, then :meth:`poll` on every tick until it
+    returns False; each job's compute runs in a worker thread (:meth:`SolveJob.start_background`)
+    and is written in the tick after it finishes.  :meth:`cancel` (Esc) stops the running job,
+    of which nothing is written, and the ones not started; those written before stay (one undo
+    step with the operator's).  Synchronous use (scripts, background mode): :meth:`run`.
+
+    ``solved`` / ``failed``: the jobs so far; ``progress`` 0-1 over the whole queue.
+    """
+
+    def __init__(self, configs, on_done=None, on_failed=None):
+        self.configs = list(configs)
+        self.on_done = on_done or (lambda job: None)
+        self.on_failed = on_failed or (lambda job, exc: None)
+        self.index = -1
+        self.job = None
+        self.solved, self.failed = [], []
+        self.cancelled = False
+
+    def __len__(self):
+        return len(self.configs)
+
+    @property
+    def progress(self) -> float:
+        n = max(len(self.configs), 1)
+        part = self.job.progress if self.job is not None else 1.0
+        return min(max((max(self.index, 0) + part) / n, 0.0), 1.0)
+
+    @property
+    def stage(self) -> str:
+        stage = self.job.stage if self.job is not None else "done"
+        if len(self.configs) < 2:
+            return stage
+        name = os.path.basename(self.configs[max(self.index, 0)].filepath or "") or "take"
+        return f"file {max(self.index, 0) + 1} of {len(self.configs)} ({name}): {stage}"
+
+    def _written(self, job, context):
+        try:
+            job.write(context)
+        except Exception as exc:
+            self._fail(job, exc)
+        else:
+            self.solved.append(job)
+            self.on_done(job)
+
+    def _fail(self, job, exc):
+        self.failed.append((job, exc))
+        self.on_failed(job, exc)
+
+    def _next(self, context) -> bool:
+        """Start the next job that gathers; False when none is left."""
+        self.job = None
+        while not self.cancelled and self.index + 1 < len(self.configs):
+            self.index += 1
+            job = SolveJob(self.configs[self.index])
+            try:
+                job.gather(context)
+            except Exception as exc:
+                self._fail(job, exc)
+                continue
+            job.start_background()
+            self.job = job
+            return True
+        return False
+
+    def start(self, context) -> bool:
+        """Start the first job; False when there is nothing to wait for (every job failed)."""
+        return self._next(context)
+
+    def poll(self, context) -> bool:
+        """Write a finished job and start the next; True while a job is running."""
+        job = self.job
+        if job is None:
+            return False
+        if not job.done:
+            return True
+        if job.error is not None:
+            self._fail(job, job.error)
+        else:
+            self._written(job, context)
+        return self._next(context)
+
+    def cancel(self, timeout=0.5):
+        """Stop: the running job is dropped unwritten (its worker never touches Blender data,
+        so it is safe to leave it finishing), none of the rest starts."""
+        self.cancelled = True
+        if self.job is not None:
+            self.job.cancel()
+            self.job.join(timeout)
+        self.job = None
+
+    def run(self, context):
+        """Every job in this thread, one after another (scripts, background mode)."""
+        for self.index, cfg in enumerate(self.configs):
+            job = SolveJob(cfg)
+            try:
+                job.gather(context)
+                job.compute()
+            except Exception as exc:
+                self._fail(job, exc)
+                continue
+            self._written(job, context)
+        self.job = None
+        return self
+
+
 def find_tpose_time(config: SolveConfig, context=None):
     """Propose the T-pose moment of the source of ``config``.
 

@@ -1,13 +1,17 @@
-"""MANIKIN_OT_solve_full_body: the "Solve full body" button.
+"""The solve operators: *Solve Full Body* and *Solve Several Files*.
 
-Invoked from the UI it is modal: the numpy/onnxruntime work runs in a worker
-thread while a window-manager timer updates ``wm.progress_*`` and the status
-bar; Esc cancels.  Nothing in the scene changes until the solve is complete
-(see :mod:`blender_manikin.blender.solve_job`): cancelling or an error leaves
-no data behind, and on success everything is created in one step, followed
-by the operator's undo push (``bl_options`` ``UNDO``), so Ctrl+Z removes the
-whole solve.  Run with ``EXEC_DEFAULT`` (scripts, background mode) it runs
-synchronously.  Errors are shown with ``self.report({'ERROR'}, ...)``.
+Invoked from the UI they are modal: the numpy/onnxruntime work of each solve
+runs in a worker thread while a window-manager timer updates ``wm.progress_*``
+and the status bar; Esc cancels.  Nothing in the scene changes until a solve is
+complete (see :mod:`blender_manikin.blender.solve_job`): cancelling or an
+error leaves no data of that solve behind, and on success everything is created
+in one step, followed by the operator's undo push (``bl_options`` ``UNDO``), so
+Ctrl+Z removes the whole solve.  Several files are solved one after another
+(:class:`~blender_manikin.blender.solve_job.SolveQueue`); Esc stops the file
+being solved (nothing of it is written) and the rest, and the files solved
+before stay, in the operator's undo step.  Run with ``EXEC_DEFAULT`` (scripts,
+background mode) both run synchronously.  Errors are shown with
+``self.report({'ERROR'}, ...)``.
 """
 from __future__ import annotations
 
@@ -16,7 +20,7 @@ from bpy.types import Operator
 
 from ..blender import solve_job as sj
 
-#: the job of the modal solve in progress (one at a time)
+#: the solve queue of the modal operator in progress (one at a time)
 _ACTIVE = {"job": None}
 
 
@@ -39,52 +43,29 @@ def _finish_report(op, context, job):
     op.report({'INFO'}, f"MANIKIN: {out.armature.name} / {out.action.name}: {summary}")
 
 
-class MANIKIN_OT_solve_full_body(Operator):
-    """Solve the full body from the trackers and key it on a new armature action"""
-    bl_idname = "manikin.solve_full_body"
-    bl_label = "Solve Full Body"
-    bl_description = ("Solve full-body animation from the tracker recording or scene objects and "
-                      "write it as a new action (Esc cancels)")
-    bl_options = {'REGISTER', 'UNDO'}
+class _ModalSolves:
+    """What both solve operators share: a :class:`~..blender.solve_job.SolveQueue` run either
+    synchronously (:meth:`_run_now`) or modally (:meth:`_run_modal`: a worker thread per solve,
+    a window-manager timer updating ``wm.progress_*`` and the status bar, Esc cancelling).
+    Subclasses give ``_queue_done(context, job)``, ``_queue_failed(context, job, exc)`` and
+    ``_queue_finish(context) -> set`` (the operator's return value)."""
 
-    @classmethod
-    def poll(cls, context):
-        if _ACTIVE["job"] is not None:
-            cls.poll_message_set("a solve is already running")
-            return False
-        return context.scene is not None and hasattr(context.scene, "manikin")
+    def _make_queue(self, context, configs):
+        return sj.SolveQueue(configs, on_done=lambda job: self._queue_done(context, job),
+                             on_failed=lambda job, exc: self._queue_failed(context, job, exc))
 
-    # -- synchronous
-    def execute(self, context):
-        try:
-            job = sj.SolveJob(self._config(context))
-            job.run(context)
-        except sj.SolveCancelled:
-            self.report({'WARNING'}, "MANIKIN: solve cancelled")
-            return {'CANCELLED'}
-        except Exception as exc:
-            self.report({'ERROR'}, f"MANIKIN: {sj.error_message(exc)}")
-            return {'CANCELLED'}
-        _finish_report(self, context, job)
-        return {'FINISHED'}
+    def _run_now(self, context, configs):
+        self._queue = self._make_queue(context, configs)
+        self._queue.run(context)
+        return self._queue_finish(context)
 
-    def _config(self, context):
-        from ..blender.properties import config_from_settings
-        return config_from_settings(context)
-
-    # -- modal
-    def invoke(self, context, event):
+    def _run_modal(self, context, configs):
         wm = context.window_manager
-        if bpy.app.background or context.window is None:
-            return self.execute(context)
-        try:
-            self._job = sj.SolveJob(self._config(context))
-            self._job.gather(context)
-        except Exception as exc:
-            self.report({'ERROR'}, f"MANIKIN: {sj.error_message(exc)}")
-            return {'CANCELLED'}
-        _ACTIVE["job"] = self._job
-        self._job.start_background()
+        self._queue = self._make_queue(context, configs)
+        self._timer = None
+        if not self._queue.start(context):          # every source failed to gather: nothing to wait for
+            return self._queue_finish(context)
+        _ACTIVE["job"] = self._queue
         wm.progress_begin(0, 100)
         self._timer = wm.event_timer_add(0.1, window=context.window)
         wm.modal_handler_add(self)
@@ -95,9 +76,9 @@ class MANIKIN_OT_solve_full_body(Operator):
         ws = getattr(context, "workspace", None)
         if ws is None:
             return
-        if text is None and self._job is not None:
-            text = (f"MANIKIN: {self._job.stage} {100 * self._job.progress:.0f}%  "
-                    f"(Esc to cancel)")
+        q = getattr(self, "_queue", None)
+        if text is None and q is not None:
+            text = f"MANIKIN: {q.stage} {100 * q.progress:.0f}%  (Esc to cancel)"
         ws.status_text_set(text)
 
     def _cleanup(self, context):
@@ -112,111 +93,165 @@ class MANIKIN_OT_solve_full_body(Operator):
         _ACTIVE["job"] = None
 
     def modal(self, context, event):
-        job = self._job
+        q = self._queue
         if event.type == 'ESC' and event.value == 'PRESS':
-            job.cancel()
-            job.join(timeout=0.5)     # the worker never touches Blender data: safe to leave
+            q.cancel()
             self._cleanup(context)
-            self.report({'WARNING'}, "MANIKIN: solve cancelled, nothing was written")
-            return {'CANCELLED'}
+            return self._queue_finish(context)
         if event.type != 'TIMER':
             return {'PASS_THROUGH'}
-        context.window_manager.progress_update(int(100 * job.progress))
-        self._status(context)
-        if not job.done:
+        running = q.poll(context)
+        context.window_manager.progress_update(int(100 * q.progress))
+        if running:
+            self._status(context)
             return {'RUNNING_MODAL'}
         self._cleanup(context)
-        if job.error is not None:
-            if isinstance(job.error, sj.SolveCancelled):
-                self.report({'WARNING'}, "MANIKIN: solve cancelled, nothing was written")
-            else:
-                self.report({'ERROR'}, f"MANIKIN: {sj.error_message(job.error)}")
-            return {'CANCELLED'}
-        try:
-            job.write(context)
-        except Exception as exc:
-            self.report({'ERROR'}, f"MANIKIN: {sj.error_message(exc)}")
-            return {'CANCELLED'}
-        _finish_report(self, context, job)
-        return {'FINISHED'}
+        return self._queue_finish(context)
 
     def cancel(self, context):
         """Called by Blender when the modal operator is aborted (e.g. file load)."""
-        if getattr(self, "_job", None) is not None:
-            self._job.cancel()
+        if getattr(self, "_queue", None) is not None:
+            self._queue.cancel()
         self._cleanup(context)
 
 
-class MANIKIN_OT_solve_files(Operator):
+class MANIKIN_OT_solve_full_body(_ModalSolves, Operator):
+    """Solve the full body from the trackers and key it on a new armature action"""
+    bl_idname = "manikin.solve_full_body"
+    bl_label = "Solve Full Body"
+    bl_description = ("Solve full-body animation from the tracker recording or scene objects and "
+                      "write it as a new action (Esc cancels)")
+    bl_options = {'REGISTER', 'UNDO'}
+
+    @classmethod
+    def poll(cls, context):
+        if _ACTIVE["job"] is not None:
+            cls.poll_message_set("a solve is already running")
+            return False
+        return context.scene is not None and hasattr(context.scene, "manikin")
+
+    def _configs(self, context):
+        from ..blender.properties import config_from_settings
+        return [config_from_settings(context)]
+
+    def execute(self, context):
+        try:
+            configs = self._configs(context)
+        except Exception as exc:
+            self.report({'ERROR'}, f"MANIKIN: {sj.error_message(exc)}")
+            return {'CANCELLED'}
+        return self._run_now(context, configs)
+
+    def invoke(self, context, event):
+        if bpy.app.background or context.window is None:
+            return self.execute(context)
+        try:
+            configs = self._configs(context)
+        except Exception as exc:
+            self.report({'ERROR'}, f"MANIKIN: {sj.error_message(exc)}")
+            return {'CANCELLED'}
+        return self._run_modal(context, configs)
+
+    def _queue_done(self, context, job):
+        _finish_report(self, context, job)
+
+    def _queue_failed(self, context, job, exc):
+        if isinstance(exc, sj.SolveCancelled):
+            return                                   # said once, by _queue_finish
+        self.report({'ERROR'}, f"MANIKIN: {sj.error_message(exc)}")
+
+    def _queue_finish(self, context):
+        q = self._queue
+        if q.solved:
+            return {'FINISHED'}
+        if q.cancelled or any(isinstance(e, sj.SolveCancelled) for _, e in q.failed):
+            self.report({'WARNING'}, "MANIKIN: solve cancelled, nothing was written")
+        return {'CANCELLED'}
+
+
+class MANIKIN_OT_solve_files(_ModalSolves, Operator):
     """Solve several recordings (or keypoint files) with the panel's settings, each onto an
     armature and action of its own, named after the file"""
     bl_idname = "manikin.solve_files"
     bl_label = "Solve Several Files"
     bl_description = ("Choose several recordings or keypoint files: each is solved with the panel's settings "
-                      "onto its own armature (MANIKIN_<file>) and action; one that fails does not stop the others")
+                      "onto its own armature (MANIKIN_<file>) and action; one that fails does not stop the "
+                      "others; Esc stops after the files already solved")
     bl_options = {'REGISTER', 'UNDO'}
 
     files: bpy.props.CollectionProperty(type=bpy.types.OperatorFileListElement, options={'HIDDEN', 'SKIP_SAVE'})
     directory: bpy.props.StringProperty(subtype='DIR_PATH', options={'HIDDEN', 'SKIP_SAVE'})
     filter_glob: bpy.props.StringProperty(default="*.csv;*.bsor;*.xror;*.npy;*.npz", options={'HIDDEN'})
+    #: set by invoke: the file browser's execute runs the files modally (progress, Esc) when there
+    #: is a window; scripts calling the operator get it synchronous
+    interactive: bpy.props.BoolProperty(default=False, options={'HIDDEN', 'SKIP_SAVE'})
 
     @classmethod
     def poll(cls, context):
         return MANIKIN_OT_solve_full_body.poll(context)
 
     def invoke(self, context, event):
+        self.interactive = True
         context.window_manager.fileselect_add(self)
         return {'RUNNING_MODAL'}
 
-    def execute(self, context):
+    def _configs(self, context):
         import dataclasses
         import os
         from ..blender.properties import config_from_settings
         paths = [os.path.join(self.directory, f.name) for f in self.files if f.name]
         if not paths:
-            self.report({'ERROR'}, "MANIKIN: choose one or more files")
-            return {'CANCELLED'}
+            raise sj.SolveError("choose one or more files")
+        base = config_from_settings(context)
+        self._base = base
+        source = "KEYPOINTS" if base.source.upper() == "KEYPOINTS" else "FILE"
+        configs = []
+        for path in paths:
+            take = os.path.splitext(os.path.basename(path))[0]
+            configs.append(dataclasses.replace(
+                base, source=source, filepath=path, keypoint_collection=None, reuse_armature=None,
+                armature_name=f"MANIKIN_{take}", set_scene_range=False, create_trackers=False, marker_take=take))
+        return configs
+
+    def execute(self, context):
         try:
-            base = config_from_settings(context)
+            configs = self._configs(context)
         except Exception as exc:
             self.report({'ERROR'}, f"MANIKIN: {sj.error_message(exc)}")
             return {'CANCELLED'}
-        source = "KEYPOINTS" if base.source.upper() == "KEYPOINTS" else "FILE"
-        scene, wm = context.scene, context.window_manager
-        solved, failed, span = [], [], []
-        wm.progress_begin(0, len(paths))
-        try:
-            for k, path in enumerate(paths):
-                take = os.path.splitext(os.path.basename(path))[0]
-                cfg = dataclasses.replace(base, source=source, filepath=path, keypoint_collection=None,
-                                          reuse_armature=None, armature_name=f"MANIKIN_{take}",
-                                          set_scene_range=False, create_trackers=False, marker_take=take)
-                try:
-                    job = sj.SolveJob(cfg)
-                    job.run(context)
-                except Exception as exc:             # one bad file does not stop the others
-                    failed.append(f"{os.path.basename(path)}: {sj.error_message(exc)}")
-                    self.report({'WARNING'}, f"MANIKIN: {os.path.basename(path)}: {sj.error_message(exc)}")
-                else:
-                    out = job.output
-                    context.scene.manikin.armature = out.armature     # the swivel panel's: the last
-                    solved.append(f"{out.armature.name} / {out.action.name}")
-                    span.append((out.frames[0], out.frames[-1]))
-                    self.report({'INFO'}, f"MANIKIN: {out.armature.name} / {out.action.name}: "
-                                          f"{job.summary(timings=False)}")
-                wm.progress_update(k + 1)
-        finally:
-            wm.progress_end()
-        if span and base.set_scene_range:
+        if self.interactive and not bpy.app.background and context.window is not None:
+            return self._run_modal(context, configs)
+        return self._run_now(context, configs)
+
+    def _queue_done(self, context, job):
+        out = job.output
+        context.scene.manikin.armature = out.armature          # the swivel panel's: the last
+        self.report({'INFO'}, f"MANIKIN: {out.armature.name} / {out.action.name}: {job.summary(timings=False)}")
+
+    def _queue_failed(self, context, job, exc):
+        import os
+        self.report({'WARNING'}, f"MANIKIN: {os.path.basename(job.config.filepath)}: {sj.error_message(exc)}")
+
+    def _queue_finish(self, context):
+        import os
+        q, scene = self._queue, context.scene
+        span = [(j.output.frames[0], j.output.frames[-1]) for j in q.solved]
+        if span and self._base.set_scene_range:
             scene.frame_start = int(min(a for a, _ in span))
             scene.frame_end = max(int(max(b for _, b in span) + 0.999), scene.frame_start)
-        s = scene.manikin
-        s.last_report = (f"{len(solved)} of {len(paths)} files solved: " + ", ".join(solved)
-                         + (f"; failed: {'; '.join(failed)}" if failed else ""))
+        solved = [f"{j.output.armature.name} / {j.output.action.name}" for j in q.solved]
+        failed = [f"{os.path.basename(j.config.filepath)}: {sj.error_message(e)}" for j, e in q.failed]
+        report = f"{len(solved)} of {len(q)} files solved: " + ", ".join(solved)
+        if failed:
+            report += f"; failed: {'; '.join(failed)}"
+        if q.cancelled:
+            left = len(q) - len(q.solved) - len(q.failed)
+            report += f"; cancelled (Esc), {left} file(s) not solved"
+        scene.manikin.last_report = report
         if not solved:
-            self.report({'ERROR'}, f"MANIKIN: {s.last_report}")
+            self.report({'WARNING'} if q.cancelled else {'ERROR'}, f"MANIKIN: {report}")
             return {'CANCELLED'}
-        self.report({'INFO'}, f"MANIKIN: {s.last_report}")
+        self.report({'INFO'}, f"MANIKIN: {report}")
         return {'FINISHED'}
 
 
