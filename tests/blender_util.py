@@ -391,8 +391,9 @@ RIG_STYLES = {
         lambda s, side: f"{s}.{side[0]}"), root="c_traj", stature=1.70, torso=1.03, arm=1.08, leg=0.97,
         arm_down=50.0, twist={}, facing="-Y", units=1.0, y_up=False, yaw_deg=30.0, location=(1.5, -0.5, 0.0)),
     # Character Creator 3/4 as an FBX in centimetres lands (+Y up, object 90° about X, 0.01): two
-    # neck bones, CC_Base_Pelvis between the hips bone and the thighs (``hips_parent``), twist
-    # bones under the limbs' segments (``twist_leaves``: not in the preset, they follow their bone)
+    # neck bones, CC_Base_Pelvis between the hips bone and the thighs (``hips_parent``), two twist
+    # bones per limb segment as CC makes them (``twist_chain``: Twist01 under the segment's bone at
+    # its head, Twist02 under Twist01 half-way along)
     "cc4": dict(names=_sided_names(
         {"pelvis": "CC_Base_Hip", "spine1": "CC_Base_Waist", "spine2": "CC_Base_Spine01",
          "spine3": "CC_Base_Spine02", "neck": ["CC_Base_NeckTwist01", "CC_Base_NeckTwist02"], "head": "CC_Base_Head"},
@@ -401,11 +402,11 @@ RIG_STYLES = {
         lambda s, side: f"CC_Base_{side[0].upper()}_{s}"), root="CC_Base_BoneRoot", stature=1.76, torso=1.02,
         arm=0.97, leg=1.03, arm_down=30.0, twist={}, facing="-Y", units=100.0, y_up=True,
         hips_parent="CC_Base_Pelvis",
-        twist_leaves={"shoulder": "UpperarmTwist01", "elbow": "ForearmTwist01", "hip": "ThighTwist01",
-                      "knee": "CalfTwist01"}),
+        twist_chain={part: [(f"{stem}Twist01", 0.0), (f"{stem}Twist02", 0.5)] for part, stem in (
+            ("shoulder", "Upperarm"), ("elbow", "Forearm"), ("hip", "Thigh"), ("knee", "Calf"))}),
     # Daz Genesis 8 as Diffeomorphic imports it (decimetres: object scale 0.1, +Z up, facing -Y):
     # four spine bones, Bend/Twist chains in the limbs (the Twist bone between the Bend bone and the
-    # next segment's), pelvis between hip and the thighs
+    # next segment's: the preset's twist bones, ``chain_twist``), pelvis between hip and the thighs
     "daz_genesis8": dict(names=_sided_names(
         {"pelvis": "hip", "spine1": "abdomenLower", "spine2": "abdomenUpper", "spine3": ["chestLower", "chestUpper"],
          "neck": ["neckLower", "neckUpper"], "head": "head"},
@@ -413,7 +414,7 @@ RIG_STYLES = {
          "wrist": "Hand", "hip": ["ThighBend", "ThighTwist"], "knee": "Shin", "ankle": "Foot", "foot": "Toe"},
         lambda s, side: [f"{side[0]}{x}" for x in s] if isinstance(s, list) else f"{side[0]}{s}"),
         root=None, stature=1.68, torso=0.98, arm=1.04, leg=1.0, arm_down=40.0, twist={}, facing="-Y",
-        units=10.0, y_up=False, hips_parent="pelvis"),
+        units=10.0, y_up=False, hips_parent="pelvis", chain_twist=("shoulder", "elbow", "hip")),
 }
 
 
@@ -493,8 +494,10 @@ _NEXT_JOINT = {"shoulder": "elbow", "elbow": "wrist", "hip": "knee", "knee": "an
 
 def _tool_bones(st, P, bones):
     """A style's own extra bones: ``hips_parent`` (a bone between the hips bone and the thighs, as
-    CC's CC_Base_Pelvis and Daz's pelvis are) and ``twist_leaves`` (part -> stem: a twist bone
-    under each side's segment bone, from half-way to 0.8 of the segment; no preset maps them)."""
+    CC's CC_Base_Pelvis and Daz's pelvis are) and ``twist_chain`` (part -> ``[(stem, fraction)]``:
+    twist bones along each side's segment, the first under the segment's bone, each next one
+    under the one before, starting ``fraction`` of the way along and reaching to the next one's
+    head or the segment's end)."""
     J = sk.J
     names = st["names"]
     out = list(bones)
@@ -508,11 +511,28 @@ def _tool_bones(st, P, bones):
             out.append((b[0], hp if b[0] in thighs else b[1], b[2], b[3]))
             if b[0] == pelvis:
                 out.append((hp, pelvis, P[0].copy(), tail))
-    for part, stem in st.get("twist_leaves", {}).items():
+    for part, chain in st.get("twist_chain", {}).items():
         for side in ("left", "right"):
             a, b = P[J[f"{side}_{part}"]], P[J[f"{side}_{_NEXT_JOINT[part]}"]]
-            out.append((f"CC_Base_{side[0].upper()}_{stem}", _first(names[f"{side}_{part}"]),
-                        a + 0.5 * (b - a), a + 0.8 * (b - a)))
+            parent = _first(names[f"{side}_{part}"])
+            ends = [f for _, f in chain[1:]] + [1.0]
+            for (stem, f), g in zip(chain, ends):
+                name = f"CC_Base_{side[0].upper()}_{stem}"
+                out.append((name, parent, a + f * (b - a), a + g * (b - a)))
+                parent = name
+    return out
+
+
+def style_twist(st):
+    """The twist lists a style's preset should give: ``{joint: [bone, ...]}`` base to tip."""
+    out = {f"{side}_{part}": [f"{b}_{side[0]}" for b, _ in v]
+           for part, v in st["twist"].items() for side in ("left", "right")}
+    for part, chain in st.get("twist_chain", {}).items():
+        for side in ("left", "right"):
+            out[f"{side}_{part}"] = [f"CC_Base_{side[0].upper()}_{stem}" for stem, _ in chain]
+    for part in st.get("chain_twist", ()):
+        for side in ("left", "right"):
+            out[f"{side}_{part}"] = list(st["names"][f"{side}_{part}"][1:])
     return out
 
 

@@ -14,7 +14,7 @@ from blender_manikin.core import retarget as rt  # noqa: E402
 from blender_manikin.core import rotations as rot  # noqa: E402
 from blender_manikin.core import skeleton as sk  # noqa: E402
 
-from blender_util import mixamo_style_character  # noqa: E402
+from blender_util import mixamo_style_character, styled_character  # noqa: E402
 from test_blender_swivel_rig import _FakeLayout, consistent_result  # noqa: E402
 from blender_manikin.blender.writer import CONTACT_PROPS as _CONTACTS  # noqa: E402
 
@@ -45,10 +45,12 @@ def _own_bones(obj):
 
 
 def _world_pose(obj, names):
-    """World heads (B, 3) and orientations (B, 3, 3) of bones ``names`` as evaluated now."""
+    """World heads (B, 3) and orientations (B, 3, 3) of bones ``names`` as evaluated now (the
+    object's scale, e.g. 0.01 of an FBX in centimetres, taken out of the orientations)."""
     W = np.array(obj.matrix_world)
     M = np.array([W @ np.array(obj.pose.bones[n].matrix) for n in names])
-    return M[:, :3, 3], M[:, :3, :3]
+    R = M[:, :3, :3]
+    return M[:, :3, 3], R / np.linalg.norm(R, axis=-2, keepdims=True)
 
 
 def _reachable_frames(res, count=3):
@@ -270,7 +272,7 @@ def test_fbx_character_in_centimetres_facing_y(addon):
     sc.frame_set(1 + k)
     h, r = _world_pose(char, names)
     assert np.linalg.norm(h - res.world_heads()[k, idx], axis=-1).max() < MM
-    assert np.abs(r / 0.01 - res.world_orientations()[k, idx]).max() < 1e-3
+    assert np.abs(r - res.world_orientations()[k, idx]).max() < 1e-3
     keys = np.stack([live_rig.read_keys(live_rig.swivel_fcurve(char, limb))[1] for limb in sk.LIMB_NAMES], -1)
     for limb in sk.LIMB_NAMES:
         _shift_key(char, limb, k, EDIT)
@@ -280,8 +282,39 @@ def test_fbx_character_in_centimetres_facing_y(addon):
     sc.frame_set(1 + k)
     h, r = _world_pose(char, names)
     assert np.linalg.norm(h - heads1[k, idx1], axis=-1).max() < MM
-    assert np.abs(r / 0.01 - rots1[k, idx1]).max() < 1e-3
+    assert np.abs(r - rots1[k, idx1]).max() < 1e-3
     assert np.linalg.norm(heads1[k, idx1] - res.world_heads()[k, idx], axis=-1).max() > 0.03
+
+
+def _check_edit_keeps_twist_shared(src, char, choice, path, bmap):
+    """Retarget ``src`` onto ``char`` with the live swivel (bone map ``choice`` / ``path``, which
+    resolves to ``bmap``), edit the left arm's and right leg's swivel keys, and check the limbs'
+    bones and twist bones against the numpy retarget with the edited swivel, same map."""
+    action, res, notes = retarget_apply.retarget_onto(src, char, choice, path, "as_is", True)
+    assert not any("twist" in n for n in notes), notes
+    k = int(_reachable_frames(res)[1])
+    for limb in ("left_arm", "right_leg"):
+        _shift_key(char, limb, k, EDIT)
+    frames, wr, pos, swivel, body = retarget_apply.sample_source(src)
+    sw = writer.unwrap_swivel(swivel)
+    sw[k, [0, 3]] += EDIT
+    target = retarget_apply.target_rig_from_object(char)
+    exp = rt.keep_ends_on_targets(rt.retarget(wr, pos, body, target, bmap, "as_is"), wr, pos, sw, ends="source")
+    names = []
+    for joint, end in (("left_shoulder", "left_wrist"), ("left_elbow", None), ("right_hip", None),
+                       ("right_knee", "right_ankle")):
+        names += [bmap.bones[joint]] + list(bmap.twist.get(joint, [])) + ([bmap.bones[end]] if end else [])
+    twisted = [n for j in ("left_shoulder", "left_elbow", "right_hip", "right_knee") for n in bmap.twist.get(j, [])]
+    assert twisted, "no twist bones on the edited limbs: the check would prove nothing"
+    idx = [exp.bone_names.index(n) for n in names]
+    bpy.context.scene.frame_set(1 + k)
+    h, r = _world_pose(char, names)
+    assert np.linalg.norm(h - exp.world_heads()[k, idx], axis=-1).max() < MM
+    assert np.abs(r - exp.world_orientations()[k, idx]).max() < 1e-3
+    # the edit changed the twist the bones share (the test would pass without the shares otherwise)
+    it = [exp.bone_names.index(n) for n in twisted]
+    before = res.world_orientations()[k, it]
+    assert np.degrees(rot.geodesic_angle(before, exp.world_orientations()[k, it])).max() > 5.0
 
 
 def test_twist_bones_share_the_edited_twist(addon, tmp_path):
@@ -307,26 +340,20 @@ def test_twist_bones_share_the_edited_twist(addon, tmp_path):
     base = bone_maps.preset("mixamo")
     bmap = bone_maps.BoneMap("mixamo_twist", dict(base.bones), {j: v[2] for j, v in twist.items()})
     bone_maps.save_bone_map(tmp_path / "map.json", bmap)
-    action, res, notes = retarget_apply.retarget_onto(src, char, "file", str(tmp_path / "map.json"), "as_is", True)
-    assert not any("twist" in n for n in notes), notes
-    k = int(_reachable_frames(res)[1])
-    for limb in ("left_arm", "right_leg"):
-        _shift_key(char, limb, k, EDIT)
-    # expected: the numpy retarget with the edited swivel, same map
-    frames, wr, pos, swivel, body = retarget_apply.sample_source(src)
-    sw = writer.unwrap_swivel(swivel)
-    sw[k, [0, 3]] += EDIT
-    target = retarget_apply.target_rig_from_object(char)
-    exp = rt.keep_ends_on_targets(rt.retarget(wr, pos, body, target, bmap, "as_is"), wr, pos, sw, ends="source")
-    names = [n for v in twist.values() for n in [v[0]] + v[2]] + ["mixamorig:LeftHand"]
-    idx = [exp.bone_names.index(n) for n in names]
-    bpy.context.scene.frame_set(1 + k)
-    h, r = _world_pose(char, names)
-    assert np.linalg.norm(h - exp.world_heads()[k, idx], axis=-1).max() < MM
-    assert np.abs(r - exp.world_orientations()[k, idx]).max() < 1e-3
-    # the edit changed the twist the bones share (the test would pass without the shares otherwise)
-    before = res.world_orientations()[k, idx]
-    assert np.degrees(rot.geodesic_angle(before[1:3], exp.world_orientations()[k, idx[1:3]])).max() > 5.0
+    _check_edit_keeps_twist_shared(src, char, "file", str(tmp_path / "map.json"), bmap)
+
+
+@pytest.mark.parametrize("style", ["cc4", "daz_genesis8"])
+def test_twist_chains_of_tool_rigs_share_the_edited_twist(addon, style):
+    """CC's Twist01/02 pairs (a chain beside the limb: Twist01 under the segment bone, Twist02
+    under Twist01) and Daz's Bend/Twist chains (the Twist bone between the Bend bone and the next
+    segment's), with their presets: a swivel edit keeps the twist shared as the retarget shares it."""
+    res = consistent_result(T=T, seed=1, stature=1.55)
+    src = writer.write_result(res, writer.WriteOptions(frame_start=1)).armature
+    char, _ = styled_character(style)
+    bmap, _ = retarget_apply.resolve_bone_map(style, char)
+    assert bmap.twist
+    _check_edit_keeps_twist_shared(src, char, style, None, bmap)
 
 
 def test_cli_live_swivel(tmp_path, monkeypatch):

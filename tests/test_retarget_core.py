@@ -574,6 +574,61 @@ def test_guess_bone_map(style, bones, preset):
     bmaps.validate_bone_map(bm2, names)
 
 
+def _cc4_bones(twist_under="segment", twist=True):
+    """A CC4 rig's body bones, heads / tails along +Z per segment: ``twist_under`` ``"segment"``
+    (as CC exports it: Twist01 under the segment's bone at its head, Twist02 under Twist01
+    half-way along, listed here tip first) or ``"clavicle"`` / ``"thigh_parent"`` (an older
+    layout with the arm's twist bones beside the segment, under the clavicle); ``twist=False``: a
+    rig exported without twist bones."""
+    z = lambda a, b: (np.array([0.0, 0.0, a]), np.array([0.0, 0.0, b]))     # noqa: E731
+    out = [("CC_Base_BoneRoot", None) + z(0, 0.1), ("CC_Base_Hip", "CC_Base_BoneRoot") + z(1.0, 1.1),
+           ("CC_Base_Pelvis", "CC_Base_Hip") + z(1.0, 0.95), ("CC_Base_Waist", "CC_Base_Hip") + z(1.1, 1.2),
+           ("CC_Base_Spine01", "CC_Base_Waist") + z(1.2, 1.3), ("CC_Base_Spine02", "CC_Base_Spine01") + z(1.3, 1.5),
+           ("CC_Base_NeckTwist01", "CC_Base_Spine02") + z(1.5, 1.55),
+           ("CC_Base_NeckTwist02", "CC_Base_NeckTwist01") + z(1.55, 1.6),
+           ("CC_Base_Head", "CC_Base_NeckTwist02") + z(1.6, 1.8)]
+    for S in ("L", "R"):
+        b = f"CC_Base_{S}_"
+        out += [(b + "Clavicle", "CC_Base_Spine02") + z(1.45, 1.5), (b + "Upperarm", b + "Clavicle") + z(1.5, 1.2),
+                (b + "Forearm", b + "Upperarm") + z(1.2, 0.95), (b + "Hand", b + "Forearm") + z(0.95, 0.85),
+                (b + "Thigh", "CC_Base_Pelvis") + z(0.95, 0.5), (b + "Calf", b + "Thigh") + z(0.5, 0.08),
+                (b + "Foot", b + "Calf") + z(0.08, 0.03), (b + "ToeBase", b + "Foot") + z(0.03, 0.02)]
+        if not twist:
+            continue
+        for seg, (h, t) in (("Upperarm", (1.5, 1.2)), ("Forearm", (1.2, 0.95)), ("Thigh", (0.95, 0.5)),
+                            ("Calf", (0.5, 0.08))):
+            under = b + seg
+            if twist_under == "clavicle" and seg == "Upperarm":
+                under = b + "Clavicle"
+            mid = 0.5 * (h + t)
+            out += [(b + seg + "Twist02", b + seg + "Twist01") + z(mid, t), (b + seg + "Twist01", under) + z(h, mid)]
+    return out
+
+
+def test_presets_keep_the_twist_bones_a_rig_has_below_their_segment():
+    """The cc4 preset's Twist01/02 pairs on CC's own layout (base to tip whatever their order in
+    the rig); beside the segment (an older layout) or absent they are left out, and the rest of the
+    preset still holds; a user's own map is not fitted (its mistakes are errors)."""
+    bm, _ = bmaps.guess_bone_map(_cc4_bones())
+    assert bm.name == "cc4"
+    assert bm.twist["left_elbow"] == ["CC_Base_L_ForearmTwist01", "CC_Base_L_ForearmTwist02"]
+    assert set(bm.twist) == {f"{s}_{p}" for s in ("left", "right") for p in ("shoulder", "elbow", "hip", "knee")}
+    fitted = bmaps.fit_twist(bmaps.preset("cc4"), _cc4_bones())
+    assert fitted.twist == bm.twist and fitted.bones == bmaps.preset("cc4").bones
+
+    beside = bmaps.fit_twist(bmaps.preset("cc4"), _cc4_bones(twist_under="clavicle"))
+    assert "left_shoulder" not in beside.twist and "right_shoulder" not in beside.twist
+    assert beside.twist["left_knee"] == ["CC_Base_L_CalfTwist01", "CC_Base_L_CalfTwist02"]
+    guessed, _ = bmaps.guess_bone_map(_cc4_bones(twist_under="clavicle"))
+    assert guessed.twist == beside.twist
+
+    bare = _cc4_bones(twist=False)
+    assert bmaps.fit_twist(bmaps.preset("cc4"), bare).twist == {}
+    bmaps.validate_bone_map(bmaps.fit_twist(bmaps.preset("cc4"), bare), [b[0] for b in bare])
+    with pytest.raises(ValueError, match="has no bone"):
+        bmaps.validate_bone_map(bmaps.preset("cc4"), [b[0] for b in bare])
+
+
 def test_guess_missing_parts_are_reported():
     bones = [b for b in _mixamo_bones("") if "Toe" not in b[0] and b[0] != "Spine2"]
     bones = [(n, "Spine1" if p == "Spine2" else p, h, t) for n, p, h, t in bones]

@@ -24,6 +24,7 @@ from __future__ import annotations
 import numpy as np
 
 import bpy
+from mathutils import Matrix
 
 from ..core import bone_maps
 from ..core import retarget as rt
@@ -64,7 +65,8 @@ def bone_list(obj):
 def resolve_bone_map(choice, target_obj, path=None):
     """``(BoneMap, notes)`` for the panel's / command line's choice: ``"auto"`` (guessed from the
     target's bone names and hierarchy: notes list each joint's bone and why), a preset name of
-    :data:`..core.bone_maps.PRESETS`, ``"file"`` with ``path`` (a saved map, JSON), or a
+    :data:`..core.bone_maps.PRESETS` (its twist lists fitted to the rig,
+    :func:`..core.bone_maps.fit_twist`), ``"file"`` with ``path`` (a saved map, JSON), or a
     :class:`..core.bone_maps.BoneMap` (the panel's edited list), used as it is."""
     if isinstance(choice, bone_maps.BoneMap):
         return choice, []
@@ -79,7 +81,7 @@ def resolve_bone_map(choice, target_obj, path=None):
         if not path:
             raise ValueError("no bone map file chosen")
         return bone_maps.load_bone_map(path), []
-    return bone_maps.preset(key), []
+    return bone_maps.fit_twist(bone_maps.preset(key), bone_list(target_obj)), []
 
 
 def _is_generated_rigify(obj):
@@ -240,6 +242,7 @@ def key_retarget(target_obj, res: rt.RetargetResult, target: rt.TargetRig, frame
         if prev is not None:
             prev.use_fake_user = True
         keying.assign_action(target_obj, action)
+        _rest_bones_no_longer_keyed(target_obj, prev, set(modes))
         # the switches first: the bases below are taken with the rig in FK
         keying.key_channels(action, target_obj, frames,
                             [(f'pose.bones["{b}"]["IK_FK"]', 0, b, np.ones(len(frames))) for b in switches],
@@ -269,6 +272,23 @@ def key_retarget(target_obj, res: rt.RetargetResult, target: rt.TargetRig, frame
         bpy.data.actions.remove(action)
         raise
     return action
+
+
+def _rest_bones_no_longer_keyed(target_obj, prev, keyed_names):
+    """Bones an earlier retarget keyed (``prev``, the action it made) that this one does not (a
+    map with fewer bones, twist bones taken out) would keep that action's last evaluated pose once
+    the new action is assigned (Blender leaves channels without F-curves where they were): put
+    them back at rest, in their own rotation mode again, as the retarget's math assumes
+    (unmapped bones at rest under their parent).  Bones of the animator's own are not touched."""
+    earlier = prev.get(PROP_MODES) if prev is not None else None
+    if not earlier:
+        return
+    for name, mode in dict(earlier).items():
+        pb = target_obj.pose.bones.get(name)
+        if pb is None or name in keyed_names:
+            continue
+        pb.matrix_basis = Matrix.Identity(4)
+        pb.rotation_mode = mode
 
 
 def copy_contacts(source_obj, source_action, target_obj, action, frames):

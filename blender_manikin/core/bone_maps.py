@@ -35,8 +35,11 @@ of a generated rig are driven by constraints, so keying them needs those constra
 (``mixamorig:`` prefix), ``mixamo_plain`` (no prefix), ``ue4``, ``ue5`` (Unreal mannequins; UE5's
 five spine bones get spine1/2/3 on ``spine_01/03/05``), ``vrm`` (VRoid / VRM 0.x ``J_Bip_*``),
 ``auto_rig_pro`` (ARP's deforming bones, as exported: ``root.x``, ``arm_stretch.l``, ...),
-``cc4`` (Reallusion Character Creator 3/4, ``CC_Base_*``), ``daz_genesis8`` (Daz Genesis 8 and 3:
-``hip``, ``abdomenLower``, ``lShldrBend``, ...).
+``cc4`` (Reallusion Character Creator 3/4, ``CC_Base_*``, with each limb segment's Twist01/02
+pair), ``daz_genesis8`` (Daz Genesis 8 and 3: ``hip``, ``abdomenLower``, ``lShldrBend``, ..., with
+the Bend/Twist chains' Twist bones).  Twist bones, ``rigify``'s and the Unreal mannequins' too,
+are fitted to the rig they are used on (:func:`fit_twist`): those it lacks, or has elsewhere than
+below their segment's bone, are left out.
 
 :func:`guess_bone_map` guesses a map for an unknown rig from bone names and hierarchy.
 """
@@ -46,7 +49,7 @@ import json
 import re
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Iterable, Mapping, Optional, Sequence
+from typing import Iterable, Mapping, Optional
 
 import numpy as np
 
@@ -289,23 +292,27 @@ def _arp() -> BoneMap:
 
 def _cc4() -> BoneMap:
     # Reallusion Character Creator 3/4 (``CC_Base_``): CC_Base_Hip carries the root motion; its
-    # child CC_Base_Pelvis (the thighs' parent) is left unmapped, as are the Twist01/02 bones under
-    # the upper arms, forearms, thighs and calves (they follow their segment) and NeckTwist02.
+    # child CC_Base_Pelvis (the thighs' parent) is left unmapped, as is NeckTwist02.  Each limb
+    # segment's skin hangs on two twist bones: Twist01 under the segment bone at its head,
+    # Twist02 under Twist01 half-way along; they share the segment's twist.
     center = {"pelvis": "CC_Base_Hip", "spine1": "CC_Base_Waist", "spine2": "CC_Base_Spine01",
               "spine3": "CC_Base_Spine02", "neck": "CC_Base_NeckTwist01", "head": "CC_Base_Head"}
     stems = dict(zip(_LIMB_PARTS, ("Clavicle", "Upperarm", "Forearm", "Hand", "Thigh", "Calf", "Foot", "ToeBase")))
-    return _sided(center, stems, lambda s, side: f"CC_Base_{'L' if side == 'left' else 'R'}_{s}", None, "cc4")
+    twist = {part: [f"{stem}Twist01", f"{stem}Twist02"]
+             for part, stem in (("shoulder", "Upperarm"), ("elbow", "Forearm"), ("hip", "Thigh"), ("knee", "Calf"))}
+    return _sided(center, stems, lambda s, side: f"CC_Base_{'L' if side == 'left' else 'R'}_{s}", twist, "cc4")
 
 
 def _daz_genesis8() -> BoneMap:
     # Daz Genesis 8 (and 3): hip carries the root motion; pelvis (the thighs' parent), chestUpper
-    # (the collars' parent), neckUpper and the Bend/Twist chains' Twist bones (lShldrTwist between
-    # lShldrBend and lForearmBend, ...) are left unmapped: they keep their rest pose under their
-    # parent, so the Bend bone carries its segment's twist.
+    # (the collars' parent) and neckUpper are left unmapped.  The limbs are Bend/Twist chains: the
+    # Twist bone sits between the Bend bone and the next segment's (lShldrBend > lShldrTwist >
+    # lForearmBend), and shares the segment's twist with the Bend bone (the shins have none).
     center = {"pelvis": "hip", "spine1": "abdomenLower", "spine2": "abdomenUpper", "spine3": "chestLower",
               "neck": "neckLower", "head": "head"}
     stems = dict(zip(_LIMB_PARTS, ("Collar", "ShldrBend", "ForearmBend", "Hand", "ThighBend", "Shin", "Foot", "Toe")))
-    return _sided(center, stems, lambda s, side: f"{'l' if side == 'left' else 'r'}{s}", None, "daz_genesis8")
+    twist = {"shoulder": ["ShldrTwist"], "elbow": ["ForearmTwist"], "hip": ["ThighTwist"]}
+    return _sided(center, stems, lambda s, side: f"{'l' if side == 'left' else 'r'}{s}", twist, "daz_genesis8")
 
 
 _PRESET_FACTORIES = {
@@ -349,11 +356,63 @@ def _strip_ns(name: str) -> str:
     return name.rsplit(":", 1)[-1].lower()
 
 
-def _match_preset(names: Sequence[str]):
+def _ancestors(parent: Mapping, name: str) -> list:
+    """Bone ``name``'s ancestors, nearest first (``parent``: bone -> parent bone or None)."""
+    out = []
+    while parent.get(name) is not None and len(out) < 10000:
+        name = parent[name]
+        out.append(name)
+    return out
+
+
+def _along(ends: Mapping, main: str, name: str) -> float:
+    """How far bone ``name``'s head lies along bone ``main`` (``ends``: bone -> (head, tail),
+    armature space; 0 without positions)."""
+    h, t = ends.get(main, (None, None))
+    hn = ends.get(name, (None, None))[0]
+    if h is None or t is None or hn is None:
+        return 0.0
+    h, t, hn = (np.asarray(v, np.float64) for v in (h, t, hn))
+    return float(np.dot(hn - h, t - h))
+
+
+def _rig_tables(bones):
+    """``(parent, ends)`` of ``bones`` ``[(name, parent, head, tail)]`` (heads / tails may be
+    missing or None)."""
+    bones = [tuple(b) for b in bones]
+    parent = {b[0]: (b[1] if len(b) > 1 else None) for b in bones}
+    ends = {b[0]: (b[2], b[3]) for b in bones if len(b) >= 4}
+    return parent, ends
+
+
+def fit_twist(bmap, bones) -> BoneMap:
+    """``bmap`` with each twist list fitted to a rig: only the twist bones the rig has below the
+    segment's own bone (what the retarget requires), base to tip by where their heads lie along
+    it.  For a preset on a rig of its tool (a rig exported without twist bones, or with them
+    elsewhere, keeps the rest of the preset); a user's own map is validated as it is.
+
+    bones: ``[(name, parent or None, head (3,), tail (3,))]`` in armature space, as
+    :func:`guess_bone_map` takes them."""
+    bm = as_bone_map(bmap)
+    parent, ends = _rig_tables(bones)
+    twist = {}
+    for j, v in bm.twist.items():
+        main = bm.bones.get(j)
+        keep = [b for b in v if b in parent and main is not None and main in _ancestors(parent, b)]
+        keep.sort(key=lambda b: _along(ends, main, b))
+        if keep:
+            twist[j] = keep
+    return BoneMap(bm.name, dict(bm.bones), twist)
+
+
+def _match_preset(bones):
     """Best preset whose bones (namespace-stripped, case-insensitive) the rig has, or None.
 
-    Returns ``(BoneMap with the rig's actual names, preset name, fraction found)``.
+    bones: as :func:`guess_bone_map` takes them.  Returns ``(BoneMap with the rig's actual names,
+    preset name, fraction found)``; its twist lists are fitted to the rig (:func:`fit_twist`).
     """
+    bones = [tuple(b) for b in bones]
+    names = [b[0] for b in bones]
     lookup = {}
     for n in names:
         lookup.setdefault(_strip_ns(n), n)
@@ -364,13 +423,14 @@ def _match_preset(names: Sequence[str]):
         frac = len(found) / len(pm.bones)
         tw = {j: [lookup[_strip_ns(b)] for b in v if _strip_ns(b) in lookup]
               for j, v in pm.twist.items() if j in found}
+        fitted = fit_twist(BoneMap(pname, found, tw), bones)
         exact = sum(b in names for b in pm.bones.values())
         # ties (ue4 / ue5 share most names, mixamo / mixamo_plain differ by a prefix): more twist
         # bones found, then more names matched exactly
-        key = (frac, sum(len(v) for v in tw.values()), exact)
+        key = (frac, sum(len(v) for v in fitted.twist.values()), exact)
         if best_key is None or key > best_key:
             best_key = key
-            best = (BoneMap(pname, found, {j: v for j, v in tw.items() if v}), pname, frac)
+            best = (fitted, pname, frac)
     return best
 
 
@@ -468,8 +528,8 @@ def guess_bone_map(bones, min_preset_fraction: float = 0.85, use_presets: bool =
     """
     bones = [tuple(b) for b in bones]
     names = [b[0] for b in bones]
-    parent = {b[0]: b[1] for b in bones}
-    hit = _match_preset(names) if use_presets else None
+    parent, ends = _rig_tables(bones)
+    hit = _match_preset(bones) if use_presets else None
     if hit is not None and hit[2] >= min_preset_fraction:
         bm, pname, frac = hit
         notes = [GuessNote(j, bm.bones.get(j), 1.0 if j in bm.bones else 0.0,
@@ -485,22 +545,7 @@ def guess_bone_map(bones, min_preset_fraction: float = 0.85, use_presets: bool =
         return d
 
     def ancestors(n):
-        out = []
-        while parent.get(n) is not None and len(out) < 10000:
-            n = parent[n]
-            out.append(n)
-        return out
-
-    ends = {b[0]: (b[2], b[3]) for b in bones if len(b) >= 4}
-
-    def along(main, n):
-        """How far bone ``n``'s head is along bone ``main`` (0 without head / tail positions)."""
-        h, t = ends.get(main, (None, None))
-        hn = ends.get(n, (None, None))[0]
-        if h is None or t is None or hn is None:
-            return 0.0
-        h, t, hn = (np.asarray(v, np.float64) for v in (h, t, hn))
-        return float(np.dot(hn - h, t - h))
+        return _ancestors(parent, n)
 
     info = {}
     for n in names:
@@ -574,7 +619,7 @@ def guess_bone_map(bones, min_preset_fraction: float = 0.85, use_presets: bool =
                 # requires it), listed base to tip by where they sit along it
                 tb = [t for t in cands(role, side, twist=True) if t not in bmap.values()
                       and bmap[j] in ancestors(t)]
-                tb.sort(key=lambda t: along(bmap[j], t))
+                tb.sort(key=lambda t: _along(ends, bmap[j], t))
                 if tb:
                     twist[j] = tb
     ordered = [notes[j] for j in JOINT_NAMES]
