@@ -42,6 +42,8 @@ SRC_STATURE = 1.8
 FRAMES = np.arange(1, T + 1)
 STYLES = tuple(RIG_STYLES)
 EY = np.array([0.0, 1.0, 0.0])
+#: the joint a twisted segment ends at
+NEXT_JOINT = {"shoulder": "elbow", "elbow": "wrist", "hip": "knee", "knee": "ankle"}
 ENDS = {"left_wrist": "arm", "right_wrist": "arm", "left_ankle": "leg", "right_ankle": "leg", "head": "torso"}
 LIMB_OF_END = {"left_wrist": ("left_shoulder", "left_elbow"), "right_wrist": ("right_shoulder", "right_elbow"),
                "left_ankle": ("left_hip", "left_knee"), "right_ankle": ("right_hip", "right_knee")}
@@ -197,8 +199,10 @@ def test_retarget_onto_an_engine_or_tool_rig(addon, style, tmp_path):
         assert dr < 1e-6 and dt < 1e-6, (n, dr, dt)
     assert len(ik) == (7 if style.startswith("ue") else 0)
 
-    # twist bones: the mapped bone keeps 1/(n+1) of its segment's twist, twist bone i (base to
-    # tip) (i+2)/(n+1); measured against the same retarget without twist bones (a saved map)
+    # twist bones: the segment's twist ramps from none at its base to all at its tip; each bone
+    # takes the middle of the stretch it spans (the mapped bone from the base to the first twist
+    # bone, each twist bone to the next one or the tip), as measured from the character's rest
+    # heads; checked against the same retarget without twist bones (a saved map)
     if preset.twist:
         plain = tmp_path / f"{style}_no_twist.json"
         bone_maps.save_bone_map(plain, _without_twist(preset))
@@ -213,17 +217,22 @@ def test_retarget_onto_an_engine_or_tool_rig(addon, style, tmp_path):
         for joint, tw in preset.twist.items():
             main = preset.bones[joint]
             parent = char.data.bones[main].parent.name
-            n = len(tw)
+            side, part = joint.split("_", 1)
+            h0, h1 = rest[main][:3, 3], rest[preset.bones[f"{side}_{NEXT_JOINT[part]}"]][:3, 3]
+            at = [0.0] + [float((rest[b][:3, 3] - h0) @ (h1 - h0) / ((h1 - h0) @ (h1 - h0))) for b in tw] + [1.0]
+            shares = [0.5 * (a + b) for a, b in zip(at[:-1], at[1:])]
+            if style == "cc4":                  # Twist01 at the segment's head, Twist02 half-way
+                assert np.allclose(shares, [0.0, 0.25, 0.75], atol=1e-4), (joint, shares)
             tau = np.unwrap(rot.twist_angle(_twist_rel(M0, rest, parent, main), EY))
             twisted += np.ptp(tau) > 0.2
             G0, G1 = M0[main][:, :3, :3], M[main][:, :3, :3]
-            # the bone still points where it did; it turned back about itself by n/(n+1) of the twist
+            # the bone still points where it did; it turned back about itself by what it does not keep
             assert np.abs(G1[:, :, 1] - G0[:, :, 1]).max() < 1e-5, (joint, "direction")
             share = rot.twist_angle(np.swapaxes(G0, -1, -2) @ G1, EY)
-            assert np.abs(np.angle(np.exp(1j * (share + n * tau / (n + 1))))).max() < 1e-4, joint
+            assert np.abs(np.angle(np.exp(1j * (share + (1 - shares[0]) * tau)))).max() < 1e-4, joint
             for i, b in enumerate(tw):
                 rel = _twist_rel(M, rest, main, b)
-                expect_rel = rot.axis_angle_rotation(EY, (i + 1) * tau / (n + 1))
+                expect_rel = rot.axis_angle_rotation(EY, (shares[i + 1] - shares[0]) * tau)
                 assert np.abs(rel[:, :3, :3] - expect_rel).max() < 1e-4, (joint, b)
         assert twisted >= 4, "the take does not twist the limbs: the check above would prove nothing"
         # what hangs below the twisted segments does not move

@@ -393,7 +393,17 @@ def test_no_flips_on_smooth_motion():
         assert np.isfinite(q).all()
 
 
+def test_twist_shares_ramp_along_the_segment():
+    assert np.allclose(rt.twist_shares([0.5]), [0.25, 0.75])                 # one twist bone half-way
+    assert np.allclose(rt.twist_shares([0.0, 0.5]), [0.0, 0.25, 0.75])       # CC: Twist01 at the head
+    assert np.allclose(rt.twist_shares([1 / 3, 2 / 3]), [1 / 6, 0.5, 5 / 6])
+    assert np.allclose(rt.twist_shares([1.3]), [0.5, 1.0])                   # past the tip: clamped
+    assert np.allclose(rt.twist_shares([0.6, 0.4]), [0.3, 0.6, 0.8])         # out of order: kept monotone
+
+
 def test_twist_bones_share_the_twist():
+    """Each twist bone (and the segment's bone) takes the twist of the middle of the stretch of
+    the segment it spans: a ramp from none at the segment's base to all at its tip."""
     body, local, root, pos, wrot = _smooth_source(frames=40, seed=7)
     rig, bm = _ue_rig(body, version=4)
     plain = bmaps.BoneMap("no twist", dict(bm.bones))
@@ -401,17 +411,26 @@ def test_twist_bones_share_the_twist():
     r1 = rt.retarget(wrot, pos, body, rig, bm, "as_is")
     i = rig.index
     ey = np.array([0, 1.0, 0])
-    for main, tw in (("lowerarm_l", "lowerarm_twist_01_l"), ("upperarm_r", "upperarm_twist_01_r"),
-                     ("calf_l", "calf_twist_01_l")):
+    heads = rig.rest_world_heads()
+    for main, tw, nxt in (("lowerarm_l", "lowerarm_twist_01_l", "hand_l"),
+                          ("upperarm_r", "upperarm_twist_01_r", "lowerarm_r"),
+                          ("calf_l", "calf_twist_01_l", "foot_l")):
         tau = np.unwrap(rot.twist_angle(r0.basis_rot[:, i[main]], ey))
         assert np.ptp(tau) > 0.2                 # the motion does twist these segments
-        # the main bone keeps half the twist (relative to the parent's unshared orientation)
+        # the twist ramps along the segment: the main bone keeps the twist of the middle of its
+        # stretch (base to the twist bone), the twist bone that of the middle of the rest
+        d = heads[i[nxt]] - heads[i[main]]
+        t = float((heads[i[tw]] - heads[i[main]]) @ d / (d @ d))
+        s_main, s_tw = t / 2, (t + 1) / 2
+        assert 0.1 < t < 0.9
+        # the main bone keeps its share (relative to the parent's unshared orientation)
         G0m = r0.orientations[:, i[main]]
-        assert np.abs(r1.orientations[:, i[main]] - G0m @ rot.axis_angle_rotation(ey, -tau / 2)).max() < 1e-9
-        # the twist bone sits on the main bone turned by the other half about the bone's axis
+        assert np.abs(r1.orientations[:, i[main]]
+                      - G0m @ rot.axis_angle_rotation(ey, -(1 - s_main) * tau)).max() < 1e-9
+        # the twist bone sits on the main bone turned by the difference about the bone's axis
         rel = np.swapaxes(r1.orientations[:, i[main]], -1, -2) @ r1.orientations[:, i[tw]]
         rest_rel = rig.rest_rot[i[main]].T @ rig.rest_rot[i[tw]]
-        expect = rot.axis_angle_rotation(ey, tau / 2) @ rest_rel
+        expect = rot.axis_angle_rotation(ey, (s_tw - s_main) * tau) @ rest_rel
         assert np.abs(rel - expect).max() < 1e-9
         # the direction of the main bone is unchanged
         assert np.abs(r1.orientations[:, i[main], :, 1] - r0.orientations[:, i[main], :, 1]).max() < 1e-9

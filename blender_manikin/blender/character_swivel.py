@@ -43,9 +43,10 @@ Added to the character (nothing of the user's is renamed or removed; names start
 
 Constraints added to the character's own bones (named ``MANIKIN ...``, appended to their stacks):
 upper arm and forearm *Copy Transforms* (world) of their follow bones, the hand *Copy Rotation*
-(world) of the control; with twist bones, the segment bone keeps ``1/(n+1)`` of its twist and
-twist bone ``i`` ``(i+2)/(n+1)`` (Transformation constraints, as :mod:`..core.retarget` shares
-it; twist bones must lie along the segment, children of it or of the previous twist bone).
+(world) of the control; with twist bones, the segment bone and each twist bone keep the share of
+its twist :func:`..core.retarget.twist_shares` gives them by where they sit along it
+(Transformation constraints, as :mod:`..core.retarget` shares it; twist bones must lie along the
+segment, children of it or of the previous twist bone).
 
 Why the live pose is the keep-ends pose: the chain is the body rig's turned by ``F``, with the
 character's lengths, so it reproduces :func:`..core.limb_solver.solve_limbs` exactly (see
@@ -169,14 +170,11 @@ def _limbs_of(plan, notes):
 
 def _twist_plan(plan, main, notes):
     """``[(twist bone index, relative share)]`` of the twist bones of segment bone ``main``:
-    the share of the segment's twist a bone adds to its parent's (the segment bone keeps
-    ``1/(n+1)``, twist bone ``i`` has ``(i+2)/(n+1)`` in all)."""
+    the share of the segment's twist a bone adds to its parent's (in all, each bone has the share
+    :func:`..core.retarget.twist_shares` gave it, ``plan.twist_share``)."""
     tg = plan.target
     ids = plan.twist_main.get(main, [])
-    n = len(ids)
-    absolute = {main: 1.0 / (n + 1)}
-    for i, t in enumerate(ids):
-        absolute[t] = (i + 2.0) / (n + 1)
+    absolute = {b: plan.twist_share[b] for b in [main] + list(ids)}
     out = []
     for t in ids:
         p = int(tg.parents[t])
@@ -247,7 +245,9 @@ def _create_bones(obj, limbs, plan, context):
                 _set_bone(eb, cl.twist_space_base, hb, tg.rest_rot[kb], 0.5 * l1, cl.parent)
             if cl.twist_space_mid:
                 pm = int(tg.parents[km])
-                if pm == kb and cl.twist_space_base:      # under the segment's full (unshared) frame
+                # under the upper segment's full (unshared) frame when the mid bone hangs from it
+                # or from one of its twist bones (Daz's lShldrTwist above lForearmBend)
+                if (pm == kb or pm in plan.twist_main.get(kb, ())) and cl.twist_space_base:
                     R = W.T @ plan.align[b] @ tg.rest_rot[kb].T @ tg.rest_rot[km]
                     _set_bone(eb, cl.twist_space_mid, hm, R, 0.5 * l2, cl.follow_base)
                 else:
@@ -295,8 +295,7 @@ def _setup_constraints(obj, limbs, plan, notes):
             c.owner_space = c.target_space = 'WORLD'
             if space is None:
                 continue
-            n = len(plan.twist_main[main])
-            k = n / (n + 1.0)
+            k = 1.0 - plan.twist_share[main]          # turned back by what it does not keep
             live_rig.twist_constraint(obj, pbs[bone], "twist share", follow, space, (-np.pi, np.pi),
                                       (k * np.pi, -k * np.pi), 'AFTER')
             for t, share in _twist_plan(plan, main, []):

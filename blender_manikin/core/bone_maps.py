@@ -10,9 +10,10 @@ Never imports bpy.  A bone map is data (JSON-friendly)::
   joint needs a bone, but ``pelvis`` must have one (it carries the root motion).  A flat dict
   ``{joint: bone, ..., "name": ..., "twist": {...}}`` is accepted as well.
 * ``twist``: source joint -> target twist bones of that segment, listed **from the segment's base
-  to its tip**.  The retarget (:mod:`.retarget`) gives the mapped bone and each of its ``n`` twist
-  bones a share ``1/(n+1)`` of the segment's twist about its own axis (cumulative along the list:
-  the last twist bone carries the whole twist, the mapped bone only ``1/(n+1)``).
+  to its tip**.  The retarget (:mod:`.retarget`) shares the segment's twist about its own axis
+  between the mapped bone and its twist bones by where they sit along it
+  (:func:`.retarget.twist_shares`: from none at the segment's base to nearly all at its tip, so
+  the skin twists evenly along the limb).
 
 Source joints without a target bone
 -----------------------------------

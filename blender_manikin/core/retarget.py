@@ -52,10 +52,10 @@ units in the bone's rest frame -- assuming Blender's defaults (inherit rotation 
 location, bone not connected).  Unmapped bones keep ``Q = I`` (their rest pose relative to the
 parent).  Twist bones: ``τ`` is the twist about the mapped bone's Y axis of its transferred orientation
 relative to its parent's (the parent's *unreduced* orientation if the parent shares its own twist),
-unwrapped over time; the mapped bone keeps ``τ/(n+1)`` of it (``G_k = G_k^full Rot_Y(-n τ/(n+1))``)
-and twist bone ``i`` (0-based, of ``n``) gets ``G_k^full Rot_Y((i+1-n) τ/(n+1)) B_kᵀ B_i`` -- i.e.
-``(i+2)/(n+1)`` of the twist; the last one carries all of it.  Children of the segment are unaffected
-(mapped bones take world orientations).
+unwrapped over time; the mapped bone keeps ``s_k τ`` of it (``G_k = G_k^full Rot_Y((s_k - 1) τ)``)
+and twist bone ``i`` gets ``G_k^full Rot_Y((s_i - 1) τ) B_kᵀ B_i``, the shares ``s`` by where the
+bones sit along the segment (:func:`twist_shares`: from none of the twist at its base to nearly all
+at its tip).  Children of the segment are unaffected (mapped bones take world orientations).
 
 Root motion
 -----------
@@ -234,6 +234,26 @@ class RetargetPlan:
     twist_main: dict             # main bone -> list of twist bones
     twist_of: dict               # twist bone -> (main bone, position, count)
     notes: list
+    twist_share: dict = field(default_factory=dict)     # main and twist bones -> share of the twist
+
+
+def twist_shares(along) -> np.ndarray:
+    """How a limb segment's twist is shared between its bone and its twist bones.
+
+    along: ``(n,)`` where each twist bone's head lies along the segment, base to tip: 0 at the
+    segment bone's head, 1 at the next mapped joint's (clamped to [0, 1], kept in order).
+    Returns ``(n + 1,)`` shares in [0, 1], the segment bone's first: each bone takes the twist of
+    the middle of the stretch whose skin it carries (the segment bone from the base to the first
+    twist bone, each twist bone from its head to the next one's, the last to the tip).  So the twist
+    ramps from none at the segment's base, where the parent segment's skin meets it, to nearly
+    all at its tip, where the next bone (hand, forearm, foot) carries it whole: one twist bone
+    half-way along gets 3/4, the segment bone 1/4; CC's Twist01 at the head and Twist02 half-way
+    get 1/4 and 3/4, the segment bone (no skin of its own) none.
+    """
+    a = np.maximum.accumulate(np.clip(np.asarray(along, np.float64).reshape(-1), 0.0, 1.0)) \
+        if len(along) else np.zeros(0)
+    p = np.concatenate([[0.0], a, [1.0]])
+    return 0.5 * (p[:-1] + p[1:])
 
 
 def _is_ancestor(a, b, parents):
@@ -289,6 +309,20 @@ def make_plan(body: Body, target: TargetRig, bone_map, facing_yaw: Optional[floa
     P = body.rest_positions()
     leaf = end_site_offsets(body)
     heads_w = tg.rest_world_heads()
+    twist_share = {}
+    for jn, tb in bm.twist.items():
+        main, ids = tg.index[bm.bones[jn]], twist_main[tg.index[bm.bones[jn]]]
+        c = PRIMARY_CHILD[J[jn]]
+        while c >= 0 and bone_of[c] < 0:
+            c = PRIMARY_CHILD[c]
+        seg = heads_w[bone_of[c]] - heads_w[main] if c >= 0 else np.zeros(3)
+        if float(seg @ seg) > 1e-12:
+            along = [float((heads_w[t] - heads_w[main]) @ seg / (seg @ seg)) for t in ids]
+        else:                        # no next joint to measure by: evenly along the segment
+            along = [(i + 1.0) / (len(ids) + 1) for i in range(len(ids))]
+        shares = twist_shares(along)
+        twist_share[main] = float(shares[0])
+        twist_share.update({t: float(x) for t, x in zip(ids, shares[1:])})
     G0 = tg.rest_world_rot()
     size = float(np.ptp(heads_w[bone_of[bone_of >= 0]], axis=0).max()) if (bone_of >= 0).sum() > 1 else 1.0
     size = max(size, 1e-6)
@@ -361,7 +395,7 @@ def make_plan(body: Body, target: TargetRig, bone_map, facing_yaw: Optional[floa
     c_s = np.array([body.root_rest[0], body.root_rest[1], 0.0])
     c_t = np.array([root_rest_world[0], root_rest_world[1], 0.0])
     return RetargetPlan(body, tg, bm, bone_of, chain_child, tuple(folded), src_dir, align, F, c_s, c_t,
-                        leg_ratio, root_bone, root_rest_world, twist_main, twist_of, notes)
+                        leg_ratio, root_bone, root_rest_world, twist_main, twist_of, notes, twist_share)
 
 
 @dataclass
@@ -432,16 +466,19 @@ def _assemble(plan: RetargetPlan, mapped_world: dict, root_head_world) -> Retarg
                 # the twist is measured against the parent's unreduced orientation, so a parent's
                 # own twist sharing does not leak into this segment's twist
                 n = len(plan.twist_main[k])
-                frame_full = tw_info[p][3] @ (Bm[p].T @ Bm[k]) if p in tw_info else frame
+                # (a parent that is a twist bone of its segment -- Daz's lShldrTwist above
+                # lForearmBend -- stands for that segment, unreduced)
+                pm = plan.twist_of[p][0] if p in plan.twist_of else p
+                frame_full = tw_info[pm][3] @ (Bm[pm].T @ Bm[k]) if pm in tw_info else frame
                 q = rot.matrix_to_quat(np.swapaxes(frame_full, -1, -2) @ Gk)
                 ang = np.unwrap(rot.swing_twist(q, _EY)[2])
                 G_sw = Gk @ rot.axis_angle_rotation(_EY, -ang)
                 tw_info[k] = (G_sw, ang, n, Gk)
-                Gk = G_sw @ rot.axis_angle_rotation(_EY, ang / (n + 1))
+                Gk = G_sw @ rot.axis_angle_rotation(_EY, ang * plan.twist_share[k])
         elif k in plan.twist_of:
-            main, i, n = plan.twist_of[k]
+            main = plan.twist_of[k][0]
             G_sw, ang, _, _ = tw_info[main]
-            Gk = G_sw @ rot.axis_angle_rotation(_EY, ang * (i + 2) / (n + 1)) @ (Bm[main].T @ Bm[k])
+            Gk = G_sw @ rot.axis_angle_rotation(_EY, ang * plan.twist_share[k]) @ (Bm[main].T @ Bm[k])
         else:
             Gk = frame
         G[:, k] = Gk
