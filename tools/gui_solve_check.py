@@ -15,9 +15,9 @@ In Blender's own event loop, as a user's clicks run them:
    take must stay, the one being solved must leave nothing behind and the rest must not start.
 
 ``STATE.json`` tells the shell script what to do (``"phase"``: ``browser`` = a file browser is
-waiting for A and Return, ``escape`` = press Esc now, ``passed`` / ``failed``) and, in the end,
-what was found (``"checks"``).  Blender quits after the last phase; any error quits it with
-status 1.
+waiting for A and Return, ``solving`` with ``"solved"`` takes written so far, ``escape`` = press
+Esc now, ``passed`` / ``failed``) and, in the end, what was found (``"checks"``).  Blender quits
+after the last phase; any error quits it with status 1.
 """
 import argparse
 import json
@@ -41,11 +41,11 @@ def parse_args():
 
 ARGS = parse_args()
 TAKES = sorted(f for f in os.listdir(ARGS.takes) if f.endswith(".csv"))
-STATE = {"phase": "starting", "step": 0, "checks": [], "t0": time.monotonic()}
+STATE = {"phase": "starting", "step": 0, "solved": 0, "checks": [], "t0": time.monotonic()}
 
 
 def write_state():
-    out = {k: STATE[k] for k in ("phase", "step", "checks")}
+    out = {k: STATE[k] for k in ("phase", "step", "solved", "checks")}
     with open(ARGS.state + ".tmp", "w") as fh:
         json.dump(out, fh)
     os.replace(ARGS.state + ".tmp", ARGS.state)
@@ -126,6 +126,7 @@ def phases():
         STATE["phase"] = "solving"
         write_state()
         while running():
+            STATE["solved"] = len(armatures())
             if esc and STATE["phase"] == "solving" and armatures():
                 STATE["phase"] = "escape"
                 write_state()

@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # The solve operators in a real Blender window, as a user's clicks and keys run them.
 #
-#   bash tools/debian13.sh run bash tools/gui_solve_check.sh
+#   bash tools/debian13.sh run bash tools/gui_solve_check.sh [SHOT.png]
 #
 # Inside the Debian 13 root (Debian's Blender 4.3, Xvfb, xdotool): installs the extension zip
 # into a fresh user directory (tools/blender_gui_env.sh), writes three takes (the bundled example
@@ -9,7 +9,8 @@
 # tools/gui_solve_check.py invoke Solve Full Body (modal, in Blender's event loop) and Solve
 # Several Files twice.  When that script says a file browser waits, this one selects every file
 # (A) and confirms (Return) with xdotool; when it says so, it presses Esc.  Exits 0 when every
-# check passed; prints the checks either way.
+# check passed; prints the checks either way.  With SHOT.png, also saves a screenshot of the
+# window while Solve Several Files solves its third take (the status bar: which file, how far).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 source tools/blender_gui_env.sh
@@ -32,7 +33,8 @@ for name in ("b_long.csv", "c_long.csv"):
     write_csv(f"{out}/{name}", Recording(streams=streams, source=name, metadata=dict(rec.metadata)),
               axes="openxr", units="m")
 PY
-export WORK
+SHOT="${1:+$(realpath -m "$1")}"
+export WORK SHOT
 xvfb-run -a -s "-screen 0 1600x1000x24" bash -c '
   set -uo pipefail
   blender --window-geometry 0 0 1600 1000 --no-window-focus --python-exit-code 1 \
@@ -51,6 +53,9 @@ xvfb-run -a -s "-screen 0 1600x1000x24" bash -c '
       xdotool mousemove 800 400; sleep 0.3
       xdotool key a; sleep 0.5; xdotool key Return
       confirmed=$step
+    elif [ -n "$SHOT" ] && [ "$phase" = solving ] && [ "$step" = 1 ] && [ "$(field solved)" = 2 ] \
+         && [ ! -e "$SHOT" ]; then
+      import -window root "$SHOT"
     elif [ "$phase" = escape ] && [ $escaped = 0 ]; then
       main=$(xdotool search --name "Blender" | head -1 || true)
       [ -n "$main" ] && xdotool windowfocus "$main"
