@@ -427,7 +427,8 @@ class SolveQueue:
 
     def run(self, context):
         """Every job in this thread, one after another (scripts, background mode)."""
-        for self.index, cfg in enumerate(self.configs):
+        for i, cfg in enumerate(self.configs):
+            self.index = i
             job = SolveJob(cfg)
             try:
                 job.gather(context)

@@ -15,6 +15,9 @@ background mode) both run synchronously.  Errors are shown with
 """
 from __future__ import annotations
 
+import dataclasses
+import os
+
 import bpy
 from bpy.types import Operator
 
@@ -49,6 +52,15 @@ class _ModalSolves:
     a window-manager timer updating ``wm.progress_*`` and the status bar, Esc cancelling).
     Subclasses give ``_queue_done(context, job)``, ``_queue_failed(context, job, exc)`` and
     ``_queue_finish(context) -> set`` (the operator's return value)."""
+
+    def _start(self, context, modal):
+        """Make the solves' configurations (``_configs``) and run them, modally or not."""
+        try:
+            configs = self._configs(context)
+        except Exception as exc:
+            self.report({'ERROR'}, f"MANIKIN: {sj.error_message(exc)}")
+            return {'CANCELLED'}
+        return self._run_modal(context, configs) if modal else self._run_now(context, configs)
 
     def _make_queue(self, context, configs):
         return sj.SolveQueue(configs, on_done=lambda job: self._queue_done(context, job),
@@ -135,22 +147,10 @@ class MANIKIN_OT_solve_full_body(_ModalSolves, Operator):
         return [config_from_settings(context)]
 
     def execute(self, context):
-        try:
-            configs = self._configs(context)
-        except Exception as exc:
-            self.report({'ERROR'}, f"MANIKIN: {sj.error_message(exc)}")
-            return {'CANCELLED'}
-        return self._run_now(context, configs)
+        return self._start(context, modal=False)
 
     def invoke(self, context, event):
-        if bpy.app.background or context.window is None:
-            return self.execute(context)
-        try:
-            configs = self._configs(context)
-        except Exception as exc:
-            self.report({'ERROR'}, f"MANIKIN: {sj.error_message(exc)}")
-            return {'CANCELLED'}
-        return self._run_modal(context, configs)
+        return self._start(context, modal=not bpy.app.background and context.window is not None)
 
     def _queue_done(self, context, job):
         _finish_report(self, context, job)
@@ -196,8 +196,6 @@ class MANIKIN_OT_solve_files(_ModalSolves, Operator):
         return {'RUNNING_MODAL'}
 
     def _configs(self, context):
-        import dataclasses
-        import os
         from ..blender.properties import config_from_settings
         paths = [os.path.join(self.directory, f.name) for f in self.files if f.name]
         if not paths:
@@ -214,14 +212,8 @@ class MANIKIN_OT_solve_files(_ModalSolves, Operator):
         return configs
 
     def execute(self, context):
-        try:
-            configs = self._configs(context)
-        except Exception as exc:
-            self.report({'ERROR'}, f"MANIKIN: {sj.error_message(exc)}")
-            return {'CANCELLED'}
-        if self.interactive and not bpy.app.background and context.window is not None:
-            return self._run_modal(context, configs)
-        return self._run_now(context, configs)
+        return self._start(context, modal=self.interactive and not bpy.app.background
+                           and context.window is not None)
 
     def _queue_done(self, context, job):
         out = job.output
@@ -229,11 +221,9 @@ class MANIKIN_OT_solve_files(_ModalSolves, Operator):
         self.report({'INFO'}, f"MANIKIN: {out.armature.name} / {out.action.name}: {job.summary(timings=False)}")
 
     def _queue_failed(self, context, job, exc):
-        import os
         self.report({'WARNING'}, f"MANIKIN: {os.path.basename(job.config.filepath)}: {sj.error_message(exc)}")
 
     def _queue_finish(self, context):
-        import os
         q, scene = self._queue, context.scene
         span = [(j.output.frames[0], j.output.frames[-1]) for j in q.solved]
         if span and self._base.set_scene_range:
