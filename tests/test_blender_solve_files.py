@@ -91,6 +91,18 @@ def test_esc_keeps_the_files_solved_and_stops_the_rest(addon, tmp_path):
     assert len(bpy.data.objects) == n
 
 
+def test_a_take_undone_while_the_next_is_solved(addon, tmp_path):
+    """Ctrl+Z while the files are solved frees what was written before (Blender reloads its
+    data): the end report still names every take solved, from what it recorded then."""
+    op = modal_operator(CLS, **_takes(tmp_path, ["first.csv", "second.csv"]))
+    queue = op.start_modal()
+    _tick(op, lambda res: len(queue.solved) == 1)
+    bpy.data.objects.remove(bpy.data.objects["MANIKIN_first"])          # as an undo frees it
+    assert _tick(op, lambda res: res != {'RUNNING_MODAL'}) == {'FINISHED'}
+    report = bpy.context.scene.manikin.last_report
+    assert report.startswith("2 of 2 files solved: MANIKIN_first / MANIKIN_live_first, MANIKIN_second")
+
+
 def test_esc_before_any_file_is_solved_cancels(addon, tmp_path):
     op = modal_operator(CLS, **_takes(tmp_path, ["first.csv", "second.csv"]))
     queue = op.start_modal()

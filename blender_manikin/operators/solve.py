@@ -202,6 +202,9 @@ class MANIKIN_OT_solve_files(_ModalSolves, Operator):
             raise sj.SolveError("choose one or more files")
         base = config_from_settings(context)
         self._base = base
+        # what each written take was, as plain values: the objects themselves may be gone by the
+        # end (an undo while the next files are solved frees them)
+        self._written = []
         source = "KEYPOINTS" if base.source.upper() == "KEYPOINTS" else "FILE"
         configs = []
         for path in paths:
@@ -218,18 +221,19 @@ class MANIKIN_OT_solve_files(_ModalSolves, Operator):
     def _queue_done(self, context, job):
         out = job.output
         context.scene.manikin.armature = out.armature          # the swivel panel's: the last
-        self.report({'INFO'}, f"MANIKIN: {out.armature.name} / {out.action.name}: {job.summary(timings=False)}")
+        name = f"{out.armature.name} / {out.action.name}"
+        self._written.append((name, float(out.frames[0]), float(out.frames[-1])))
+        self.report({'INFO'}, f"MANIKIN: {name}: {job.summary(timings=False)}")
 
     def _queue_failed(self, context, job, exc):
         self.report({'WARNING'}, f"MANIKIN: {os.path.basename(job.config.filepath)}: {sj.error_message(exc)}")
 
     def _queue_finish(self, context):
         q, scene = self._queue, context.scene
-        span = [(j.output.frames[0], j.output.frames[-1]) for j in q.solved]
-        if span and self._base.set_scene_range:
-            scene.frame_start = int(min(a for a, _ in span))
-            scene.frame_end = max(int(max(b for _, b in span) + 0.999), scene.frame_start)
-        solved = [f"{j.output.armature.name} / {j.output.action.name}" for j in q.solved]
+        if self._written and self._base.set_scene_range:
+            scene.frame_start = int(min(a for _, a, _ in self._written))
+            scene.frame_end = max(int(max(b for _, _, b in self._written) + 0.999), scene.frame_start)
+        solved = [name for name, _, _ in self._written]
         failed = [f"{os.path.basename(j.config.filepath)}: {sj.error_message(e)}" for j, e in q.failed]
         report = f"{len(solved)} of {len(q)} files solved: " + ", ".join(solved)
         if failed:
