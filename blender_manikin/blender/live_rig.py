@@ -701,7 +701,7 @@ def result_from_fk_action(obj, fps: float, action=None):
 
 # --------------------------------------------------------------------------
 # baking
-def _pose_matrices(obj_eval, order):
+def evaluated_pose_matrices(obj_eval, order):
     """``(len(order), 4, 4)`` armature-space pose matrices of the evaluated object (bulk read).
 
     order: indices into ``obj_eval.pose.bones``.
@@ -725,7 +725,7 @@ def sample_pose_matrices(obj, names, frames, context=None):
     try:
         for t, f in enumerate(frames):
             scene.frame_set(int(f))
-            M[t] = _pose_matrices(obj.evaluated_get(context.evaluated_depsgraph_get()), order)
+            M[t] = evaluated_pose_matrices(obj.evaluated_get(context.evaluated_depsgraph_get()), order)
     finally:
         scene.frame_set(prev[0], subframe=prev[1])
     return M

@@ -130,28 +130,28 @@ def sample_source(obj, context=None, frames=None):
         if len(key_frames) == len(frames) and np.allclose(key_frames, frames):
             pos, wr = res.fk()
             return frames, wr, pos, res.swivel, body
+    # the live rig: Blender evaluates it frame by frame (constraints, drivers); the matrices are
+    # read in bulk and converted all at once
     _, rest = arm_mod.rest_matrices(obj)
     W = np.array(obj.matrix_world, dtype=np.float64)
     Rw = rot.orthonormalize(W[:3, :3])
     scene = context.scene
     keep = scene.frame_current, scene.frame_subframe
     T = len(frames)
-    wr = np.empty((T, sk.NUM_JOINTS, 3, 3))
-    pos = np.empty((T, sk.NUM_JOINTS, 3))
+    M = np.empty((T, sk.NUM_JOINTS, 4, 4))
     swivel = np.zeros((T, 4))
     from .writer import SWIVEL_PROPS
-    pbs = [obj.pose.bones[n] for n in sk.JOINT_NAMES]
+    order = [obj.pose.bones.find(n) for n in sk.JOINT_NAMES]
+    props = [SWIVEL_PROPS[limb] for limb in sk.LIMB_NAMES]
     try:
         for t, f in enumerate(frames):
             scene.frame_set(int(np.floor(f)), subframe=float(f - np.floor(f)))
-            for j, pb in enumerate(pbs):
-                M = np.array(pb.matrix, dtype=np.float64)
-                wr[t, j] = Rw @ rot.orthonormalize(M[:3, :3]) @ rest[j].T
-                pos[t, j] = (W @ np.append(M[:3, 3], 1.0))[:3]
-            for li, limb in enumerate(sk.LIMB_NAMES):
-                swivel[t, li] = float(obj.get(SWIVEL_PROPS[limb], 0.0))
+            M[t] = live_rig.evaluated_pose_matrices(obj.evaluated_get(context.evaluated_depsgraph_get()), order)
+            swivel[t] = [float(obj.get(p, 0.0)) for p in props]
     finally:
         scene.frame_set(keep[0], subframe=keep[1])
+    wr = Rw @ rot.orthonormalize(M[..., :3, :3]) @ np.swapaxes(rest, -1, -2)
+    pos = M[..., :3, 3] @ W[:3, :3].T + W[:3, 3]
     return frames, wr, pos, swivel, body
 
 

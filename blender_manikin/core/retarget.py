@@ -492,7 +492,9 @@ def _assemble(plan: RetargetPlan, mapped_world: dict, root_head_world) -> Retarg
             H[:, k] = H[:, p] + G[:, p] @ (Bm[p].T @ (h0[k] - h0[p]))
         else:
             H[:, k] = h0[k]
-    quats = rot.quat_continuous(rot.matrix_to_quat(rot.orthonormalize(Q)), axis=0)
+    # Q is a product of rotations (round-off away from orthonormal): its quaternion, normalised,
+    # is the rotation (an SVD per bone and frame took most of a long take's retarget)
+    quats = rot.quat_continuous(rot.normalize(rot.matrix_to_quat(Q)), axis=0)
     keyed = np.zeros(Bn, dtype=bool)
     keyed[list(mapped_world)] = True
     keyed[list(plan.twist_of)] = True
