@@ -105,7 +105,9 @@ def test_live_rig_source_is_sampled_by_evaluation(addon):
     # the rig from the FK keys (their swivel measured from the joints, as "Make Live" does)
     res, _ = live_rig.result_from_fk_action(src, 24.0)
     live_rig.build_live_rig(src, res, frames=frames)
-    frames2, wr, pos, sw, body = retarget_apply.sample_source(src)
+    done = []
+    frames2, wr, pos, sw, body = retarget_apply.sample_source(src, progress=done.append)
+    assert done and done[0] == 0.0 and all(0.0 <= f < 1.0 for f in done)     # it says how far it is
     np.testing.assert_allclose(frames2, frames)
     np.testing.assert_allclose(pos, pos_fk, atol=1e-4)
     # orientations too, but the elbows': the rig puts the forearm's pronation into the elbow

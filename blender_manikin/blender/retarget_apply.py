@@ -109,10 +109,11 @@ def _frames_of(action, obj):
     return co[0::2].astype(np.float64)
 
 
-def sample_source(obj, context=None, frames=None):
+def sample_source(obj, context=None, frames=None, progress=None):
     """The motion of the MANIKIN armature ``obj``: ``(frames (T,), world_rot (T, 22, 3, 3),
     positions (T, 22, 3) metres, swivel (T, 4) radians, body)``, body-model convention (identity =
-    rest T-pose).  frames: scene frames (default: the keys of its action)."""
+    rest T-pose).  frames: scene frames (default: the keys of its action).  progress: called with
+    the fraction 0-1 sampled so far while a live rig is evaluated frame by frame."""
     from . import live_rig
     context = context or bpy.context
     if obj is None or arm_mod.PROP_BODY not in obj.keys():
@@ -148,6 +149,8 @@ def sample_source(obj, context=None, frames=None):
             scene.frame_set(int(np.floor(f)), subframe=float(f - np.floor(f)))
             M[t] = live_rig.evaluated_pose_matrices(obj.evaluated_get(context.evaluated_depsgraph_get()), order)
             swivel[t] = [float(obj.get(p, 0.0)) for p in props]
+            if progress is not None and t % 500 == 0:
+                progress(t / T)
     finally:
         scene.frame_set(keep[0], subframe=keep[1])
     wr = Rw @ rot.orthonormalize(M[..., :3, :3]) @ np.swapaxes(rest, -1, -2)
@@ -316,7 +319,7 @@ def copy_contacts(source_obj, source_action, target_obj, action, frames):
 
 
 def retarget_onto(source_obj, target_obj, bone_map="auto", map_path=None, root_motion="scaled",
-                  keep_ends=False, context=None, live_swivel=None):
+                  keep_ends=False, context=None, live_swivel=None, progress=None):
     """Retarget the MANIKIN armature ``source_obj``'s motion onto ``target_obj``: a new action
     ``MANIKIN_retarget_<source action>`` on the target.  Returns ``(action, result, notes)``:
     notes, plain-language lines for the user (the guessed map's doubtful joints, hands / feet out
@@ -325,7 +328,8 @@ def retarget_onto(source_obj, target_obj, bone_map="auto", map_path=None, root_m
     live_swivel: also give the character the keyed swivel properties and the live swivel rig of
     :mod:`.character_swivel` (its elbows / knees follow the swivel, its hands / feet stay on their
     targets); None (default): when ``keep_ends`` is on.  A rig an earlier retarget left on the
-    character is removed first either way (its actions are kept)."""
+    character is removed first either way (its actions are kept).  progress: called with the
+    fraction 0-1 done (the source's evaluation is most of a long take's time)."""
     from . import character_swivel
     context = context or bpy.context
     if live_swivel is None:
@@ -334,7 +338,10 @@ def retarget_onto(source_obj, target_obj, bone_map="auto", map_path=None, root_m
         raise ValueError("choose a target armature other than the solved one")
     target = target_rig_from_object(target_obj)
     bmap, guess = resolve_bone_map(bone_map, target_obj, map_path)
-    frames, wr, pos, swivel, body = sample_source(source_obj, context)
+    frames, wr, pos, swivel, body = sample_source(
+        source_obj, context, progress=None if progress is None else (lambda f: progress(0.6 * f)))
+    if progress is not None:
+        progress(0.6)
     res = rt.retarget(wr, pos, body, target, bmap, root_motion)
     notes = [f"{g.joint}: {g.bone or 'no bone'} ({g.why})" for g in guess if g.confidence < 0.5]
     # With keep_ends every limb lands on its target; without, the legs still do when the root
@@ -372,4 +379,6 @@ def retarget_onto(source_obj, target_obj, bone_map="auto", map_path=None, root_m
                 target_obj.animation_data.action = None
             bpy.data.actions.remove(action)
             raise
+    if progress is not None:
+        progress(1.0)
     return action, res, notes

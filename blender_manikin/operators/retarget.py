@@ -41,33 +41,41 @@ class MANIKIN_OT_retarget(Operator):
         # character's, one at a time, and would drive only the last)
         live = s.retarget_keep_ends and s.retarget_live_swivel and len(sources) == 1
         made = []
-        for src in sources:
-            try:
-                if s.retarget_map == 'EDITED':
-                    action, res, notes = _retarget_with_edited_list(src, s, context, live)
-                else:
-                    action, res, notes = retarget_apply.retarget_onto(
-                        src, s.retarget_target, s.retarget_map.lower(), bpy.path.abspath(s.retarget_map_file),
-                        s.retarget_root.lower(), s.retarget_keep_ends, context, live_swivel=live)
-            except (ValueError, KeyError, TypeError, OSError) as exc:
-                self.report({'ERROR'}, f"retarget of {src.name}: {exc}")
-                return {'CANCELLED'}
-            made.append(action.name)
-            msg = f"MANIKIN: {src.name} -> {s.retarget_target.name} / {action.name}"
-            self.report({'WARNING'} if notes else {'INFO'}, msg + ("; " + "; ".join(notes) if notes else ""))
+        wm = context.window_manager
+        wm.progress_begin(0, 100)               # the mouse cursor counts while a long take is read
+        try:
+            for i, src in enumerate(sources):
+                def progress(f, i=i):
+                    wm.progress_update(int(100 * (i + f) / len(sources)))
+                try:
+                    if s.retarget_map == 'EDITED':
+                        action, res, notes = _retarget_with_edited_list(src, s, context, live, progress)
+                    else:
+                        action, res, notes = retarget_apply.retarget_onto(
+                            src, s.retarget_target, s.retarget_map.lower(), bpy.path.abspath(s.retarget_map_file),
+                            s.retarget_root.lower(), s.retarget_keep_ends, context, live_swivel=live,
+                            progress=progress)
+                except (ValueError, KeyError, TypeError, OSError) as exc:
+                    self.report({'ERROR'}, f"retarget of {src.name}: {exc}")
+                    return {'CANCELLED'}
+                made.append(action.name)
+                msg = f"MANIKIN: {src.name} -> {s.retarget_target.name} / {action.name}"
+                self.report({'WARNING'} if notes else {'INFO'}, msg + ("; " + "; ".join(notes) if notes else ""))
+        finally:
+            wm.progress_end()
         if len(made) > 1:
             self.report({'INFO'}, f"MANIKIN: {len(made)} takes retargeted onto {s.retarget_target.name}: "
                                   f"{', '.join(made)} (the last assigned; the others kept with a fake user)")
         return {'FINISHED'}
 
 
-def _retarget_with_edited_list(src, s, context, live_swivel):
+def _retarget_with_edited_list(src, s, context, live_swivel, progress=None):
     """The retarget with the bone map list as edited, checked against the character first (a bone
     it lacks is an error naming the joint and the bone)."""
     from ..blender import bone_map_list, retarget_apply
     bmap = bone_map_list.checked_bone_map(s, s.retarget_target)
     return retarget_apply.retarget_onto(src, s.retarget_target, bmap, None, s.retarget_root.lower(),
-                                        s.retarget_keep_ends, context, live_swivel=live_swivel)
+                                        s.retarget_keep_ends, context, live_swivel=live_swivel, progress=progress)
 
 
 def _selected_sources(context):
