@@ -73,3 +73,28 @@ def test_trackers_the_calibration_take_lacks_are_said(tmp_path):
     out = cs.solve_recording(without_tpose(rec), cs.SolveSettings(fps=30.0, calibration_take=path))
     assert "left foot, right foot tracker offsets not measured (not in the calibration take cal_no_feet.csv)" \
         in " ".join(out.info)
+
+
+def test_a_batch_reads_its_calibration_take_once(tmp_path, monkeypatch):
+    """The takes of a batch are calibrated on one read of the calibration take; each gets its own
+    copy of the result; a changed file or other settings read it again."""
+    rec = six_tracker_recording(body_with_legs(1.76), random_mounts(2), duration=6.0, seed=2)
+    cal_path = tmp_path / "calibration.csv"
+    write_csv(str(cal_path), rec, axes="openxr", units="m")
+    reads = []
+    real = cs.read_recording
+    monkeypatch.setattr(cs, "read_recording", lambda path, s: reads.append(path) or real(path, s))
+    settings = cs.SolveSettings(fps=30.0, calibration_take=str(cal_path))
+    body, offsets, info = cs.calibration_from_take(settings, devices=("head", "left_hand", "right_hand"))
+    body.offsets[:] = 0.0                                      # the caller's copy only
+    body2, offsets2, info2 = cs.calibration_from_take(settings, devices=("head", "left_hand", "right_hand"))
+    assert len(reads) == 1 and info2 == info and np.abs(body2.offsets).max() > 0.1
+    # another take's trackers: the notes follow the take, not the first caller
+    _, _, info3 = cs.calibration_from_take(cs.SolveSettings(fps=30.0, calibration_take=str(cal_path)),
+                                           devices=("head", "left_hand", "right_hand", "left_foot"))
+    assert len(reads) == 1 and info3 == info2      # the calibration take has foot trackers: measured
+    cs.calibration_from_take(cs.SolveSettings(fps=30.0, calibration_take=str(cal_path), height=1.9))
+    assert len(reads) == 2                                     # other settings: measured again
+    os.utime(cal_path, ns=(1, 1))                              # the file changed
+    cs.calibration_from_take(settings)
+    assert len(reads) == 3

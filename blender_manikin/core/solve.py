@@ -14,8 +14,11 @@ first tracker sample (what the timeline shows).  No bpy.
 """
 from __future__ import annotations
 
+import copy
 import os
+import threading
 import time as _time
+from collections import OrderedDict
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -645,22 +648,58 @@ def device_targets(out: SolveOutcome, settings: SolveSettings, teleports="keep")
     return times, pos, quat, valid, offsets, notes, smoothed, jumps
 
 
+#: calibrations measured on calibration takes, newest last: a batch solves many takes against the
+#: same one, which is then read once (key: the file's path, size and time, the settings)
+_CALIBRATION_TAKES = OrderedDict()
+_CALIBRATION_TAKES_LOCK = threading.Lock()
+CALIBRATION_TAKES_KEPT = 4
+
+
 def calibration_from_take(settings: SolveSettings, teleports="keep", devices=()):
     """``(body, offsets, info)`` calibrated on the T- or A-pose of another recording,
     ``settings.calibration_take`` (a session's calibration take: the same performer, the same
     trackers strapped on the same way), read, resampled and calibrated as :func:`calibrate` does
     with ``settings`` (Auto or T-pose time; typed height and arm span still win).  The notes
     name the take, and the solved take's ``devices`` the calibration take lacks (their offsets
-    are not measured).  Raises :class:`SolveError` when it holds no usable pose."""
+    are not measured).  Raises :class:`SolveError` when it holds no usable pose.
+
+    The last :data:`CALIBRATION_TAKES_KEPT` calibrations are kept (each caller gets its own
+    copy): the takes of a batch are calibrated on one read of the file, read again when it
+    changes (size or modification time) or the settings do."""
     import dataclasses
-    import re
     path = settings.calibration_take
-    name = os.path.basename(os.fspath(path))
     mode = (settings.calibration or "AUTO").upper()
     if mode == "MEASURE":
         raise SolveError("a calibration take needs Auto or T-pose calibration (measurements come from the "
                          "typed height)")
     cal_settings = dataclasses.replace(settings, start=None, end=None, max_frames=None, calibration_take=None)
+    try:
+        st = os.stat(path)
+        key = (os.path.abspath(os.fspath(path)), st.st_size, st.st_mtime_ns, repr(cal_settings), teleports)
+    except (OSError, TypeError):
+        key = None                       # not a file (read_recording says what is wrong)
+    with _CALIBRATION_TAKES_LOCK:
+        hit = _CALIBRATION_TAKES.get(key) if key is not None else None
+    if hit is None:
+        hit = _calibrate_on_take(path, cal_settings, teleports)
+        if key is not None:
+            with _CALIBRATION_TAKES_LOCK:
+                _CALIBRATION_TAKES[key] = hit
+                while len(_CALIBRATION_TAKES) > CALIBRATION_TAKES_KEPT:
+                    _CALIBRATION_TAKES.popitem(last=False)
+    body, offsets, info, have = copy.deepcopy(hit)
+    missing = [d for d in devices if d in ("pelvis", "left_foot", "right_foot") and d not in have]
+    if missing:
+        info.append(f"{', '.join(d.replace('_', ' ') for d in missing)} tracker offsets not measured (not in "
+                    f"the calibration take {os.path.basename(os.fspath(path))}): their poses are taken as "
+                    f"the joints'")
+    return body, offsets, info
+
+
+def _calibrate_on_take(path, cal_settings, teleports):
+    """:func:`calibration_from_take`'s measurement: ``(body, offsets, info, devices the take has)``."""
+    import re
+    name = os.path.basename(os.fspath(path))
     from .recording import RecordingError
     cal = SolveOutcome()
     try:
@@ -677,11 +716,7 @@ def calibration_from_take(settings: SolveSettings, teleports="keep", devices=())
         n = n.replace("(from the T-pose)", f"(from the T-pose of {name})").replace(
             "(from the A-pose)", f"(from the A-pose of {name})")
         out.append(n)
-    missing = [d for d in devices if d in ("pelvis", "left_foot", "right_foot") and d not in cal.targets.pos]
-    if missing:
-        out.append(f"{', '.join(d.replace('_', ' ') for d in missing)} tracker offsets not measured (not in "
-                   f"the calibration take {name}): their poses are taken as the joints'")
-    return body, offsets, out
+    return body, offsets, out, tuple(cal.targets.pos)
 
 
 def solve_recording(source, settings: SolveSettings | None = None, solver=None, progress=None) -> SolveOutcome:
