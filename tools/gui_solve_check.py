@@ -9,7 +9,8 @@ In Blender's own event loop, as a user's clicks run them:
 1. *Solve Full Body* invoked (modal: a worker thread, progress in the status bar) on DIR's
    last take: it must finish on its own and key ``MANIKIN_body``;
 2. *Solve Several Files* invoked: its file browser opens on DIR; the shell script selects every
-   file (A) and confirms (Return), as a user would; every take must be solved onto
+   file (A) and confirms (Return), as a user would (again, up to three times, waiting longer, when
+   the browser was confirmed before it listed the files); every take must be solved onto
    ``MANIKIN_<take>`` while the window keeps running;
 3. the same again, with Esc pressed (by the shell script) once the first take is written: that
    take must stay, the one being solved must leave nothing behind and the rest must not start.
@@ -117,12 +118,21 @@ def phases():
     # 2. Solve Several Files through the file browser
     for esc in (False, True):
         clear_scene()
-        res = invoke(bpy.ops.manikin.solve_files, directory=ARGS.takes)
-        check(res == {'RUNNING_MODAL'}, "Solve Several Files opens the file browser")
-        STATE["phase"], STATE["step"] = "browser", STATE["step"] + 1
-        write_state()
-        while not running():                      # until the shell script confirmed the browser
-            yield
+        for attempt in range(3):
+            res = invoke(bpy.ops.manikin.solve_files, directory=ARGS.takes)
+            check(res == {'RUNNING_MODAL'}, "Solve Several Files opens the file browser")
+            STATE["phase"], STATE["step"] = "browser", STATE["step"] + 1
+            write_state()
+            closed = None
+            while not running():                  # until the shell script confirmed the browser
+                if len(bpy.context.window_manager.windows) == 1:
+                    closed = closed or time.monotonic()
+                    if time.monotonic() - closed > 2.0:
+                        break                     # confirmed before it listed the files: again
+                yield
+            if running():
+                break
+        check(running(), "the files chosen in the file browser are being solved")
         STATE["phase"] = "solving"
         write_state()
         while running():

@@ -47,7 +47,8 @@ xvfb-run -a -s "-screen 0 1600x1000x24" bash -c '
   while kill -0 $pid 2>/dev/null; do
     phase=$(field phase); step=$(field step)
     if [ "$phase" = browser ] && [ "$step" != "$confirmed" ]; then
-      sleep 1.5                                     # the file browser drawn and listing the folder
+      tries=$((${tries:-0} + 1))
+      sleep $((tries + 1))                          # the file browser drawn and listing the folder
       fb=$(xdotool search --name "File View" | head -1 || true)
       [ -n "$fb" ] && xdotool windowfocus --sync "$fb"
       xdotool mousemove 800 400; sleep 0.3
