@@ -1,7 +1,7 @@
 """End-to-end speed and memory of the add-on on long recordings, 10, 30 and 60 minutes side by side.
 
     python benchmarks/bench_addon.py [--minutes 10,30,60] [--rate 90] [--fps 60] [--no-live-rig]
-                                     [--read-hours 2]
+                                     [--read-hours 2] [--retarget]
 
 For each length: synthesises a three-tracker recording at ``--rate`` Hz
 (jittered timestamps, OpenXR axes, the bundled example's performer) as the
@@ -11,7 +11,8 @@ module, in a fresh process of its own; and solves the same file with the
 Blender-free command line (``python -m blender_manikin solve --format
 json,bvh,npz``) in another.  A thread samples the process's resident memory
 every 10 ms, so each stage's row shows its seconds and the peak resident
-memory (MB) reached while it ran.
+memory (MB) reached while it ran.  With ``--retarget`` each solve is also retargeted onto the
+tests' Mixamo-style character (keep ends, live swivel), in its own row.
 
 Then the reader alone: a ``--read-hours`` long, 90 Hz, six-device CSV (the
 size of a long session with pelvis and feet trackers) is read in a fresh
@@ -108,10 +109,22 @@ def child_blender(args):
                                 calibration="AUTO", live_rig=not args.no_live_rig)
     job = solve_job.SolveJob(cfg)
     base = rss_mb()
-    mem = StageMemory(lambda: job.stage)
+    now = {"stage": None}
+    mem = StageMemory(lambda: now["stage"] or job.stage)
     t = time.perf_counter()
     job.run(bpy.context)
     total = time.perf_counter() - t
+    if args.retarget:
+        # onto the tests' Mixamo-style character (A-pose, rolled bones), keep-ends and the live
+        # swivel rig, as the panel's Retarget to Character does by default with Keep Ends on
+        sys.path.insert(0, os.path.join(ROOT, "tests"))
+        from blender_util import mixamo_style_character
+        from blender_manikin.blender import retarget_apply
+        char = mixamo_style_character("Character", stature=1.8)
+        now["stage"] = "retarget"
+        t = time.perf_counter()
+        retarget_apply.retarget_onto(job.output.armature, char, "auto", None, "scaled", True)
+        job.timings["retarget"] = time.perf_counter() - t
     peak = mem.stop()
     print(json.dumps({"timings": job.timings, "total": total, "frames": job.result.num_frames,
                       "peak": peak, "base": base, "summary": job.summary()}))
@@ -158,6 +171,8 @@ STAGES = [("read", "read", "reading recording"), ("resample", "resample", "resam
           ("calibrate", "calibrate", "calibrating"), ("network (onnxruntime)", "solve.network", None),
           ("solver (torso FK, feet, limbs)", "solve.solver", None), ("solve (network + solver)", None, "solving"),
           ("armature (+ FK keys: no live rig)", "keying", "keying"), ("live swivel rig", "live rig", "live rig")]
+#: with --retarget, after the totals (not part of the solve)
+RETARGET_STAGE = ("retarget (keep ends, live swivel)", "retarget", "retarget")
 
 
 def main(argv=None):
@@ -166,6 +181,8 @@ def main(argv=None):
     ap.add_argument("--rate", type=float, default=90.0, help="tracker rate, Hz (all three devices)")
     ap.add_argument("--fps", type=float, default=60.0, help="scene / solve frame rate")
     ap.add_argument("--no-live-rig", action="store_true")
+    ap.add_argument("--retarget", action="store_true",
+                    help="also retarget each solve onto a Mixamo-style character (keep ends, live swivel)")
     ap.add_argument("--read-hours", type=float, default=2.0, help="length of the reader's six-device CSV (0: skip)")
     ap.add_argument("--child", help=argparse.SUPPRESS)
     ap.add_argument("--csv", help=argparse.SUPPRESS)
@@ -183,7 +200,8 @@ def main(argv=None):
     for m in lengths:
         csv = os.path.join(tmp, f"take_{m:g}min.csv")
         run_child("make", csv=csv, minutes=m, rate=args.rate)
-        b = run_child("blender", csv=csv, minutes=m, rate=args.rate, fps=args.fps, no_live_rig=args.no_live_rig)
+        b = run_child("blender", csv=csv, minutes=m, rate=args.rate, fps=args.fps, no_live_rig=args.no_live_rig,
+                      retarget=args.retarget)
         c = run_child("cli", csv=csv, minutes=m, fps=args.fps)
         runs[m] = (os.path.getsize(csv) / 1e6, b, c)
         os.remove(csv)
@@ -203,10 +221,16 @@ def main(argv=None):
             peak = b["peak"].get(skey) if skey else None
             cells.append((f"{secs:8.2f} s" if secs is not None else "") + (f" / {peak:6,.0f}" if peak else ""))
         print(f"{name:<{w}}|" + "|".join(f"{c:>{cw}}" for c in cells))
+    def solve_peak(b):
+        return max(v for k, v in b["peak"].items() if k != RETARGET_STAGE[2])
     print(f"{'total in Blender':<{w}}|" + "|".join(
-        f"{runs[m][1]['total']:8.2f} s / {max(runs[m][1]['peak'].values()):6,.0f}" for m in lengths))
+        f"{runs[m][1]['total']:8.2f} s / {solve_peak(runs[m][1]):6,.0f}" for m in lengths))
     print(f"{'frames/s in Blender':<{w}}|" + "|".join(
         f"{runs[m][1]['frames'] / runs[m][1]['total']:>{cw},.0f}" for m in lengths))
+    if args.retarget:
+        name, tkey, skey = RETARGET_STAGE
+        print(f"{name:<{w}}|" + "|".join(
+            f"{runs[m][1]['timings'][tkey]:8.2f} s / {runs[m][1]['peak'].get(skey, 0.0):6,.0f}" for m in lengths))
     print(f"{'command line, json+bvh+npz':<{w}}|" + "|".join(
         f"{runs[m][2]['total']:8.2f} s / {runs[m][2]['peak']:6,.0f}" for m in lengths))
     if len(lengths) > 1:

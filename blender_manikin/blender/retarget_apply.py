@@ -139,7 +139,7 @@ def sample_source(obj, context=None, frames=None, progress=None):
     scene = context.scene
     keep = scene.frame_current, scene.frame_subframe
     T = len(frames)
-    M = np.empty((T, sk.NUM_JOINTS, 4, 4))
+    M = np.empty((T, sk.NUM_JOINTS, 4, 4), np.float32)        # as Blender stores them
     swivel = np.zeros((T, 4))
     from .writer import SWIVEL_PROPS
     order = [obj.pose.bones.find(n) for n in sk.JOINT_NAMES]
