@@ -54,7 +54,7 @@ def test_files_are_solved_one_after_another_with_progress(addon, tmp_path):
     op = modal_operator(CLS, **_takes(tmp_path, ["walk.csv", "broken.csv", "again.csv"]))
     queue = op.start_modal()
     assert not solve_op.MANIKIN_OT_solve_full_body.poll(bpy.context)     # one solve at a time
-    seen, stages = [], set()
+    seen, stages = [queue.progress], {queue.stage.split(":")[0]}
 
     def finished(res):
         seen.append(queue.progress)
