@@ -11,8 +11,9 @@ module, in a fresh process of its own; and solves the same file with the
 Blender-free command line (``python -m blender_manikin solve --format
 json,bvh,npz``) in another.  A thread samples the process's resident memory
 every 10 ms, so each stage's row shows its seconds and the peak resident
-memory (MB) reached while it ran.  With ``--retarget`` each solve is also retargeted onto the
-tests' Mixamo-style character (keep ends, live swivel), in its own row.
+memory (MB) reached while it ran.  With ``--retarget`` each solve is also retargeted (keep ends,
+live swivel) onto the tests' Mixamo-style character and onto their CC4-style one with a 150-bone
+face rig and 15 bones per hand, in rows of their own.
 
 Then the reader alone: a ``--read-hours`` long, 90 Hz, six-device CSV (the
 size of a long session with pelvis and feet trackers) is read in a fresh
@@ -115,19 +116,38 @@ def child_blender(args):
     job.run(bpy.context)
     total = time.perf_counter() - t
     if args.retarget:
-        # onto the tests' Mixamo-style character (A-pose, rolled bones), keep-ends and the live
-        # swivel rig, as the panel's Retarget to Character does by default with Keep Ends on
+        # keep-ends and the live swivel rig, as the panel's Retarget to Character does with Keep
+        # Ends on: onto the tests' Mixamo-style character (A-pose, rolled bones), then onto their
+        # CC4-style one with a face rig and fingers (bones the retarget leaves alone)
         sys.path.insert(0, os.path.join(ROOT, "tests"))
-        from blender_util import mixamo_style_character
+        from blender_util import mixamo_style_character, styled_character
         from blender_manikin.blender import retarget_apply
-        char = mixamo_style_character("Character", stature=1.8)
-        now["stage"] = "retarget"
-        t = time.perf_counter()
-        retarget_apply.retarget_onto(job.output.armature, char, "auto", None, "scaled", True)
-        job.timings["retarget"] = time.perf_counter() - t
+        for stage, char, bone_map in (
+                ("retarget", mixamo_style_character("Character", stature=1.8), "auto"),
+                ("retarget cc4", with_face_and_fingers(styled_character("cc4")[0]), "cc4")):
+            now["stage"] = stage
+            t = time.perf_counter()
+            retarget_apply.retarget_onto(job.output.armature, char, bone_map, None, "scaled", True)
+            job.timings[stage] = time.perf_counter() - t
     peak = mem.stop()
     print(json.dumps({"timings": job.timings, "total": total, "frames": job.result.num_frames,
                       "peak": peak, "base": base, "summary": job.summary()}))
+
+
+def with_face_and_fingers(char, face=150, fingers=15):
+    """``char`` (a CC4-style armature object) with ``face`` leaf bones under its head and
+    ``fingers`` under each hand, as a character with a face rig has them; returns it."""
+    import bpy
+    bpy.context.view_layer.objects.active = char
+    bpy.ops.object.mode_set(mode='EDIT')
+    eb = char.data.edit_bones
+    for parent, n in (("CC_Base_Head", face), ("CC_Base_L_Hand", fingers), ("CC_Base_R_Hand", fingers)):
+        p = eb[parent]
+        for i in range(n):
+            b = eb.new(f"{parent}_extra_{i:03d}")
+            b.head, b.tail, b.parent = p.tail, p.tail + 0.2 * (p.tail - p.head), p
+    bpy.ops.object.mode_set(mode='OBJECT')
+    return char
 
 
 def child_cli(args):
@@ -172,7 +192,8 @@ STAGES = [("read", "read", "reading recording"), ("resample", "resample", "resam
           ("solver (torso FK, feet, limbs)", "solve.solver", None), ("solve (network + solver)", None, "solving"),
           ("armature (+ FK keys: no live rig)", "keying", "keying"), ("live swivel rig", "live rig", "live rig")]
 #: with --retarget, after the totals (not part of the solve)
-RETARGET_STAGE = ("retarget (keep ends, live swivel)", "retarget", "retarget")
+RETARGET_STAGES = [("retarget onto Mixamo-style", "retarget", "retarget"),
+                   ("retarget onto CC4 + face, fingers", "retarget cc4", "retarget cc4")]
 
 
 def main(argv=None):
@@ -182,7 +203,7 @@ def main(argv=None):
     ap.add_argument("--fps", type=float, default=60.0, help="scene / solve frame rate")
     ap.add_argument("--no-live-rig", action="store_true")
     ap.add_argument("--retarget", action="store_true",
-                    help="also retarget each solve onto a Mixamo-style character (keep ends, live swivel)")
+                    help="also retarget each solve onto two characters (keep ends, live swivel)")
     ap.add_argument("--read-hours", type=float, default=2.0, help="length of the reader's six-device CSV (0: skip)")
     ap.add_argument("--child", help=argparse.SUPPRESS)
     ap.add_argument("--csv", help=argparse.SUPPRESS)
@@ -222,13 +243,12 @@ def main(argv=None):
             cells.append((f"{secs:8.2f} s" if secs is not None else "") + (f" / {peak:6,.0f}" if peak else ""))
         print(f"{name:<{w}}|" + "|".join(f"{c:>{cw}}" for c in cells))
     def solve_peak(b):
-        return max(v for k, v in b["peak"].items() if k != RETARGET_STAGE[2])
+        return max(v for k, v in b["peak"].items() if k not in {r[2] for r in RETARGET_STAGES})
     print(f"{'total in Blender':<{w}}|" + "|".join(
         f"{runs[m][1]['total']:8.2f} s / {solve_peak(runs[m][1]):6,.0f}" for m in lengths))
     print(f"{'frames/s in Blender':<{w}}|" + "|".join(
         f"{runs[m][1]['frames'] / runs[m][1]['total']:>{cw},.0f}" for m in lengths))
-    if args.retarget:
-        name, tkey, skey = RETARGET_STAGE
+    for name, tkey, skey in (RETARGET_STAGES if args.retarget else ()):
         print(f"{name:<{w}}|" + "|".join(
             f"{runs[m][1]['timings'][tkey]:8.2f} s / {runs[m][1]['peak'].get(skey, 0.0):6,.0f}" for m in lengths))
     print(f"{'command line, json+bvh+npz':<{w}}|" + "|".join(

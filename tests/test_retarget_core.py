@@ -393,6 +393,32 @@ def test_no_flips_on_smooth_motion():
         assert np.isfinite(q).all()
 
 
+def test_a_rig_restricted_to_the_driven_bones_retargets_them_alike():
+    """TargetRig.restricted_to keeps the driven bones and those above them (UE5: root, the
+    extra spine bones, twist bones), drops the leaves below (a hand's fingers, a prop); the
+    retarget of those bones and keep-ends are the same on either rig."""
+    body, local, root, pos, wrot = _smooth_source(frames=30, seed=3)
+    rig, bm = _ue_rig(body, version=5)
+    leaves = [("index_01_l", "hand_l"), ("index_02_l", "index_01_l"), ("weapon_r", "hand_r")]
+    names = list(rig.names) + [n for n, _ in leaves]
+    parents = [rig.names[p] if p >= 0 else None for p in rig.parents] + [p for _, p in leaves]
+    hand = [rig.index["hand_l"], rig.index["hand_l"], rig.index["hand_r"]]
+    full = rt.TargetRig(names, parents, np.concatenate([rig.rest_rot, rig.rest_rot[hand]]),
+                        np.concatenate([rig.heads, rig.heads[hand] + 0.05]))
+    small = full.restricted_to(bm.target_bones())
+    assert set(small.names) == set(rig.names) and len(small.names) == len(full.names) - 3
+    assert {"root", "spine_02", "spine_04"} <= set(small.names)
+    a = rt.keep_ends_on_targets(rt.retarget(wrot, pos, body, full, bm, "scaled"), wrot, pos,
+                                np.zeros((pos.shape[0], 4)), ends="scaled")
+    b = rt.keep_ends_on_targets(rt.retarget(wrot, pos, body, small, bm, "scaled"), wrot, pos,
+                                np.zeros((pos.shape[0], 4)), ends="scaled")
+    ia = [a.bone_names.index(n) for n in small.names]
+    np.testing.assert_allclose(b.quaternions, a.quaternions[:, ia], atol=1e-12)
+    np.testing.assert_allclose(b.world_heads(), a.world_heads()[:, ia], atol=1e-12)
+    np.testing.assert_allclose(b.root_location, a.root_location, atol=1e-12)
+    assert [b.bone_names[k] for k in np.flatnonzero(b.keyed)] == [a.bone_names[k] for k in np.flatnonzero(a.keyed)]
+
+
 def test_twist_shares_ramp_along_the_segment():
     assert np.allclose(rt.twist_shares([0.5]), [0.25, 0.75])                 # one twist bone half-way
     assert np.allclose(rt.twist_shares([0.0, 0.5]), [0.0, 0.25, 0.75])       # CC: Twist01 at the head

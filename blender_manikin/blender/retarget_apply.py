@@ -336,8 +336,10 @@ def retarget_onto(source_obj, target_obj, bone_map="auto", map_path=None, root_m
         live_swivel = bool(keep_ends)
     if target_obj is None or target_obj == source_obj:
         raise ValueError("choose a target armature other than the solved one")
-    target = target_rig_from_object(target_obj)
     bmap, guess = resolve_bone_map(bone_map, target_obj, map_path)
+    # only the bones the map drives and those above them: the retarget's arrays hold a row per
+    # bone and frame, and fingers, face and props keep their rest pose under their parent anyway
+    target = target_rig_from_object(target_obj).restricted_to(bone_maps.as_bone_map(bmap).target_bones())
     frames, wr, pos, swivel, body = sample_source(
         source_obj, context, progress=None if progress is None else (lambda f: progress(0.6 * f)))
     if progress is not None:

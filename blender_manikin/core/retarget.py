@@ -199,6 +199,26 @@ class TargetRig:
     def num_bones(self) -> int:
         return len(self.names)
 
+    def restricted_to(self, names) -> "TargetRig":
+        """This rig with only the bones ``names`` (those it has) and their ancestors.
+
+        A retarget holds a row per bone and frame (orientations, heads, bases, quaternions); the
+        bones a map neither names nor passes through -- fingers, face, props, helpers below the
+        driven ones -- keep their rest pose under their parent whatever the retarget does, and a
+        character with a face rig can have ten times as many of them as driven bones.  Bone
+        order and indices are renumbered; names, rest poses and the world placement are kept."""
+        keep = set()
+        for n in names:
+            k = self.index.get(n, -1)
+            while k >= 0 and k not in keep:
+                keep.add(k)
+                k = int(self.parents[k])
+        ids = sorted(keep)
+        new = {k: i for i, k in enumerate(ids)}
+        return TargetRig([self.names[k] for k in ids], [new[int(p)] if p >= 0 else -1 for p in self.parents[ids]],
+                         self.rest_rot[ids], self.heads[ids], self.world_rot, self.world_scale,
+                         self.world_translation)
+
     def to_world(self, p):
         """Armature-space points ``(..., 3)`` -> world metres."""
         return self.world_translation + self.world_scale * np.asarray(p, np.float64) @ self.world_rot.T
@@ -588,7 +608,7 @@ def keep_ends_on_targets(res: RetargetResult, world_rot, positions, swivel, limb
     def to_src(p):                                  # target world -> source frame
         return (p - plan.c_t) @ F + plan.c_s
 
-    base_src = to_src(res.world_heads()[:, kb])
+    base_src = to_src(plan.target.to_world(res.heads[:, kb]))
     if end_positions is not None:
         tgt_w = np.asarray(end_positions, np.float64).reshape(T, len(ids), 3)
     elif ends == "source":
