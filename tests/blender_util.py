@@ -406,7 +406,7 @@ RIG_STYLES = {
             ("shoulder", "Upperarm"), ("elbow", "Forearm"), ("hip", "Thigh"), ("knee", "Calf"))}),
     # Daz Genesis 8 as Diffeomorphic imports it (decimetres: object scale 0.1, +Z up, facing -Y):
     # four spine bones, Bend/Twist chains in the limbs (the Twist bone between the Bend bone and the
-    # next segment's: the preset's twist bones, ``chain_twist``), pelvis between hip and the thighs
+    # next segment's: the preset's twist bones, ``twist_in_chain``), pelvis between hip and the thighs
     "daz_genesis8": dict(names=_sided_names(
         {"pelvis": "hip", "spine1": "abdomenLower", "spine2": "abdomenUpper", "spine3": ["chestLower", "chestUpper"],
          "neck": ["neckLower", "neckUpper"], "head": "head"},
@@ -414,7 +414,7 @@ RIG_STYLES = {
          "wrist": "Hand", "hip": ["ThighBend", "ThighTwist"], "knee": "Shin", "ankle": "Foot", "foot": "Toe"},
         lambda s, side: [f"{side[0]}{x}" for x in s] if isinstance(s, list) else f"{side[0]}{s}"),
         root=None, stature=1.68, torso=0.98, arm=1.04, leg=1.0, arm_down=40.0, twist={}, facing="-Y",
-        units=10.0, y_up=False, hips_parent="pelvis", chain_twist=("shoulder", "elbow", "hip")),
+        units=10.0, y_up=False, hips_parent="pelvis", twist_in_chain=("shoulder", "elbow", "hip")),
 }
 
 
@@ -530,7 +530,7 @@ def style_twist(st):
     for part, chain in st.get("twist_chain", {}).items():
         for side in ("left", "right"):
             out[f"{side}_{part}"] = [f"CC_Base_{side[0].upper()}_{stem}" for stem, _ in chain]
-    for part in st.get("chain_twist", ()):
+    for part in st.get("twist_in_chain", ()):
         for side in ("left", "right"):
             out[f"{side}_{part}"] = list(st["names"][f"{side}_{part}"][1:])
     return out
