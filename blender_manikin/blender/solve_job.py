@@ -376,8 +376,11 @@ class SolveQueue:
         except Exception as exc:
             self._fail(job, exc)
         else:
-            self.solved.append(job)
-            self.on_done(job)
+            self._done(job)
+
+    def _done(self, job):
+        self.solved.append(job)
+        self.on_done(job)
 
     def _fail(self, job, exc):
         self.failed.append((job, exc))
@@ -431,12 +434,11 @@ class SolveQueue:
             self.index = i
             job = SolveJob(cfg)
             try:
-                job.gather(context)
-                job.compute()
+                job.run(context)
             except Exception as exc:
                 self._fail(job, exc)
-                continue
-            self._written(job, context)
+            else:
+                self._done(job)
         self.job = None
         return self
 

@@ -329,20 +329,6 @@ def make_plan(body: Body, target: TargetRig, bone_map, facing_yaw: Optional[floa
     P = body.rest_positions()
     leaf = end_site_offsets(body)
     heads_w = tg.rest_world_heads()
-    twist_share = {}
-    for jn, tb in bm.twist.items():
-        main, ids = tg.index[bm.bones[jn]], twist_main[tg.index[bm.bones[jn]]]
-        c = PRIMARY_CHILD[J[jn]]
-        while c >= 0 and bone_of[c] < 0:
-            c = PRIMARY_CHILD[c]
-        seg = heads_w[bone_of[c]] - heads_w[main] if c >= 0 else np.zeros(3)
-        if float(seg @ seg) > 1e-12:
-            along = [float((heads_w[t] - heads_w[main]) @ seg / (seg @ seg)) for t in ids]
-        else:                        # no next joint to measure by: evenly along the segment
-            along = [(i + 1.0) / (len(ids) + 1) for i in range(len(ids))]
-        shares = twist_shares(along)
-        twist_share[main] = float(shares[0])
-        twist_share.update({t: float(x) for t, x in zip(ids, shares[1:])})
     G0 = tg.rest_world_rot()
     size = float(np.ptp(heads_w[bone_of[bone_of >= 0]], axis=0).max()) if (bone_of >= 0).sum() > 1 else 1.0
     size = max(size, 1e-6)
@@ -395,6 +381,20 @@ def make_plan(body: Body, target: TargetRig, bone_map, facing_yaw: Optional[floa
                 continue
             d = G0[k] @ _EY
         align[j] = rot.rotation_between(d, a) @ G0[k]
+
+    # each segment's twist shared by where its bones sit between its head and the next joint's
+    twist_share = {}
+    for jn in bm.twist:
+        main = tg.index[bm.bones[jn]]
+        ids, c = twist_main[main], chain_child[J[jn]]
+        seg = heads_w[bone_of[c]] - heads_w[main] if c >= 0 else np.zeros(3)
+        if float(seg @ seg) > 1e-12:
+            along = [float((heads_w[t] - heads_w[main]) @ seg / (seg @ seg)) for t in ids]
+        else:                        # no next joint to measure by: evenly along the segment
+            along = [(i + 1.0) / (len(ids) + 1) for i in range(len(ids))]
+        shares = twist_shares(along)
+        twist_share[main] = float(shares[0])
+        twist_share.update({t: float(x) for t, x in zip(ids, shares[1:])})
 
     # leg length ratio for root motion
     ratios = []
