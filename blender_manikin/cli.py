@@ -76,6 +76,7 @@ Options of ``solve`` (they mirror the panel; ``--help`` has them all):
                               character, default with --keep-ends)
 --no-live-rig                 plain FK keys only (no live swivel rig)
 --no-marks                    no timeline markers where the solve is worth a look (.blend)
+--no-mannequin                no mannequin mesh on the solved armature (.blend, .fbx)
 
 ``convert INPUT... --out DIR`` converts many recordings on Dask (the same solve options, plus
 ``--scheduler`` and ``--workers``; :mod:`blender_manikin.core.convert`).
@@ -288,6 +289,8 @@ def build_parser():
                    help="retarget: plain keys on the character, no live swivel rig")
     s.add_argument("--no-marks", dest="marks", action="store_false",
                    help="no timeline markers ('MANIKIN: ...') where the solve is worth a look")
+    s.add_argument("--no-mannequin", dest="mannequin", action="store_false",
+                   help="no mannequin mesh on the solved armature (blend, fbx)")
     s.add_argument("--no-live-rig", dest="live_rig", action="store_false",
                    help="write plain FK keys only (default: the live swivel rig, whose elbows and knees "
                         "follow the swivel properties)")
@@ -372,6 +375,7 @@ def _config(path, args):
     return SolveConfig(source="FILE", filepath=path, frame_start=1, create_trackers=bool(args.trackers),
                        live_rig=bool(args.live_rig), set_scene_range=True, armature_name="MANIKIN_body",
                        mark_problems=bool(getattr(args, "marks", True)),
+                       body_mesh=bool(getattr(args, "mannequin", True)),
                        **{k: getattr(st, k) for k in SolveSettings.__dataclass_fields__})
 
 

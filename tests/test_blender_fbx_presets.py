@@ -262,9 +262,22 @@ def test_cli_fbx_preset(tmp_path, monkeypatch):
     body = next(o for o in bpy.data.objects if o.type == 'ARMATURE')
     names = list(sk.JOINT_NAMES)
     in_blend = _bone_heads(body, names, (3, 17))
+    mannequin = [o for o in bpy.data.objects if o.type == 'MESH']
+    assert [o.parent for o in mannequin] == [body]          # the solve's mannequin, on by default
+    mannequin_blend = _mesh_verts(mannequin[0], (3, 17))
     fresh_scene()
     bpy.context.scene.render.fps = 30
     assert bpy.ops.import_scene.fbx(filepath=str(out / "take.fbx"), anim_offset=0.0) == {'FINISHED'}
     arm = next(o for o in bpy.data.objects if o.type == 'ARMATURE')
     np.testing.assert_allclose(_bone_heads(arm, names, (3, 17)), in_blend, atol=1e-3)
+    # the mannequin comes along, skinned: in the engine it moves as in the .blend
+    meshes = [o for o in bpy.data.objects if o.type == 'MESH']
+    assert len(meshes) == 1
+    np.testing.assert_allclose(_mesh_verts(meshes[0], (3, 17)), mannequin_blend, atol=1e-3)
     assert cli.main(["solve", str(rec), "--out", str(out), "--fbx-preset", "maya"]) == 2
+    # --no-mannequin: the armature alone
+    bare = tmp_path / "bare"
+    assert cli.main(["solve", str(rec), "--out", str(bare), "--format", "fbx", "--fps", "30", "--height", "1.8",
+                     "--no-mannequin"]) == 0
+    _, meshes = _import(bare / "take.fbx")
+    assert meshes == []

@@ -65,7 +65,14 @@ def _solve_file(scene_setup):
                           for n in ("head", "left_ankle", "right_wrist")])
             target = np.array(bpy.data.objects["MANIKIN_right_hand"].matrix_world)[:3, 3]
             wrists_off = max(wrists_off, float(np.linalg.norm(heads[-1][2] - target)))
-        return np.array(heads), wrists_off, s.last_report, bpy.data.objects["MANIKIN_right_hand"].empty_display_size
+        # the mannequin, built in the scene's unit: its extent at the last of those frames
+        from blender_manikin.blender.body_mesh import find_body_mesh
+        mo = find_body_mesh(arm)
+        me = mo.evaluated_get(bpy.context.evaluated_depsgraph_get()).to_mesh()
+        co = np.array([tuple(v.co) for v in me.vertices])
+        mo.evaluated_get(bpy.context.evaluated_depsgraph_get()).to_mesh_clear()
+        return (np.array(heads), wrists_off, s.last_report, bpy.data.objects["MANIKIN_right_hand"].empty_display_size,
+                co.max(axis=0) - co.min(axis=0))
     finally:
         blender_manikin.unregister()
 
@@ -73,13 +80,15 @@ def _solve_file(scene_setup):
 def test_a_solve_in_a_centimetre_scene_is_built_at_its_true_size():
     """The example (a 1.75 m performer) solved in a metre scene and in a centimetre scene: the
     same pose, 100 times the units; the wrists on their tracker empties either way."""
-    metres, off_m, report_m, size_m = _solve_file(lambda sc: None)
-    cm, off_cm, report_cm, size_cm = _solve_file(centimetre_scene)
+    metres, off_m, report_m, size_m, mannequin_m = _solve_file(lambda sc: None)
+    cm, off_cm, report_cm, size_cm, mannequin_cm = _solve_file(centimetre_scene)
     assert "stature 1.75 m" in report_m and "stature 1.75 m" in report_cm
     np.testing.assert_allclose(cm, 100.0 * metres, atol=2e-3)        # 0.02 mm
     assert 145.0 < cm[0, 0, 2] < 165.0                                 # the head joint ~1.5 m up
     assert off_m < 1e-4 and off_cm < 1e-2                              # 0.1 mm either way
     assert size_cm == pytest.approx(100.0 * size_m)
+    np.testing.assert_allclose(mannequin_cm, 100.0 * mannequin_m, atol=2e-2)      # 0.2 mm
+    assert 1.0 < mannequin_m[2] < 1.9                                  # a person's size, in metres
 
 
 def test_scene_objects_in_centimetres_are_read_as_what_they_measure(addon):

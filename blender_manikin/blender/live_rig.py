@@ -800,7 +800,8 @@ def bake_live_rig(armature_obj, frame_start: int, frame_end: int, name: str | No
     The new object (``<name>_baked`` by default) has a copy of the armature
     data reduced to those bones, no constraints, drivers or custom
     properties other than the MANIKIN body marks, the source's world
-    transform, and a NEW action (bulk-written with :mod:`.keying`).  It is
+    transform, and a NEW action (bulk-written with :mod:`.keying`), and a copy of the
+    source's mannequin (:mod:`.body_mesh`) when it has one.  It is
     linked to the source's collections.  Returns the new object.
     """
     context = context or bpy.context
@@ -825,6 +826,8 @@ def bake_live_rig(armature_obj, frame_start: int, frame_end: int, name: str | No
         action = keying.new_action(f"{new.name}_action")
         keying.assign_action(new, action)
         keying.key_channels(action, new, frames.astype(np.float64), ch, interpolation)
+        from . import body_mesh
+        body_mesh.copy_body_mesh(src, new, context)
     except BaseException:
         data = new.data
         bpy.data.objects.remove(new)

@@ -288,6 +288,9 @@ class MANIKIN_Settings(PropertyGroup):
                                        "hand/foot controls live (constraints + drivers); off: plain FK keys")
     create_trackers: BoolProperty(name="Tracker Empties", default=True,
                                   description="Also create keyed empties at the device targets")
+    body_mesh: BoolProperty(name="Mannequin", default=True,
+                            description="Give the solved armature a mannequin mesh skinned to its bones, "
+                                        "to judge contacts, reach and volume (exported with the FBX)")
     mark_problems: BoolProperty(name="Mark Problems", default=True,
                                 description="Timeline markers (\"MANIKIN: ...\") where the solve is worth a look: a "
                                             "hand or foot out of reach, a swivel at its limit, a device lost, "
@@ -402,6 +405,7 @@ def config_from_settings(context):
     cfg.teleports = s.teleports.lower()
     cfg.posture = s.posture.lower()
     cfg.create_trackers = s.create_trackers
+    cfg.body_mesh = s.body_mesh
     cfg.live_rig = s.live_rig
     cfg.set_scene_range = s.set_scene_range
     cfg.mark_problems = s.mark_problems

@@ -55,7 +55,8 @@ class SolveConfig(SolveSettings):
     (``scene_sources``: device → ``(object name, bone name or "")``, sampled over
     ``scene_frames`` = (first, last) scene frame).
     frame_start: scene frame of the first solved frame.  create_trackers: also key tracker
-    empties.  live_rig: convert the solved armature to the live swivel rig (:mod:`.live_rig`):
+    empties.  body_mesh: give the armature the mannequin mesh (:mod:`.body_mesh`).  live_rig:
+    convert the solved armature to the live swivel rig (:mod:`.live_rig`):
     elbows/knees follow the swivel properties and the hand/foot controls; False keeps plain FK
     keys only.  mark_problems: timeline markers where the solve is worth a look
     (:mod:`core.review_marks`).  set_scene_range, armature_name, reuse_armature: how the result is
@@ -66,6 +67,7 @@ class SolveConfig(SolveSettings):
     filepath: str = ""
     frame_start: int = 1
     create_trackers: bool = False
+    body_mesh: bool = True
     live_rig: bool = True
     set_scene_range: bool = False
     mark_problems: bool = True
@@ -257,7 +259,7 @@ class SolveJob:
         take = cfg.take_name()
         opts = writer.WriteOptions(frame_start=cfg.frame_start, armature=cfg.reuse_armature,
                                    armature_name=cfg.armature_name, action_name=f"MANIKIN_solve_{take}",
-                                   create_trackers=cfg.create_trackers,
+                                   create_trackers=cfg.create_trackers, body_mesh=cfg.body_mesh,
                                    set_scene_range=cfg.set_scene_range, key_pose=not cfg.live_rig)
         from .units import result_in_scene_units
         result = result_in_scene_units(self.result, context.scene)     # metres → the scene's unit

@@ -25,6 +25,8 @@ trackers: the live rig then keys its own action, see ``solve_job.SolveJob.write`
 * ``["foot_contact_left"]``, ``["foot_contact_right"]``: object custom properties, 1 while
   the solve holds that foot planted, else 0, keyed as steps (constant interpolation): footstep
   events for a game engine or a sound editor.
+* optional: the mannequin mesh (:mod:`.body_mesh`), a child of a new armature (or of a reused
+  one that has none), skinned to its bones;
 * optional tracker empties ``MANIKIN_<device>`` in a new collection
   ``MANIKIN trackers``, each with its own new action keying ``location``
   (scene units, world) and ``rotation_quaternion`` (the targeted joint's world
@@ -66,6 +68,7 @@ class WriteOptions:
     armature_name: str = "MANIKIN_body"
     action_name: str = "MANIKIN_solve"
     create_trackers: bool = False
+    body_mesh: bool = False                  # the mannequin mesh on the armature (.body_mesh)
     tracker_collection: str = TRACKER_COLLECTION
     set_scene_range: bool = False
     interpolation: str = 'LINEAR'
@@ -83,6 +86,7 @@ class WriteOutput:
     tracker_actions: dict = field(default_factory=dict)   # device -> action
     tracker_collection: object = None
     live_action: object = None                            # set when the live swivel rig was built
+    body_mesh: object = None                              # the mannequin, when this write made it
 
 
 def scene_fps(scene) -> float:
@@ -178,6 +182,10 @@ def _remove_ids(ids):
                 bpy.data.actions.remove(idb)
             elif isinstance(idb, bpy.types.Collection):
                 bpy.data.collections.remove(idb)
+            elif isinstance(idb, bpy.types.Mesh):
+                bpy.data.meshes.remove(idb)
+            elif isinstance(idb, bpy.types.Material):
+                bpy.data.materials.remove(idb)
         except ReferenceError:
             pass
 
@@ -222,6 +230,10 @@ def write_result(result, options: WriteOptions | None = None, context=None) -> W
             keying.assign_action(obj, action)
             keying.key_channels(action, obj, frames, _pose_channels(obj, result), options.interpolation)
         out = WriteOutput(obj, action, not reuse, frames)
+        if options.body_mesh:
+            from . import body_mesh
+            if body_mesh.find_body_mesh(obj) is None:
+                out.body_mesh = body_mesh.add_body_mesh(obj, result.body, context, created)
 
         if options.create_trackers and result.targets is not None:
             _write_trackers(result.targets, frames, scene, options, out, created)
@@ -297,6 +309,8 @@ def remove_output(out: WriteOutput):
     if out.created_armature:
         ids += [out.armature.data, out.armature]
     ids += [a for a in (out.action, out.live_action) if a is not None]
+    if out.body_mesh is not None:
+        ids += [out.body_mesh.data, out.body_mesh]
     if out.tracker_collection is not None:
         ids.append(out.tracker_collection)
     ids += list(out.trackers.values()) + list(out.tracker_actions.values())

@@ -204,6 +204,7 @@ class MANIKIN_PT_output(_Base, Panel):
             col.prop(s, "frame_end")
         layout.separator()
         layout.prop(s, "create_trackers")
+        layout.prop(s, "body_mesh")
         layout.prop(s, "live_rig")
         layout.prop(s, "set_scene_range")
         layout.prop(s, "mark_problems")
