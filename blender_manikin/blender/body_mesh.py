@@ -99,10 +99,3 @@ def copy_body_mesh(src_armature, dst_armature, context=None):
             mod.object = dst_armature
     return obj
 
-
-def remove_body_mesh(obj):
-    """Delete the mannequin object ``obj`` and its mesh when nothing else uses it."""
-    me = obj.data
-    bpy.data.objects.remove(obj)
-    if me is not None and me.users == 0:
-        bpy.data.meshes.remove(me)
