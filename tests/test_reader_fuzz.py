@@ -1,5 +1,6 @@
 """Readers never crash: whatever the bytes, a reader returns a Recording or raises RecordingError
-naming the file (property-based: random bytes, every truncation, flipped bytes).  A bounded fuzz
+naming the file, and so does the resampling of what it returns (property-based: random bytes,
+every truncation, flipped bytes).  A bounded fuzz
 runs in the normal suite; ``pytest -m fuzz_long tests`` runs a longer one (deselected by default,
 pyproject.toml), and BLENDER_MANIKIN_FUZZ_EXAMPLES sets the examples of the bounded one."""
 import os
@@ -11,6 +12,7 @@ from hypothesis import HealthCheck, given, settings, strategies as st
 from blender_manikin.core import formats
 from blender_manikin.core.device_offsets import load_offsets
 from blender_manikin.core.recording import Recording, RecordingError
+from blender_manikin.core.resample import resample, seconds_from_time_units
 
 from fixtures_recordings import synthetic_bsor
 
@@ -48,6 +50,14 @@ def _read(tmp_path, ext, data):
     assert isinstance(rec, Recording)
     for s in rec.streams.values():
         assert s.pos.shape == (len(s.time), 3) and s.quat.shape == (len(s.time), 4)
+    # what a reader accepts, the solve's resampling takes or refuses by name: corrupt times must
+    # not turn into a frame grid of petabytes
+    try:
+        times, pos, _, _, _ = resample(seconds_from_time_units(rec), 30.0)
+    except RecordingError as exc:
+        assert f"fuzz{ext}" in str(exc), str(exc)
+        return rec
+    assert times.shape[0] >= 1 and all(p.shape == (times.shape[0], 3) for p in pos.values())
     return rec
 
 

@@ -14,7 +14,7 @@ from blender_manikin.core.recording import (
 from blender_manikin.core.resample import resample
 from blender_manikin.core.rotations import axis_angle_to_quat, geodesic_angle, quat_to_matrix
 
-from fixtures_recordings import make_recording, synthetic_bsor, truth, write_recording_csv
+from fixtures_recordings import bsor_bytes, make_recording, synthetic_bsor, truth, unity_pose, write_recording_csv
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 BSOR_SAMPLE = os.path.join(ROOT, "..", "shared", "data", "vr", "beatsaber-replay-sample.bsor")
@@ -483,3 +483,32 @@ def test_csv_error_deep_in_a_big_file_names_its_line(tmp_path):
         for bb in (None, 333):
             with pytest.raises(RecordingError, match=rf"broken.csv, line 1801: {problem}"):
                 read_csv(p, block_bytes=bb)
+
+
+def test_increasing_mask_drops_a_corrupt_time_but_keeps_pauses_and_rewinds_as_before():
+    from blender_manikin.core.recording import increasing_mask
+    spike = [0.0, 0.01, 0.02, 5000.0, 0.03, 0.04]              # one timestamp gone wrong
+    assert increasing_mask(spike).tolist() == [True, True, True, False, True, True]
+    pause = [0.0, 0.01, 0.02, 9.0, 9.01, 9.02]                  # the time goes on after a pause
+    assert increasing_mask(pause).all()
+    rewind = [0.0, 0.01, 0.02, 0.03, 0.01, 0.02, 0.04]          # a rewind: dropped until time passes 0.03
+    assert increasing_mask(rewind).tolist() == [True, True, True, True, False, False, True]
+    assert increasing_mask([0.0, np.nan, 0.02]).tolist() == [True, False, True]
+
+
+def test_bsor_frame_with_a_corrupt_time_is_dropped_alone(tmp_path):
+    """One frame's song time gone wrong (1e9 s) costs that frame, not the rest of the take, nor
+    a take stretched to 30 years."""
+    _, t = synthetic_bsor(n=180, repeated_zero_times=0, placeholder=False)
+    bad = t.copy()
+    bad[90] = 1e9
+    head, left, right = (unity_pose(d, t) for d in ("head", "left_hand", "right_hand"))
+    path = tmp_path / "glitch.bsor"
+    path.write_bytes(bsor_bytes(bad, head, left, right))
+    rec = load_recording(path)
+    assert len(rec.streams["head"]) == 179
+    assert rec.streams["head"].time.max() < 2.0
+    assert any("leapt ahead" in w and "frame index 90" in w for w in rec.warnings), rec.warnings
+    assert not any("did not increase" in w for w in rec.warnings)
+    times = resample(rec, 30.0)[0]
+    assert times[-1] == pytest.approx(t[-1], abs=1 / 30)

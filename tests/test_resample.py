@@ -313,3 +313,26 @@ def test_the_summary_names_the_longest_gap():
     out = solve_recording(Recording(streams=streams, source="head lost", metadata=dict(rec.metadata)),
                           SolveSettings(fps=30.0))
     assert "1 gap(s) bridged, the longest head 3.0 s from 2.0 s (no samples)" in out.summary()
+
+
+def test_a_take_mostly_without_samples_is_refused_by_name(tmp_path):
+    """A last sample stamped 1e12 s (a logger's closing row with a broken clock) on every device:
+    the grid would be 3e13 frames.  A clear error naming the file, the device, the samples and
+    the jump, before anything is allocated; a real pause is still a gap."""
+    rec = make_recording(duration=3.0)
+    for d, s in list(rec.streams.items()):
+        rec.streams[d] = TrackerStream(d, np.r_[s.time, 1e12], np.vstack([s.pos, s.pos[-1]]),
+                                       np.vstack([s.quat, s.quat[-1]]))
+    rec.source = str(tmp_path / "broken_clock.csv")
+    with pytest.raises(RecordingError) as err:
+        resample(rec, 30.0)
+    msg = str(err.value)
+    assert "broken_clock.csv" in msg and "1e+12 s" in msg and "between its samples" in msg
+    assert "--start / --end" in msg
+    # ten minutes without samples between two takes of a session: a gap, not an error
+    rec = make_recording(duration=3.0)
+    for d, s in list(rec.streams.items()):
+        rec.streams[d] = TrackerStream(d, np.r_[s.time, s.time + 600.0], np.vstack([s.pos, s.pos]),
+                                       np.vstack([s.quat, s.quat]))
+    times = resample(rec, 30.0)[0]
+    assert times[-1] > 600.0

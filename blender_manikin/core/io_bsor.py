@@ -58,7 +58,7 @@ import numpy as np
 
 from .recording import (
     Recording, RecordingError, TrackerStream, UNITS, canonical_axes, canonical_units,
-    increasing_mask, read_file_bytes, to_blender,
+    increasing_mask, read_file_bytes, time_spikes, to_blender,
 )
 from .rotations import normalize
 
@@ -154,7 +154,14 @@ def pose_frame_masks(t, pose, warnings, devices=FRAME_DEVICES, time_name="song t
         first = np.nonzero(~any_ok)[0][:3]
         warnings.append(f"dropped {n_placeholder} frame(s) with no valid pose (placeholder/lost; "
                         f"frame index {', '.join(str(int(i)) for i in first)}{' ...' if n_placeholder > 3 else ''})")
-    dropped = any_ok & ~keep
+    tt = np.where(any_ok, t, np.nan)
+    spikes = any_ok & time_spikes(tt)
+    if spikes.any():
+        idx = np.nonzero(spikes)[0]
+        warnings.append(f"dropped {idx.size} frame(s) whose {time_name} leapt ahead of the frames on "
+                        f"either side (a corrupt timestamp; frame index "
+                        f"{', '.join(str(int(i)) for i in idx[:3])}{' ...' if idx.size > 3 else ''})")
+    dropped = any_ok & ~keep & ~spikes
     if dropped.any():
         idx = np.nonzero(dropped)[0]
         times = ", ".join(f"{t[i]:.3f}" for i in idx[:5])
@@ -264,9 +271,10 @@ def parse_bsor(data: bytes, path="<bytes>", axes=None, units=None) -> Recording:
             f"offset {r.o}) but only {avail} bytes remain ({avail // FRAME_BYTES} whole frames)",
             path=path, offset=r.o + (avail // FRAME_BYTES) * FRAME_BYTES)
     frames = np.frombuffer(r.b, dtype=FRAME_DTYPE, count=n, offset=r.o)
-    t = frames["time"].astype(np.float64)
+    with np.errstate(invalid="ignore"):         # a corrupt float (a signalling NaN) is checked below
+        t = frames["time"].astype(np.float64)
+        pose = frames["pose"].astype(np.float64)          # (N, 3 devices, 7)
     fps = frames["fps"].astype(np.int64)
-    pose = frames["pose"].astype(np.float64)              # (N, 3 devices, 7)
     ok, keep = pose_frame_masks(t, pose, warnings)
     speed = 1.0
     mods = [m.strip().upper() for m in info.get("modifiers", "").split(",") if m.strip()]

@@ -299,7 +299,8 @@ def _shape_points(X, conf, path):
     X = np.asarray(X)
     if X.dtype.kind not in "fiu":
         raise RecordingError(f"keypoints must be numbers, found dtype {X.dtype}", path=path)
-    X = X.astype(np.float64)
+    with np.errstate(invalid="ignore"):         # a corrupt float (a signalling NaN) counts as missing
+        X = X.astype(np.float64)
     if X.ndim == 2 and X.shape[1] % 3 == 0 and X.shape[1] >= 3 * 17:
         X = X.reshape(X.shape[0], -1, 3)
     if X.ndim != 3 or X.shape[2] not in (3, 4):

@@ -167,16 +167,37 @@ def from_blender(pos, quat, axes):
     return p, q
 
 
+#: seconds a single sample's time may leap ahead of both its neighbours (which go on from each
+#: other) before it is taken for a corrupt timestamp and dropped (:func:`increasing_mask`)
+TIME_SPIKE_S = 1.0
+
+
+def time_spikes(time) -> np.ndarray:
+    """``(N,)`` bool: single samples whose time leaps more than :data:`TIME_SPIKE_S` ahead of the
+    sample before them while the sample after them goes on from that one (a corrupt timestamp,
+    not a pause: after a pause the time does not come back)."""
+    t = np.asarray(time, dtype=np.float64)
+    out = np.zeros(t.shape, dtype=bool)
+    if t.size >= 3:
+        prev, mid, nxt = t[:-2], t[1:-1], t[2:]
+        with np.errstate(invalid="ignore"):
+            out[1:-1] = (mid - prev > TIME_SPIKE_S) & (nxt < mid) & (nxt >= prev)
+    return out
+
+
 def increasing_mask(time) -> np.ndarray:
     """``(N,)`` bool: True for samples whose time is greater than every earlier sample's.
 
     Keeping these yields a strictly increasing series (the first of several
     samples sharing a time is kept; samples after a backwards jump are dropped
-    until time passes the previous maximum).  NaN times are never kept.
+    until time passes the previous maximum).  NaN times are never kept, nor a single sample
+    whose time leaps ahead of both its neighbours (:func:`time_spikes`): it would otherwise
+    drop every sample after it, or stretch the take to its time.
     """
     t = np.asarray(time, dtype=np.float64)
     if t.size == 0:
         return np.zeros(0, dtype=bool)
+    t = np.where(time_spikes(t), np.nan, t)
     tt = np.where(np.isfinite(t), t, -np.inf)
     prev_max = np.concatenate([[-np.inf], np.maximum.accumulate(tt)[:-1]])
     return np.isfinite(t) & (t > prev_max)

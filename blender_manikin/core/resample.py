@@ -35,7 +35,7 @@ import numpy as np
 
 from .plain import shown
 from .devices import DEVICES, REQUIRED_DEVICES
-from .recording import Recording, RecordingError, TrackerStream, increasing_mask
+from .recording import Recording, RecordingError, TrackerStream, increasing_mask, time_spikes
 from .rotations import normalize, quat_continuous, quat_slerp
 from .runs import run_bounds
 
@@ -225,6 +225,35 @@ def _jumps(pos, jump_m):
     return np.nonzero((prev > jump_m) & (nxt > jump_m) & (across < 0.5 * jump_m))[0] + 1
 
 
+#: a frame grid may hold this many times as many frames as the best-sampled device has usable
+#: samples (and at least :data:`EMPTY_GRID_MIN_S` seconds) before :func:`resample` refuses it: a
+#: take that is mostly time without samples has a corrupt timestamp, not a recording
+EMPTY_GRID_RATIO = 100.0
+EMPTY_GRID_MIN_S = 600.0
+
+
+def _check_grid_length(prep, t0, t1, fps, path):
+    """Raise :class:`RecordingError` when the grid from ``t0`` to ``t1`` seconds at ``fps`` would be
+    mostly empty (see :data:`EMPTY_GRID_RATIO`), naming the longest step between usable samples."""
+    frames = (t1 - t0) * fps
+    samples = max(int(P["ok"].sum()) for P in prep.values())
+    if frames <= max(EMPTY_GRID_RATIO * samples, EMPTY_GRID_MIN_S * fps):
+        return
+    step, where = -1.0, ""
+    for d, P in prep.items():
+        idx = np.nonzero(P["ok"])[0]
+        t = P["t"][idx]
+        if t.size > 1:
+            k = int(np.argmax(np.diff(t)))
+            if t[k + 1] - t[k] > step:
+                step = float(t[k + 1] - t[k])
+                where = (f"{d}'s time jumps from {t[k]:.3f} s to {t[k + 1]:.6g} s between its samples "
+                         f"{int(idx[k]) + 1} and {int(idx[k + 1]) + 1}")
+    raise RecordingError(f"the take would span {t1 - t0:.6g} s ({frames:.3g} frames at {fps:g} fps) for "
+                         f"{samples} samples: {where}; a corrupt or wrong timestamp? (--start / --end, "
+                         f"Trim in the panel, solve the part before or after it)", path=path)
+
+
 def resample(recording: Recording, fps, t_start=None, t_end=None, required=REQUIRED_DEVICES,
              gap_factor=3.0, freeze_s=0.1, move_tol=0.002, check_units=True, jump_m=0.25, floor=0.0):
     """Resample every device of ``recording`` onto one frame grid.
@@ -271,7 +300,10 @@ def resample(recording: Recording, fps, t_start=None, t_end=None, required=REQUI
         s = recording.streams[d]
         inc = increasing_mask(s.time)
         if not inc.all():
-            warnings.append(f"{d}: {int((~inc).sum())} sample(s) with non-increasing time ignored")
+            n_spikes = int(time_spikes(s.time).sum())
+            warnings.append(f"{d}: {int((~inc).sum())} sample(s) with non-increasing time ignored"
+                            + (f" ({n_spikes} with a time leaping ahead of the samples on either side: "
+                               "a corrupt timestamp)" if n_spikes else ""))
             s = s.select(inc)
         finite = np.all(np.isfinite(s.pos), -1) & np.all(np.isfinite(s.quat), -1)
         nonzero = np.linalg.norm(np.where(np.isfinite(s.quat), s.quat, 0.0), axis=-1) > 1e-6
@@ -325,6 +357,7 @@ def resample(recording: Recording, fps, t_start=None, t_end=None, required=REQUI
     if not (t1 >= t0):
         raise RecordingError(f"no time covered by all of {', '.join(required)}: grid would end at "
                              f"{t1:.3f} s before it starts at {t0:.3f} s", path=path)
+    _check_grid_length(prep, t0, t1, fps, path)
     # 1e-3 frame of slack: timestamps written with 6 decimals must not lose the last frame
     T = int(np.floor((t1 - t0) * fps + 1e-3)) + 1
     times = t0 + np.arange(T) / fps
