@@ -296,3 +296,23 @@ def test_bad_cells_name_their_line(tmp_path):
     p.write_text("\n".join(lines) + "\n")
     rec = formats.load_recording(p)
     assert not rec.streams["head"].valid[4] and rec.streams["head"].valid[5]
+
+
+def test_an_infinite_cell_is_a_lost_sample_without_warnings(tmp_path):
+    """'inf' where a hand's position should be (a logger's overflow): the axes are still told from
+    the other rows, quietly (no RuntimeWarning on the console), and the sample counts as lost."""
+    import warnings
+    p = tmp_path / "inf.csv"
+    write_wide(p, **FAMILIES["unity_logger_ms_cm"])
+    lines = p.read_text().splitlines()
+    header = lines[0].split(",")
+    cells = lines[5].split(",")
+    cells[header.index("left_controller_pos_x")] = "inf"
+    lines[5] = ",".join(cells)
+    p.write_text("\n".join(lines) + "\n")
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        rec = formats.load_recording(p)
+    assert "axes unity" in rec.metadata["detected"]
+    s = rec.streams["left_hand"]
+    assert not np.all(np.isfinite(s.pos[4])) or not s.valid[4]

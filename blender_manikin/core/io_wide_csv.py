@@ -163,9 +163,11 @@ def _axes_by_forward(pos, quat, candidates):
     best = None
     hands = [pos[d] for d in ("left_hand", "right_hand") if d in pos]
     to_hands = np.mean(hands, 0) - pos["head"]
+    rows = np.isfinite(to_hands).all(-1) & np.isfinite(quat["head"]).all(-1)      # lost / corrupt rows
+    to_hands, head_quat = to_hands[rows], quat["head"][rows]
     for axes in candidates:
         up, local = _CONVENTIONS[axes]
-        fwd = quat_rotate(normalize(quat["head"]), np.array(local))
+        fwd = quat_rotate(normalize(head_quat), np.array(local))
         f, h = fwd.copy(), to_hands.copy()
         f[:, up] = 0.0
         h[:, up] = 0.0
