@@ -130,3 +130,27 @@ def test_bake_to_fk_copies_the_mannequin_onto_the_baked_armature():
     assert [m.object for m in mo.modifiers if m.type == 'ARMATURE'] == [arm]      # untouched
     for f in (f0 + 10, (f0 + f1) // 2):
         assert np.abs(_evaluated(mb, f) - _evaluated(mo, f)).max() < 1e-3
+
+
+def test_the_panel_setting_reaches_the_solve():
+    """Frames and Output shows *Mannequin*; off, the operator's solve makes none."""
+    from types import SimpleNamespace
+    from blender_manikin.panels import main as panels
+    from blender_util import PanelLayout
+    fresh_scene()
+    blender_manikin.register()
+    try:
+        sc = bpy.context.scene
+        sc.render.fps = 30
+        s = sc.manikin
+        log = []
+        panels.MANIKIN_PT_output.draw(SimpleNamespace(layout=PanelLayout(log)), bpy.context)
+        assert ("prop", "body_mesh") in log
+        s.source, s.filepath, s.body_mesh, s.reuse_armature = 'FILE', EXAMPLE, False, False
+        assert bpy.ops.manikin.solve_full_body() == {'FINISHED'}
+        assert body_mesh.find_body_mesh(s.armature) is None
+        s.body_mesh = True
+        assert bpy.ops.manikin.solve_full_body() == {'FINISHED'}
+        assert body_mesh.find_body_mesh(s.armature) is not None
+    finally:
+        blender_manikin.unregister()
