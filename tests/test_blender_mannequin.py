@@ -98,7 +98,10 @@ def test_a_failed_solve_leaves_no_mannequin(monkeypatch):
     assert (len(bpy.data.objects), len(bpy.data.meshes)) == before
 
 
-def test_undo_of_the_solve_operator_removes_the_mannequin():
+@pytest.fixture
+def panel_settings():
+    """The add-on registered on an empty 30 fps scene, its panel set to solve the example;
+    yields the settings."""
     fresh_scene()
     blender_manikin.register()
     try:
@@ -106,16 +109,21 @@ def test_undo_of_the_solve_operator_removes_the_mannequin():
         sc.render.fps = 30
         s = sc.manikin
         s.source, s.filepath = 'FILE', EXAMPLE
-        assert s.body_mesh                                   # on by default
-        bpy.ops.ed.undo_push(message="before solve")
-        assert bpy.ops.manikin.solve_full_body('EXEC_DEFAULT', True) == {'FINISHED'}
-        assert body_mesh.find_body_mesh(s.armature) is not None
-        bpy.ops.ed.undo()
-        assert not [o for o in bpy.data.objects if o.get(body_mesh.PROP_MESH)]
-        bpy.ops.ed.redo()
-        assert len([o for o in bpy.data.objects if o.get(body_mesh.PROP_MESH)]) == 1
+        yield s
     finally:
         blender_manikin.unregister()
+
+
+def test_undo_of_the_solve_operator_removes_the_mannequin(panel_settings):
+    s = panel_settings
+    assert s.body_mesh                                   # on by default
+    bpy.ops.ed.undo_push(message="before solve")
+    assert bpy.ops.manikin.solve_full_body('EXEC_DEFAULT', True) == {'FINISHED'}
+    assert body_mesh.find_body_mesh(s.armature) is not None
+    bpy.ops.ed.undo()
+    assert not [o for o in bpy.data.objects if o.get(body_mesh.PROP_MESH)]
+    bpy.ops.ed.redo()
+    assert len([o for o in bpy.data.objects if o.get(body_mesh.PROP_MESH)]) == 1
 
 
 def test_bake_to_fk_copies_the_mannequin_onto_the_baked_armature():
@@ -132,25 +140,18 @@ def test_bake_to_fk_copies_the_mannequin_onto_the_baked_armature():
         assert np.abs(_evaluated(mb, f) - _evaluated(mo, f)).max() < 1e-3
 
 
-def test_the_panel_setting_reaches_the_solve():
+def test_the_panel_setting_reaches_the_solve(panel_settings):
     """Frames and Output shows *Mannequin*; off, the operator's solve makes none."""
     from types import SimpleNamespace
     from blender_manikin.panels import main as panels
     from blender_util import PanelLayout
-    fresh_scene()
-    blender_manikin.register()
-    try:
-        sc = bpy.context.scene
-        sc.render.fps = 30
-        s = sc.manikin
-        log = []
-        panels.MANIKIN_PT_output.draw(SimpleNamespace(layout=PanelLayout(log)), bpy.context)
-        assert ("prop", "body_mesh") in log
-        s.source, s.filepath, s.body_mesh, s.reuse_armature = 'FILE', EXAMPLE, False, False
-        assert bpy.ops.manikin.solve_full_body() == {'FINISHED'}
-        assert body_mesh.find_body_mesh(s.armature) is None
-        s.body_mesh = True
-        assert bpy.ops.manikin.solve_full_body() == {'FINISHED'}
-        assert body_mesh.find_body_mesh(s.armature) is not None
-    finally:
-        blender_manikin.unregister()
+    s = panel_settings
+    log = []
+    panels.MANIKIN_PT_output.draw(SimpleNamespace(layout=PanelLayout(log)), bpy.context)
+    assert ("prop", "body_mesh") in log
+    s.body_mesh, s.reuse_armature = False, False
+    assert bpy.ops.manikin.solve_full_body() == {'FINISHED'}
+    assert body_mesh.find_body_mesh(s.armature) is None
+    s.body_mesh = True
+    assert bpy.ops.manikin.solve_full_body() == {'FINISHED'}
+    assert body_mesh.find_body_mesh(s.armature) is not None
