@@ -69,6 +69,8 @@ def test_bone_and_constrained_sources():
     rec = scene_trackers.sample_sources(sc, {"head": (follower, ""), "left_hand": (arm.name, "left_wrist")},
                                         1, N)
     assert rec.metadata["method"] == {"head": "frame_set", "left_hand": "frame_set"}
+    # the names the devices come from, for the auto offsets (an object "HMD" is a headset)
+    assert rec.metadata["device_labels"] == {"head": follower.name, "left_hand": "left_wrist"}
     ref = scene_trackers.sample_sources(sc, {"head": (target, "")}, 1, N)
     np.testing.assert_allclose(rec["head"].pos, ref["head"].pos, atol=1e-5)
     for k in (0, N - 1):

@@ -183,6 +183,7 @@ def sample_sources(scene, sources, frame_start, frame_end, depsgraph=None, progr
         streams[dev] = TrackerStream(dev, times.copy(), pos[dev], q, np.ones(N, dtype=bool))
     meta = {"frames": (frame_start, frame_end), "fps": fps, "method": method,
             "objects": {d: (o.name, b) for d, (o, b) in resolved.items()},
+            "device_labels": {d: b or o.name for d, (o, b) in resolved.items()},     # "HMD": a headset
             "axes": "blender", "units": "m", "exact": True}     # held keys repeat exactly: not lost
     return Recording(streams=streams, source="scene", metadata=meta)
 

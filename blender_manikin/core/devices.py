@@ -47,7 +47,7 @@ ALIASES = {
 
 
 #: name parts that scene objects carry around a device's name (this add-on's own empties, tools)
-_OBJECT_AFFIXES = ("manikin_", "tracker_", "vr_", "xr_", "_tracker", "_empty")
+OBJECT_AFFIXES = ("manikin_", "tracker_", "vr_", "xr_", "_tracker", "_empty")
 
 
 def name_key(name, affixes=()) -> str:
@@ -69,8 +69,8 @@ def name_key(name, affixes=()) -> str:
 def device_of_object_name(name):
     """The device a scene object's ``name`` stands for (``"HMD"``, ``"LeftController"``,
     ``"MANIKIN_left_hand.001"``, ``"Tracker_LeftFoot"``), or ``None``: :func:`canonical_device`
-    of its :func:`name_key`, else of that key without the affixes of :data:`_OBJECT_AFFIXES`."""
-    return canonical_device(name_key(name)) or canonical_device(name_key(name, _OBJECT_AFFIXES))
+    of its :func:`name_key`, else of that key without the affixes of :data:`OBJECT_AFFIXES`."""
+    return canonical_device(name_key(name)) or canonical_device(name_key(name, OBJECT_AFFIXES))
 
 
 def canonical_device(name):

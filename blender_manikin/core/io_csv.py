@@ -208,10 +208,11 @@ def _parse_fast(rows, lines, header, text=None):
     return b
 
 
-def _device_codes(block, unknown):
+def _device_codes(block, unknown, labels):
     """``(n,)`` int8 index into :data:`DEVICES` of each row's device name, -1 for a name that is
     not a device (an extra tracker: chest, elbows, knees; or a typo), counted in ``unknown``
-    (name → ``[rows, first line]``).  One vectorised comparison per distinct name."""
+    (name → ``[rows, first line]``); ``labels`` gets the first name each device is written with
+    (device → name, e.g. ``"head": "HMD"``).  One vectorised comparison per distinct name."""
     names = np.asarray(block.names)
     codes = np.empty(len(names), dtype=np.int8)
     todo = np.ones(len(names), dtype=bool)
@@ -226,6 +227,7 @@ def _device_codes(block, unknown):
             codes[same] = -1
         else:
             codes[same] = DEVICES.index(d)
+            labels.setdefault(d, name.strip())
         todo &= ~same
     return codes
 
@@ -248,6 +250,7 @@ def read_csv(path, axes=None, units=None, block_bytes=None) -> Recording:
     header = header_line = None
     blocks = []
     unknown = {}                             # rows of names that are not devices
+    labels = {}                              # device -> the name the file writes it with
     any_text = False
     first = 1                                # line number of the block's first line
     for text in _text_blocks(path, max(int(block_bytes or BLOCK_BYTES), 1)):
@@ -257,7 +260,7 @@ def read_csv(path, axes=None, units=None, block_bytes=None) -> Recording:
             n = text.count("\n") + (not text.endswith("\n"))
             block = _parse_fast(None, np.arange(first, first + n, dtype=np.int64), header, text=text)
             if block is not None:
-                block.names = _device_codes(block, unknown)
+                block.names = _device_codes(block, unknown, labels)
                 blocks.append(block)
                 first += n
                 continue
@@ -293,7 +296,7 @@ def read_csv(path, axes=None, units=None, block_bytes=None) -> Recording:
             if rows:
                 block = _parse_fast(rows, lines, header) or _parse_exact(rows, lines, header, path)
         if block is not None:
-            block.names = _device_codes(block, unknown)     # int8 codes from here on (names are 24 bytes a row)
+            block.names = _device_codes(block, unknown, labels)     # int8 codes from here on (names are 24 bytes a row)
             blocks.append(block)
             any_text = True
         first += len(block_lines)
@@ -367,6 +370,7 @@ def read_csv(path, axes=None, units=None, block_bytes=None) -> Recording:
                         f"{', '.join(DEVICES)})")
     if unknown:
         metadata["ignored_devices"] = list(unknown)
+    metadata["device_labels"] = labels
     metadata["axes"] = axes_used
     metadata["units"] = units_used
     return Recording(streams=streams, source=path, metadata=metadata, warnings=warnings)

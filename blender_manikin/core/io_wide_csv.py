@@ -429,6 +429,7 @@ def read_wide_csv(path, axes=None, units=None, layout=None, rate=None) -> Record
     if layout is not None:
         detected = "layout file: " + detected.split(": ", 1)[1]
     meta = {"format": "wide_csv", "axes": axes, "units": units, "detected": detected,
-            "ignored_columns": skipped, "layout": used}
+            "ignored_columns": skipped, "layout": used,
+            "device_labels": {d: g["prefix"] for d, g in groups.items()}}
     return Recording(streams=streams, source=path, metadata=meta, warnings=[])
 

@@ -304,15 +304,27 @@ def resolve_offsets(offsets, recording):
     return formats.default_offsets(str(getattr(recording, "source", "")))
 
 
-def offsets_note(setting, resolved, recording=None):
+def _offsets_unstated(setting, resolved, recording):
+    """True when the offsets are ``auto`` and neither the file nor its format says what they are
+    (``none`` by default): :mod:`.offsets_auto` then looks at the take itself."""
+    if not (isinstance(setting, str) and setting.lower() == "auto") or resolved != "none":
+        return False
+    meta = (getattr(recording, "metadata", None) or {}).get("offsets")
+    return not (isinstance(meta, str) and meta.strip())
+
+
+def offsets_note(setting, resolved, recording=None, guessed=None):
     """The summary's note on the device offsets: ``"offsets beat_saber_touch (auto: from the file)"``.
 
     setting: what the user chose (``"auto"``, a preset name, a file's offsets dict ...);
-    resolved: what :func:`resolve_offsets` made of it.  ``None`` when nothing needs saying: a
-    typed preset or offsets the user gave (they know what they chose), or ``auto`` giving ``none``
-    for a format whose poses are the joints' own."""
+    resolved: what :func:`resolve_offsets` made of it, or what the take showed
+    (:mod:`.offsets_auto`; ``guessed``: why).  ``None`` when nothing needs saying: a typed preset
+    or offsets the user gave (they know what they chose), or ``auto`` giving ``none`` for a format
+    whose poses are the joints' own."""
     if not (isinstance(setting, str) and setting.lower() == "auto") or not isinstance(resolved, str):
         return None
+    if guessed:
+        return f"offsets {resolved} (auto: {guessed}; choose offsets none if the head samples are the head joint's)"
     if resolved == "none":
         return None
     meta = (getattr(recording, "metadata", None) or {}).get("offsets")
@@ -632,9 +644,20 @@ def device_targets(out: SolveOutcome, settings: SolveSettings, teleports="keep")
         sides = fix_swapped_sides(pos, quat, valid, settings.fps)
     resolved = resolve_offsets(settings.offsets, out.recording)
     out.targets, offsets = make_targets(times, pos, quat, valid, settings.fps, resolved)
-    note = offsets_note(settings.offsets, resolved, out.recording)
     out.floor = floor_height(settings, out.targets)
     out.targets = move_floor(out.targets, out.floor)
+    guessed = None
+    if _offsets_unstated(settings.offsets, resolved, out.recording):      # a headset's poses after all?
+        from .offsets_auto import HEADSET_PRESET, headset_evidence
+        as_headset, headset_offsets = make_targets(times, pos, quat, valid, settings.fps, HEADSET_PRESET)
+        headset_floor = floor_height(settings, as_headset)
+        labels = (out.recording.metadata or {}).get("device_labels") or {}
+        preset, guessed = headset_evidence(out.targets, move_floor(as_headset, headset_floor), float(times[0]),
+                                           labels.get("head"))
+        if preset is not None:
+            resolved, offsets, out.floor = preset, headset_offsets, headset_floor
+            out.targets = move_floor(as_headset, headset_floor)
+    note = offsets_note(settings.offsets, resolved, out.recording, guessed)
     first, last = headset_off(out.targets.pos["head"], out.targets.rot["head"], settings.fps,
                               out.targets.valid.get("head"))
     out.headset_off = (first, last)

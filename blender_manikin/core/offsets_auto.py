@@ -1,0 +1,60 @@
+"""Headset or head joint?  What the *Auto* device offsets make of a recording that does not say.
+
+A CSV that names no offsets (no ``# offsets:`` line; every wide-layout CSV) is read as joint
+poses (``none``: mocap, keyed scene objects).  Loggers in Unity, Unreal or OpenXR apps write the
+headset's view pose there, 11.5 cm above and 8 cm in front of the head joint: taken for the joint,
+it sizes a 1.75 m performer 1.88 m tall and hides the T-pose (its hands then stand 13 cm below
+where the shoulders would be).  Two kinds of evidence decide, in this order:
+
+1. the take's T-pose (:func:`.calibration.find_tpose`), looked for with the head samples as the
+   head joint and as a headset's view pose (``openxr_generic``): when only the headset reading
+   gives a T-pose, or one that fits clearly better (:data:`TPOSE_MARGIN`), the samples are a
+   headset's.  A standing body's own joints fit the other way round by as much (the mocap
+   T-poses of ``benchmarks/standing.py`` at 1.50-2.00 m: hands on the shoulders' height read as
+   joints, 17 cm off read as a headset);
+2. without a T-pose that decides, the name the file gives the head (``hmd``, ``headset``,
+   ``camera``, ...; a wide CSV's column prefix, a native CSV's device name, a scene object's
+   name): a name for the hardware, not the body part.
+
+Either way the solve says so in its summary and how to override it.  No bpy.
+"""
+from __future__ import annotations
+
+from . import calibration as cal
+from .devices import OBJECT_AFFIXES, name_key
+
+#: the preset a headset's recording gets: the head as an OpenXR view pose (every preset but
+#: ``none`` agrees on the head), the hands as grip poses
+HEADSET_PRESET = "openxr_generic"
+#: how much lower (find_tpose's cost: span ratio + 3 x height error / stature + speed) the T-pose
+#: must be read as a headset's than as the head joint's before the headset reading wins; 13 cm of
+#: height error on a 1.75 m performer is 0.22
+TPOSE_MARGIN = 0.1
+#: head names (:func:`.devices.name_key` of a column prefix, a device or an object's name, also
+#: without the affixes of :data:`.devices.OBJECT_AFFIXES`) that name the hardware
+HEADSET_NAMES = ("hmd", "headset", "camera", "main_camera", "xr_camera", "center_eye", "centereye",
+                 "centre_eye", "eye_center", "head_mounted_display", "view")
+
+
+def headset_evidence(as_joint, as_headset, t0=0.0, head_label=None):
+    """``(preset, reason)``: :data:`HEADSET_PRESET` and a plain reason when the head samples are a
+    headset's, else ``(None, None)``.
+
+    as_joint, as_headset: the take's :class:`~.pose_result.TrackerTargets` (the floor at z = 0)
+    made with the offsets ``none`` and :data:`HEADSET_PRESET`; t0: the time of their frame 0
+    (seconds); head_label: the name the file gives the head device (a column prefix, a device
+    name), if any."""
+    if not all(d in as_joint.pos for d in ("head", "left_hand", "right_hand")) or as_joint.num_frames < 2:
+        return None, None
+    joint = cal.find_tpose(as_joint, t0=t0)
+    headset = cal.find_tpose(as_headset, t0=t0)
+    if headset.plausible and (not joint.plausible or headset.cost + TPOSE_MARGIN < joint.cost):
+        return HEADSET_PRESET, (f"the T-pose at {headset.time - t0:.2f} s fits a headset's view pose, not the "
+                                f"head joint: its hands {100 * joint.height_error:.0f} cm off shoulder height "
+                                f"read as the joint's, {100 * headset.height_error:.0f} cm as a headset's")
+    if joint.plausible:
+        return None, None
+    keys = {name_key(head_label), name_key(head_label, OBJECT_AFFIXES)} if head_label else set()
+    if keys & set(HEADSET_NAMES):
+        return HEADSET_PRESET, f"the head samples are named {head_label!r}, a headset"
+    return None, None

@@ -1,0 +1,116 @@
+"""Auto offsets on a CSV that does not say what its poses are (core/offsets_auto.py): a headset's
+view pose is told from the head joint by the take's T-pose, else by the head's name; joint poses
+(mocap) stay joint poses, whatever they are called."""
+import os
+import sys
+
+import numpy as np
+import pytest
+
+from blender_manikin.core import rotations as rot
+from blender_manikin.core import skeleton as sk
+from blender_manikin.core.device_offsets import remove_offsets
+from blender_manikin.core.offsets_auto import HEADSET_PRESET
+from blender_manikin.core.solve import SolveSettings, solve_recording
+
+sys.path.insert(0, os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "benchmarks"))
+from standing import bandai_like_body, standing_targets  # noqa: E402
+
+DEVICES = ("head", "left_hand", "right_hand")
+
+
+def write_wide(path, body, pose, labels, headset):
+    """A wide CSV (OpenXR axes, metres, seconds) of ``body`` standing 4 s in ``pose`` then turning
+    its head; each device's columns named by ``labels``; ``headset``: the poses a headset and
+    grip poses give (:data:`HEADSET_PRESET` taken off the joints), else the joints' own."""
+    tg = standing_targets(body, pose, seconds=4.0)
+    T = tg.num_frames
+    cols, data = ["time"], [np.arange(T) / tg.fps]
+    to_xr = np.array([[-1.0, 0, 0], [0, 0, 1], [0, 1, 0]])        # Blender → OpenXR axes
+    for d in DEVICES:
+        p, R = tg.pos[d], tg.rot[d]
+        if headset:
+            p, R = remove_offsets(p, R, HEADSET_PRESET, d)
+        p, q = p @ to_xr.T, rot.matrix_to_quat(to_xr @ R @ to_xr.T)
+        for k, a in enumerate("xyz"):
+            cols.append(f"{labels[d]}_pos_{a}")
+            data.append(p[:, k])
+        for k, a in enumerate("wxyz"):
+            cols.append(f"{labels[d]}_rot_{a}")
+            data.append(q[:, k])
+    with open(path, "w") as f:
+        f.write(",".join(cols) + "\n")
+        for row in np.stack(data, -1):
+            f.write(",".join(f"{v:.6f}" for v in row) + "\n")
+    return path
+
+
+JOINT_NAMES = {"head": "head", "left_hand": "left_hand", "right_hand": "right_hand"}
+HEADSET_NAMES = {"head": "hmd", "left_hand": "left_controller", "right_hand": "right_controller"}
+
+
+def _solve(path):
+    out = solve_recording(str(path), SolveSettings(fps=30.0))
+    return out, out.summary()
+
+
+@pytest.mark.parametrize("stature", [1.50, 1.75, 2.00])
+def test_a_headset_take_with_a_t_pose_is_read_as_a_headset_whatever_its_names(tmp_path, stature):
+    body = sk.make_body(stature)
+    for labels in (HEADSET_NAMES, JOINT_NAMES):
+        out, summary = _solve(write_wide(tmp_path / "take.csv", body, "T", labels, headset=True))
+        assert f"offsets {HEADSET_PRESET} (auto: the T-pose at" in summary, summary
+        assert "choose offsets none" in summary
+        assert abs(out.result.body.stature - stature) < 0.01, summary           # not 7 % too tall
+
+
+@pytest.mark.parametrize("body", [sk.make_body(1.50), sk.make_body(2.00), bandai_like_body(1.70)],
+                         ids=["1.50", "2.00", "bandai"])
+def test_joint_poses_with_a_t_pose_stay_joint_poses_even_named_as_a_headset(tmp_path, body):
+    for labels in (JOINT_NAMES, HEADSET_NAMES):
+        path = write_wide(tmp_path / "take.csv", body, "T", labels, headset=False)
+        out, summary = _solve(path)
+        assert "auto:" not in summary and "calibrated on a T-pose" in summary, summary
+        stated = solve_recording(str(path), SolveSettings(fps=30.0, offsets="none"))
+        assert out.result.body.stature == stated.result.body.stature        # as if "none" was chosen
+        np.testing.assert_array_equal(out.result.positions, stated.result.positions)
+
+
+def test_without_a_t_pose_the_head_s_name_decides(tmp_path):
+    body = sk.make_body(1.75)
+    out, summary = _solve(write_wide(tmp_path / "hmd.csv", body, "A", HEADSET_NAMES, headset=True))
+    assert f"offsets {HEADSET_PRESET} (auto: the head samples are named 'hmd', a headset" in summary, summary
+    assert abs(out.result.body.stature - 1.75) < 0.03, summary
+    out, summary = _solve(write_wide(tmp_path / "head.csv", body, "A", JOINT_NAMES, headset=False))
+    assert "auto:" not in summary and abs(out.result.body.stature - 1.75) < 0.03, summary
+
+
+def test_a_file_or_a_user_that_states_the_offsets_is_not_second_guessed(tmp_path):
+    body = sk.make_body(1.75)
+    path = write_wide(tmp_path / "take.csv", body, "T", JOINT_NAMES, headset=True)
+    out = solve_recording(str(path), SolveSettings(fps=30.0, offsets="none"))
+    assert "auto:" not in out.summary()
+    assert out.result.body.stature > 1.8                  # what "none" makes of a headset, as asked
+
+
+def test_a_native_csv_whose_head_rows_say_hmd(tmp_path):
+    """The native format's device column may name the hardware (``hmd``): without a T-pose that
+    is what the auto offsets go by; its other names (``head``) leave the poses as the joints'."""
+    from blender_manikin.core.io_csv import write_csv
+    from blender_manikin.core.recording import Recording, TrackerStream
+    tg = standing_targets(sk.make_body(1.80), "A", seconds=3.0)
+    t = np.arange(tg.num_frames) / tg.fps
+    streams = {}
+    for d in DEVICES:
+        p, R = remove_offsets(tg.pos[d], tg.rot[d], HEADSET_PRESET, d)
+        streams[d] = TrackerStream(d, t, p, rot.matrix_to_quat(R))
+    path = tmp_path / "hmd.csv"
+    write_csv(path, Recording(streams=streams, source="synthetic"))
+    text = path.read_text()
+    path.write_text(text.replace(",head,", ",hmd,"))
+    out, summary = _solve(path)
+    assert f"offsets {HEADSET_PRESET} (auto: the head samples are named 'hmd'" in summary, summary
+    assert abs(out.result.body.stature - 1.80) < 0.03
+    path.write_text(text)
+    out, summary = _solve(path)
+    assert "auto:" not in summary and out.result.body.stature > 1.9         # a headset taken as the joint
