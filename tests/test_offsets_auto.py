@@ -11,6 +11,7 @@ from blender_manikin.core import rotations as rot
 from blender_manikin.core import skeleton as sk
 from blender_manikin.core.device_offsets import remove_offsets
 from blender_manikin.core.offsets_auto import HEADSET_PRESET
+from blender_manikin.core.recording import from_blender
 from blender_manikin.core.solve import SolveSettings, solve_recording
 
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "benchmarks"))
@@ -20,18 +21,19 @@ DEVICES = ("head", "left_hand", "right_hand")
 
 
 def write_wide(path, body, pose, labels, headset):
-    """A wide CSV (OpenXR axes, metres, seconds) of ``body`` standing 4 s in ``pose`` then turning
-    its head; each device's columns named by ``labels``; ``headset``: the poses a headset and
-    grip poses give (:data:`HEADSET_PRESET` taken off the joints), else the joints' own."""
-    tg = standing_targets(body, pose, seconds=4.0)
-    T = tg.num_frames
-    cols, data = ["time"], [np.arange(T) / tg.fps]
-    to_xr = np.array([[-1.0, 0, 0], [0, 0, 1], [0, 1, 0]])        # Blender → OpenXR axes
+    """A wide CSV (OpenXR axes, metres, seconds) of ``body`` standing 4 s in ``pose``, then 2 s
+    with its arms reaching forward; each device's columns named by ``labels``; ``headset``: the
+    poses a headset and grip poses give (:data:`HEADSET_PRESET` taken off the joints), else the
+    joints' own."""
+    holds = [standing_targets(body, pose, seconds=4.0), standing_targets(body, "forward", seconds=2.0)]
+    T = sum(h.num_frames for h in holds)
+    cols, data = ["time"], [np.arange(T) / holds[0].fps]
     for d in DEVICES:
-        p, R = tg.pos[d], tg.rot[d]
+        p = np.concatenate([h.pos[d] for h in holds])
+        R = np.concatenate([h.rot[d] for h in holds])
         if headset:
             p, R = remove_offsets(p, R, HEADSET_PRESET, d)
-        p, q = p @ to_xr.T, rot.matrix_to_quat(to_xr @ R @ to_xr.T)
+        p, q = from_blender(p, rot.matrix_to_quat(R), "openxr")
         for k, a in enumerate("xyz"):
             cols.append(f"{labels[d]}_pos_{a}")
             data.append(p[:, k])
@@ -60,7 +62,7 @@ def test_a_headset_take_with_a_t_pose_is_read_as_a_headset_whatever_its_names(tm
     for labels in (HEADSET_NAMES, JOINT_NAMES):
         out, summary = _solve(write_wide(tmp_path / "take.csv", body, "T", labels, headset=True))
         assert f"offsets {HEADSET_PRESET} (auto: the T-pose at" in summary, summary
-        assert "choose offsets none" in summary
+        assert "choose offsets none" in summary and "axes openxr" in summary
         assert abs(out.result.body.stature - stature) < 0.01, summary           # not 7 % too tall
 
 

@@ -1,6 +1,8 @@
 """Wide CSV layouts (one row per time step, a column group per device), detected automatically:
 device names, column patterns, quaternion order, time units, length units and axes.  Every
 fixture is made here from one known motion (Blender axes) written in the family's conventions."""
+import os
+
 import numpy as np
 import pytest
 
@@ -316,3 +318,34 @@ def test_an_infinite_cell_is_a_lost_sample_without_warnings(tmp_path):
     assert "axes unity" in rec.metadata["detected"]
     s = rec.streams["left_hand"]
     assert not np.all(np.isfinite(s.pos[4])) or not s.valid[4]
+
+
+@pytest.mark.parametrize("axes", ["openxr", "unity"])
+def test_a_take_mostly_at_the_sides_is_not_read_mirrored(tmp_path, axes):
+    """The bundled example (a T-pose, walking with the hands at the sides, one reach, a wave),
+    written as a wide CSV: its headset stands ahead of the hands most of the time, yet the reach
+    decides the axes.  Voting on the hands' direction read it mirrored (left-handed for OpenXR),
+    8 cm of headset offset then turned the wrong way."""
+    from blender_manikin.core.resample import resample
+    example = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "examples",
+                           "example_recording.csv")
+    rec = formats.load_recording(example)
+    times, pos, quat, _, _ = resample(rec, 72.0, floor=None, check_units=False)
+    names = {"head": "hmd", "left_hand": "left_controller", "right_hand": "right_controller"}
+    cols, data = ["time"], [times - times[0]]
+    for d, prefix in names.items():
+        p, q = from_blender(pos[d], quat[d], axes)
+        for k, a in enumerate("xyz"):
+            cols.append(f"{prefix}_pos_{a}")
+            data.append(p[:, k])
+        for k, a in enumerate("wxyz"):
+            cols.append(f"{prefix}_rot_{a}")
+            data.append(q[:, k])
+    path = tmp_path / "example_wide.csv"
+    with open(path, "w") as f:
+        f.write(",".join(cols) + "\n")
+        for row in np.stack(data, -1):
+            f.write(",".join(f"{v:.6f}" for v in row) + "\n")
+    back = formats.load_recording(path)
+    assert f"axes {axes} (" in back.metadata["detected"]
+    np.testing.assert_allclose(back.streams["head"].pos, pos["head"], atol=1e-5)

@@ -25,8 +25,9 @@ Detected:
   (a pandas index) is ignored;
 * units from the head's height (a head at 161.9 means centimetres);
 * axes: Y-up or Z-up from the head's height; between Unity (left-handed, +Z forward) and
-  OpenXR/OpenVR (right-handed, -Z forward), the convention in which the head's forward axis
-  points towards the hands (datasets' READMEs are not always right about their axes).
+  OpenXR/OpenVR (right-handed, -Z forward), the convention along whose head forward axis the
+  hands reach ahead of the head (:func:`_axes_by_forward`; datasets' READMEs are not always right
+  about their axes).
 
 ``axes`` / ``units`` given by the user override the detection.  Ambiguity (two column groups
 for one device, a quaternion without all four components) is a :class:`RecordingError` that
@@ -157,21 +158,28 @@ _CONVENTIONS = {"unity": (1, (0.0, 0.0, 1.0)), "openxr": (1, (0.0, 0.0, -1.0)), 
 
 
 def _axes_by_forward(pos, quat, candidates):
-    """The convention among ``candidates`` in which the head's forward axis points most towards
-    the hands (horizontally), judged in the file's own coordinates (dot products do not depend on
-    the axes change); ``(axes, median cosine)``."""
+    """The convention among ``candidates`` in which the hands reach ahead of the head, along its
+    forward axis (horizontally), judged in the file's own coordinates (dot products do not depend
+    on the axes change); ``(axes, score)``.
+
+    A hand's reach is lopsided: up to 60 cm ahead of the head, hardly 10 cm behind it, while at
+    the sides or in a T-pose the hands stand a few centimetres behind a headset (its view pose
+    is in front of the eyes).  The score is the sum of the 90th and 10th percentiles of the
+    hands' distance ahead of the head (every frame, both hands): positive read the right way,
+    negative mirrored.  (Voting on the direction of the hands alone, as before, read a take of
+    T-poses, hands at the sides and a few reaches the mirrored way.)"""
     best = None
     hands = [pos[d] for d in ("left_hand", "right_hand") if d in pos]
-    to_hands = np.mean(hands, 0) - pos["head"]
-    rows = np.isfinite(to_hands).all(-1) & np.isfinite(quat["head"]).all(-1)      # lost / corrupt rows
-    to_hands, head_quat = to_hands[rows], quat["head"][rows]
+    head = pos["head"]
+    rows = np.isfinite(head).all(-1) & np.isfinite(quat["head"]).all(-1)      # lost / corrupt rows
     for axes in candidates:
         up, local = _CONVENTIONS[axes]
-        fwd = quat_rotate(normalize(head_quat), np.array(local))
-        f, h = fwd.copy(), to_hands.copy()
-        f[:, up] = 0.0
-        h[:, up] = 0.0
-        score = float(np.nanmedian(np.sum(normalize(f) * normalize(h), -1)))
+        fwd = quat_rotate(normalize(quat["head"][rows]), np.array(local))
+        fwd[:, up] = 0.0
+        fwd = normalize(fwd)
+        ahead = np.concatenate([np.sum((h[rows] - head[rows]) * fwd, -1) for h in hands])
+        ahead = ahead[np.isfinite(ahead)]
+        score = float(np.percentile(ahead, 90) + np.percentile(ahead, 10)) if ahead.size else 0.0
         if best is None or score > best[1]:
             best = (axes, score)
     return best

@@ -8,10 +8,12 @@ where the shoulders would be).  Two kinds of evidence decide, in this order:
 
 1. the take's T-pose (:func:`.calibration.find_tpose`), looked for with the head samples as the
    head joint and as a headset's view pose (``openxr_generic``): when only the headset reading
-   gives a T-pose, or one that fits clearly better (:data:`TPOSE_MARGIN`), the samples are a
-   headset's.  A standing body's own joints fit the other way round by as much (the mocap
-   T-poses of ``benchmarks/standing.py`` at 1.50-2.00 m: hands on the shoulders' height read as
-   joints, 17 cm off read as a headset);
+   gives a T-pose, or one that fits clearly better (:data:`TPOSE_MARGIN`), and the head stands
+   ahead of the hands as a headset does (:data:`HEAD_AHEAD_MIN`), the samples are a headset's.
+   A standing body's own joints fit the other way round by as much (the mocap T-poses of
+   ``benchmarks/standing.py`` at 1.50-2.00 m: hands on the shoulders' height read as joints,
+   17 cm off read as a headset), and a T-pose with the arms drooped 10 cm, whose heights fit the
+   headset reading better, keeps its hands beside the head joint;
 2. without a T-pose that decides, the name the file gives the head (``hmd``, ``headset``,
    ``camera``, ...; a wide CSV's column prefix, a native CSV's device name, a scene object's
    name): a name for the hardware, not the body part.
@@ -19,6 +21,8 @@ where the shoulders would be).  Two kinds of evidence decide, in this order:
 Either way the solve says so in its summary and how to override it.  No bpy.
 """
 from __future__ import annotations
+
+import numpy as np
 
 from . import calibration as cal
 from .devices import OBJECT_AFFIXES, name_key
@@ -30,10 +34,28 @@ HEADSET_PRESET = "openxr_generic"
 #: must be read as a headset's than as the head joint's before the headset reading wins; 13 cm of
 #: height error on a 1.75 m performer is 0.22
 TPOSE_MARGIN = 0.1
+#: metres the head sample must stand ahead of the hands in the T-pose (:func:`head_ahead_of_hands`)
+#: for the T-pose to say "headset": a performer drooping the arms 10 cm below the shoulders fits
+#: the headset reading's heights better, but keeps the hands beside the head joint
+HEAD_AHEAD_MIN = 0.04
 #: head names (:func:`.devices.name_key` of a column prefix, a device or an object's name, also
 #: without the affixes of :data:`.devices.OBJECT_AFFIXES`) that name the hardware
 HEADSET_NAMES = ("hmd", "headset", "camera", "main_camera", "xr_camera", "center_eye", "centereye",
                  "centre_eye", "eye_center", "head_mounted_display", "view")
+
+
+def head_ahead_of_hands(targets, frame):
+    """Metres the head sample stands ahead of the hands' midpoint at ``frame``, along the facing
+    the hands give (horizontal, square to the left-right line; :class:`~.pose_result.TrackerTargets`,
+    Z up).  In a T-pose the wrists lie in the plane of the head joint: about 0 read as joints,
+    about 8 cm for a headset's view pose (in front of the eyes)."""
+    head = np.asarray(targets.pos["head"][frame], np.float64)
+    left, right = (np.asarray(targets.pos[d][frame], np.float64) for d in ("left_hand", "right_hand"))
+    forward = np.cross(left - right, [0.0, 0.0, 1.0])
+    n = np.linalg.norm(forward)
+    if not n > 1e-6:
+        return 0.0
+    return float(np.dot(head - 0.5 * (left + right), forward / n))
 
 
 def headset_evidence(as_joint, as_headset, t0=0.0, head_label=None):
@@ -48,10 +70,13 @@ def headset_evidence(as_joint, as_headset, t0=0.0, head_label=None):
         return None, None
     joint = cal.find_tpose(as_joint, t0=t0)
     headset = cal.find_tpose(as_headset, t0=t0)
-    if headset.plausible and (not joint.plausible or headset.cost + TPOSE_MARGIN < joint.cost):
+    ahead = head_ahead_of_hands(as_joint, headset.frame)
+    if headset.plausible and (not joint.plausible or headset.cost + TPOSE_MARGIN < joint.cost) \
+            and ahead > HEAD_AHEAD_MIN:
         return HEADSET_PRESET, (f"the T-pose at {headset.time - t0:.2f} s fits a headset's view pose, not the "
                                 f"head joint: its hands {100 * joint.height_error:.0f} cm off shoulder height "
-                                f"read as the joint's, {100 * headset.height_error:.0f} cm as a headset's")
+                                f"read as the joint's, {100 * headset.height_error:.0f} cm as a headset's, "
+                                f"the head {100 * ahead:.0f} cm ahead of them")
     if joint.plausible:
         return None, None
     keys = {name_key(head_label), name_key(head_label, OBJECT_AFFIXES)} if head_label else set()
