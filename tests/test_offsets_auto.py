@@ -20,12 +20,14 @@ from standing import bandai_like_body, standing_targets  # noqa: E402
 DEVICES = ("head", "left_hand", "right_hand")
 
 
-def write_wide(path, body, pose, labels, headset):
+def write_wide(path, body, pose, labels, headset, droop=0.0):
     """A wide CSV (OpenXR axes, metres, seconds) of ``body`` standing 4 s in ``pose``, then 2 s
     with its arms reaching forward; each device's columns named by ``labels``; ``headset``: the
     poses a headset and grip poses give (:data:`HEADSET_PRESET` taken off the joints), else the
-    joints' own."""
+    joints' own.  droop: metres the hands hang lower during the hold (a tired T-pose)."""
     holds = [standing_targets(body, pose, seconds=4.0), standing_targets(body, "forward", seconds=2.0)]
+    for d in ("left_hand", "right_hand"):               # droop: the hands this much lower in the hold
+        holds[0].pos[d][:, 2] -= droop
     T = sum(h.num_frames for h in holds)
     cols, data = ["time"], [np.arange(T) / holds[0].fps]
     for d in DEVICES:
@@ -116,3 +118,13 @@ def test_a_native_csv_whose_head_rows_say_hmd(tmp_path):
     path.write_text(text)
     out, summary = _solve(path)
     assert "auto:" not in summary and out.result.body.stature > 1.9         # a headset taken as the joint
+
+
+@pytest.mark.parametrize("droop", [0.10, 0.14, 0.16])
+def test_a_drooped_mocap_t_pose_stays_joint_poses(tmp_path, droop):
+    """Mocap hands 14-16 cm below the shoulders in the T-pose are no T-pose read as joints, and
+    one read as a headset (its shoulders 11 cm lower), but the head joint stands level with the
+    hands, not 8 cm ahead of them as a headset does: still joint poses."""
+    path = write_wide(tmp_path / "take.csv", sk.make_body(1.75), "T", JOINT_NAMES, headset=False, droop=droop)
+    out, summary = _solve(path)
+    assert "auto:" not in summary, summary

@@ -12,8 +12,8 @@ where the shoulders would be).  Two kinds of evidence decide, in this order:
    ahead of the hands as a headset does (:data:`HEAD_AHEAD_MIN`), the samples are a headset's.
    A standing body's own joints fit the other way round by as much (the mocap T-poses of
    ``benchmarks/standing.py`` at 1.50-2.00 m: hands on the shoulders' height read as joints,
-   17 cm off read as a headset), and a T-pose with the arms drooped 10 cm, whose heights fit the
-   headset reading better, keeps its hands beside the head joint;
+   17 cm off read as a headset), and a T-pose with the hands drooped 14-16 cm, no T-pose read as
+   joints but one read as a headset, keeps its hands beside the head joint;
 2. without a T-pose that decides, the name the file gives the head (``hmd``, ``headset``,
    ``camera``, ...; a wide CSV's column prefix, a native CSV's device name, a scene object's
    name): a name for the hardware, not the body part.
@@ -35,8 +35,8 @@ HEADSET_PRESET = "openxr_generic"
 #: height error on a 1.75 m performer is 0.22
 TPOSE_MARGIN = 0.1
 #: metres the head sample must stand ahead of the hands in the T-pose (:func:`head_ahead_of_hands`)
-#: for the T-pose to say "headset": a performer drooping the arms 10 cm below the shoulders fits
-#: the headset reading's heights better, but keeps the hands beside the head joint
+#: for the T-pose to say "headset": a performer drooping the hands 14 cm below the shoulders
+#: makes a T-pose only read as a headset, but keeps them beside the head joint
 HEAD_AHEAD_MIN = 0.04
 #: head names (:func:`.devices.name_key` of a column prefix, a device or an object's name, also
 #: without the affixes of :data:`.devices.OBJECT_AFFIXES`) that name the hardware
