@@ -128,3 +128,22 @@ def test_a_drooped_mocap_t_pose_stays_joint_poses(tmp_path, droop):
     path = write_wide(tmp_path / "take.csv", sk.make_body(1.75), "T", JOINT_NAMES, headset=False, droop=droop)
     out, summary = _solve(path)
     assert "auto:" not in summary, summary
+
+
+@pytest.mark.parametrize("name,headset", [
+    ("HMD", True), ("CenterEyeAnchor", True), ("Main Camera", True), ("VR_Camera.001", True), ("xr_head", True),
+    ("XRHead", True), ("hmd_pose", True), ("headset", True),
+    ("head", False), ("Head", False), ("MANIKIN_head", False), ("head_pose", False), ("LeftHand", False)])
+def test_headset_names(name, headset):
+    from blender_manikin.core.offsets_auto import is_headset_name
+    assert is_headset_name(name) is headset
+
+
+def test_a_meta_rig_export_without_a_t_pose(tmp_path):
+    """An OVRCameraRig log (CenterEyeAnchor, LeftControllerAnchor, ...) with no T-pose: the
+    headset's name decides."""
+    names = {"head": "CenterEyeAnchor", "left_hand": "LeftControllerAnchor", "right_hand": "RightControllerAnchor"}
+    out, summary = _solve(write_wide(tmp_path / "ovr.csv", sk.make_body(1.68), "A", names, headset=True))
+    assert "head=CenterEyeAnchor_*" in summary
+    assert "named 'CenterEyeAnchor', a headset" in summary, summary
+    assert abs(out.result.body.stature - 1.68) < 0.03

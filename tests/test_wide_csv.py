@@ -349,3 +349,27 @@ def test_a_take_mostly_at_the_sides_is_not_read_mirrored(tmp_path, axes):
     back = formats.load_recording(path)
     assert f"axes {axes} (" in back.metadata["detected"]
     np.testing.assert_allclose(back.streams["head"].pos, pos["head"], atol=1e-5)
+
+
+@pytest.mark.parametrize("head,left,right,style", [
+    ("CenterEyeAnchor", "LeftHandAnchor", "RightHandAnchor", "dot"),           # Meta OVRCameraRig
+    ("CenterEyeAnchor", "LeftControllerAnchor", "RightControllerAnchor", "dot"),
+    ("hmd", "MotionController_L", "MotionController_R", "underscore"),          # Unreal
+    ("Main Camera", "LeftHand Controller", "RightHand Controller", "dot"),      # Unity XR rig
+    ("XRHead", "LHand", "RHand", "dot"),
+    ("head_pose", "left_hand_pose", "right_hand_pose", "underscore"),
+    ("head", "left_wrist", "right_wrist", "underscore"),                         # hand tracking, mocap
+    ("hmd", "controller_l", "controller_r", "underscore"),
+])
+def test_engine_rig_names_are_devices(head, left, right, style):
+    from blender_manikin.core.io_wide_csv import parse_columns
+
+    def cols(prefix):
+        if style == "dot":
+            return [f"{prefix}.position.{a}" for a in "xyz"] + [f"{prefix}.rotation.{a}" for a in "xyzw"]
+        return [f"{prefix}_pos_{a}" for a in "xyz"] + [f"{prefix}_rot_{a}" for a in "xyzw"]
+
+    groups, time_col, skipped = parse_columns(["time"] + cols(head) + cols(left) + cols(right))
+    assert skipped == [] and time_col == (0, "time")
+    # the prefixes as the file writes them (the detection line, the auto offsets' head name)
+    assert {d: g["prefix"] for d, g in groups.items()} == {"head": head, "left_hand": left, "right_hand": right}

@@ -43,7 +43,25 @@ ALIASES = {
     "left_foot_tracker": "left_foot", "foot_r": "right_foot", "foot_right": "right_foot", "r_foot": "right_foot",
     "tracker_right_foot": "right_foot", "right_foot_tracker": "right_foot", "tracker_waist": "pelvis",
     "waist_tracker": "pelvis", "tracker_hip": "pelvis", "camera": "head", "main_camera": "head",
+    # engines' and SDKs' rig names: Meta's OVRCameraRig anchors (CenterEyeAnchor, LeftHandAnchor,
+    # LeftControllerAnchor: the "_anchor" is dropped, see _SUFFIXES), Unreal's motion controllers,
+    # XR cameras; hand-tracking and mocap wrists drive the hands too
+    "center_eye": "head", "centereye": "head", "centre_eye": "head", "eye_center": "head",
+    "vr_camera": "head", "vrcamera": "head", "xr_camera": "head", "xrcamera": "head",
+    "xr_head": "head", "vr_head": "head", "xrhead": "head", "vrhead": "head",
+    "motion_controller_l": "left_hand", "motioncontroller_l": "left_hand", "motion_controller_left": "left_hand",
+    "motioncontrollerleft": "left_hand", "controller_l": "left_hand", "lcontroller": "left_hand",
+    "lhand": "left_hand", "left_wrist": "left_hand", "l_wrist": "left_hand",
+    "wrist_l": "left_hand", "leftwrist": "left_hand",
+    "motion_controller_r": "right_hand", "motioncontroller_r": "right_hand",
+    "motion_controller_right": "right_hand", "motioncontrollerright": "right_hand", "controller_r": "right_hand",
+    "rcontroller": "right_hand", "rhand": "right_hand", "right_wrist": "right_hand",
+    "r_wrist": "right_hand", "wrist_r": "right_hand", "rightwrist": "right_hand",
 }
+
+#: endings a device's name may carry and still name it (``head_pose``, ``LeftHandAnchor``,
+#: ``left_grip``)
+_SUFFIXES = ("_pose", "_anchor", "_transform", "_grip")
 
 
 #: name parts that scene objects carry around a device's name (this add-on's own empties, tools)
@@ -74,8 +92,12 @@ def device_of_object_name(name):
 
 
 def canonical_device(name):
-    """The device named ``name`` (case-, space- and dash-insensitive, or an alias), or ``None``."""
+    """The device named ``name`` (case-, space- and dash-insensitive, or an alias, also with one
+    of the endings of :data:`_SUFFIXES`), or ``None``."""
     key = str(name).strip().lower().replace(" ", "_").replace("-", "_")
-    if key in DEVICES:
-        return key
-    return ALIASES.get(key)
+    for k in (key, *(key[:-len(s)] for s in _SUFFIXES if key.endswith(s) and len(key) > len(s))):
+        if k in DEVICES:
+            return k
+        if k in ALIASES:
+            return ALIASES[k]
+    return None

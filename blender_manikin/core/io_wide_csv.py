@@ -62,6 +62,19 @@ def _norm(name):
     return re.sub(r"[^a-z0-9]+", "_", s.lower()).strip("_")
 
 
+def _raw_prefix(raw, prefix):
+    """The part of the column name ``raw`` that the normalised ``prefix`` (:func:`_norm`) came
+    from: ``("CenterEyeAnchor.position.x", "center_eye_anchor")`` -> ``"CenterEyeAnchor"``."""
+    want = sum(c.isalnum() for c in prefix)
+    seen = 0
+    for k, c in enumerate(raw):
+        if c.isalnum():
+            seen += 1
+            if seen == want:
+                return raw[: k + 1]
+    return raw or prefix
+
+
 def device_of(prefix):
     """The device a column prefix names, or None."""
     key = _norm(prefix)
@@ -109,7 +122,7 @@ def parse_columns(header):
         if kind is None:
             skipped.append(raw)
             continue
-        g = groups.setdefault(dev, {"pos": {}, "rot": {}, "prefix": raw[: len(prefix)] if raw else prefix})
+        g = groups.setdefault(dev, {"pos": {}, "rot": {}, "prefix": _raw_prefix(raw, prefix)})
         if axis in g[kind]:
             raise RecordingError(f"two columns for {dev} {kind} {axis}: {header[g[kind][axis]]!r} and {raw!r}")
         g[kind][axis] = i

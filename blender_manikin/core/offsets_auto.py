@@ -15,12 +15,15 @@ where the shoulders would be).  Two kinds of evidence decide, in this order:
    17 cm off read as a headset), and a T-pose with the hands drooped 14-16 cm, no T-pose read as
    joints but one read as a headset, keeps its hands beside the head joint;
 2. without a T-pose that decides, the name the file gives the head (``hmd``, ``headset``,
-   ``camera``, ...; a wide CSV's column prefix, a native CSV's device name, a scene object's
-   name): a name for the hardware, not the body part.
+   ``Main Camera``, ``CenterEyeAnchor``, ...; a wide CSV's column prefix, a native CSV's device
+   name, a scene object's name; :func:`is_headset_name`): a name for the hardware, not the body
+   part.
 
 Either way the solve says so in its summary and how to override it.  No bpy.
 """
 from __future__ import annotations
+
+import re
 
 import numpy as np
 
@@ -38,10 +41,24 @@ TPOSE_MARGIN = 0.1
 #: for the T-pose to say "headset": a performer drooping the hands 14 cm below the shoulders
 #: makes a T-pose only read as a headset, but keeps them beside the head joint
 HEAD_AHEAD_MIN = 0.04
-#: head names (:func:`.devices.name_key` of a column prefix, a device or an object's name, also
-#: without the affixes of :data:`.devices.OBJECT_AFFIXES`) that name the hardware
-HEADSET_NAMES = ("hmd", "headset", "camera", "main_camera", "xr_camera", "center_eye", "centereye",
-                 "centre_eye", "eye_center", "head_mounted_display", "view")
+#: head names that name the hardware, as :func:`is_headset_name` compares them (lower case, no
+#: separators, an engine's ``Anchor`` / ``Pose`` / ``Transform`` ending dropped)
+HEADSET_NAMES = frozenset(("hmd", "headset", "camera", "maincamera", "xrcamera", "vrcamera", "centereye",
+                           "centreeye", "eyecenter", "headmounteddisplay", "xrhead", "vrhead"))
+
+
+def is_headset_name(name) -> bool:
+    """Whether a head device's ``name`` (a column prefix, a device or an object's name) names a
+    headset: ``HMD``, ``CenterEyeAnchor``, ``Main Camera``, ``VR_Camera.001``, ``xr_head`` (not
+    ``head``, ``Head``, ``MANIKIN_head``)."""
+    raw = str(name)
+    keys = set()
+    for n in (raw, re.sub(r"(?<=[a-z0-9])(?=[A-Z])", "_", raw)):
+        for k in (name_key(n), name_key(n, OBJECT_AFFIXES)):
+            k = re.sub(r"[^a-z0-9]", "", k)
+            keys.add(k)
+            keys.update(k[:-len(end)] for end in ("anchor", "pose", "transform") if k.endswith(end))
+    return bool(keys & HEADSET_NAMES)
 
 
 def head_ahead_of_hands(targets, frame):
@@ -79,7 +96,6 @@ def headset_evidence(as_joint, as_headset, t0=0.0, head_label=None):
                                 f"the head {100 * ahead:.0f} cm ahead of them")
     if joint.plausible:
         return None, None
-    keys = {name_key(head_label), name_key(head_label, OBJECT_AFFIXES)} if head_label else set()
-    if keys & set(HEADSET_NAMES):
+    if head_label and is_headset_name(head_label):
         return HEADSET_PRESET, f"the head samples are named {head_label!r}, a headset"
     return None, None
