@@ -358,7 +358,6 @@ def test_a_take_mostly_at_the_sides_is_not_read_mirrored(tmp_path, axes):
     ("Main Camera", "LeftHand Controller", "RightHand Controller", "dot"),      # Unity XR rig
     ("XRHead", "LHand", "RHand", "dot"),
     ("head_pose", "left_hand_pose", "right_hand_pose", "underscore"),
-    ("head", "left_wrist", "right_wrist", "underscore"),                         # hand tracking, mocap
     ("hmd", "controller_l", "controller_r", "underscore"),
 ])
 def test_engine_rig_names_are_devices(head, left, right, style):

@@ -45,18 +45,16 @@ ALIASES = {
     "waist_tracker": "pelvis", "tracker_hip": "pelvis", "camera": "head", "main_camera": "head",
     # engines' and SDKs' rig names: Meta's OVRCameraRig anchors (CenterEyeAnchor, LeftHandAnchor,
     # LeftControllerAnchor: the "_anchor" is dropped, see _SUFFIXES), Unreal's motion controllers,
-    # XR cameras; hand-tracking and mocap wrists drive the hands too
+    # XR cameras
     "center_eye": "head", "centereye": "head", "centre_eye": "head", "eye_center": "head",
     "vr_camera": "head", "vrcamera": "head", "xr_camera": "head", "xrcamera": "head",
     "xr_head": "head", "vr_head": "head", "xrhead": "head", "vrhead": "head",
     "motion_controller_l": "left_hand", "motioncontroller_l": "left_hand", "motion_controller_left": "left_hand",
     "motioncontrollerleft": "left_hand", "controller_l": "left_hand", "lcontroller": "left_hand",
-    "lhand": "left_hand", "left_wrist": "left_hand", "l_wrist": "left_hand",
-    "wrist_l": "left_hand", "leftwrist": "left_hand",
+    "lhand": "left_hand",
     "motion_controller_r": "right_hand", "motioncontroller_r": "right_hand",
     "motion_controller_right": "right_hand", "motioncontrollerright": "right_hand", "controller_r": "right_hand",
-    "rcontroller": "right_hand", "rhand": "right_hand", "right_wrist": "right_hand",
-    "r_wrist": "right_hand", "wrist_r": "right_hand", "rightwrist": "right_hand",
+    "rcontroller": "right_hand", "rhand": "right_hand",
 }
 
 #: endings a device's name may carry and still name it (``head_pose``, ``LeftHandAnchor``,

@@ -212,7 +212,8 @@ def _device_codes(block, unknown, labels):
     """``(n,)`` int8 index into :data:`DEVICES` of each row's device name, -1 for a name that is
     not a device (an extra tracker: chest, elbows, knees; or a typo), counted in ``unknown``
     (name → ``[rows, first line]``); ``labels`` gets the first name each device is written with
-    (device → name, e.g. ``"head": "HMD"``).  One vectorised comparison per distinct name."""
+    (device → name, e.g. ``"head": "HMD"``; rows under another of its names are the same device's).
+    One vectorised comparison per distinct name."""
     names = np.asarray(block.names)
     codes = np.empty(len(names), dtype=np.int8)
     todo = np.ones(len(names), dtype=bool)
