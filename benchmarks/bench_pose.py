@@ -1,10 +1,15 @@
 """Accuracy and speed of MANIKIN against its baselines, on the Bandai Namco held-out takes and on
 the HDM05 validation set (another studio, other people and motions), side by side, in one run.
 
-    python benchmarks/bench_pose.py [--datasets bandai,hdm05] [--model M.onnx]
+    python benchmarks/bench_pose.py [--datasets bandai,hdm05,PATH] [--model M.onnx]
         [--previous-model P.onnx] [--fk-model F.onnx] [--pelvis-model P4.onnx]
         [--six-model P6.onnx] [--trackers 3,4,6] [--capture 72[,2,0.5,1]] [--smoothing auto|S]
         [--max-clips N] [--repeats N] [--markdown]
+
+Your own mocap (another studio's, your performers): ``--datasets PATH`` with a folder, file or
+``.tar.xz`` of BVH or ASF/AMC takes (joint map, units and axes detected as training detects
+them), or a sources ``.json`` stating them (``training/dataset.py`` ``load_sources``), e.g.
+``--datasets ~/mocap/studio_b --body tpose --capture 72``: every clip is a test clip.
 
 Ground truth: every clip is mapped onto the 22-joint body and solved by HybrIK into the cache
 the training uses (``training/dataset.py``; HDM05 through ``core/asf_amc.py``), and posed by FK
@@ -321,15 +326,41 @@ def motion_class(path):
     return dataset.motion_class(path) or "other"
 
 
+def add_mocap_datasets(token):
+    """Register the mocap of ``token`` (not one of :data:`DATASETS`) as datasets of its own, every
+    clip a test clip, and return their names: a folder, file or ``.tar.xz`` of BVH or ASF/AMC
+    takes (joint map, units and axes detected as training detects them), or a ``.json`` sources
+    file (``training/dataset.py`` ``load_sources``: each source's joint map, units, axes, fps),
+    one dataset per source.  Raises SystemExit naming what is wrong."""
+    from blender_manikin.training import dataset
+    if token.lower().endswith(".json"):
+        try:
+            sources = dataset.load_sources(token)
+        except (OSError, ValueError) as exc:
+            raise SystemExit(f"--datasets {token}: {exc}") from None
+    elif os.path.exists(token):
+        sources = [dataset.MotionSource(path=token)]
+    else:
+        raise SystemExit(f"unknown dataset {token!r}: choose from {', '.join(DATASETS)}, or give a folder, "
+                         f"archive or file of BVH / ASF-AMC mocap, or a sources .json")
+    names = []
+    for src in sources:
+        name = src.name or os.path.basename(os.path.normpath(src.path))
+        DATASETS[name] = (src, "all")
+        names.append(name)
+    return names
+
+
 def dataset_files(name, max_clips=0):
     from blender_manikin.training import dataset   # the training cache (numpy only here)
     source, part = DATASETS[name]
-    if not os.path.exists(source):
-        return None, source
+    path = getattr(source, "path", source)
+    if not os.path.exists(path):
+        return None, path
     files = dataset.build_cache(source, verbose=False)
     if part == "val":
         files = dataset.split_files(files)[1]
-    return (files[:max_clips] if max_clips else files), source
+    return (files[:max_clips] if max_clips else files), path
 
 
 def needs(devices, fn):
@@ -500,7 +531,9 @@ def print_tracker_table(r, names, what):
 
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--datasets", default="bandai,hdm05", help="comma-separated: " + ",".join(DATASETS))
+    ap.add_argument("--datasets", default="bandai,hdm05",
+                    help="comma-separated: " + ",".join(DATASETS) + ", or your own mocap: a folder, file or .tar.xz "
+                         "of BVH or ASF/AMC takes, or a sources .json (every clip a test clip)")
     ap.add_argument("--model", default=os.path.join(MODELS_DIR, "manikin_s.onnx"))
     ap.add_argument("--previous-model", default=PREVIOUS, help="the model shipped before (skipped if absent)")
     ap.add_argument("--fk-model", default=os.path.join(ROOT, "benchmarks", "models", "baseline_fk.onnx"),
@@ -550,9 +583,10 @@ def main(argv=None):
     methods.update(set_methods)
 
     results = []
-    for name in [d.strip() for d in args.datasets.split(",") if d.strip()]:
-        if name not in DATASETS:
-            raise SystemExit(f"unknown dataset {name!r}: choose from {', '.join(DATASETS)}")
+    names = []
+    for token in [d.strip() for d in args.datasets.split(",") if d.strip()]:
+        names += [token] if token in DATASETS else add_mocap_datasets(token)
+    for name in names:
         for body_mode in [b.strip() for b in args.body.split(",") if b.strip()]:
             if body_mode not in BODY_MODES:
                 raise SystemExit(f"unknown body {body_mode!r}: choose from {', '.join(BODY_MODES)}")

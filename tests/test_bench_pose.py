@@ -164,3 +164,31 @@ def test_head_body_sizes_each_clip_by_its_standing_head_height(monkeypatch):
     assert abs(first[1].stature - 1.80) < 0.01                     # stood at its own height
     assert abs(first[1].stature - second[1].stature - 0.10 / sk.PROPORTIONS["head_height"]) < 1e-6
     assert "head" in bp.BODY_MODES and set(bp.BODY_TITLES) == set(bp.BODY_MODES)
+
+
+def test_your_own_mocap_is_a_dataset(tmp_path, monkeypatch, capsys):
+    """``--datasets PATH``: a folder of another studio's BVH takes (here Bandai-layout clips of a
+    synthetic body) is cached, solved and tabled like the named sets; a sources .json names it;
+    a path that is not there is an error naming the choices."""
+    import json
+    import pytest
+    from fixtures_bvh import bandai_clip, synthetic_motion, write_fixture
+    monkeypatch.setenv("BLENDER_MANIKIN_CACHE", str(tmp_path / "cache"))
+    studio = tmp_path / "studio_b"
+    studio.mkdir()
+    for k in range(2):
+        body, _, _, pos, rot = synthetic_motion(frames=60, seed=k)
+        write_fixture(studio / f"take_{k}.bvh", bandai_clip(body, pos, rot, name=f"take_{k}"))
+    argv = ["--body", "gt", "--trackers", "none", "--markdown", "--repeats", "1", "--previous-model", "none"]
+    bp.main(["--datasets", str(studio)] + argv)
+    out = capsys.readouterr().out
+    assert "studio_b, true skeleton: 2 clips" in out
+    row = next(ln for ln in out.splitlines() if ln.startswith("| (a) MANIKIN"))
+    mpjpe = float(row.split("|")[2])
+    assert 0.0 < mpjpe < 30.0                     # measured, finite: a pose, not a blow-up
+    sources = tmp_path / "sources.json"
+    sources.write_text(json.dumps([{"path": str(studio), "name": "Studio B", "joint_map": "bandai"}]))
+    bp.main(["--datasets", str(sources)] + argv)
+    assert "Studio B, true skeleton: 2 clips" in capsys.readouterr().out
+    with pytest.raises(SystemExit, match="unknown dataset 'nowhere'.*BVH / ASF-AMC"):
+        bp.main(["--datasets", "nowhere"] + argv)
