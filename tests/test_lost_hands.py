@@ -94,3 +94,37 @@ def test_a_solve_hangs_the_arm_of_a_hand_lost_for_seconds():
     g = int(1.0 * FPS)
     assert np.linalg.norm(P[g, J["left_wrist"]] - out.result.targets.pos["left_hand"][g]) < 1e-4
     assert RELAX_AFTER_S == 1.0
+
+
+@pytest.mark.parametrize("how", ["no rows", "all invalid"])
+def test_a_hand_never_tracked_hangs_for_the_whole_take(how):
+    """A take whose left controller was off (no rows of it) or never tracked (every sample
+    invalid): the solve goes on, that arm hangs relaxed all along, the right hand lands on its
+    tracker, and the summary says so.  One hand is the most that may be missing: without the
+    head, or without both hands, the take is refused by name."""
+    from blender_manikin.core.recording import RecordingError
+    from blender_manikin.core.resample import resample
+    rec = load_recording(EXAMPLE)
+    st = rec.streams["left_hand"]
+    streams = dict(rec.streams)
+    if how == "no rows":
+        del streams["left_hand"]
+    else:
+        streams["left_hand"] = TrackerStream("left_hand", st.time, st.pos, st.quat, np.zeros(len(st.time), bool))
+    one = Recording(streams=streams, source="one_hand.csv", metadata=dict(rec.metadata))
+    times, pos, quat, valid, report = resample(one, FPS)
+    assert not valid["left_hand"].any() and valid["right_hand"].mean() > 0.95
+    assert np.isfinite(pos["left_hand"]).all() and "left_hand" in report.devices
+    assert any("left hand: no usable sample in the take" in w for w in report.warnings)
+    out = cs.solve_recording(one, cs.SolveSettings(fps=FPS))
+    summary = out.summary()
+    assert "left hand lost over 1 s on 1 stretch (7.0 s in all, from 0.0 s): the arm hangs relaxed there" in summary
+    P = out.result.positions
+    assert (P[:, J["left_wrist"], 2] < P[:, J["left_shoulder"], 2] - 0.4).all()        # hanging, every frame
+    right = np.linalg.norm(P[:, J["right_wrist"]] - out.result.targets.pos["right_hand"], axis=-1)
+    assert np.median(right) < 1e-4
+    for gone in (("left_hand", "right_hand"), ("head",)):
+        rest = Recording(streams={d: s for d, s in streams.items() if d not in gone}, source="few.csv",
+                         metadata=dict(rec.metadata))
+        with pytest.raises(RecordingError, match="few.csv: the recording has no"):
+            resample(rest, FPS)

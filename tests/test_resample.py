@@ -161,7 +161,13 @@ def test_hold_at_ends_for_a_late_optional_device():
 
 
 def test_required_devices():
+    rec = make_recording(duration=1.0, rates={"head": 90.0})
+    with pytest.raises(RecordingError, match="has no left_hand, right_hand samples"):
+        resample(rec, 30)
     rec = make_recording(duration=1.0, rates={"head": 90.0, "left_hand": 72.0})
+    times, pos, quat, valid, report = resample(rec, 30)      # one hand never there: held, marked lost
+    assert not valid["right_hand"].any() and "right hand: no usable sample" in report.warnings[-1]
+    rec.metadata["objects"] = {"head": ("HMD", ""), "left_hand": ("Left", "")}      # scene slots: chosen
     with pytest.raises(RecordingError, match="has no right_hand samples"):
         resample(rec, 30)
     times, pos, *_ = resample(rec, 30, required=("head",))

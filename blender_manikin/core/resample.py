@@ -34,7 +34,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .plain import shown
-from .devices import DEVICES, REQUIRED_DEVICES
+from .devices import DEVICES, HAND_DEVICES, REQUIRED_DEVICES
 from .recording import Recording, RecordingError, TrackerStream, increasing_mask, time_spikes
 from .rotations import normalize, quat_continuous, quat_slerp
 from .runs import run_bounds
@@ -232,6 +232,15 @@ EMPTY_GRID_RATIO = 100.0
 EMPTY_GRID_MIN_S = 600.0
 
 
+def _one_hand_absent(absent, required, devices):
+    """True when what is ``absent`` of the ``required`` devices is one hand, the other hand and the
+    head being in the recording's ``devices``: the solve then hangs that arm (a controller off or
+    never seen) instead of refusing the take."""
+    hands = [d for d in absent if d in HAND_DEVICES]
+    return (len(absent) == 1 and len(hands) == 1 and "head" in devices
+            and all(h in devices for h in HAND_DEVICES if h not in absent))
+
+
 def _check_grid_length(prep, t0, t1, fps, path):
     """Raise :class:`RecordingError` when the grid from ``t0`` to ``t1`` seconds at ``fps`` would be
     mostly empty (see :data:`EMPTY_GRID_RATIO`), naming the longest step between usable samples."""
@@ -287,12 +296,17 @@ def resample(recording: Recording, fps, t_start=None, t_end=None, required=REQUI
     if not np.isfinite(fps) or fps <= 0:
         raise ValueError(f"fps must be positive, got {shown(fps)}")
     missing = [d for d in required if d not in recording.streams]
-    if missing:
-        ignored = (recording.metadata or {}).get("ignored_devices") or []
+    meta = recording.metadata or {}
+    # a hand with no rows hangs only where no rows were left out under other names (a misspelt
+    # device) and the devices were not chosen by hand (scene objects: a slot left empty)
+    rows_may_lack = not meta.get("ignored_devices") and "objects" not in meta
+    if missing and not (rows_may_lack and _one_hand_absent(missing, required, recording.devices)):
+        ignored = meta.get("ignored_devices") or []
         also = f"; rows of {', '.join(shown(n) for n in ignored)} were left out: not device names" if ignored else ""
         raise RecordingError(f"the recording has no {', '.join(missing)} samples "
                              f"(devices present: {', '.join(recording.devices) or 'none'}{also})", path=path)
     warnings = list(recording.warnings)
+    absent = list(missing)              # a required hand with no usable sample: its arm hangs
 
     # --- usable samples per device
     prep = {}
@@ -321,9 +335,12 @@ def resample(recording: Recording, fps, t_start=None, t_end=None, required=REQUI
             reason[spikes] = "jump"
             ok[spikes] = False
         if ok.sum() == 0:
-            if d in required:
+            if d in required and not _one_hand_absent(absent + [d], required, recording.devices):
                 raise RecordingError(f"{d} has no usable samples (all invalid or NaN)", path=path)
-            warnings.append(f"{d}: no usable samples; device dropped")
+            if d in required:
+                absent.append(d)
+            else:
+                warnings.append(f"{d}: no usable samples; device dropped")
             continue
         prep[d] = dict(t=s.time, ok=ok, reason=reason, pos=s.pos, quat=s.quat)
 
@@ -349,7 +366,8 @@ def resample(recording: Recording, fps, t_start=None, t_end=None, required=REQUI
     lasts = {d: P["t"][P["ok"]][-1] for d, P in prep.items()}
     t0 = float(min(firsts.values())) if t_start is None else float(t_start)
     if t_end is None:
-        t1 = float(min(lasts[d] for d in required)) if required else float(max(lasts.values()))
+        present = [d for d in required if d in lasts]
+        t1 = float(min(lasts[d] for d in present)) if present else float(max(lasts.values()))
         if "head" in required and "head" in lasts and lasts["head"] - t1 > END_HOLD_S:
             t1 = float(lasts["head"])            # a hand lost before the end: held, not the take cut
     else:
@@ -409,5 +427,14 @@ def resample(recording: Recording, fps, t_start=None, t_end=None, required=REQUI
         out_quat[d] = quat_continuous(q)
         out_valid[d] = valid
 
+    for d in absent:                     # never tracked: held beside the head, marked lost
+        side = 1.0 if d == "left_hand" else -1.0
+        out_pos[d] = out_pos["head"] + np.array([0.2 * side, 0.0, -0.6])
+        out_quat[d] = np.tile([1.0, 0.0, 0.0, 0.0], (T, 1))
+        out_valid[d] = np.zeros(T, dtype=bool)
+        report.gaps.append(Gap(d, t0, report.t_end, "missing", 0))
+        warnings.append(f"{d.replace('_', ' ')}: no usable sample in the take (a controller off or never "
+                        f"seen): its arm hangs relaxed")
+    report.devices = tuple(d for d in DEVICES if d in out_pos)
     report.gaps.sort(key=lambda g: (g.start, DEVICES.index(g.device)))
     return times, out_pos, out_quat, out_valid, report
