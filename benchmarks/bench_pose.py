@@ -568,6 +568,11 @@ def main(argv=None):
     ap.add_argument("--per-class", action="store_true",
                     help="also MPJPE and L-PE per motion class (shipped and previous model)")
     args = ap.parse_args(argv)
+    names = []
+    for token in [d.strip() for d in args.datasets.split(",") if d.strip()]:
+        names += [token] if token in DATASETS else add_mocap_datasets(token)
+    for name in names:          # caches built (in worker processes) before any ONNX session's threads
+        dataset_files(name, args.max_clips)
 
     runner = ModelRunner(args.model)
     methods = {"(a) MANIKIN, shipped model": lambda tg, b: pipeline.solve(tg, b, runner, overlap=args.overlap)}
@@ -583,9 +588,6 @@ def main(argv=None):
     methods.update(set_methods)
 
     results = []
-    names = []
-    for token in [d.strip() for d in args.datasets.split(",") if d.strip()]:
-        names += [token] if token in DATASETS else add_mocap_datasets(token)
     for name in names:
         for body_mode in [b.strip() for b in args.body.split(",") if b.strip()]:
             if body_mode not in BODY_MODES:

@@ -179,6 +179,13 @@ def test_your_own_mocap_is_a_dataset(tmp_path, monkeypatch, capsys):
     for k in range(2):
         body, _, _, pos, rot = synthetic_motion(frames=60, seed=k)
         write_fixture(studio / f"take_{k}.bvh", bandai_clip(body, pos, rot, name=f"take_{k}"))
+    sources = tmp_path / "sources.json"
+    sources.write_text(json.dumps([{"path": str(studio), "name": "Studio B", "joint_map": "bandai"}]))
+    # the caches built here in-process: this test process has threads (earlier tests' ONNX sessions),
+    # where the benchmark's own worker processes would fork
+    from blender_manikin.training import dataset
+    for src in (dataset.MotionSource(path=str(studio)), dataset.load_sources(str(sources))[0]):
+        dataset.build_cache(src, workers=1, verbose=False)
     argv = ["--body", "gt", "--trackers", "none", "--markdown", "--repeats", "1", "--previous-model", "none"]
     bp.main(["--datasets", str(studio)] + argv)
     out = capsys.readouterr().out
@@ -186,8 +193,6 @@ def test_your_own_mocap_is_a_dataset(tmp_path, monkeypatch, capsys):
     row = next(ln for ln in out.splitlines() if ln.startswith("| (a) MANIKIN"))
     mpjpe = float(row.split("|")[2])
     assert 0.0 < mpjpe < 30.0                     # measured, finite: a pose, not a blow-up
-    sources = tmp_path / "sources.json"
-    sources.write_text(json.dumps([{"path": str(studio), "name": "Studio B", "joint_map": "bandai"}]))
     bp.main(["--datasets", str(sources)] + argv)
     assert "Studio B, true skeleton: 2 clips" in capsys.readouterr().out
     with pytest.raises(SystemExit, match="unknown dataset 'nowhere'.*BVH / ASF-AMC"):
