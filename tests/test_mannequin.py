@@ -116,7 +116,7 @@ def test_solved_feet_keep_the_mannequin_out_of_the_floor():
     assert np.percentile(low, 50) < 0.01
 
 
-@pytest.mark.parametrize("joint", ["left_elbow", "left_wrist", "right_knee"])
+@pytest.mark.parametrize("joint", ["left_elbow", "left_wrist", "right_knee", "left_foot"])
 def test_a_zero_length_bone_gives_a_round_piece_not_nans(joint):
     body = sk.make_body(1.7)
     off = body.offsets.copy()

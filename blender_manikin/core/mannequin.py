@@ -23,6 +23,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .export_bvh import end_site_offsets
 from .pipeline import HEEL_BACK
 from .skeleton import Body, J, JOINT_NAMES, NUM_JOINTS, PROPORTIONS
 
@@ -95,10 +96,18 @@ def rounded_piece(a, b, ra, rb, across=(1.0, 0.0, 0.0), flat=1.0, cap=1.0, aroun
     return verts, np.asarray(faces, np.int32)
 
 
+def _unit(v, fallback):
+    """``v`` ``(3,)`` made unit length, or ``fallback`` where it has none (a zero-length bone)."""
+    v = np.asarray(v, np.float64)
+    n = float(np.linalg.norm(v))
+    return v / n if n > 1e-9 else np.asarray(fallback, np.float64)
+
+
 def _pieces(body: Body):
     """``[(name, bone joint index, kwargs of rounded_piece)]`` for ``body``'s rest pose."""
     P = body.rest_positions()
     H = float(body.stature)
+    leaf = end_site_offsets(body)                                     # the leaf bones' tips
     X, Y = np.array([1.0, 0.0, 0.0]), np.array([0.0, 1.0, 0.0])
     up = np.array([0.0, 0.0, 1.0])
     out = []
@@ -117,17 +126,15 @@ def _pieces(body: Body):
     # the head: an ellipsoid from the chin to the top of the skull at the stature
     top = P[J["head"]][2] + (1.0 - PROPORTIONS["head_height"]) * H
     centre = np.array([P[J["head"]][0], P[J["head"]][1] - 0.008 * H, top - 0.068 * H])
-    add("head", "head", centre, centre, 0.047, 0.047, across=X, flat=1.2, cap=0.068 / 0.047)
-    out[-1][2]["a"] = centre - 1e-6 * up                        # the axis: up (a, b must differ)
+    add("head", "head", centre - 1e-6 * up, centre, 0.047, 0.047, across=X, flat=1.2,     # axis: up
+        cap=0.068 / 0.047)
     for side, sx in (("left", 1.0), ("right", -1.0)):
         s = f"{side}_"
         sh, el, wr = P[J[s + "shoulder"]], P[J[s + "elbow"]], P[J[s + "wrist"]]
         add(s + "collar", s + "collar", P[J[s + "collar"]], sh, 0.030, 0.042, across=Y)
         add(s + "upper_arm", s + "shoulder", sh, el, 0.040, 0.031, across=Y)
         add(s + "forearm", s + "elbow", el, wr, 0.030, 0.022, across=Y)
-        d = wr - el
-        n = np.linalg.norm(d)
-        d = d / n if n > 1e-9 else np.array([1.0 if side == "left" else -1.0, 0.0, 0.0])
+        d = _unit(wr - el, [sx, 0.0, 0.0])
         # the hand: palm width across the forearm's Y (palms down in the T-pose), thin
         add(s + "hand", s + "wrist", wr + 0.02 * H * d, wr + 0.085 * H * d, 0.026, 0.024, across=Y,
             flat=0.45, cap=0.9)
@@ -143,13 +150,12 @@ def _pieces(body: Body):
         half = 0.5 * (an[2] - floor) * 0.85 / H                     # the block's half height
         z = floor + half * H
         w = 0.029
-        fwd = (ball - heel) * np.array([1.0, 1.0, 0.0])
-        fwd /= np.linalg.norm(fwd)
+        fwd = _unit((ball - heel) * np.array([1.0, 1.0, 0.0]), [0.0, -1.0, 0.0])
         r_end = half                                                # rounded ends: half the height
         add(s + "foot", s + "ankle", np.r_[heel[:2] + fwd[:2] * r_end * H, z],
             np.r_[ball[:2], z], w, w * 0.95, across=X, flat=half / w, cap=r_end / w)
         toe_half = 0.5 * (ball[2] - floor + 0.004 * H) / H
-        tip = ball + np.array([0.0, -0.04 * H, 0.0])
+        tip = ball + fwd * np.linalg.norm(leaf[J[s + "foot"]])       # the toe tip of the foot bone
         add(s + "toes", s + "foot", np.r_[ball[:2], floor + toe_half * H],
             np.r_[tip[:2] - fwd[:2] * 0.01 * H, floor + toe_half * H], w * 0.95, w * 0.8, across=X,
             flat=toe_half / w, cap=0.01 / w)
