@@ -155,3 +155,19 @@ def test_the_panel_setting_reaches_the_solve(panel_settings):
     s.body_mesh = True
     assert bpy.ops.manikin.solve_full_body() == {'FINISHED'}
     assert body_mesh.find_body_mesh(s.armature) is not None
+
+
+def test_a_mannequin_that_cannot_be_built_does_not_cost_the_solve(monkeypatch):
+    """The mannequin is a viewing aid: a body it cannot be built for leaves the solve written
+    without it, and the summary says why."""
+    from blender_manikin.core import mannequin
+
+    def cannot(body, *a, **k):
+        raise ValueError("the body's rest pose gives no finite mannequin (a zero-length bone?)")
+
+    monkeypatch.setattr(body_mesh, "mannequin_mesh", cannot)
+    assert mannequin.mannequin_mesh is not cannot
+    fresh_scene()
+    job, out = _solve()
+    assert out.armature is not None and out.body_mesh is None and body_mesh.find_body_mesh(out.armature) is None
+    assert "no mannequin: the body's rest pose gives no finite mannequin" in job.summary()

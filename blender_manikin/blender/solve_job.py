@@ -264,6 +264,8 @@ class SolveJob:
         from .units import result_in_scene_units
         result = result_in_scene_units(self.result, context.scene)     # metres → the scene's unit
         out = writer.write_result(result, opts, context=context)
+        if self.outcome is not None:
+            self.outcome.info.extend(out.notes)
         self.timings["keying"] = _time.perf_counter() - t
         t = _time.perf_counter()
         if cfg.live_rig:

@@ -87,6 +87,7 @@ class WriteOutput:
     tracker_collection: object = None
     live_action: object = None                            # set when the live swivel rig was built
     body_mesh: object = None                              # the mannequin, when this write made it
+    notes: list = field(default_factory=list)             # for the solve's summary
 
 
 def scene_fps(scene) -> float:
@@ -233,7 +234,10 @@ def write_result(result, options: WriteOptions | None = None, context=None) -> W
         if options.body_mesh:
             from . import body_mesh
             if body_mesh.find_body_mesh(obj) is None:
-                out.body_mesh = body_mesh.add_body_mesh(obj, result.body, context, created)
+                try:
+                    out.body_mesh = body_mesh.add_body_mesh(obj, result.body, context, created)
+                except ValueError as exc:            # an odd body: the solve is written without it
+                    out.notes.append(f"no mannequin: {exc}")
 
         if options.create_trackers and result.targets is not None:
             _write_trackers(result.targets, frames, scene, options, out, created)

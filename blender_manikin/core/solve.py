@@ -161,7 +161,7 @@ class SolveOutcome:
                                 "pelvis and right foot trackers",
                                 "spikes removed",
                                 "no twist information",
-                                "point(s) never seen", "retarget:", "smoothing", "no smoothing")) \
+                                "point(s) never seen", "retarget:", "smoothing", "no smoothing", "no mannequin")) \
                     or " tracker offset" in note or " teleport" in note or " snap turn" in note \
                     or note.endswith("the arm hangs relaxed there"):
                 parts.append(note)
