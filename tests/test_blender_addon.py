@@ -287,17 +287,21 @@ def test_find_tpose_and_offsets_preset(addon, tmp_path):
 
 
 def test_floor_setting_finds_the_tpose_and_stands_the_body_on_the_ground(addon, tmp_path):
-    """A T-pose recording whose origin is at eye level (floor at -1.5 m): with the floor at 0
-    the solve is refused; the Floor setting (At Height, Under Performer) reaches the solve and
-    the T-pose finder, and the armature stands on Blender's ground."""
+    """A T-pose recording whose origin is at eye level (floor at -1.5 m): with the floor left at
+    0 the solve finds it under the performer its T-pose's arm span gives; the Floor setting (At
+    Height, Under Performer) reaches the solve and the T-pose finder, and the armature stands on
+    Blender's ground."""
     from blender_manikin.panels import main as panels
     from blender_manikin.blender.properties import config_from_settings
     from types import SimpleNamespace
     s = _settings(str(write_tpose_recording(tmp_path / "eyes.csv", lift=-1.5)))
     s.calibration = 'AUTO'
     assert s.floor_mode == 'ZERO' and config_from_settings(bpy.context).floor == 0.0
-    with pytest.raises(RuntimeError, match="head is only"):
-        bpy.ops.manikin.solve_full_body()
+    assert bpy.ops.manikin.solve_full_body() == {'FINISHED'}
+    assert "the recording's origin is at eye level: under a 1.80 m performer, from the T-pose's arm span" \
+        in s.last_report
+    bones = s.armature.data.bones
+    assert abs((bones["head"].head_local[2] - sk.SOLE) / sk.PROPORTIONS["head_height"] - 1.8) < 0.02
     s.floor_mode, s.floor_height = 'OFFSET', -1.5
     assert config_from_settings(bpy.context).floor == -1.5
     assert bpy.ops.manikin.find_tpose() == {'FINISHED'}

@@ -112,3 +112,20 @@ def test_a_tracked_foot_stays_on_its_tracker_when_seated():
     for d, j in (("left_foot", "left_ankle"), ("right_foot", "right_ankle")):
         miss = np.linalg.norm(P[:, J[j]] - out.result.targets.pos[d], axis=-1)
         assert np.median(miss) < 1e-3, (d, np.median(miss))
+
+
+def test_a_seated_take_at_eye_level_finds_its_floor(take):
+    """A seated take whose origin is at eye level (the seated head about 0 m up, the floor left
+    at 0): with the height typed, the floor goes under the seated head by the seated proportions,
+    and the take solves as the one on the floor does."""
+    import copy
+    body, rec, pos = take
+    low = copy.deepcopy(rec)
+    for st in low.streams.values():
+        st.pos[:, 2] -= 1.13                       # the seated head joint was about 1.13 m up
+    settings = cs.SolveSettings(fps=30.0, posture="seated", height=1.75, calibration="MEASURE")
+    ref = cs.solve_recording(rec, settings)
+    out = cs.solve_recording(low, settings)
+    assert "the recording's origin is at eye level: under the typed 1.75 m, seated" in out.summary()
+    assert out.floor == pytest.approx(-1.13, abs=0.015)
+    assert np.abs(out.result.positions - ref.result.positions).max() < 0.02

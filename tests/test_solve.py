@@ -206,15 +206,26 @@ def _raised(rec, dz):
 
 def test_the_floor_setting_puts_an_eye_level_origin_on_the_ground():
     """A recording whose origin is at the performer's eyes (an OpenXR LOCAL space: the floor at
-    -1.6 m) is refused with the floor at 0, naming the fix; told where the floor is, or to put it
-    under the 1.75 m performer, it solves as the recording on the floor does."""
+    -1.6 m), the floor left at 0: the floor is found under the performer the T-pose's arm span
+    gives (1.753 m for the example's 1.75 m); told where the floor is, or to put it under the
+    1.75 m performer, it solves as the recording on the floor does."""
     rec = load_recording(EXAMPLE)
     ref = cs.solve_recording(rec, cs.SolveSettings(fps=30.0))
     assert ref.floor == 0.0 and not any(n.startswith("floor at") for n in ref.info)
     low = _raised(rec, -1.6)
-    from blender_manikin.core.recording import RecordingError
-    with pytest.raises(RecordingError, match=r"head is only 0\.\d\d m above the floor.*--floor"):
-        cs.solve_recording(low, cs.SolveSettings(fps=30.0))
+    found = cs.solve_recording(low, cs.SolveSettings(fps=30.0))
+    assert found.floor == pytest.approx(-1.6, abs=0.01)
+    assert ("(the recording's origin is at eye level: under a 1.75 m performer, from the T-pose's arm span at "
+            "0.53 s) moved to 0") in found.summary()
+    assert np.abs(found.result.positions - ref.result.positions).max() < 0.02
+    # no T-pose to measure (the take from 1.5 s on): a 1.75 m performer, and the summary says so
+    for st in low.streams.values():
+        keep = st.time >= st.time[0] + 1.5
+        st.time, st.pos, st.quat, st.valid = st.time[keep], st.pos[keep], st.quat[keep], st.valid[keep]
+    guessed = cs.solve_recording(low, cs.SolveSettings(fps=30.0))
+    assert "at eye level: under a 1.75 m performer: no T-pose to measure, type the height" in guessed.summary()
+    assert guessed.body.stature == pytest.approx(1.75, abs=0.005)
+    low = _raised(rec, -1.6)
     typed = cs.solve_recording(low, cs.SolveSettings(fps=30.0, floor=-1.6))
     assert typed.floor == -1.6 and "floor at -1.600 m (as set) moved to 0" in typed.summary()
     np.testing.assert_allclose(typed.result.positions, ref.result.positions, atol=1e-6)

@@ -136,6 +136,7 @@ class SolveOutcome:
     result: PoseResult | None = None
     timings: dict = field(default_factory=dict)
     floor: float | None = None          # the floor's height in the recording (metres), moved to z = 0
+    floor_why: str | None = None        # how the floor was found when the settings did not say
     jumps: list = field(default_factory=list)   # the app's teleports and snap turns (teleports.RigJump)
     headset_off: tuple = (0, 0)         # frames at the start / end where the headset lay off (headset_off.py)
 
@@ -386,7 +387,8 @@ def floor_height(settings: SolveSettings, targets: TrackerTargets) -> float:
     ``"height"``: under a performer of ``settings.height`` standing in the take, i.e. the
     standing head height (:func:`standing_head_height`) less the head height of that stature
     (:func:`head_height_for`), for recordings whose origin is at eye level, on a desk or
-    anywhere else.  Raises :class:`SolveError` when ``"height"`` has no height."""
+    anywhere else (a take whose origin is at eye level while the floor is left at 0:
+    :func:`eye_level_floor`).  Raises :class:`SolveError` when ``"height"`` has no height."""
     floor = parse_floor(settings.floor)
     if floor != FLOOR_FROM_HEIGHT:
         return floor
@@ -405,13 +407,67 @@ def move_floor(targets: TrackerTargets, floor: float) -> TrackerTargets:
                           rot=targets.rot, valid=targets.valid)
 
 
-def floor_note(settings: SolveSettings, floor: float):
-    """The note for the summary when the floor was moved (else None)."""
+def floor_note(settings: SolveSettings, floor: float, why=None):
+    """The note for the summary when the floor was moved (else None); ``why``: how it was found
+    when the settings did not say (:func:`eye_level_floor`)."""
     if not floor:
         return None
-    how = (f"under the {settings.height:.2f} m performer" if parse_floor(settings.floor) == FLOOR_FROM_HEIGHT
-           else "as set")
+    how = why or (f"under the {settings.height:.2f} m performer" if parse_floor(settings.floor) == FLOOR_FROM_HEIGHT
+                  else "as set")
     return f"floor at {floor:+.3f} m ({how}) moved to 0"
+
+
+#: a standing head (:data:`.resample.STANDING_PERCENTILE`) this close (metres) to the recording's
+#: zero, the floor left at 0, is an origin at eye level (OpenXR LOCAL space, Unity's Device
+#: tracking origin, a headset's starting pose), not a floor: :func:`eye_level_floor` finds it
+EYE_LEVEL_MAX = 0.5
+#: the stature an eye-level take is sized for when it has no T-pose and no typed height
+EYE_LEVEL_STATURE = 1.75
+
+
+def eye_level_origin(recording, settings: SolveSettings) -> bool:
+    """Whether ``recording`` (Blender axes, metres) has its origin at eye level: the floor setting
+    left at 0 and the standing head within :data:`EYE_LEVEL_MAX` of it."""
+    from .resample import STANDING_PERCENTILE
+    if parse_floor(settings.floor) != 0.0 or "head" not in recording.streams:
+        return False
+    head = recording.streams["head"]
+    z = np.asarray(head.pos, np.float64)[:, 2][np.asarray(head.valid, bool)]
+    z = z[np.isfinite(z)]
+    return bool(z.size) and abs(float(np.percentile(z, STANDING_PERCENTILE))) < EYE_LEVEL_MAX
+
+
+def eye_level_floor(settings: SolveSettings, targets: TrackerTargets):
+    """``(floor, why)``: where the floor of an eye-level take (:func:`eye_level_origin`) is, metres
+    in the recording's z, under a performer of the typed height, else of the stature the take's
+    T-pose arm span gives (wrist to wrist :data:`.calibration.TPOSE_WRIST_DISTANCE` of it), else
+    of :data:`EYE_LEVEL_STATURE`, standing (its standing head height) or, with the *Seated*
+    posture, sitting (its median head height, :data:`.seated.SEATED_HEAD_HEIGHT` of the
+    stature); ``why`` says which, for the summary."""
+    from . import calibration as cal
+    from .seated import SEATED_HEAD_HEIGHT
+    head = standing_head_height(targets)
+    if settings.height:
+        stature, why = float(settings.height), f"under the typed {float(settings.height):.2f} m"
+    else:
+        guess = head - head_height_for(EYE_LEVEL_STATURE, settings.sole)
+        cand = cal.find_tpose(move_floor(targets, guess))
+        if cand.plausible:
+            k = cand.frame
+            span = float(np.linalg.norm(targets.pos["left_hand"][k] - targets.pos["right_hand"][k]))
+            stature = span / cal.TPOSE_WRIST_DISTANCE
+            why = (f"under a {stature:.2f} m performer, from the T-pose's arm span at "
+                   f"{k / targets.fps:.2f} s")
+        else:
+            stature = EYE_LEVEL_STATURE
+            why = f"under a {stature:.2f} m performer: no T-pose to measure, type the height"
+    if str(settings.posture or "").lower() == "seated":
+        z = np.asarray(targets.pos["head"], np.float64)[:, 2]
+        floor = float(np.nanmedian(z)) - SEATED_HEAD_HEIGHT * stature
+        why += ", seated"
+    else:
+        floor = head - head_height_for(stature, settings.sole)
+    return floor, f"the recording's origin is at eye level: {why}"
 
 
 def body_from_head_height(targets: TrackerTargets, height=None, arm_span=None, sole=None) -> sk.Body:
@@ -628,7 +684,9 @@ def device_targets(out: SolveOutcome, settings: SolveSettings, teleports="keep")
     if teleports != "ignore":
         jumps = find_rig_jumps(out.recording)
         continuous = remove_rig_jumps(out.recording, jumps)
-    times, pos, quat, valid, out.report = resample_recording(continuous, settings.fps, settings.floor)
+    eye_level = eye_level_origin(continuous, settings)       # no floor at 0: found below
+    times, pos, quat, valid, out.report = resample_recording(
+        continuous, settings.fps, FLOOR_FROM_HEIGHT if eye_level else settings.floor)
     if settings.max_frames is not None and settings.max_frames > 0 and len(times) > settings.max_frames:
         n = int(settings.max_frames)
         times = times[:n]
@@ -644,18 +702,22 @@ def device_targets(out: SolveOutcome, settings: SolveSettings, teleports="keep")
         sides = fix_swapped_sides(pos, quat, valid, settings.fps)
     resolved = resolve_offsets(settings.offsets, out.recording)
     out.targets, offsets = make_targets(times, pos, quat, valid, settings.fps, resolved)
-    out.floor = floor_height(settings, out.targets)
+
+    def floor_of(targets):               # (floor, how it was found when the settings did not say)
+        return eye_level_floor(settings, targets) if eye_level else (floor_height(settings, targets), None)
+
+    out.floor, out.floor_why = floor_of(out.targets)
     out.targets = move_floor(out.targets, out.floor)
     guessed = None
     if _offsets_unstated(settings.offsets, resolved, out.recording):      # a headset's poses after all?
         from .offsets_auto import HEADSET_PRESET, headset_evidence
         as_headset, headset_offsets = make_targets(times, pos, quat, valid, settings.fps, HEADSET_PRESET)
-        headset_floor = floor_height(settings, as_headset)
+        headset_floor, headset_why = floor_of(as_headset)
         labels = (out.recording.metadata or {}).get("device_labels") or {}
         preset, guessed = headset_evidence(out.targets, move_floor(as_headset, headset_floor), float(times[0]),
                                            labels.get("head"))
         if preset is not None:
-            resolved, offsets, out.floor = preset, headset_offsets, headset_floor
+            resolved, offsets, out.floor, out.floor_why = preset, headset_offsets, headset_floor, headset_why
             out.targets = move_floor(as_headset, headset_floor)
     note = offsets_note(settings.offsets, resolved, out.recording, guessed)
     first, last = headset_off(out.targets.pos["head"], out.targets.rot["head"], settings.fps,
@@ -800,8 +862,8 @@ def solve_recording(source, settings: SolveSettings | None = None, solver=None, 
         out.targets = move_floor(make_targets(times, pos, quat, valid, settings.fps, out.offsets)[0], out.floor)
     out.targets, lost = relax_lost_hands(out.targets, out.body)     # long hand gaps: the arm hangs
     out.info.extend(lost)
-    notes = (floor_note(settings, out.floor),) if posture == "seated" else \
-        (floor_note(settings, out.floor), stature_note(settings, out), head_height_note(settings, out))
+    notes = (floor_note(settings, out.floor, out.floor_why),) if posture == "seated" else \
+        (floor_note(settings, out.floor, out.floor_why), stature_note(settings, out), head_height_note(settings, out))
     for note in notes:
         if note:
             out.info.append(note)
