@@ -297,6 +297,9 @@ def test_floor_setting_finds_the_tpose_and_stands_the_body_on_the_ground(addon, 
     s = _settings(str(write_tpose_recording(tmp_path / "eyes.csv", lift=-1.5)))
     s.calibration = 'AUTO'
     assert s.floor_mode == 'ZERO' and config_from_settings(bpy.context).floor == 0.0
+    assert bpy.ops.manikin.find_tpose() == {'FINISHED'}          # Find T-Pose sees the floor the solve finds
+    assert s.calibration == 'TPOSE' and 26 / 24 - 1e-6 <= s.tpose_time <= 44 / 24 + 1e-6
+    s.calibration = 'AUTO'
     assert bpy.ops.manikin.solve_full_body() == {'FINISHED'}
     assert "the recording's origin is at eye level: under a 1.80 m performer, from the T-pose's arm span" \
         in s.last_report

@@ -39,8 +39,7 @@ _P_LOAD, _P_SOLVE = 0.08, 0.92
 
 from ..core.pipeline import SolveCancelled  # noqa: E402,F401  (raised through the job on cancel)
 from ..core import solve as core_solve  # noqa: E402
-from ..core.solve import (SolveError, SolveSettings, error_message, floor_height,  # noqa: E402,F401
-                          make_targets, move_floor, resample_recording, resolve_offsets)
+from ..core.solve import SolveError, SolveSettings, error_message, resolve_offsets  # noqa: E402,F401
 
 
 @dataclass
@@ -466,9 +465,11 @@ def find_tpose_time(config: SolveConfig, context=None):
         job.recording = load_source(config)
     if config.fps is None:
         raise SolveError("no frame rate: set fps")
-    times, pos, quat, valid, _ = resample_recording(job.recording, config.fps, config.floor)
-    targets, _ = make_targets(times, pos, quat, valid, config.fps,
-                              resolve_offsets(config.offsets, job.recording))
-    targets = move_floor(targets, floor_height(config, targets))      # the T-pose test needs the floor
-    cand = cal.find_tpose(targets, t0=float(times[0]))
+    # the device targets as the solve makes them (offsets, also those the take shows, and the
+    # floor, also one found under an eye-level origin: the T-pose test needs it)
+    from ..core.solve import SolveOutcome, device_targets
+    out = SolveOutcome()
+    out.recording = job.recording
+    times = device_targets(out, config, str(config.teleports or "keep").strip().lower())[0]
+    cand = cal.find_tpose(out.targets, t0=float(times[0]))
     return float(cand.time - times[0]), cand
