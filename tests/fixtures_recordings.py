@@ -208,3 +208,24 @@ def xror_bytes(t, pose, joints=("HEAD", "HAND_LEFT", "HAND_RIGHT"), app="Some Ap
                     "software": {"app": {"name": app, "version": "1"}}},
            "frames": fpzip.compress(np.ascontiguousarray(rows[None, None])), "events": []}
     return bson.encode(doc)
+
+
+def write_wide_poses(path, times, pos, quat, names, axes="openxr"):
+    """Write device poses as a wide CSV (``time`` in seconds, ``<prefix>_pos_{x,y,z}`` metres,
+    ``<prefix>_rot_{w,x,y,z}``) in ``axes``.  times ``(T,)``; pos / quat: device → ``(T, 3)`` /
+    ``(T, 4)`` wxyz, Blender axes; names: device → the column prefix.  Returns ``path``."""
+    from blender_manikin.core.recording import from_blender
+    cols, data = ["time"], [np.asarray(times, np.float64)]
+    for d, prefix in names.items():
+        p, q = from_blender(pos[d], quat[d], axes)
+        for k, a in enumerate("xyz"):
+            cols.append(f"{prefix}_pos_{a}")
+            data.append(p[:, k])
+        for k, a in enumerate("wxyz"):
+            cols.append(f"{prefix}_rot_{a}")
+            data.append(q[:, k])
+    with open(path, "w") as f:
+        f.write(",".join(cols) + "\n")
+        for row in np.stack(data, -1):
+            f.write(",".join(f"{v:.6f}" for v in row) + "\n")
+    return path

@@ -11,11 +11,12 @@ from blender_manikin.core import rotations as rot
 from blender_manikin.core import skeleton as sk
 from blender_manikin.core.device_offsets import remove_offsets
 from blender_manikin.core.offsets_auto import HEADSET_PRESET
-from blender_manikin.core.recording import from_blender
 from blender_manikin.core.solve import SolveSettings, solve_recording
 
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "benchmarks"))
 from standing import bandai_like_body, standing_targets  # noqa: E402
+
+from fixtures_recordings import write_wide_poses  # noqa: E402
 
 DEVICES = ("head", "left_hand", "right_hand")
 
@@ -29,24 +30,14 @@ def write_wide(path, body, pose, labels, headset, droop=0.0):
     for d in ("left_hand", "right_hand"):               # droop: the hands this much lower in the hold
         holds[0].pos[d][:, 2] -= droop
     T = sum(h.num_frames for h in holds)
-    cols, data = ["time"], [np.arange(T) / holds[0].fps]
+    pos, quat = {}, {}
     for d in DEVICES:
         p = np.concatenate([h.pos[d] for h in holds])
         R = np.concatenate([h.rot[d] for h in holds])
         if headset:
             p, R = remove_offsets(p, R, HEADSET_PRESET, d)
-        p, q = from_blender(p, rot.matrix_to_quat(R), "openxr")
-        for k, a in enumerate("xyz"):
-            cols.append(f"{labels[d]}_pos_{a}")
-            data.append(p[:, k])
-        for k, a in enumerate("wxyz"):
-            cols.append(f"{labels[d]}_rot_{a}")
-            data.append(q[:, k])
-    with open(path, "w") as f:
-        f.write(",".join(cols) + "\n")
-        for row in np.stack(data, -1):
-            f.write(",".join(f"{v:.6f}" for v in row) + "\n")
-    return path
+        pos[d], quat[d] = p, rot.matrix_to_quat(R)
+    return write_wide_poses(path, np.arange(T) / holds[0].fps, pos, quat, labels)
 
 
 JOINT_NAMES = {"head": "head", "left_hand": "left_hand", "right_hand": "right_hand"}

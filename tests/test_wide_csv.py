@@ -331,21 +331,9 @@ def test_a_take_mostly_at_the_sides_is_not_read_mirrored(tmp_path, axes):
                            "example_recording.csv")
     rec = formats.load_recording(example)
     times, pos, quat, _, _ = resample(rec, 72.0, floor=None, check_units=False)
+    from fixtures_recordings import write_wide_poses
     names = {"head": "hmd", "left_hand": "left_controller", "right_hand": "right_controller"}
-    cols, data = ["time"], [times - times[0]]
-    for d, prefix in names.items():
-        p, q = from_blender(pos[d], quat[d], axes)
-        for k, a in enumerate("xyz"):
-            cols.append(f"{prefix}_pos_{a}")
-            data.append(p[:, k])
-        for k, a in enumerate("wxyz"):
-            cols.append(f"{prefix}_rot_{a}")
-            data.append(q[:, k])
-    path = tmp_path / "example_wide.csv"
-    with open(path, "w") as f:
-        f.write(",".join(cols) + "\n")
-        for row in np.stack(data, -1):
-            f.write(",".join(f"{v:.6f}" for v in row) + "\n")
+    path = write_wide_poses(tmp_path / "example_wide.csv", times - times[0], pos, quat, names, axes)
     back = formats.load_recording(path)
     assert f"axes {axes} (" in back.metadata["detected"]
     np.testing.assert_allclose(back.streams["head"].pos, pos["head"], atol=1e-5)
