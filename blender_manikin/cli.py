@@ -29,9 +29,10 @@ Options of ``solve`` (they mirror the panel; ``--help`` has them all):
                               body measurement)
 --arm-span METRES             wrist-to-wrist span (with --height)
 --sole METRES                 the performer's shoe soles (default 0.03; 0 barefoot)
---floor METRES|height         trackers: the recording's floor height (default 0), or
-                              'height': under the --height performer standing in the
-                              take (an origin at eye level); moved to 0
+--floor METRES|height         trackers: the recording's floor height (default 0: a head
+                              standing near 0, an origin at eye level, gets its floor
+                              under the performer), or 'height': under the --height
+                              performer standing in the take; moved to 0
 --offsets auto|none|PRESET|FILE  device offsets: auto (the file's metadata or its
                               format's default), a preset name or a JSON file
 --layout FILE.json            the columns, time, units, axes and Euler order of
@@ -123,9 +124,10 @@ def _add_solve_options(s):
                    help="thickness of the performer's shoe soles: the feet stand this far above the floor "
                         "(default 0.03; 0 barefoot)")
     s.add_argument("--floor", type=_floor_arg, default=0.0, metavar="METRES|height",
-                   help="trackers: where the recording's floor is, metres on its vertical axis (default 0), "
-                        "or 'height': under the performer of --height standing in the take (an origin at eye "
-                        "level or on a desk); the floor is moved to 0")
+                   help="trackers: where the recording's floor is, metres on its vertical axis (default 0; a "
+                        "head standing within 0.5 m of 0, an origin at eye level, gets its floor under the "
+                        "performer: --height, else the T-pose's arm span, else 1.75 m), or 'height': under the "
+                        "performer of --height standing in the take (an origin on a desk); moved to 0")
     s.add_argument("--offsets", default="auto", metavar="auto|none|PRESET|FILE",
                    help="device-to-joint offsets: a preset name, a JSON file, or auto (default: the "
                         "recording's '# offsets:' metadata, beat_saber for .bsor and Beat Saber .xror, "

@@ -218,7 +218,8 @@ class MANIKIN_Settings(PropertyGroup):
     floor_mode: EnumProperty(
         name="Floor", default='ZERO',
         items=[('ZERO', "At Zero", "The recording's height 0 is the floor (room-scale VR: OpenXR stage, "
-                "SteamVR standing)"),
+                "SteamVR standing); a head standing near 0 (an origin at eye level) gets its floor under "
+                "the performer: the typed height, else the T-pose's arm span, else 1.75 m"),
                ('OFFSET', "At Height", "The floor is at Floor Height in the recording"),
                ('PERFORMER', "Under Performer", "The floor is put under a performer of the typed Height "
                 "standing in the take (an origin at eye level or on a desk)")],
