@@ -34,7 +34,9 @@ Options of ``solve`` (they mirror the panel; ``--help`` has them all):
                               under the performer), or 'height': under the --height
                               performer standing in the take; moved to 0
 --offsets auto|none|PRESET|FILE  device offsets: auto (the file's metadata or its
-                              format's default), a preset name or a JSON file
+                              format's default; a CSV that does not say: none, or
+                              openxr_generic where the take shows a headset), a preset
+                              name or a JSON file
 --layout FILE.json            the columns, time, units, axes and Euler order of
                               wide-layout CSV inputs (default: detected)
 --layout KEYPOINTS            the layout of keypoint inputs: mediapipe33, coco17,
@@ -131,7 +133,8 @@ def _add_solve_options(s):
     s.add_argument("--offsets", default="auto", metavar="auto|none|PRESET|FILE",
                    help="device-to-joint offsets: a preset name, a JSON file, or auto (default: the "
                         "recording's '# offsets:' metadata, beat_saber for .bsor and Beat Saber .xror, "
-                        "openxr_generic for other .xror, else none)")
+                        "openxr_generic for other .xror, else none, or openxr_generic where the take shows a "
+                        "headset: its T-pose, or a head named hmd, Main Camera, ...)")
     s.add_argument("--bvh-units", choices=("cm", "m"), default="cm")
     s.add_argument("--model", default="auto", metavar="auto|head_hands|pelvis|six|FILE.onnx",
                    help="the pose network: auto (default: the shipped model for the recording's trackers, "

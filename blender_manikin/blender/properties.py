@@ -40,7 +40,9 @@ def _preset_items(self, context):
         implied = ", ".join(f"{f.default_offsets.replace('_', ' ').title()} for {'/'.join(f.extensions)}"
                             for f in formats.READERS.values() if f.default_offsets != "none")
         _preset_items_cache = [("auto", "Auto", "From the recording: its '# offsets:' metadata, "
-                                                f"{implied}, else None")] + \
+                                                f"{implied}, else None, unless the take shows a headset "
+                                                "(its T-pose, or a head named HMD, Main Camera, ...): "
+                                                "Openxr Generic")] + \
             [(n, n.replace("_", " ").title() if n != "none" else "None", desc[n]) for n in names]
     return _preset_items_cache
 
