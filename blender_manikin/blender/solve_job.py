@@ -373,9 +373,10 @@ class SolveQueue:
         name = os.path.basename(self.configs[max(self.index, 0)].filepath or "") or "take"
         return f"file {max(self.index, 0) + 1} of {len(self.configs)} ({name}): {stage}"
 
-    def _written(self, job, context):
+    def _attempt(self, job, step, context):
+        """``step(context)`` (the job's ``write`` or ``run``), then the job is done or failed."""
         try:
-            job.write(context)
+            step(context)
         except Exception as exc:
             self._fail(job, exc)
         else:
@@ -419,7 +420,7 @@ class SolveQueue:
         if job.error is not None:
             self._fail(job, job.error)
         else:
-            self._written(job, context)
+            self._attempt(job, job.write, context)
         return self._next(context)
 
     def cancel(self, timeout=0.5):
@@ -436,12 +437,7 @@ class SolveQueue:
         for i, cfg in enumerate(self.configs):
             self.index = i
             job = SolveJob(cfg)
-            try:
-                job.run(context)
-            except Exception as exc:
-                self._fail(job, exc)
-            else:
-                self._done(job)
+            self._attempt(job, job.run, context)
         self.job = None
         return self
 

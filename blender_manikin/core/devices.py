@@ -6,6 +6,8 @@ network's inputs, the panel, the exporters).  No bpy.
 """
 from __future__ import annotations
 
+import re
+
 from .skeleton import J
 
 #: every device, in this order wherever devices are listed
@@ -64,6 +66,13 @@ _SUFFIXES = ("_pose", "_anchor", "_transform", "_grip")
 
 #: name parts that scene objects carry around a device's name (this add-on's own empties, tools)
 OBJECT_AFFIXES = ("manikin_", "tracker_", "vr_", "xr_", "_tracker", "_empty")
+
+
+def snake_name(name) -> str:
+    """``LeftHand.Position.X`` -> ``left_hand_position_x``: camel case split, lower case, every run
+    of other characters one ``_`` (how column names and rig names are compared)."""
+    s = re.sub(r"(?<=[a-z0-9])(?=[A-Z])", "_", str(name).strip())
+    return re.sub(r"[^a-z0-9]+", "_", s.lower()).strip("_")
 
 
 def name_key(name, affixes=()) -> str:

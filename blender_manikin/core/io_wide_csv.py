@@ -40,7 +40,7 @@ import re
 
 import numpy as np
 
-from .devices import DEVICES, canonical_device
+from .devices import DEVICES, canonical_device, snake_name
 from .plain import shown
 from .recording import (Recording, RecordingError, TrackerStream, UNITS, canonical_axes, canonical_units,
                         read_file_bytes, to_blender)
@@ -56,14 +56,8 @@ _DELTA_MS = ("delta_time_ms", "dt_ms", "delta_ms", "frame_time_ms")
 _DELTA_S = ("delta_time", "dt", "delta_time_s")
 
 
-def _norm(name):
-    """``LeftHand.Position.X`` -> ``left_hand_position_x`` (camel case split, separators _)."""
-    s = re.sub(r"(?<=[a-z0-9])(?=[A-Z])", "_", name.strip())
-    return re.sub(r"[^a-z0-9]+", "_", s.lower()).strip("_")
-
-
 def _raw_prefix(raw, prefix):
-    """The part of the column name ``raw`` that the normalised ``prefix`` (:func:`_norm`) came
+    """The part of the column name ``raw`` that the normalised ``prefix`` (:func:`.devices.snake_name`) came
     from: ``("CenterEyeAnchor.position.x", "center_eye_anchor")`` -> ``"CenterEyeAnchor"``."""
     want = sum(c.isalnum() for c in prefix)
     seen = 0
@@ -77,7 +71,7 @@ def _raw_prefix(raw, prefix):
 
 def device_of(prefix):
     """The device a column prefix names, or None."""
-    key = _norm(prefix)
+    key = snake_name(prefix)
     return canonical_device(key) or canonical_device(key.replace("_", ""))
 
 
@@ -92,7 +86,7 @@ def parse_columns(header):
     only when there is no time column (kind ``"frames"``, read with a rate)."""
     groups, time_col, skipped, frame_col = {}, None, [], None
     for i, raw in enumerate(header):
-        name = _norm(raw)
+        name = snake_name(raw)
         if i == 0 and (name == "" or name.startswith("unnamed")):
             continue
         if name in _TIME_S + _TIME_MS + _DELTA_MS + _DELTA_S and time_col is None:

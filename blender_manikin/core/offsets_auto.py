@@ -28,7 +28,7 @@ import re
 import numpy as np
 
 from . import calibration as cal
-from .devices import OBJECT_AFFIXES, name_key
+from .devices import OBJECT_AFFIXES, name_key, snake_name
 
 #: the preset a headset's recording gets: the head as an OpenXR view pose (every preset but
 #: ``none`` agrees on the head), the hands as grip poses
@@ -51,9 +51,8 @@ def is_headset_name(name) -> bool:
     """Whether a head device's ``name`` (a column prefix, a device or an object's name) names a
     headset: ``HMD``, ``CenterEyeAnchor``, ``Main Camera``, ``VR_Camera.001``, ``xr_head`` (not
     ``head``, ``Head``, ``MANIKIN_head``)."""
-    raw = str(name)
     keys = set()
-    for n in (raw, re.sub(r"(?<=[a-z0-9])(?=[A-Z])", "_", raw)):
+    for n in (str(name), snake_name(name)):
         for k in (name_key(n), name_key(n, OBJECT_AFFIXES)):
             k = re.sub(r"[^a-z0-9]", "", k)
             keys.add(k)
