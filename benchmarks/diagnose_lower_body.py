@@ -85,7 +85,7 @@ def expected_lean(head_pos, fps):
     feet, relative to an upright body's: ``-a / g`` times the head's height (the body pivots over
     its feet, so the head leads them by that much).  head_pos ``(T, 3)``, Z-up; the path is
     smoothed (Gaussian, :data:`LEAN_SMOOTH_S`) before it is differentiated twice."""
-    from blender_manikin.core.pipeline import smooth_frames
+    from blender_manikin.core.smoothing import smooth_frames
     smooth = smooth_frames(np.asarray(head_pos, np.float64), LEAN_SMOOTH_S * fps)
     acc = np.gradient(np.gradient(smooth, axis=0), axis=0) * fps * fps
     return -acc[:, :2] * (head_pos[:, 2] / GRAVITY)[:, None]

@@ -186,8 +186,8 @@ def test_the_detection_line_reads_like_a_sentence(tmp_path):
     write_wide(path, **FAMILIES["unity_logger_ms_cm"])
     line = formats.load_recording(path).metadata["detected"]
     assert line == ("wide layout: head=hmd_*, hands=left_controller_*/right_controller_*; quaternions x,y,z,w; "
-                    "time=timestamp in ms; units cm (head at 1.62 m); axes unity (left-handed), from the head's "
-                    "forward axis")
+                    "time=timestamp in ms; units cm (head at 1.62 m); axes unity (left-handed), from the "
+                    "hands' reach ahead of the head")
 
 
 def test_given_axes_and_units_override_the_detection(tmp_path):

@@ -4,8 +4,8 @@ exports).  The layout is detected from the header and the data, and said in one 
 (``Recording.metadata["detected"]``), e.g.::
 
     wide layout: head=hmd_*, hands=left_controller_*/right_controller_*; quaternions x,y,z,w;
-    time=timestamp in ms; units cm (head at 1.62 m); axes unity (left-handed), from the head's
-    forward axis
+    time=timestamp in ms; units cm (head at 1.62 m); axes unity (left-handed), from the walking
+    direction (41.3 s forward)
 
 Detected:
 
@@ -23,10 +23,13 @@ Detected:
   when the steps say so), ``delta_time_ms``/``dt`` (per-row deltas), or only a frame counter
   (``frame``, ``frame_index``, ...) with the rate given (``rate``); an unnamed first column
   (a pandas index) is ignored;
-* units from the head's height (a head at 161.9 means centimetres);
-* axes: Y-up or Z-up from the head's height; between Unity (left-handed, +Z forward) and
-  OpenXR/OpenVR (right-handed, -Z forward), the convention along whose head forward axis the
-  hands reach ahead of the head (:func:`_axes_by_forward`; datasets' READMEs are not always right
+* units from an arm's length (:func:`.axes_detect.length_units`: the hands 55 apart from the head
+  means centimetres), wherever the origin is;
+* axes: Y-up or Z-up from the head's height, or where that is unclear from the hands below the
+  head and the headset's own up axis (:func:`.axes_detect.up_axis`); between Unity (left-handed, +Z forward) and
+  OpenXR/OpenVR (right-handed, -Z forward), the convention the take faces forward in: the way
+  the performer walks, else the head turning about the neck behind it, else the hands reaching
+  ahead of the head (:func:`.axes_detect.choose_axes`; datasets' READMEs are not always right
   about their axes).
 
 ``axes`` / ``units`` given by the user override the detection.  Ambiguity (two column groups
@@ -45,7 +48,8 @@ from .plain import shown
 from .recording import (Recording, RecordingError, TrackerStream, UNITS, canonical_axes, canonical_units,
                         read_file_bytes, to_blender)
 from . import rotations as rot
-from .rotations import normalize, quat_rotate
+from .rotations import normalize
+from .axes_detect import choose_axes, length_units, up_axis
 
 _POS_WORDS = ("pos", "position", "p", "loc", "location", "")
 _ROT_WORDS = ("rot", "rotation", "quat", "quaternion", "q", "orientation", "euler", "eul", "angles", "ang")
@@ -158,38 +162,6 @@ def _time(col, values, header=None, rate=None, path=None):
         scale, unit = (1e-3, "ms") if med < 500 else (1e-6, "µs") if med < 5e5 else (1e-9, "ns")
         return (v - v[0]) * scale, f"time={col_name} in {unit}"
     return v - v[0], f"time={col_name} in s"
-
-
-#: each convention's up axis (index) and the head's local forward axis, in its own coordinates
-_CONVENTIONS = {"unity": (1, (0.0, 0.0, 1.0)), "openxr": (1, (0.0, 0.0, -1.0)), "blender": (2, (0.0, -1.0, 0.0))}
-
-
-def _axes_by_forward(pos, quat, candidates):
-    """The convention among ``candidates`` in which the hands reach ahead of the head, along its
-    forward axis (horizontally), judged in the file's own coordinates (dot products do not depend
-    on the axes change); ``(axes, score)``.
-
-    A hand's reach is lopsided: up to 60 cm ahead of the head, hardly 10 cm behind it, while at
-    the sides or in a T-pose the hands stand a few centimetres behind a headset (its view pose
-    is in front of the eyes).  The score is the sum of the 90th and 10th percentiles of the
-    hands' distance ahead of the head (every frame, both hands): positive read the right way,
-    negative mirrored.  (Voting on the direction of the hands alone, as before, read a take of
-    T-poses, hands at the sides and a few reaches the mirrored way.)"""
-    best = None
-    hands = [pos[d] for d in ("left_hand", "right_hand") if d in pos]
-    head = pos["head"]
-    rows = np.isfinite(head).all(-1) & np.isfinite(quat["head"]).all(-1)      # lost / corrupt rows
-    for axes in candidates:
-        up, local = _CONVENTIONS[axes]
-        fwd = quat_rotate(normalize(quat["head"][rows]), np.array(local))
-        fwd[:, up] = 0.0
-        fwd = normalize(fwd)
-        ahead = np.concatenate([np.sum((h[rows] - head[rows]) * fwd, -1) for h in hands])
-        ahead = ahead[np.isfinite(ahead)]
-        score = float(np.percentile(ahead, 90) + np.percentile(ahead, 10)) if ahead.size else 0.0
-        if best is None or score > best[1]:
-            best = (axes, score)
-    return best
 
 
 LAYOUT_VERSION = 1
@@ -385,31 +357,31 @@ def read_wide_csv(path, axes=None, units=None, layout=None, rate=None) -> Record
     else:
         quat = {d: (values[:, [g["rot"][a] for a in "wxyz"]] if g["rot"] else np.tile([1.0, 0, 0, 0], (len(t), 1)))
                 for d, g in groups.items()}
-    # units from the head height (the largest coordinate of a standing head)
-    head_h = float(np.nanmedian(np.nanmax(np.abs(pos["head"]), axis=1)))
+    # units from an arm's length (the hands' distance to the head), wherever the origin is
     if units is None:
-        units = "m" if head_h < 5 else "cm" if head_h < 500 else "mm"
-        units_note = f"units {units} (head at {head_h * UNITS[units]:.2f} m)"
+        units = (length_units(pos) or ("m", 0.0))[0]
+        units_how = None
     else:
         units = canonical_units(units)
-        units_note = f"units {units} ({given['units']})"
+        units_how = given["units"]
     scale = UNITS[units]
+    metres = {d: p * scale for d, p in pos.items()}
     if euler:      # the order a convention's tools write (Unity: Z, X, Y), unless stated
         def order_for(ax):
             return str(eu.get("order") or EULER_ORDERS.get(ax, "XYZ")).upper()
     if axes is None:
-        up = int(np.argmax(np.nanmedian(pos["head"], axis=0)))
+        up, up_how = up_axis(metres, quats_for(order_for("openxr")) if euler else quat)
         cands = ("blender",) if up == 2 else ("unity", "openxr")
-        if euler:
-            scores = [(_axes_by_forward(pos, quats_for(order_for(c)), (c,))[1], c) for c in cands]
-            axes = max(scores)[1]
-        else:
-            axes, score = _axes_by_forward(pos, quat, cands)
-        axes_note = (f"axes {axes} ({'left-handed' if axes == 'unity' else 'right-handed'}), from the head's "
-                     f"forward axis" + ("" if len(cands) > 1 else ", Z up"))
+        axes, why = choose_axes(t, metres, (lambda c: quats_for(order_for(c))) if euler else (lambda c: quat), cands)
+        up_note = "" if up_how == "the head's height" else f", {'Z' if up == 2 else 'Y'} up from {up_how}"
+        axes_note = (f"axes {axes} ({'left-handed' if axes == 'unity' else 'right-handed'}){up_note}, "
+                     + (why if len(cands) > 1 else "Z up"))
     else:
         axes = canonical_axes(axes)
+        up = 2 if axes == "blender" else 1
         axes_note = f"axes {axes} ({given['axes']})"
+    head_h = float(np.nanmedian(metres["head"][:, up]))
+    units_note = f"units {units} ({units_how or f'head at {head_h:.2f} m'})"
     if euler:
         quat = quats_for(order_for(axes))
     streams = {}

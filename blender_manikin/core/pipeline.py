@@ -44,6 +44,7 @@ from .devices import REQUIRED_DEVICES
 from .pose_result import PoseResult, TrackerTargets
 from .runs import runs
 from .skeleton import Body, J, NUM_JOINTS, PARENTS, forward_kinematics, mirror_name
+from .smoothing import smooth_frames
 
 #: a foot is planted (reported and locked) where the network is this confident
 CONTACT_THRESHOLD = 0.8
@@ -407,21 +408,6 @@ def lock_planted_feet(ankle_pos, contact, threshold=CONTACT_THRESHOLD, blend_s=N
             w = np.clip(np.minimum((t - (pa - b_in - 1)) / (b_in + 1), ((pb + b_out) - t) / (b_out + 1)), 0.0, 1.0)
             w = (w * w * (3.0 - 2.0 * w))[:, None]        # smoothstep: no velocity jump at the edges
             out[lo:hi, k, ax] = out[lo:hi, k, ax] * (1 - w) + anchor[ax] * w
-    return out
-
-
-def smooth_frames(x, sigma):
-    """Gaussian smoothing along axis 0 (``sigma`` in frames, edges held), vectorised."""
-    x = np.asarray(x, np.float64)
-    if sigma <= 0 or x.shape[0] < 3:
-        return x.copy()
-    r = int(np.ceil(3 * sigma))
-    k = np.exp(-0.5 * (np.arange(-r, r + 1) / sigma) ** 2)
-    k /= k.sum()
-    pad = np.concatenate([np.repeat(x[:1], r, 0), x, np.repeat(x[-1:], r, 0)], 0)
-    out = np.zeros_like(x)
-    for i, w in enumerate(k):
-        out += w * pad[i:i + x.shape[0]]
     return out
 
 

@@ -20,6 +20,21 @@ import numpy as np
 from . import rotations as rot
 
 
+def smooth_frames(x, sigma):
+    """Gaussian smoothing along axis 0 (``sigma`` in frames, edges held), vectorised."""
+    x = np.asarray(x, np.float64)
+    if sigma <= 0 or x.shape[0] < 3:
+        return x.copy()
+    r = int(np.ceil(3 * sigma))
+    k = np.exp(-0.5 * (np.arange(-r, r + 1) / sigma) ** 2)
+    k /= k.sum()
+    pad = np.concatenate([np.repeat(x[:1], r, 0), x, np.repeat(x[-1:], r, 0)], 0)
+    out = np.zeros_like(x)
+    for i, w in enumerate(k):
+        out += w * pad[i:i + x.shape[0]]
+    return out
+
+
 # --------------------------------------------------------------------------
 def savgol_weights(window: int, order: int = 2):
     """``(window, window)`` Savitzky-Golay weights: row ``i`` gives the least-squares polynomial

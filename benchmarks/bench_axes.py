@@ -1,0 +1,158 @@
+"""Unity or OpenXR: how often a wide CSV's axes are read the right way (``core/axes_detect.py``).
+
+Every clip of the Bandai Namco set (all 3,076 takes) and of the HDM05 subset becomes a
+recording of a headset and two controllers (the ground truth's head joint and wrists, moved to
+the headset and grip poses by the ``openxr_generic`` offsets) and, as a mocap export would be,
+of the head joint and wrists themselves.  Each is written in Unity's and in OpenXR's axes and
+read back by the detection: single clips (1-10 s), and takes of 10 clips one after the other
+(each clip moved and turned to start where the one before ended, as one longer recording).
+Prints, per row, how many readings the hands' reach alone (the rule before this module) and
+the three cues (walking, then head turns, then reach) got right, and which cue decided; then
+the real VR recordings of ``../shared/data/vr`` (Beat Saber, Unity axes).
+
+    .venv/bin/python benchmarks/bench_axes.py [--max-clips N]
+
+Needs ``../shared/data`` (the dataset cache is built on first use, a few minutes).  Nothing is
+timed: this is a count of right and wrong readings.
+"""
+from __future__ import annotations
+
+import argparse
+import glob
+import os
+import sys
+
+import numpy as np
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+sys.path.insert(0, ROOT)
+sys.path.insert(0, os.path.join(ROOT, "benchmarks"))
+
+from bench_pose import DATASETS, SHARED, load_clip  # noqa: E402
+from blender_manikin.core import axes_detect as ad  # noqa: E402
+from blender_manikin.core import device_offsets as do  # noqa: E402
+from blender_manikin.core import rotations as rot  # noqa: E402
+from blender_manikin.core.devices import DEVICE_JOINT  # noqa: E402
+from blender_manikin.core.recording import from_blender  # noqa: E402
+
+DEVICES = ("head", "left_hand", "right_hand")
+CONVENTIONS = ("unity", "openxr")
+TAKE_CLIPS = 10
+
+
+def clip_devices(path, headset):
+    """``(time, pos, rotm)``: the clip's devices in Blender axes (metres; ``(T, 3)``,
+    ``(T, 3, 3)``), the headset and grips (``openxr_generic``) or the joints themselves."""
+    _, _, pos, world, fps = load_clip(path)
+    offsets = do.get_preset("openxr_generic")["devices"]
+    P, R = {}, {}
+    for d in DEVICES:
+        j = DEVICE_JOINT[d]
+        if headset:
+            P[d], R[d] = do.remove_offsets(pos[:, j], world[:, j], offsets[d], device=d)
+        else:
+            P[d], R[d] = pos[:, j].copy(), world[:, j].copy()
+    return np.arange(len(pos)) / fps, P, R
+
+
+def _heading(R):
+    f = R @ np.array([0.0, -1.0, 0.0])          # a Blender-axes device looks along local -Y
+    return float(np.arctan2(f[1], f[0]))
+
+
+def stitch(clips):
+    """One take of ``clips`` (each ``(time, pos, rotm)``) one after the other: each clip turned
+    about the vertical and moved so that its head starts where, and facing as, the last one's
+    ended; time runs on at the clips' rate."""
+    t_all, P_all, R_all = [], {d: [] for d in DEVICES}, {d: [] for d in DEVICES}
+    t0 = 0.0
+    for k, (t, P, R) in enumerate(clips):
+        if k:
+            yaw = _heading(R_all["head"][-1][-1]) - _heading(R["head"][0])
+            Rz = rot.axis_angle_rotation(np.array([0.0, 0.0, 1.0]), yaw)
+            start, end = P["head"][0], P_all["head"][-1][-1]
+            P = {d: (p - start) @ Rz.T + end for d, p in P.items()}
+            R = {d: Rz @ r for d, r in R.items()}
+        dt = t[1] - t[0] if len(t) > 1 else 1 / 30
+        t_all.append(t - t[0] + t0)
+        t0 = t_all[-1][-1] + dt
+        for d in DEVICES:
+            P_all[d].append(P[d])
+            R_all[d].append(R[d])
+    return (np.concatenate(t_all), {d: np.concatenate(v) for d, v in P_all.items()},
+            {d: np.concatenate(v) for d, v in R_all.items()})
+
+
+def read_both_ways(t, P, R, truth):
+    """``(reach_right, chosen_right, cue)`` for the take written in ``truth`` axes."""
+    pos, quat = {}, {}
+    for d in DEVICES:
+        pos[d], quat[d] = from_blender(P[d], rot.matrix_to_quat(R[d]), truth)
+    ev = {a: ad.facing_evidence(t, pos, quat, a) for a in CONVENTIONS}
+    reach = max(CONVENTIONS, key=lambda a: ev[a].reach)
+    chosen, why = ad.choose_axes(t, pos, lambda a: quat, CONVENTIONS)
+    cue = "walking" if "walking" in why else "turns" if "turns" in why else "reach"
+    return reach == truth, chosen == truth, cue
+
+
+def tally(takes):
+    """Counts over ``takes`` (each ``(t, P, R)``) read in both conventions."""
+    n = reach = chosen = 0
+    cues = {"walking": 0, "turns": 0, "reach": 0}
+    for t, P, R in takes:
+        for truth in CONVENTIONS:
+            r, c, cue = read_both_ways(t, P, R, truth)
+            n += 1
+            reach += r
+            chosen += c
+            cues[cue] += 1
+    return n, reach, chosen, cues
+
+
+def vr_rows():
+    from blender_manikin.core.formats import load_recording
+    rows = []
+    for path in sorted(glob.glob(os.path.join(SHARED, "vr", "*.bsor"))):
+        rec = load_recording(path)
+        T = min(len(rec.streams[d].time) for d in DEVICES)
+        t = rec.streams["head"].time[:T]
+        P = {d: rec.streams[d].pos[:T] for d in DEVICES}
+        R = {d: rot.quat_to_matrix(rec.streams[d].quat[:T]) for d in DEVICES}
+        rows.append((os.path.basename(path), tally([(t, P, R)])))
+    return rows
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--max-clips", type=int, default=0, help="per dataset (0: all)")
+    args = ap.parse_args(argv)
+    from blender_manikin.training import dataset
+    print("| recordings | head | clips per take | readings | reach alone right | three cues right "
+          "| decided by walking / turns / reach |")
+    print("|---|---|---:|---:|---:|---:|---|")
+
+    def row(name, head, per, counts):
+        n, reach, chosen, cues = counts
+        print(f"| {name} | {head} | {per} | {n} | {100 * reach / n:.1f} % | {100 * chosen / n:.1f} % | "
+              f"{cues['walking']} / {cues['turns']} / {cues['reach']} |")
+
+    for name, (source, _) in DATASETS.items():
+        if not os.path.exists(source):
+            print(f"{name}: {source} not found, skipped")
+            continue
+        files = dataset.build_cache(source, verbose=False)
+        files = files[:args.max_clips] if args.max_clips else files
+        order = np.random.default_rng(0).permutation(len(files))
+        for headset in (True, False):
+            clips = [clip_devices(files[i], headset) for i in order]
+            clips = [c for c in clips if len(c[0]) >= 4]
+            head = "headset" if headset else "head joint"
+            row(name, head, 1, tally(clips))
+            groups = [stitch(clips[k:k + TAKE_CLIPS]) for k in range(0, len(clips) - TAKE_CLIPS + 1, TAKE_CLIPS)]
+            row(name, head, TAKE_CLIPS, tally(groups))
+    for name, counts in vr_rows():
+        row(name, "headset", "whole replay", counts)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,140 @@
+"""Unity or OpenXR for files that do not say (``core/axes_detect.py``): takes whose hands never
+reach ahead of the headset (walking with the hands at the sides; standing and looking around)
+are read the right way from the walking direction and the head's turns, where the hands'
+reach alone read them mirrored.  Every take is made here by FK-like numpy geometry, Blender
+axes, and written in each convention."""
+import numpy as np
+import pytest
+
+from blender_manikin.core import axes_detect as ad
+from blender_manikin.core import formats
+from blender_manikin.core import rotations as rot
+from blender_manikin.core.recording import from_blender
+
+RATE = 72.0
+Z = np.array([0.0, 0.0, 1.0])
+#: the headset's pose from the neck's turning point, in the head's frame (Blender device axes:
+#: -Y forward, +Z up): 9 cm ahead, 11 cm up
+HEADSET_FROM_NECK = np.array([0.0, -0.09, 0.11])
+
+
+def _take(seconds, body_xy, body_yaw, head_yaw, head_pitch):
+    """Device poses (Blender axes, metres) of a performer whose neck is at ``body_xy`` (1.50 m
+    up), body turned ``body_yaw`` and head ``head_yaw`` / ``head_pitch`` (radians, ``(T,)``):
+    the headset ahead of the neck, the hands hanging at the sides 12 cm behind the headset and
+    swinging.  Returns ``(time, pos, quat)``, quaternions wxyz."""
+    t = np.arange(int(seconds * RATE)) / RATE
+    neck = np.concatenate([body_xy, np.full((len(t), 1), 1.50)], -1)
+    R_body = rot.axis_angle_rotation(Z, body_yaw)
+    R_head = R_body @ rot.axis_angle_rotation(Z, head_yaw) @ rot.axis_angle_rotation(np.array([1.0, 0, 0]), head_pitch)
+    pos = {"head": neck + np.einsum("tij,j->ti", R_head, HEADSET_FROM_NECK)}
+    swing = 0.12 * np.sin(2 * np.pi * 0.9 * t)
+    for d, x, s in (("left_hand", 0.2, 1.0), ("right_hand", -0.2, -1.0)):
+        local = np.stack([np.full_like(t, x), 0.03 + s * swing, np.full_like(t, -0.62)], -1)
+        pos[d] = neck + np.einsum("tij,tj->ti", R_body, local)
+    quat = {"head": rot.matrix_to_quat(R_head), "left_hand": rot.matrix_to_quat(R_body),
+            "right_hand": rot.matrix_to_quat(R_body)}
+    return t, pos, quat
+
+
+def walking_take(seconds=8.0):
+    """Walking a wide curve at 1.2 m/s the way the body faces, the head glancing about."""
+    t = np.arange(int(seconds * RATE)) / RATE
+    yaw = 0.2 * t
+    fwd = np.stack([np.sin(yaw), -np.cos(yaw)], -1)           # Rz(yaw) @ (0, -1, 0)
+    xy = np.cumsum(1.2 * fwd / RATE, 0)
+    return _take(seconds, xy, yaw, 0.25 * np.sin(2 * np.pi * 0.3 * t), 0.1 * np.sin(2 * np.pi * 0.2 * t))
+
+
+def looking_around_take(seconds=8.0):
+    """Standing (1 cm of sway) and looking left and right, up and down."""
+    t = np.arange(int(seconds * RATE)) / RATE
+    xy = 0.01 * np.stack([np.sin(2 * np.pi * 0.1 * t), np.cos(2 * np.pi * 0.13 * t)], -1)
+    return _take(seconds, xy, np.zeros_like(t), 0.8 * np.sin(2 * np.pi * 0.25 * t),
+                 0.25 * np.sin(2 * np.pi * 0.4 * t))
+
+
+def in_axes(take, axes):
+    t, pos, quat = take
+    out_p, out_q = {}, {}
+    for d in pos:
+        out_p[d], out_q[d] = from_blender(pos[d], quat[d], axes)
+    return t, out_p, out_q
+
+
+@pytest.mark.parametrize("axes", ["unity", "openxr"])
+@pytest.mark.parametrize("make,cue", [(walking_take, "walking direction"), (looking_around_take, "head's turns")])
+def test_hands_at_the_sides_are_read_the_right_way(make, cue, axes):
+    t, pos, quat = in_axes(make(), axes)
+    other = "openxr" if axes == "unity" else "unity"
+    ev = {a: ad.facing_evidence(t, pos, quat, a) for a in (axes, other)}
+    # the hands stand 12 cm behind the headset: their reach alone says the other convention
+    assert ev[other].reach > ev[axes].reach
+    chosen, why = ad.choose_axes(t, pos, lambda a: quat, ("unity", "openxr"))
+    assert chosen == axes and cue in why
+
+
+def test_the_cues_measure_what_they_say():
+    t, pos, quat = in_axes(walking_take(), "openxr")
+    ev = ad.facing_evidence(t, pos, quat, "openxr")
+    assert 7.0 < ev.walk <= 8.0                  # 8 s of walking, the head glancing up to 14 degrees
+    t, pos, quat = in_axes(looking_around_take(), "openxr")
+    ev = ad.facing_evidence(t, pos, quat, "openxr")
+    assert ev.walk == 0.0
+    assert 0.07 < ev.pivot < 0.10                # the neck 9 cm behind the headset
+    mirrored = ad.facing_evidence(t, pos, quat, "unity")
+    assert mirrored.pivot == pytest.approx(-ev.pivot) and mirrored.reach == pytest.approx(-ev.reach)
+
+
+def test_a_head_that_never_turns_gives_no_pivot():
+    t, pos, quat = in_axes(_take(4.0, np.zeros((int(4.0 * RATE), 2)), np.zeros(int(4.0 * RATE)),
+                                 np.zeros(int(4.0 * RATE)), np.zeros(int(4.0 * RATE))), "unity")
+    ev = ad.facing_evidence(t, pos, quat, "unity")
+    assert ev.walk == 0.0 and abs(ev.pivot) < 1e-6
+    assert ad.choose_axes(t, pos, lambda a: quat, ("unity", "openxr"))[1] == "from the hands' reach ahead of the head"
+
+
+def test_lost_samples_do_not_decide(tmp_path):
+    t, pos, quat = in_axes(walking_take(), "unity")
+    pos["head"][100:130] = np.nan
+    quat["head"][300:310] = np.nan
+    assert ad.choose_axes(t, pos, lambda a: quat, ("unity", "openxr"))[0] == "unity"
+
+
+@pytest.mark.parametrize("axes", ["unity", "openxr"])
+def test_a_wide_csv_of_walking_with_the_hands_at_the_sides(tmp_path, axes):
+    from fixtures_recordings import write_wide_poses
+    t, pos, quat = walking_take()
+    names = {"head": "hmd", "left_hand": "left_controller", "right_hand": "right_controller"}
+    path = write_wide_poses(tmp_path / "walk.csv", t, pos, quat, names, axes)
+    rec = formats.load_recording(path)
+    hand = "left-handed" if axes == "unity" else "right-handed"
+    line = rec.metadata["detected"]
+    assert f"axes {axes} ({hand})" in line and "from the walking direction (" in line
+    np.testing.assert_allclose(rec.streams["head"].pos, pos["head"], atol=1e-5)
+
+
+@pytest.mark.parametrize("units,scale", [("m", 1.0), ("cm", 100.0)])
+@pytest.mark.parametrize("axes", ["unity", "openxr"])
+def test_a_world_space_log_far_from_the_origin(tmp_path, axes, units, scale):
+    """A game's log in world space: the player walked (thumbstick locomotion) 12-20 m from the
+    level's origin.  The head's largest coordinate said centimetres for a file in metres, and
+    the horizontal axis the player stood furthest along was taken for up."""
+    from fixtures_recordings import write_wide_poses
+    t, pos, quat = walking_take()
+    pos = {d: (p + np.array([-12.0, -15.0, 0.0])) * scale for d, p in pos.items()}
+    names = {"head": "Main Camera", "left_hand": "LeftHand Controller", "right_hand": "RightHand Controller"}
+    path = write_wide_poses(tmp_path / "world.csv", t, pos, quat, names, axes)
+    rec = formats.load_recording(path)
+    line = rec.metadata["detected"]
+    assert f"units {units} (head at 1.61 m)" in line and f"axes {axes} (" in line, line
+    assert "Y up from the hands below the head" in line
+    np.testing.assert_allclose(rec.streams["head"].pos, pos["head"] / scale, atol=1e-5)
+
+
+def test_the_head_height_decides_up_when_it_is_clear():
+    t, pos, quat = walking_take(2.0)                   # 2.4 m of walk from the origin, head 1.61 m up
+    for axes, up in (("openxr", 1), ("blender", 2)):
+        p, q = in_axes((t, pos, quat), axes)[1:]
+        assert ad.up_axis(p, q) == (up, "the head's height")
+    assert ad.length_units({d: 1000 * p for d, p in pos.items()})[0] == "mm"
