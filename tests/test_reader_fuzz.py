@@ -23,6 +23,15 @@ N = int(os.environ.get("BLENDER_MANIKIN_FUZZ_EXAMPLES", "60"))
 
 def _valid_files():
     out = {".csv": open(EXAMPLE, "rb").read()[:6000], ".bsor": synthetic_bsor(n=40)[0]}
+    # a wide layout as a logger on a decimal-comma locale writes it: semicolons, ISO 8601 times
+    cols = ["time"] + [f"{d}_{k}_{a}" for d in ("hmd", "left_controller", "right_controller")
+                       for k, axes in (("pos", "xyz"), ("rot", "wxyz")) for a in axes]
+    lines = [";".join(cols)]
+    for k in range(30):
+        pose = [0.01 * k, 1.6, 0.0, 1.0, 0.0, 0.0, 0.0, -0.2, 1.2, -0.3, 1.0, 0.0, 0.0, 0.0,
+                0.2, 1.2, -0.3 - 0.01 * k, 1.0, 0.0, 0.0, 0.0]
+        lines.append(";".join([f"2026-12-07T10:00:{k / 72:09.6f}"] + [f"{v:.4f}".replace(".", ",") for v in pose]))
+    out["_semicolons.csv"] = ("\n".join(lines) + "\n").encode()
     try:
         import bson
         import fpzip

@@ -360,3 +360,70 @@ def test_engine_rig_names_are_devices(head, left, right, style):
     assert skipped == [] and time_col == (0, "time")
     # the prefixes as the file writes them (the detection line, the auto offsets' head name)
     assert {d: g["prefix"] for d, g in groups.items()} == {"head": head, "left_hand": left, "right_hand": right}
+
+
+def _relocale(src, dst, delim, decimal_comma=False, time=None):
+    """``src`` (a comma-separated wide CSV) rewritten with ``delim`` between fields, decimal commas,
+    and ``time(seconds) -> text`` in the first column."""
+    lines = open(src).read().splitlines()
+    out = [lines[0].replace(",", delim)]
+    for ln in lines[1:]:
+        cells = ln.split(",")
+        if time is not None:
+            cells[0] = time(float(cells[0]))
+        if decimal_comma:
+            cells = [c.replace(".", ",") if k or time is None else c for k, c in enumerate(cells)]
+        out.append(delim.join(cells))
+    open(dst, "w").write("\n".join(out) + "\n")
+    return dst
+
+
+@pytest.mark.parametrize("delim,decimal_comma,said", [
+    (";", True, "fields separated by semicolons, decimal commas; "),      # Unity on a German locale
+    (";", False, "fields separated by semicolons; "),
+    ("\t", False, "fields separated by tabs; "),
+])
+def test_semicolons_tabs_and_decimal_commas(tmp_path, delim, decimal_comma, said):
+    src = tmp_path / "comma.csv"
+    write_wide(src, **FAMILIES["openxr_dotted_m"])
+    plain = formats.load_recording(src)
+    rec = formats.load_recording(_relocale(src, tmp_path / "locale.csv", delim, decimal_comma))
+    assert said in rec.metadata["detected"]
+    for d in plain.streams:
+        np.testing.assert_array_equal(rec.streams[d].pos, plain.streams[d].pos)
+        np.testing.assert_array_equal(rec.streams[d].time, plain.streams[d].time)
+    # the layout file keeps the separator and the decimal mark
+    from blender_manikin.core.io_wide_csv import save_layout
+    layout = rec.metadata["layout"]
+    assert layout["delimiter"] == delim and layout["decimal"] == ("," if decimal_comma else ".")
+    save_layout(tmp_path / "layout.json", layout)
+    again = formats.load_recording(tmp_path / "locale.csv", layout=str(tmp_path / "layout.json"))
+    np.testing.assert_array_equal(again.streams["head"].pos, plain.streams["head"].pos)
+
+
+@pytest.mark.parametrize("fmt", [
+    lambda s: f"2026-12-07T10:59:{58 + s:09.6f}",               # ISO 8601, local time
+    lambda s: f"2026-12-07 09:59:{58 + s:09.6f}Z",              # a space for the T, UTC
+    lambda s: f"2026-12-07T10:59:{58 + s:09.6f}+01:00",         # a zone offset
+    lambda s: f"23:59:{59 + s:09.6f}" if s < 1 else f"00:00:{s - 1:09.6f}",   # past midnight
+])
+def test_iso_8601_times(tmp_path, fmt):
+    """Loggers that write DateTime strings: seconds from the first, across a minute and (times of
+    day) past midnight."""
+    src = tmp_path / "comma.csv"
+    write_wide(src, **FAMILIES["openxr_dotted_m"])
+    plain = formats.load_recording(src)
+    rec = formats.load_recording(_relocale(src, tmp_path / "iso.csv", ",", time=fmt))
+    assert "time=time as ISO 8601" in rec.metadata["detected"]
+    np.testing.assert_allclose(rec.streams["head"].time, plain.streams["head"].time, atol=2e-6)
+    assert rec.metadata["layout"]["time"]["unit"] == "iso8601"
+
+
+def test_a_time_that_is_not_iso_8601_names_its_line(tmp_path):
+    src = tmp_path / "comma.csv"
+    write_wide(src, **FAMILIES["openxr_dotted_m"])
+    bad = _relocale(src, tmp_path / "iso.csv", ";", decimal_comma=True,
+                    time=lambda s: "7.12.2026 10:00" if s > 0.5 else f"2026-12-07T10:00:{s:09.6f}")
+    with pytest.raises(RecordingError, match=r"iso.csv, line 48: '7.12.2026 10:00' is not an ISO 8601 date "
+                                             r"and time, as the first time is"):
+        formats.load_recording(bad)

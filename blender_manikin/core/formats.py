@@ -141,8 +141,9 @@ def _csv_header(path):
 def _read_csv(path, axes=None, units=None, rate=None):
     """The native (long) CSV when the header has a ``device`` column, else a wide layout
     (``rate``: samples per second of a wide layout timed by a frame counter only)."""
+    from .io_wide_csv import sniff_delimiter
     header, text = _csv_header(path)
-    if "device" not in [c.strip().strip('"') for c in header.split(",")]:
+    if "device" not in [c.strip().strip('"') for c in header.split(sniff_delimiter(header))]:
         from .io_wide_csv import looks_wide, read_wide_csv
         if looks_wide(text):
             return read_wide_csv(path, axes=axes, units=units, rate=rate)

@@ -19,8 +19,11 @@ Detected:
   degrees when any exceeds 2π + 0.5, else radians; rotations about the fixed axes applied in
   :data:`EULER_ORDERS` order (Unity's Z, X, Y for a Unity file), unless a layout file's
   ``"euler"`` states the order and unit;
+* field separators (:func:`sniff_delimiter`: commas, semicolons or tabs) and decimal commas (a
+  file not separated by commas with commas in its numbers);
 * time: a ``time``/``t``/``seconds`` column (seconds), ``timestamp``/``time_ms`` (milliseconds
-  when the steps say so), ``delta_time_ms``/``dt`` (per-row deltas), or only a frame counter
+  when the steps say so), ``delta_time_ms``/``dt`` (per-row deltas), ISO 8601 date-times or times
+  of day (:func:`iso_seconds`), or only a frame counter
   (``frame``, ``frame_index``, ...) with the rate given (``rate``); an unnamed first column
   (a pandas index) is ignored;
 * units from an arm's length (:func:`.axes_detect.length_units`: the hands 55 apart from the head
@@ -54,10 +57,67 @@ from .axes_detect import choose_axes, length_units, up_axis
 _POS_WORDS = ("pos", "position", "p", "loc", "location", "")
 _ROT_WORDS = ("rot", "rotation", "quat", "quaternion", "q", "orientation", "euler", "eul", "angles", "ang")
 _FRAMES = ("frame", "frame_index", "frame_number", "frame_no", "frame_id", "frames")
-_TIME_S = ("time", "t", "seconds", "time_s", "secs")
+_TIME_S = ("time", "t", "seconds", "time_s", "secs", "datetime", "date_time", "time_utc", "utc_time",
+           "timestamp_utc", "time_of_day")
 _TIME_MS = ("timestamp", "time_ms", "timestamp_ms", "ms")
 _DELTA_MS = ("delta_time_ms", "dt_ms", "delta_ms", "frame_time_ms")
 _DELTA_S = ("delta_time", "dt", "delta_time_s")
+#: field separators, in the order a tie goes: commas; semicolons (spreadsheets and loggers on a
+#: locale with decimal commas, Unity's float.ToString() on a German or French machine); tabs
+DELIMITERS = (",", ";", "\t")
+_DELIMITER_NAMES = {",": "commas", ";": "semicolons", "\t": "tabs"}
+
+
+def sniff_delimiter(header_line):
+    """The field separator of :data:`DELIMITERS` that splits the header line into the most
+    fields (commas on a tie)."""
+    return max(DELIMITERS, key=lambda d: len(header_line.split(d)))
+
+
+def iso_seconds(cells, path=None, lines=None):
+    """Seconds ``(T,)`` float64 from ISO 8601 date-times (``2026-12-07T10:00:00.125``, a space for
+    the ``T``, a ``Z`` or ``+01:00`` zone) or times of day (``10:00:00.125``; past midnight they
+    run on), relative to the first; ``nan`` cells stay NaN.  None when the first finite cell is
+    neither.  A later cell that is not one is a :class:`RecordingError` naming its line
+    (``lines[k]``, the file line of cell ``k``)."""
+    import datetime as dt
+    first = next((c for c in cells if c != "nan"), None)
+    if first is None:
+        return None
+
+    def parse(c):
+        c = c.strip().strip('"')
+        if c.endswith(("Z", "z")):
+            c = c[:-1] + "+00:00"
+        try:
+            d = dt.datetime.fromisoformat(c)
+            if d.tzinfo is None:
+                d = d.replace(tzinfo=dt.timezone.utc)
+            return d.timestamp(), True
+        except ValueError:
+            tod = dt.time.fromisoformat(c)
+            return tod.hour * 3600 + tod.minute * 60 + tod.second + tod.microsecond * 1e-6, False
+    try:
+        _, dated = parse(first)
+    except ValueError:
+        return None
+    out = np.full(len(cells), np.nan)
+    for k, c in enumerate(cells):
+        if c == "nan":
+            continue
+        try:
+            out[k], d = parse(c)
+        except ValueError:
+            d = None
+        if d is not dated:
+            what = "an ISO 8601 date and time" if dated else "an ISO 8601 time of day"
+            raise RecordingError(f"{shown(c)} is not {what}, as the first time is", path=path,
+                                 line=None if lines is None else lines[k])
+    if not dated:                                         # a take that runs past midnight
+        ok = np.isfinite(out)
+        out[ok] += 86400.0 * np.cumsum(np.concatenate([[0], np.diff(out[ok]) < -43200]))
+    base = out[np.isfinite(out)][0]
+    return out - base
 
 
 def _raw_prefix(raw, prefix):
@@ -132,7 +192,7 @@ def looks_wide(head_text):
     lines = [ln for ln in head_text.splitlines() if ln.strip() and not ln.lstrip().startswith("#")]
     if not lines:
         return False
-    header = [c.strip().strip('"') for c in lines[0].split(",")]
+    header = [c.strip().strip('"') for c in lines[0].split(sniff_delimiter(lines[0]))]
     try:
         groups, _, _ = parse_columns(header)
     except RecordingError:
@@ -201,9 +261,9 @@ def load_layout(path):
                     problems.append(f"{d}: \"euler\" must list the x, y, z angle columns (and \"rot\" be null)")
         tm = layout.get("time")
         if not isinstance(tm, dict) or not isinstance(tm.get("column"), str) or \
-                tm.get("unit") not in ("s", "ms", "us", "ns", "delta_ms", "delta_s", "frames"):
+                tm.get("unit") not in ("s", "ms", "us", "ns", "delta_ms", "delta_s", "frames", "iso8601"):
             problems.append('"time" must be {"column": NAME, "unit": "s"|"ms"|"us"|"ns"|"delta_ms"|"delta_s"'
-                            '|"frames"} (with "rate": HZ for frames)')
+                            '|"frames"|"iso8601"} (with "rate": HZ for frames)')
         elif tm.get("rate") is not None and not (isinstance(tm["rate"], (int, float)) and tm["rate"] > 0):
             problems.append('"time": "rate" must be a positive number of samples per second')
         eu = layout.get("euler")
@@ -211,7 +271,8 @@ def load_layout(path):
                                or eu.get("unit") not in (None, "deg", "rad")):
             problems.append('"euler" must be {"order": "XYZ"|"ZXY"|... (applied first to last, about the fixed '
                             'axes), "unit": "deg"|"rad"}')
-        for key, allowed in (("units", tuple(UNITS)), ("axes", ("unity", "openxr", "blender"))):
+        for key, allowed in (("units", tuple(UNITS)), ("axes", ("unity", "openxr", "blender")),
+                             ("delimiter", DELIMITERS), ("decimal", (".", ","))):
             if layout.get(key) is not None and layout[key] not in allowed:
                 problems.append(f'"{key}" must be one of {", ".join(allowed)} or null')
     if problems:
@@ -254,7 +315,7 @@ def _layout_groups(layout, header, path, hline):
                        "prefix": _prefix_of(cols["pos"]) or d}
     unit = layout["time"]["unit"]
     name = {"s": "time", "ms": "time_ms", "us": "time_us", "ns": "time_ns", "delta_ms": "delta_time_ms",
-            "delta_s": "delta_time", "frames": "frames"}[unit]
+            "delta_s": "delta_time", "frames": "frames", "iso8601": "time"}[unit]
     return groups, (col(layout["time"]["column"]), name), []
 
 
@@ -273,9 +334,10 @@ def read_wide_csv(path, axes=None, units=None, layout=None, rate=None) -> Record
     if not rows:
         raise RecordingError("file is empty", path=path)
     hline, header_text = rows[0]
-    header = [c.strip().strip('"') for c in header_text.split(",")]
     if isinstance(layout, (str, os.PathLike)):
         layout = load_layout(layout)
+    delim = (layout or {}).get("delimiter") or sniff_delimiter(header_text)
+    header = [c.strip().strip('"') for c in header_text.split(delim)]
     try:
         if layout is not None:
             groups, time_col, skipped = _layout_groups(layout, header, path, hline)
@@ -312,14 +374,21 @@ def read_wide_csv(path, axes=None, units=None, layout=None, rate=None) -> Record
     body = rows[1:]
     if len(body) < 2:
         raise RecordingError("fewer than two rows of samples", path=path)
-    cells = [ln.split(",") for _, ln in body]
+    decimal = (layout or {}).get("decimal") or \
+        ("," if delim != "," and any("," in ln for _, ln in body[:200]) else ".")
+    cells = [(ln.replace(",", ".") if decimal == "," else ln).split(delim) for _, ln in body]   # 1,62 is 1.62
     counts = np.fromiter((len(c) for c in cells), dtype=np.int64, count=len(cells))
     wrong = np.nonzero(counts != len(header))[0]
     if wrong.size:
         k = int(wrong[0])
         raise RecordingError(f"{counts[k]} fields, the header has {len(header)}", path=path, line=body[k][0])
     text_cells = np.char.strip(np.array(cells, dtype=str))
+    text_cells = np.char.strip(text_cells, '"')
     text_cells[text_cells == ""] = "nan"                 # an empty cell is a lost sample
+    iso = iso_seconds(text_cells[:, time_col[0]], path, [n for n, _ in body]) \
+        if time_col[1] != "frames" and (layout is None or layout["time"]["unit"] == "iso8601") else None
+    if iso is not None:
+        text_cells[:, time_col[0]] = "0"
     try:
         values = text_cells.astype(np.float64)           # one vectorised conversion
     except ValueError:
@@ -332,12 +401,18 @@ def read_wide_csv(path, axes=None, units=None, layout=None, rate=None) -> Record
         raise
     if rate is None and layout is not None:
         rate = layout["time"].get("rate")
-    t, time_note = _time(time_col, values, header, rate=rate, path=path)
-    time_unit = time_note.rsplit(" in ", 1)[-1] if " in " in time_note else "s"
-    if time_col[1] == "frames":
-        time_unit = "frames"
-    if time_note.startswith("time=cumulative"):
-        time_unit = "delta_ms" if time_note.endswith("ms") else "delta_s"
+    if iso is not None:
+        t, time_note, time_unit = iso, f"time={header[time_col[0]]} as ISO 8601", "iso8601"
+    else:
+        t, time_note = _time(time_col, values, header, rate=rate, path=path)
+        time_unit = time_note.rsplit(" in ", 1)[-1] if " in " in time_note else "s"
+        if time_col[1] == "frames":
+            time_unit = "frames"
+        if time_note.startswith("time=cumulative"):
+            time_unit = "delta_ms" if time_note.endswith("ms") else "delta_s"
+    if delim != ",":
+        time_note = f"fields separated by {_DELIMITER_NAMES[delim]}" + \
+            (", decimal commas" if decimal == "," else "") + "; " + time_note
     pos = {d: values[:, [g["pos"][a] for a in "xyz"]] for d, g in groups.items()}
     if euler:
         eu = (layout or {}).get("euler") or {}
@@ -411,6 +486,8 @@ def read_wide_csv(path, axes=None, units=None, layout=None, rate=None) -> Record
             "time": {"column": header[time_col[0]], "unit": {"µs": "us"}.get(time_unit, time_unit),
                      **({"rate": float(rate)} if time_col[1] == "frames" else {})},
             "units": units, "axes": axes}
+    if delim != "," or decimal != ".":
+        used.update(delimiter=delim, decimal=decimal)
     if euler:
         used["euler"] = {"order": order_for(axes), "unit": eu_unit}
     if layout is not None:
