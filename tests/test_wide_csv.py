@@ -427,3 +427,16 @@ def test_a_time_that_is_not_iso_8601_names_its_line(tmp_path):
     with pytest.raises(RecordingError, match=r"iso.csv, line 48: '7.12.2026 10:00' is not an ISO 8601 date "
                                              r"and time, as the first time is"):
         formats.load_recording(bad)
+
+
+def test_whole_milliseconds_are_not_times_of_day(tmp_path):
+    """Python reads "11" and "22" as ISO 8601 hours: integer times stay numbers."""
+    src = tmp_path / "comma.csv"
+    write_wide(src, **FAMILIES["openxr_dotted_m"])
+    plain = formats.load_recording(src)
+    path = _relocale(src, tmp_path / "ms.csv", ",", time=lambda s: f"{round(s * 1000) + 11}")
+    text = open(path).read()
+    open(path, "w").write("timestamp" + text[len("time"):])
+    rec = formats.load_recording(path)
+    assert "time=timestamp in ms" in rec.metadata["detected"]
+    np.testing.assert_allclose(rec.streams["head"].time, plain.streams["head"].time, atol=1e-3)

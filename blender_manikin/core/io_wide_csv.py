@@ -79,11 +79,16 @@ def iso_seconds(cells, path=None, lines=None):
     the ``T``, a ``Z`` or ``+01:00`` zone) or times of day (``10:00:00.125``; past midnight they
     run on), relative to the first; ``nan`` cells stay NaN.  None when the first finite cell is
     neither.  A later cell that is not one is a :class:`RecordingError` naming its line
-    (``lines[k]``, the file line of cell ``k``)."""
+    (``lines[k]``, the file line of cell ``k``).  None too when the first is a number."""
     import datetime as dt
     first = next((c for c in cells if c != "nan"), None)
     if first is None:
         return None
+    try:
+        float(first)
+        return None                         # a number (Python reads "12" and "20261207" as ISO too)
+    except ValueError:
+        pass
 
     def parse(c):
         c = c.strip().strip('"')
