@@ -331,8 +331,8 @@ def expand_inputs(inputs):
             out.append(item.rstrip("/\\") or item)
         elif os.path.isdir(item):
             found = sorted(os.path.join(item, n) for n in os.listdir(item)
-                           if n.lower().endswith(INPUT_EXTENSIONS)
-                           and os.path.isfile(os.path.join(item, n)))
+                           if os.path.isfile(os.path.join(item, n))
+                           and _formats.is_recording_file(os.path.join(item, n)))
             out.extend(found)
         else:
             out.append(item)

@@ -116,19 +116,25 @@ def test_a_wide_csv_of_walking_with_the_hands_at_the_sides(tmp_path, axes):
 
 @pytest.mark.parametrize("units,scale", [("m", 1.0), ("cm", 100.0)])
 @pytest.mark.parametrize("axes", ["unity", "openxr"])
-def test_a_world_space_log_far_from_the_origin(tmp_path, axes, units, scale):
+@pytest.mark.parametrize("origin,up_how", [
+    ((-12.0, -15.0, 0.0), None),                                       # the level's origin far away
+    ((0.0, 0.0, -40.0), "Y up from the hands below the head"),          # the level's floor 40 m up
+])
+def test_a_world_space_log_far_from_the_origin(tmp_path, axes, units, scale, origin, up_how):
     """A game's log in world space: the player walked (thumbstick locomotion) 12-20 m from the
-    level's origin.  The head's largest coordinate said centimetres for a file in metres, and
-    the horizontal axis the player stood furthest along was taken for up."""
+    level's origin, or stands on a floor 40 m above it.  The head's largest coordinate said
+    centimetres for a file in metres, and the horizontal axis the player stood furthest along
+    was taken for up."""
     from fixtures_recordings import write_wide_poses
     t, pos, quat = walking_take()
-    pos = {d: (p + np.array([-12.0, -15.0, 0.0])) * scale for d, p in pos.items()}
+    pos = {d: (p - np.array(origin)) * scale for d, p in pos.items()}
     names = {"head": "Main Camera", "left_hand": "LeftHand Controller", "right_hand": "RightHand Controller"}
     path = write_wide_poses(tmp_path / "world.csv", t, pos, quat, names, axes)
     rec = formats.load_recording(path)
     line = rec.metadata["detected"]
-    assert f"units {units} (head at 1.61 m)" in line and f"axes {axes} (" in line, line
-    assert "Y up from the hands below the head" in line
+    height = 1.61 - origin[2]
+    assert f"units {units} (head at {height:.2f} m)" in line and f"axes {axes} (" in line, line
+    assert (up_how or "from the hands below") in line if up_how else "from the hands below" not in line
     np.testing.assert_allclose(rec.streams["head"].pos, pos["head"] / scale, atol=1e-5)
 
 

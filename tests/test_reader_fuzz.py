@@ -32,6 +32,14 @@ def _valid_files():
                 0.2, 1.2, -0.3 - 0.01 * k, 1.0, 0.0, 0.0, 0.0]
         lines.append(";".join([f"2026-12-07T10:00:{k / 72:09.6f}"] + [f"{v:.4f}".replace(".", ",") for v in pose]))
     out["_semicolons.csv"] = ("\n".join(lines) + "\n").encode()
+    # JSON frames as Unity's JsonUtility writes them, and as JSON Lines
+    import json
+    frames = [{"time": k / 72, **{d: {"position": {"x": x, "y": 1.6 - 0.4 * (d != "head"), "z": -0.01 * k},
+                                       "rotation": {"x": 0.0, "y": 0.1, "z": 0.0, "w": 1.0}}
+                                   for d, x in (("head", 0.0), ("leftHand", -0.2), ("rightHand", 0.2))}}
+              for k in range(30)]
+    out[".json"] = json.dumps({"fps": 72, "frames": frames}, indent=1).encode()
+    out[".jsonl"] = ("\n".join(json.dumps(f) for f in frames) + "\n").encode()
     try:
         import bson
         import fpzip

@@ -5,10 +5,10 @@ CSV layouts).  No bpy.
 m), which does not depend on where the recording's origin is.  (The head's height did, and a
 Unity log in world space, the player 12 m from the level's origin, read as centimetres.)
 
-**Up** (:func:`up_axis`): the axis along which the head stands highest, when that is clear (a
-tracking-space origin on the floor under the performer); otherwise, Y or Z by the hands hanging
-below the head along it and the headset's own up axis along it (a world-space log whose origin
-is anywhere).
+**Up** (:func:`up_axis`): the axis along which the head stands at a steady height of a standing
+or seated person, when that is clear (a tracking-space origin on the floor under the performer);
+otherwise, Y or Z by the hands hanging below the head along it and the headset's own up axis
+along it (a world-space log whose origin is anywhere).
 
 **Forward**: Unity (left-handed, +Z forward) or OpenXR / OpenVR (right-handed, -Z forward).
 Read in the wrong one of the two conventions, a take of a headset and two hands is its own
@@ -78,6 +78,9 @@ ARM_MAX = 5.0
 #: range and every other axis's median is this much lower (:func:`up_axis`)
 HEAD_HEIGHT_RANGE = (0.5, 2.5)
 UP_MARGIN = 0.5
+#: metres: the spread (interquartile range) of the head's height along the up axis above which
+#: that axis is not taken from the head's height alone (walking along an axis spreads it by metres)
+HEIGHT_SPREAD = 0.6
 
 
 def length_units(pos):
@@ -97,8 +100,9 @@ def up_axis(pos, quat):
     """``(axis, how)``: 1 (Y up) or 2 (Z up), and in words how it was found.  pos: device ->
     ``(T, 3)`` metres; quat: device -> ``(T, 4)`` wxyz; both in the file's axes.
 
-    The axis along which the head's median stands in :data:`HEAD_HEIGHT_RANGE` and
-    :data:`UP_MARGIN` above every other axis's, as a tracking-space origin on the floor gives.
+    Of Y and Z, the one along which the head stands at a steady height (its median in
+    :data:`HEAD_HEIGHT_RANGE`, its interquartile spread at most :data:`HEIGHT_SPREAD`), or the
+    higher by :data:`UP_MARGIN` when both do, as a tracking-space origin on the floor gives.
     Otherwise (an origin off the floor or far away), of Y and Z the one with the larger sum of:
     the hands' median depth below the head along it, in 30 cm (clipped to ±1), and the mean of the
     head's own up axis along it (a Y-up convention's device frame is Y-up, Blender's Z-up)."""
@@ -108,11 +112,12 @@ def up_axis(pos, quat):
         med = np.nanmedian(head, axis=0)
         hands = np.nanmean(np.stack([pos[h] for h in ("left_hand", "right_hand") if h in pos]), axis=0)
         below = np.nan_to_num(np.nanmedian(head - hands, axis=0))
-    top = int(np.argmax(np.nan_to_num(med, nan=-np.inf)))
-    others = np.delete(med, top)
-    if top in (1, 2) and HEAD_HEIGHT_RANGE[0] <= med[top] <= HEAD_HEIGHT_RANGE[1] \
-            and np.all(others <= med[top] - UP_MARGIN):
-        return top, "the head's height"
+        spread = np.nanpercentile(head, 75, axis=0) - np.nanpercentile(head, 25, axis=0)
+    # the head stands at a steady height: an axis it walks along spreads over metres
+    steady = [a for a in (1, 2) if HEAD_HEIGHT_RANGE[0] <= med[a] <= HEAD_HEIGHT_RANGE[1]
+              and spread[a] <= HEIGHT_SPREAD]
+    if len(steady) == 1 or (len(steady) == 2 and abs(med[1] - med[2]) >= UP_MARGIN):
+        return max(steady, key=lambda a: med[a]), "the head's height"
     R = quat_to_matrix(normalize(np.where(np.isfinite(quat["head"]), quat["head"], [1.0, 0, 0, 0])))
     score = {a: float(np.clip(below[a] / 0.3, -1, 1) + np.mean(R[:, a, a])) for a in (1, 2)}
     axis = max(score, key=score.get)

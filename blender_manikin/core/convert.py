@@ -37,7 +37,7 @@ _MANIFEST_SUFFIXES = (".txt", ".lst", ".jsonl")
 # --------------------------------------------------------------------------
 # inputs and outputs
 def _is_recording(path):
-    return path.lower().endswith(formats.input_extensions())
+    return formats.is_recording_file(path)
 
 
 def collect_inputs(items):
@@ -70,7 +70,7 @@ def _walk_recordings(folder):
             yield d
             continue
         dirs.sort()
-        yield from (os.path.join(d, f) for f in fs if _is_recording(f))
+        yield from (p for p in (os.path.join(d, f) for f in fs) if _is_recording(p))
 
 
 def _read_manifest_file(path):

@@ -32,7 +32,7 @@ DEVICE_JOINT = {d: J[j] for d, j in DEVICE_JOINT_NAMES.items()}
 
 #: other names recordings use (lower case, spaces and dashes as underscores)
 ALIASES = {
-    "hmd": "head", "headset": "head",
+    "hmd": "head", "headset": "head", "viewer": "head",
     "left": "left_hand", "lefthand": "left_hand", "left_controller": "left_hand",
     "right": "right_hand", "righthand": "right_hand", "right_controller": "right_hand",
     "waist": "pelvis", "hips": "pelvis", "hip": "pelvis",
@@ -102,7 +102,10 @@ def canonical_device(name):
     """The device named ``name`` (case-, space- and dash-insensitive, or an alias, also with one
     of the endings of :data:`_SUFFIXES`), or ``None``."""
     key = str(name).strip().lower().replace(" ", "_").replace("-", "_")
-    for k in (key, *(key[:-len(s)] for s in _SUFFIXES if key.endswith(s) and len(key) > len(s))):
+    keys = [key]
+    for _ in range(3):                 # "left_hand_grip_pose_transform": three endings
+        keys += [k[:-len(s)] for k in keys for s in _SUFFIXES if k.endswith(s) and len(k) > len(s)]
+    for k in dict.fromkeys(keys):
         if k in DEVICES:
             return k
         if k in ALIASES:

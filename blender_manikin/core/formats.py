@@ -68,6 +68,28 @@ def input_extensions() -> tuple:
     return tuple(e for f in READERS.values() for e in f.extensions)
 
 
+#: extensions other files share (layout and offsets files, this add-on's JSON output, convert's
+#: manifests): a file with one is a recording only when its reader's sniff says so
+SHARED_EXTENSIONS = (".json", ".jsonl", ".ndjson")
+
+
+def is_recording_file(path) -> bool:
+    """Whether ``path`` is a recording to solve when a folder or a list is gathered: it has a
+    reader's extension, and for :data:`SHARED_EXTENSIONS` its first bytes look like one."""
+    path = os.fspath(path)
+    ext = os.path.splitext(path)[1].lower()
+    if ext not in input_extensions():
+        return False
+    if ext not in SHARED_EXTENSIONS:
+        return True
+    try:
+        with open(path, "rb") as f:
+            head = f.read(SNIFF_BYTES)
+    except OSError:
+        return False
+    return any(ext in fmt.extensions and fmt.sniff is not None and fmt.sniff(head) for fmt in READERS.values())
+
+
 def describe_inputs() -> str:
     """``".csv (native CSV), .bsor (Beat Saber replay)"``: for help texts and the panel."""
     return ", ".join(f"{'/'.join(f.extensions)} ({f.description})" for f in READERS.values())
@@ -105,14 +127,12 @@ def load_recording(path, axes=None, units=None, layout=None, rate=None) -> Recor
     if fmt.kind != "trackers":
         raise RecordingError(f"{fmt.description}, not a tracker recording: solve it as keypoints "
                              f"(the panel's Keypoints source, or the command line's solve)", path=path)
-    if (layout is not None or rate) and fmt.name != "csv":
+    if (layout is not None or rate) and fmt.name not in ("csv", "json"):
         what = "a layout file" if layout is not None else "a sample rate"
-        raise RecordingError(f"{what} applies to wide-layout CSV files, not to {fmt.description}", path=path)
-    if layout is not None:
-        from .io_wide_csv import read_wide_csv
-        return read_wide_csv(path, axes=axes, units=units, layout=layout, rate=rate)
-    if rate:
-        return _read_csv(path, axes=axes, units=units, rate=rate)
+        raise RecordingError(f"{what} applies to wide-layout CSV and JSON files, not to {fmt.description}",
+                             path=path)
+    if layout is not None or rate:
+        return fmt.read(path, axes=axes, units=units, layout=layout, rate=rate)
     return fmt.read(path, axes=axes, units=units)
 
 
@@ -138,10 +158,14 @@ def _csv_header(path):
     return (lines[0].lower() if lines else ""), text
 
 
-def _read_csv(path, axes=None, units=None, rate=None):
+def _read_csv(path, axes=None, units=None, rate=None, layout=None):
     """The native (long) CSV when the header has a ``device`` column, else a wide layout
-    (``rate``: samples per second of a wide layout timed by a frame counter only)."""
+    (``rate``: samples per second of a wide layout timed by a frame counter only; ``layout``: a
+    layout file's path or dict, which makes it a wide layout)."""
     from .io_wide_csv import sniff_delimiter
+    if layout is not None:
+        from .io_wide_csv import read_wide_csv
+        return read_wide_csv(path, axes=axes, units=units, layout=layout, rate=rate)
     header, text = _csv_header(path)
     if "device" not in [c.strip().strip('"') for c in header.split(sniff_delimiter(header))]:
         from .io_wide_csv import looks_wide, read_wide_csv
@@ -186,6 +210,21 @@ register_reader(ReaderFormat("bsor", "Beat Saber replay", (".bsor",), _read_bsor
 # sized from the head height 1.88 m tall for its 1.75 m performer)
 register_reader(ReaderFormat("xror", "XROR / BOXRR-23", (".xror",), _read_xror,
                              default_offsets="openxr_generic"))
+
+
+def _read_json(path, axes=None, units=None, layout=None, rate=None):
+    from .io_json import read_json
+    return read_json(path, axes=axes, units=units, layout=layout, rate=rate)
+
+
+def _sniff_json(head: bytes) -> bool:
+    from .io_json import looks_like_recording
+    return looks_like_recording(head.decode("utf-8", "replace"))
+
+
+# JSON / JSON Lines frames (WebXR, three.js, Unity's JsonUtility): flattened into a wide layout
+register_reader(ReaderFormat("json", "JSON / JSON Lines frames", (".json", ".jsonl", ".ndjson"), _read_json,
+                             _sniff_json))
 
 
 def _read_keypoints(path, axes=None, units=None):

@@ -343,6 +343,37 @@ def read_wide_csv(path, axes=None, units=None, layout=None, rate=None) -> Record
         layout = load_layout(layout)
     delim = (layout or {}).get("delimiter") or sniff_delimiter(header_text)
     header = [c.strip().strip('"') for c in header_text.split(delim)]
+    body = rows[1:]
+    decimal = (layout or {}).get("decimal") or \
+        ("," if delim != "," and any("," in ln for _, ln in body[:200]) else ".")
+
+    def table():
+        if len(body) < 2:
+            raise RecordingError("fewer than two rows of samples", path=path)
+        cells = [(ln.replace(",", ".") if decimal == "," else ln).split(delim) for _, ln in body]   # 1,62 is 1.62
+        counts = np.fromiter((len(c) for c in cells), dtype=np.int64, count=len(cells))
+        wrong = np.nonzero(counts != len(header))[0]
+        if wrong.size:
+            k = int(wrong[0])
+            raise RecordingError(f"{counts[k]} fields, the header has {len(header)}", path=path, line=body[k][0])
+        text_cells = np.char.strip(np.array(cells, dtype=str))
+        return np.char.strip(text_cells, '"'), [n for n, _ in body]
+
+    note = "" if delim == "," else (f"fields separated by {_DELIMITER_NAMES[delim]}"
+                                    + (", decimal commas" if decimal == "," else ""))
+    extra = {"delimiter": delim, "decimal": decimal} if delim != "," or decimal != "." else {}
+    return read_wide_table(path, header, hline, table, axes=axes, units=units, layout=layout, rate=rate,
+                           note=note, layout_extra=extra)
+
+
+def read_wide_table(path, header, hline, table, axes=None, units=None, layout=None, rate=None, note="",
+                    layout_extra=None, what="wide layout") -> Recording:
+    """A :class:`Recording` from a wide table: ``header`` (column names; ``hline`` its line, or
+    None) and ``table()`` -> ``(cells, lines)``, the ``(N, len(header))`` text cells and each row's
+    line (called once the columns are known to make a recording).  The columns, time, units and
+    axes are detected as for a wide CSV (or taken from ``layout``); ``note`` goes before the time
+    in the detection line, which starts with ``what``; ``layout_extra`` goes into the layout used
+    (``metadata["layout"]``).  Errors name ``path`` and the line."""
     try:
         if layout is not None:
             groups, time_col, skipped = _layout_groups(layout, header, path, hline)
@@ -376,33 +407,24 @@ def read_wide_csv(path, axes=None, units=None, layout=None, rate=None) -> Record
     if missing:
         raise RecordingError(f"no columns for {', '.join(missing)} (found devices: {', '.join(groups) or 'none'}; "
                              f"unrecognised columns: {', '.join(skipped[:8])})", path=path, line=hline)
-    body = rows[1:]
-    if len(body) < 2:
-        raise RecordingError("fewer than two rows of samples", path=path)
-    decimal = (layout or {}).get("decimal") or \
-        ("," if delim != "," and any("," in ln for _, ln in body[:200]) else ".")
-    cells = [(ln.replace(",", ".") if decimal == "," else ln).split(delim) for _, ln in body]   # 1,62 is 1.62
-    counts = np.fromiter((len(c) for c in cells), dtype=np.int64, count=len(cells))
-    wrong = np.nonzero(counts != len(header))[0]
-    if wrong.size:
-        k = int(wrong[0])
-        raise RecordingError(f"{counts[k]} fields, the header has {len(header)}", path=path, line=body[k][0])
-    text_cells = np.char.strip(np.array(cells, dtype=str))
-    text_cells = np.char.strip(text_cells, '"')
+    text_cells, row_lines = table()
     text_cells[text_cells == ""] = "nan"                 # an empty cell is a lost sample
-    iso = iso_seconds(text_cells[:, time_col[0]], path, [n for n, _ in body]) \
+    iso = iso_seconds(text_cells[:, time_col[0]], path, row_lines) \
         if time_col[1] != "frames" and (layout is None or layout["time"]["unit"] == "iso8601") else None
     if iso is not None:
         text_cells[:, time_col[0]] = "0"
+    # the time's and the devices' columns; others (names, events, flags) may hold anything
+    used = sorted({time_col[0]} | {i for g in groups.values() for i in (*g["pos"].values(), *g["rot"].values())})
+    values = np.full(text_cells.shape, np.nan)
     try:
-        values = text_cells.astype(np.float64)           # one vectorised conversion
+        values[:, used] = text_cells[:, used].astype(np.float64)      # one vectorised conversion
     except ValueError:
-        for k, row in enumerate(text_cells):             # only to name the bad cell's line
+        for k, row in enumerate(text_cells[:, used]):                 # only to name the bad cell's line
             for c in row:
                 try:
                     float(c)
                 except ValueError:
-                    raise RecordingError(f"{shown(c)} is not a number", path=path, line=body[k][0]) from None
+                    raise RecordingError(f"{shown(c)} is not a number", path=path, line=row_lines[k]) from None
         raise
     if rate is None and layout is not None:
         rate = layout["time"].get("rate")
@@ -415,9 +437,8 @@ def read_wide_csv(path, axes=None, units=None, layout=None, rate=None) -> Record
             time_unit = "frames"
         if time_note.startswith("time=cumulative"):
             time_unit = "delta_ms" if time_note.endswith("ms") else "delta_s"
-    if delim != ",":
-        time_note = f"fields separated by {_DELIMITER_NAMES[delim]}" + \
-            (", decimal commas" if decimal == "," else "") + "; " + time_note
+    if note:
+        time_note = f"{note}; {time_note}"
     pos = {d: values[:, [g["pos"][a] for a in "xyz"]] for d, g in groups.items()}
     if euler:
         eu = (layout or {}).get("euler") or {}
@@ -480,7 +501,7 @@ def read_wide_csv(path, axes=None, units=None, layout=None, rate=None) -> Record
         qnote = "quaternions w,x,y,z" if has_w_first else "quaternions x,y,z,w"
     hands = "/".join(f"{groups[d]['prefix']}_*" for d in ("left_hand", "right_hand"))
     extra = "".join(f", {d}={groups[d]['prefix']}_*" for d in ("pelvis", "left_foot", "right_foot") if d in groups)
-    detected = (f"wide layout: head={groups['head']['prefix']}_*, hands={hands}{extra}; {qnote}; {time_note}; "
+    detected = (f"{what}: head={groups['head']['prefix']}_*, hands={hands}{extra}; {qnote}; {time_note}; "
                 f"{units_note}; {axes_note}")
     used = {"format": "wide_csv", "version": LAYOUT_VERSION,
             "devices": {d: {"pos": [header[g["pos"][a]] for a in "xyz"],
@@ -491,8 +512,7 @@ def read_wide_csv(path, axes=None, units=None, layout=None, rate=None) -> Record
             "time": {"column": header[time_col[0]], "unit": {"µs": "us"}.get(time_unit, time_unit),
                      **({"rate": float(rate)} if time_col[1] == "frames" else {})},
             "units": units, "axes": axes}
-    if delim != "," or decimal != ".":
-        used.update(delimiter=delim, decimal=decimal)
+    used.update(layout_extra or {})
     if euler:
         used["euler"] = {"order": order_for(axes), "unit": eu_unit}
     if layout is not None:

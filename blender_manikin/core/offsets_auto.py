@@ -44,7 +44,7 @@ HEAD_AHEAD_MIN = 0.04
 #: head names that name the hardware, as :func:`is_headset_name` compares them (lower case, no
 #: separators, an engine's ``Anchor`` / ``Pose`` / ``Transform`` ending dropped)
 HEADSET_NAMES = frozenset(("hmd", "headset", "camera", "maincamera", "xrcamera", "vrcamera", "centereye",
-                           "centreeye", "eyecenter", "headmounteddisplay", "xrhead", "vrhead"))
+                           "centreeye", "eyecenter", "headmounteddisplay", "xrhead", "vrhead", "viewer"))
 
 
 def is_headset_name(name) -> bool:

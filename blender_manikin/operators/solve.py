@@ -22,6 +22,7 @@ import bpy
 from bpy.types import Operator
 
 from ..blender import solve_job as sj
+from ..core import formats
 
 #: the solve queue of the modal operator in progress (one at a time)
 _ACTIVE = {"job": None}
@@ -181,7 +182,8 @@ class MANIKIN_OT_solve_files(_ModalSolves, Operator):
 
     files: bpy.props.CollectionProperty(type=bpy.types.OperatorFileListElement, options={'HIDDEN', 'SKIP_SAVE'})
     directory: bpy.props.StringProperty(subtype='DIR_PATH', options={'HIDDEN', 'SKIP_SAVE'})
-    filter_glob: bpy.props.StringProperty(default="*.csv;*.bsor;*.xror;*.npy;*.npz", options={'HIDDEN'})
+    filter_glob: bpy.props.StringProperty(default=";".join("*" + e for e in formats.input_extensions()),
+                                          options={'HIDDEN'})
     #: set by invoke: the file browser's execute runs the files modally (progress, Esc) when there
     #: is a window; scripts calling the operator get it synchronous
     interactive: bpy.props.BoolProperty(default=False, options={'HIDDEN', 'SKIP_SAVE'})
