@@ -18,17 +18,17 @@ Z = np.array([0.0, 0.0, 1.0])
 HEADSET_FROM_NECK = np.array([0.0, -0.09, 0.11])
 
 
-def _take(seconds, body_xy, body_yaw, head_yaw, head_pitch):
+def _take(seconds, body_xy, body_yaw, head_yaw, head_pitch, swing=0.12):
     """Device poses (Blender axes, metres) of a performer whose neck is at ``body_xy`` (1.50 m
     up), body turned ``body_yaw`` and head ``head_yaw`` / ``head_pitch`` (radians, ``(T,)``):
     the headset ahead of the neck, the hands hanging at the sides 12 cm behind the headset and
-    swinging.  Returns ``(time, pos, quat)``, quaternions wxyz."""
+    swinging ``swing`` metres to and fro.  Returns ``(time, pos, quat)``, quaternions wxyz."""
     t = np.arange(int(seconds * RATE)) / RATE
     neck = np.concatenate([body_xy, np.full((len(t), 1), 1.50)], -1)
     R_body = rot.axis_angle_rotation(Z, body_yaw)
     R_head = R_body @ rot.axis_angle_rotation(Z, head_yaw) @ rot.axis_angle_rotation(np.array([1.0, 0, 0]), head_pitch)
     pos = {"head": neck + np.einsum("tij,j->ti", R_head, HEADSET_FROM_NECK)}
-    swing = 0.12 * np.sin(2 * np.pi * 0.9 * t)
+    swing = swing * np.sin(2 * np.pi * 0.9 * t)
     for d, x, s in (("left_hand", 0.2, 1.0), ("right_hand", -0.2, -1.0)):
         local = np.stack([np.full_like(t, x), 0.03 + s * swing, np.full_like(t, -0.62)], -1)
         pos[d] = neck + np.einsum("tij,tj->ti", R_body, local)
@@ -51,7 +51,7 @@ def looking_around_take(seconds=8.0):
     t = np.arange(int(seconds * RATE)) / RATE
     xy = 0.01 * np.stack([np.sin(2 * np.pi * 0.1 * t), np.cos(2 * np.pi * 0.13 * t)], -1)
     return _take(seconds, xy, np.zeros_like(t), 0.8 * np.sin(2 * np.pi * 0.25 * t),
-                 0.25 * np.sin(2 * np.pi * 0.4 * t))
+                 0.25 * np.sin(2 * np.pi * 0.4 * t), swing=0.02)
 
 
 def in_axes(take, axes):
@@ -144,3 +144,50 @@ def test_the_head_height_decides_up_when_it_is_clear():
         p, q = in_axes((t, pos, quat), axes)[1:]
         assert ad.up_axis(p, q) == (up, "the head's height")
     assert ad.length_units({d: 1000 * p for d, p in pos.items()})[0] == "mm"
+
+
+def _heading_error_deg(quat, body_yaw):
+    """Degrees between the level forward of device quaternions (Blender axes) and the body's."""
+    f = np.einsum("tij,j->ti", rot.quat_to_matrix(quat), np.array([0.0, -1.0, 0.0]))
+    want = np.stack([np.sin(body_yaw), -np.cos(body_yaw)], -1)
+    return np.degrees(np.arccos(np.clip(np.sum(f[:, :2] * want, -1) / np.linalg.norm(f[:, :2], axis=-1), -1, 1)))
+
+
+@pytest.mark.parametrize("axes", ["unity", "openxr"])
+@pytest.mark.parametrize("make,yaw", [(walking_take, lambda t: 0.2 * t), (looking_around_take, lambda t: 0 * t)])
+def test_positions_without_orientations(tmp_path, axes, make, yaw):
+    """A logger that writes positions only: the axes from the walking direction (or the reach)
+    against the hands' left-right line, and level orientations facing that heading; the body was
+    taken as facing one way all along."""
+    t, pos, quat = make()
+    cols, data = ["time"], [t]
+    for d, n in (("head", "hmd"), ("left_hand", "left_controller"), ("right_hand", "right_controller")):
+        p = from_blender(pos[d], None, axes)[0]
+        cols += [f"{n}_pos_{a}" for a in "xyz"]
+        data += list(p.T)
+    path = tmp_path / "positions.csv"
+    np.savetxt(path, np.stack(data, -1), delimiter=",", header=",".join(cols), comments="", fmt="%.6f")
+    # standing with the hands at the sides, the axes cannot be told without orientations
+    rec = formats.load_recording(path, axes=None if make is walking_take else axes)
+    line = rec.metadata["detected"]
+    assert "no orientation columns for head, left_hand, right_hand: level, facing the hands' left-right line" in line
+    assert f"axes {axes} (" in line, line
+    for d in ("head", "left_hand", "right_hand"):
+        err = _heading_error_deg(rec.streams[d].quat, yaw(t))
+        assert np.median(err) < 5 and err.max() < 20, (d, np.median(err), err.max())
+
+
+def test_hands_without_orientations_face_the_heads_heading(tmp_path):
+    from fixtures_recordings import write_wide_poses
+    t, pos, quat = walking_take()
+    path = write_wide_poses(tmp_path / "take.csv", t, pos, quat,
+                            {"head": "hmd", "left_hand": "left_controller", "right_hand": "right_controller"}, "openxr")
+    lines = open(path).read().splitlines()
+    header = lines[0].split(",")
+    keep = [i for i, c in enumerate(header) if "controller_rot" not in c]
+    open(path, "w").write("\n".join(",".join(ln.split(",")[i] for i in keep) for ln in lines) + "\n")
+    rec = formats.load_recording(path)
+    assert "quaternions w,x,y,z; no orientation columns for left_hand, right_hand: level, facing the head's heading" \
+        in rec.metadata["detected"]
+    head_yaw = 0.2 * t + 0.25 * np.sin(2 * np.pi * 0.3 * t)
+    assert _heading_error_deg(rec.streams["left_hand"].quat, head_yaw).max() < 0.1

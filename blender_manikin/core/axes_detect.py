@@ -227,13 +227,87 @@ def facing_evidence(time, pos, quat, axes) -> FacingEvidence:
                           reach=reach_ahead(pos, fwd, rows))
 
 
+#: metres: the hands' sideways distance over which their left-right line gives the body's heading
+#: fully (:func:`heading_from_positions`; closer together, the walking direction takes over)
+HANDS_APART = 0.3
+#: seconds (Gaussian sigma) the heading of a take without orientations is smoothed over (a
+#: walk's arm swing, 0.9 Hz, left at a quarter)
+HEADING_SMOOTH_S = 0.3
+
+
+def heading_from_positions(time, pos):
+    """``(T, 3)`` unit horizontal forward direction of a body whose devices have no orientations,
+    Blender axes (+Z up): from the hands' left-right line (the body faces ``up × (right - left)``),
+    weighted by how far apart they are sideways (full at :data:`HANDS_APART`), and the head's
+    walking direction, weighted by its speed from half :data:`WALK_SPEED` up (up to 1.5: a walk
+    outweighs the hands' swing); frames with neither take the heading of their neighbours;
+    smoothed (:data:`HEADING_SMOOTH_S`, which also evens out the arms' swing).  A take that
+    neither walks nor reaches cannot tell its axes this way (:func:`choose_axes`), but read
+    mirrored it only moves the hands a few centimetres front to back.  time ``(T,)`` seconds; pos:
+    device -> ``(T, 3)`` metres, Blender axes, lost samples NaN."""
+    time = np.asarray(time, np.float64)
+    T = len(time)
+    fps = _rate(time) or 30.0
+    side = np.nan_to_num(np.asarray(pos["right_hand"], np.float64) - pos["left_hand"])
+    side[:, 2] = 0.0
+    lateral = np.cross([0.0, 0.0, 1.0], side)                    # |lateral| = the hands' spread
+    spread = np.linalg.norm(lateral, axis=-1)
+    lateral *= (np.clip(spread / HANDS_APART, 0.0, 1.0) / np.maximum(spread, 1e-9))[:, None]
+    head = np.asarray(pos["head"], np.float64)
+    ok = np.isfinite(head).all(-1)
+    v = np.zeros((T, 3))
+    if ok.sum() >= 3:
+        path = smooth_frames(head[ok], HIGH_PASS_S * fps)
+        v[ok] = np.gradient(path, time[ok], axis=0)
+    v[:, 2] = 0.0
+    speed = np.linalg.norm(v, axis=-1)
+    walk = v * (np.clip(speed / WALK_SPEED - 0.5, 0.0, 1.5) / np.maximum(speed, 1e-9))[:, None]
+    f = lateral + walk
+    w = np.linalg.norm(f, axis=-1)
+    known = w > 0.2
+    if not known.any():
+        out = np.zeros((T, 3))
+        out[:, 1] = -1.0                                          # no evidence: Blender's forward
+        return out
+    ang = np.unwrap(np.arctan2(f[known, 1], f[known, 0]))
+    ang = np.interp(np.arange(T), np.nonzero(known)[0], ang)
+    ang = smooth_frames(ang[:, None], HEADING_SMOOTH_S * fps)[:, 0]
+    return np.stack([np.cos(ang), np.sin(ang), np.zeros(T)], -1)
+
+
+def heading_quats(forward):
+    """``(T, 4)`` wxyz: level device orientations (Blender device axes: -Y forward, +Z up) facing
+    ``forward`` ``(T, 3)``."""
+    psi = np.arctan2(forward[:, 0], -forward[:, 1])
+    return np.stack([np.cos(psi / 2), np.zeros_like(psi), np.zeros_like(psi), np.sin(psi / 2)], -1)
+
+
+def _positions_only_evidence(time, pos, axes):
+    """:class:`FacingEvidence` (no pivot) of a take without orientations read in ``axes``: the
+    walking and reaching cues against the heading :func:`heading_from_positions` gives there."""
+    from .recording import to_blender
+    time = np.asarray(time, np.float64)
+    rows = np.isfinite(time) & np.isfinite(pos["head"]).all(-1)
+    b = {d: to_blender(np.asarray(p, np.float64)[rows], None, axes)[0] for d, p in pos.items()}
+    t = time[rows]
+    fwd = heading_from_positions(t, b)
+    everything = np.ones(len(t), bool)
+    return FacingEvidence(walk=walking_seconds(t, b["head"], fwd, 2), pivot=0.0,
+                          reach=reach_ahead(b, fwd, everything))
+
+
 def choose_axes(time, pos, quats_for, candidates):
     """``(axes, why)``: the convention among ``candidates`` the take faces forward in, and the
     cue that decided, in words.  quats_for: axes -> the devices' quaternions read in it (Euler
-    angles give each convention its own); time, pos as :func:`facing_evidence`."""
+    angles give each convention its own), or None when the file has no orientations (the
+    heading then comes from :func:`heading_from_positions`, and only walking and reaching
+    decide); time, pos as :func:`facing_evidence`."""
     if len(candidates) == 1:
         return candidates[0], "the only convention with that up axis"
-    ev = {a: facing_evidence(time, pos, quats_for(a), a) for a in candidates}
+    if quats_for is None:
+        ev = {a: _positions_only_evidence(time, pos, a) for a in candidates}
+    else:
+        ev = {a: facing_evidence(time, pos, quats_for(a), a) for a in candidates}
     walk = max(candidates, key=lambda a: ev[a].walk)
     if ev[walk].walk >= WALK_MIN_S:
         return walk, f"from the walking direction ({ev[walk].walk:.1f} s forward)"

@@ -52,7 +52,7 @@ from .recording import (Recording, RecordingError, TrackerStream, UNITS, canonic
                         read_file_bytes, to_blender)
 from . import rotations as rot
 from .rotations import normalize
-from .axes_detect import choose_axes, length_units, up_axis
+from .axes_detect import choose_axes, heading_from_positions, heading_quats, length_units, up_axis
 
 _POS_WORDS = ("pos", "position", "p", "loc", "location", "")
 _ROT_WORDS = ("rot", "rotation", "quat", "quaternion", "q", "orientation", "euler", "eul", "angles", "ang")
@@ -470,10 +470,12 @@ def read_wide_table(path, header, hline, table, axes=None, units=None, layout=No
     if euler:      # the order a convention's tools write (Unity: Z, X, Y), unless stated
         def order_for(ax):
             return str(eu.get("order") or EULER_ORDERS.get(ax, "XYZ")).upper()
+    unrotated = [d for d, g in groups.items() if not g["rot"]]
     if axes is None:
         up, up_how = up_axis(metres, quats_for(order_for("openxr")) if euler else quat)
         cands = ("blender",) if up == 2 else ("unity", "openxr")
-        axes, why = choose_axes(t, metres, (lambda c: quats_for(order_for(c))) if euler else (lambda c: quat), cands)
+        axes, why = choose_axes(t, metres, (lambda c: quats_for(order_for(c))) if euler else
+                                None if unrotated == list(groups) else (lambda c: quat), cands)
         up_note = "" if up_how == "the head's height" else f", {'Z' if up == 2 else 'Y'} up from {up_how}"
         axes_note = (f"axes {axes} ({'left-handed' if axes == 'unity' else 'right-handed'}){up_note}, "
                      + (why if len(cands) > 1 else "Z up"))
@@ -490,6 +492,22 @@ def read_wide_table(path, header, hline, table, axes=None, units=None, layout=No
         if d not in groups:
             continue
         p, q = to_blender(pos[d] * scale, normalize(quat[d]), axes)
+        streams[d] = [p, q]
+    rot_note = ""
+    if unrotated:      # no orientation columns: level, facing the head's (or the body's) heading
+        if "head" in unrotated:
+            heading = heading_from_positions(t, {d: streams[d][0] for d in ("head", "left_hand", "right_hand")})
+            rot_note = (f"no orientation columns for {', '.join(unrotated)}: level, facing the hands' left-right line "
+                        "and the walking direction")
+        else:
+            fwd = rot.quat_to_matrix(streams["head"][1]) @ np.array([0.0, -1.0, 0.0])
+            fwd[:, 2] = 0.0
+            heading = normalize(np.where(np.linalg.norm(fwd, axis=-1, keepdims=True) > 1e-6, fwd, [0.0, -1.0, 0.0]))
+            rot_note = f"no orientation columns for {', '.join(unrotated)}: level, facing the head's heading"
+        for d in unrotated:
+            streams[d][1] = heading_quats(heading)
+    for d in list(streams):
+        p, q = streams[d]
         ok = np.all(np.isfinite(p), -1) & np.all(np.isfinite(q), -1)
         streams[d] = TrackerStream(d, t.copy(), p, q, ok)
     if euler:
@@ -499,6 +517,8 @@ def read_wide_table(path, header, hline, table, axes=None, units=None, layout=No
     else:
         has_w_first = all(g["rot"]["w"] < g["rot"]["x"] for g in groups.values() if g["rot"])
         qnote = "quaternions w,x,y,z" if has_w_first else "quaternions x,y,z,w"
+    if rot_note:
+        qnote = rot_note if len(unrotated) == len(groups) else f"{qnote}; {rot_note}"
     hands = "/".join(f"{groups[d]['prefix']}_*" for d in ("left_hand", "right_hand"))
     extra = "".join(f", {d}={groups[d]['prefix']}_*" for d in ("pelvis", "left_foot", "right_foot") if d in groups)
     detected = (f"{what}: head={groups['head']['prefix']}_*, hands={hands}{extra}; {qnote}; {time_note}; "
