@@ -1,5 +1,5 @@
 """A recording's length unit, up axis and forward convention, for files that do not say (wide
-CSV layouts).  No bpy.
+CSV layouts, JSON frames), and the heading of devices logged without orientations.  No bpy.
 
 **Units** (:func:`length_units`): from the hands' distance to the head (an arm's length, 0.2-1
 m), which does not depend on where the recording's origin is.  (The head's height did, and a
@@ -38,6 +38,10 @@ these cues, 24.1 % and 75.0 % by the reach alone; single clips of 1-10 s, 89.1 %
 against 51.7 % and 44.9 %.  The Beat Saber sample replay (Unity), which the reach alone reads as
 OpenXR, is read as Unity by its head's turns (the pivot 3.8 cm behind the headset).
 
+**Heading without orientations** (:func:`heading_from_positions`): a logger that writes positions
+only gets level devices facing the way the body does, from the hands' left-right line and the
+walking direction.
+
 Positions are in the file's axes (metres, once the unit is known); quaternions ``(w, x, y, z)`` in
 the file's axes.
 """
@@ -71,12 +75,12 @@ HIGH_PASS_S = 0.15
 TURN_FLOOR = np.radians(0.5)
 
 
-#: metres: the head-to-hand distance (median) below which a file is in metres, and that times
-#: 100 below which it is in centimetres (else millimetres)
+#: the head-to-hand distance (median, in the file's unit) below which a file is in metres, and
+#: that times 100 below which it is in centimetres (else millimetres): an arm's reach is 0.2-1 m
 ARM_MAX = 5.0
-#: metres: the head's median height along the up axis is taken as it stands when it lies in this
-#: range and every other axis's median is this much lower (:func:`up_axis`)
+#: metres: the range the head's median height along an up axis must lie in (:func:`up_axis`)
 HEAD_HEIGHT_RANGE = (0.5, 2.5)
+#: metres the higher of two axes along which the head is steady must stand above the other
 UP_MARGIN = 0.5
 #: metres: the spread (interquartile range) of the head's height along the up axis above which
 #: that axis is not taken from the head's height alone (walking along an axis spreads it by metres)
@@ -137,7 +141,7 @@ class FacingEvidence:
 
 
 def _rows(time, pos, quat):
-    """Rows where the head and its time are finite, in time order (lost samples dropped)."""
+    """``(T,)`` bool: the rows where the time and the head's position and rotation are finite."""
     ok = np.isfinite(time) & np.isfinite(pos["head"]).all(-1) & np.isfinite(quat["head"]).all(-1)
     return ok
 
