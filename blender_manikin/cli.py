@@ -38,11 +38,11 @@ Options of ``solve`` (they mirror the panel; ``--help`` has them all):
                               openxr_generic where the take shows a headset), a preset
                               name or a JSON file
 --layout FILE.json            the columns, time, units, axes and Euler order of
-                              wide-layout CSV inputs (default: detected)
+                              wide-layout CSV and JSON inputs (default: detected)
 --layout KEYPOINTS            the layout of keypoint inputs: mediapipe33, coco17,
                               h36m17, smpl22, smpl24, body25 (default: detected)
---rate HZ                     samples per second of a wide-layout CSV or keypoints
-                              with no times
+--rate HZ                     samples per second of a wide-layout CSV, JSON or
+                              keypoints with no times
 --up +x|-x|+y|-y|+z|-z        keypoints: the file's up axis (default: detected)
 --smoothing auto|SECONDS      trackers and keypoints: auto (default: each device's or point's
                               filter from its measured noise; clean ones are left as they
@@ -65,7 +65,7 @@ Options of ``solve`` (they mirror the panel; ``--help`` has them all):
 --keep-spikes                 keypoints: keep every sample (default: remove samples
                               30 cm or more off their point's local median)
 --mapping FILE.json           keypoints: a CSV's column names for the layout's points
---save-layout FILE.json       write the layout detected in the first wide CSV
+--save-layout FILE.json       write the layout detected in the first wide CSV or JSON
 --format blend,fbx,bvh,json,npz  one or several (default blend,fbx,json); without blend
                               and fbx, the numpy core writes them without Blender
 --bvh-units cm|m              BVH length unit (default cm)
@@ -159,10 +159,10 @@ def _add_solve_options(s):
                         "on the body (keep, default), left out (remove: the path continuous), or not looked "
                         "for (ignore)")
     s.add_argument("--layout", default=None, metavar="FILE.json|KEYPOINTS",
-                   help="the columns, time, units and axes of wide-layout CSV inputs (default: detected); "
+                   help="the columns, time, units and axes of wide-layout CSV and JSON inputs (default: detected); "
                         "or the layout of keypoint inputs: " + "|".join(_keypoint_layouts()))
     s.add_argument("--rate", type=float, default=None, metavar="HZ",
-                   help="samples per second of wide-layout CSV or keypoint inputs without times")
+                   help="samples per second of wide-layout CSV, JSON or keypoint inputs without times")
     s.add_argument("--up", default=None, choices=("+x", "-x", "+y", "-y", "+z", "-z"),
                    help="keypoints: the file's up axis (default: told from the body)")
     s.add_argument("--smoothing", type=_smoothing_arg, default="auto", metavar="auto|SECONDS",
@@ -183,7 +183,7 @@ def _add_solve_options(s):
                    help="keypoints: a CSV's columns for the layout's points "
                         '({"layout": "coco17", "columns": {"nose": "Nose", ...}})')
     s.add_argument("--save-layout", default=None, metavar="FILE.json",
-                   help="write the layout detected in the first wide-layout CSV input, for --layout")
+                   help="write the layout detected in the first wide-layout CSV or JSON input, for --layout")
 
 
 def _bone_map_presets():

@@ -175,8 +175,8 @@ class MANIKIN_Settings(PropertyGroup):
                              description="Tracker recording (" + ", ".join(formats.input_extensions()) + ")")
     layout_file: StringProperty(name="Layout", subtype='FILE_PATH', default="",
                                 description="Layout file (JSON) fixing the columns, time, units and axes of a "
-                                            "wide-layout CSV (blender-manikin solve --save-layout writes one); "
-                                            "empty: detected")
+                                            "wide-layout CSV or JSON recording (blender-manikin solve "
+                                            "--save-layout writes one); empty: detected")
     axes: EnumProperty(name="Axes", items=_AXES_ITEMS, default='AUTO')
     units: EnumProperty(name="Units", items=_UNITS_ITEMS, default='AUTO')
     use_scene_fps: BoolProperty(name="Scene Frame Rate", default=True,
