@@ -23,6 +23,7 @@ frame (JSON Lines, or a list whose frames start on lines of their own).
 """
 from __future__ import annotations
 
+import functools
 import json
 import os
 import re
@@ -67,8 +68,17 @@ def _number(v):
     return isinstance(v, (int, float)) and not isinstance(v, bool)
 
 
+@functools.lru_cache(maxsize=4096)
 def _last_word(key):
+    """``"gripPose"`` -> ``"pose"``, ``"head_position"`` -> ``"position"`` (keys repeat every frame)."""
     return re.split(r"[^a-z0-9]+", re.sub(r"(?<=[a-z0-9])(?=[A-Z])", "_", key).lower())[-1]
+
+
+@functools.lru_cache(maxsize=4096)
+def _has_pose_parts(keys):
+    """Whether an object with ``keys`` (a tuple) has both a position and a rotation key."""
+    words = {_last_word(str(k)) for k in keys}
+    return bool(words & set(_POSITION_KEYS)) and bool(words & set(_ROTATION_KEYS))
 
 
 def flatten(obj, prefix="", out=None):
@@ -76,8 +86,7 @@ def flatten(obj, prefix="", out=None):
     strings (an ISO 8601 time), other leaves (booleans, nulls, names) are left out."""
     out = {} if out is None else out
     if isinstance(obj, dict):
-        words = {_last_word(str(k)) for k in obj}
-        parts = bool(words & set(_POSITION_KEYS)) and bool(words & set(_ROTATION_KEYS))
+        parts = _has_pose_parts(tuple(obj))
         for k, v in obj.items():
             key = f"{prefix}_{k}" if prefix else str(k)
             if k in ("w", "W") and prefix and _last_word(prefix) in _POSITION_KEYS:
@@ -115,27 +124,41 @@ def _line_of(text, offset):
     return text.count("\n", 0, offset) + 1
 
 
-def _list_items_with_lines(text, start):
-    """The lines of the items of the JSON list that opens at ``text[start]`` (``"["``), by
-    decoding each item in turn, or None when that fails."""
-    dec = json.JSONDecoder()
-    lines, i = [], start + 1
-    try:
-        while True:
-            while text[i] in " \t\r\n,":
-                i += 1
-            if text[i] == "]":
-                return lines
-            lines.append(_line_of(text, i))
-            _, i = dec.raw_decode(text, i)
-    except (IndexError, ValueError):
-        return None
+class FrameLines:
+    """The line each item of the JSON list that opens at ``text[start]`` (``"["``) starts on, found
+    when first asked for (only an error needs them): each item is decoded in turn.  ``[k]`` is
+    None when they cannot be told."""
+
+    def __init__(self, text, start):
+        self.text, self.start, self._lines = text, start, None
+
+    def _find(self):
+        text, dec = self.text, json.JSONDecoder()
+        lines, i = [], self.start + 1
+        line, counted = _line_of(text, i), i           # newlines counted up to ``counted``
+        try:
+            while True:
+                while text[i] in " \t\r\n,":
+                    i += 1
+                if text[i] == "]":
+                    return lines
+                line += text.count("\n", counted, i)
+                counted = i
+                lines.append(line)
+                _, i = dec.raw_decode(text, i)
+        except (IndexError, ValueError):
+            return []
+
+    def __getitem__(self, k):
+        if self._lines is None:
+            self._lines = self._find()
+        return self._lines[k] if 0 <= k < len(self._lines) else None
 
 
 def frames_of(path, text):
     """``(frames, lines)``: the frame objects of a JSON or JSON Lines text and the line each
-    starts on (None where it cannot be told).  Raises :class:`RecordingError` naming the file
-    and line."""
+    starts on (``lines[k]``; a list, a :class:`FrameLines`, or None where it cannot be told).
+    Raises :class:`RecordingError` naming the file and line."""
     if os.path.splitext(path)[1].lower() in JSONL_EXTENSIONS:
         frames, lines = [], []
         for n, ln in enumerate(text.splitlines(), 1):
@@ -154,14 +177,14 @@ def frames_of(path, text):
     except RecursionError:
         raise RecordingError("not valid JSON (nested too deeply)", path=path) from None
     if isinstance(doc, list):
-        return doc, _list_items_with_lines(text, text.index("["))
+        return doc, FrameLines(text, text.index("["))
     if isinstance(doc, dict):
         lists = {k: v for k, v in doc.items()
                  if isinstance(v, list) and len(v) >= 2 and all(isinstance(f, dict) for f in v)}
         if lists:
             key = max(lists, key=lambda k: len(lists[k]))
             m = re.search(r'"' + re.escape(json.dumps(key)[1:-1]) + r'"\s*:\s*\[', text)
-            return lists[key], (_list_items_with_lines(text, m.end() - 1) if m else None)
+            return lists[key], (FrameLines(text, m.end() - 1) if m else None)
     raise RecordingError("expected a list of frame objects, or an object holding one (e.g. \"frames\": [...])",
                          path=path, line=1)
 
@@ -175,7 +198,7 @@ def read_json(path, axes=None, units=None, layout=None, rate=None) -> Recording:
     if not text.strip():
         raise RecordingError("file is empty", path=path)
     frames, lines = frames_of(path, text)
-    if lines is None or len(lines) != len(frames):
+    if lines is None:
         lines = [None] * len(frames)
     flat = []
     for f, n in zip(frames, lines):
