@@ -440,3 +440,32 @@ def test_whole_milliseconds_are_not_times_of_day(tmp_path):
     rec = formats.load_recording(path)
     assert "time=timestamp in ms" in rec.metadata["detected"]
     np.testing.assert_allclose(rec.streams["head"].time, plain.streams["head"].time, atol=1e-3)
+
+
+def test_unity_vector_and_quaternion_tuples(tmp_path):
+    """A logger that writes Unity's Vector3 / Quaternion ToString() into one field each:
+    "(0.10000, 1.60000, 0.20000)" and "(x, y, z, w)"; the layout file names the spread columns."""
+    from blender_manikin.core.io_wide_csv import save_layout
+    t, pos, quat = motion()
+    names = {"head": "Head", "left_hand": "LeftHand", "right_hand": "RightHand"}
+    rows = ["time," + ",".join(f"{n}Position,{n}Rotation" for n in names.values())]
+    for k in range(T):
+        cells = [f"{t[k]:.5f}"]
+        for d in names:
+            p, q = from_blender(pos[d][k], quat[d][k], "unity")
+            for v in (p, q[[1, 2, 3, 0]]):
+                cells.append("(" + ", ".join(f"{x:.5f}" for x in v) + ")")
+        rows.append(",".join(cells))
+    path = tmp_path / "tostring.csv"
+    path.write_text("\n".join(rows) + "\n")
+    rec = formats.load_recording(path, axes="unity")
+    assert "quaternions x,y,z,w; vectors and quaternions as (x, y, z[, w]) tuples; time=time in s" \
+        in rec.metadata["detected"]
+    assert rec.metadata["layout"]["devices"]["head"]["pos"] == ["HeadPosition_x", "HeadPosition_y", "HeadPosition_z"]
+    for d in names:
+        assert np.abs(rec.streams[d].pos - pos[d]).max() < 1e-5
+        err = np.degrees(rot.geodesic_angle(rot.quat_to_matrix(rec.streams[d].quat), rot.quat_to_matrix(quat[d])))
+        assert err.max() < 0.01
+    save_layout(tmp_path / "layout.json", rec.metadata["layout"])
+    again = formats.load_recording(path, layout=str(tmp_path / "layout.json"))
+    np.testing.assert_array_equal(again.streams["head"].pos, rec.streams["head"].pos)

@@ -74,6 +74,38 @@ def sniff_delimiter(header_line):
     return max(DELIMITERS, key=lambda d: len(header_line.split(d)))
 
 
+#: a parenthesised tuple in one field, as Unity's Vector3 / Quaternion ToString() writes it:
+#: "(0.10, 1.60, 0.20)", "(0.00000, 0.70711, 0.00000, 0.70711)" (x, y, z, w)
+_TUPLE = re.compile(r"\(([^()]*)\)")
+
+
+def tuple_header(header, first_row, delim):
+    """``header`` with each column whose cell in ``first_row`` (the first data line, text) is a
+    parenthesised tuple spread over one column per component (``head_position`` ->
+    ``head_position_x``, ``_y``, ``_z``; four: ``_x`` .. ``_w``, Unity's quaternion order), or
+    ``header`` itself when the row has none."""
+    if "(" not in first_row:
+        return header
+    fields = re.split(re.escape(delim) + r"(?![^()]*\))", first_row)
+    if len(fields) != len(header):
+        return header
+    out = []
+    for name, cell in zip(header, fields):
+        m = _TUPLE.fullmatch(cell.strip().strip('"'))
+        if not m:
+            out.append(name)
+            continue
+        n = len(re.split(r"\s*[,;]\s*", m.group(1).strip()))
+        out += [f"{name}_{a}" for a in ("xyz" if n == 3 else "xyzw" if n == 4 else range(n))]
+    return out
+
+
+def _untuple(line, delim):
+    """``line`` with each parenthesised tuple's components as fields of their own."""
+    return _TUPLE.sub(lambda m: delim.join(re.split(r"\s*[,;]\s*", m.group(1).strip())), line) if "(" in line \
+        else line
+
+
 def iso_seconds(cells, path=None, lines=None):
     """Seconds ``(T,)`` float64 from ISO 8601 date-times (``2026-12-07T10:00:00.125``, a space for
     the ``T``, a ``Z`` or ``+01:00`` zone) or times of day (``10:00:00.125``; past midnight they
@@ -197,7 +229,10 @@ def looks_wide(head_text):
     lines = [ln for ln in head_text.splitlines() if ln.strip() and not ln.lstrip().startswith("#")]
     if not lines:
         return False
-    header = [c.strip().strip('"') for c in lines[0].split(sniff_delimiter(lines[0]))]
+    delim = sniff_delimiter(lines[0])
+    header = [c.strip().strip('"') for c in lines[0].split(delim)]
+    if len(lines) > 1:
+        header = tuple_header(header, lines[1], delim)
     try:
         groups, _, _ = parse_columns(header)
     except RecordingError:
@@ -344,13 +379,18 @@ def read_wide_csv(path, axes=None, units=None, layout=None, rate=None) -> Record
     delim = (layout or {}).get("delimiter") or sniff_delimiter(header_text)
     header = [c.strip().strip('"') for c in header_text.split(delim)]
     body = rows[1:]
+    tuples = bool(body) and tuple_header(header, body[0][1], delim) != header
+    if tuples:
+        header = tuple_header(header, body[0][1], delim)
     decimal = (layout or {}).get("decimal") or \
         ("," if delim != "," and any("," in ln for _, ln in body[:200]) else ".")
 
     def table():
         if len(body) < 2:
             raise RecordingError("fewer than two rows of samples", path=path)
-        cells = [(ln.replace(",", ".") if decimal == "," else ln).split(delim) for _, ln in body]   # 1,62 is 1.62
+        cells = [(ln.replace(",", ".") if decimal == "," else ln)
+                 for ln in ((_untuple(ln, delim) if tuples else ln) for _, ln in body)]      # 1,62 is 1.62
+        cells = [ln.split(delim) for ln in cells]
         counts = np.fromiter((len(c) for c in cells), dtype=np.int64, count=len(cells))
         wrong = np.nonzero(counts != len(header))[0]
         if wrong.size:
@@ -361,6 +401,8 @@ def read_wide_csv(path, axes=None, units=None, layout=None, rate=None) -> Record
 
     note = "" if delim == "," else (f"fields separated by {_DELIMITER_NAMES[delim]}"
                                     + (", decimal commas" if decimal == "," else ""))
+    if tuples:
+        note = "; ".join(n for n in (note, "vectors and quaternions as (x, y, z[, w]) tuples") if n)
     extra = {"delimiter": delim, "decimal": decimal} if delim != "," or decimal != "." else {}
     return read_wide_table(path, header, hline, table, axes=axes, units=units, layout=layout, rate=rate,
                            note=note, layout_extra=extra)
