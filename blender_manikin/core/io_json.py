@@ -201,9 +201,10 @@ def read_json(path, axes=None, units=None, layout=None, rate=None) -> Recording:
     if lines is None:
         lines = [None] * len(frames)
     flat = []
-    for f, n in zip(frames, lines):
+    for k, f in enumerate(frames):
         if not isinstance(f, dict):
-            raise RecordingError(f"a frame is {type(f).__name__} {shown(f)}, not an object", path=path, line=n)
+            raise RecordingError(f"a frame is {type(f).__name__} {shown(f)}, not an object", path=path,
+                                 line=lines[k])
         flat.append(flatten(f))
     header = list(dict.fromkeys(k for f in flat for k in f))
     if isinstance(layout, (str, os.PathLike)):
@@ -215,5 +216,5 @@ def read_json(path, axes=None, units=None, layout=None, rate=None) -> Recording:
         cells = np.array([[str(f.get(k, "nan")) for k in header] for f in flat], dtype=str)
         return cells, lines
 
-    return read_wide_table(path, header, lines[0] if flat else None, table, axes=axes, units=units,
+    return read_wide_table(path, header, None, table, axes=axes, units=units,
                            layout=layout, rate=rate, what="JSON frames")
