@@ -108,6 +108,9 @@ def test_errors_name_the_file_and_line(tmp_path):
     open(tmp_path / "cut.json", "w").write(text[: len(text) // 2])
     with pytest.raises(RecordingError, match=r"cut.json, line \d+: not valid JSON"):
         formats.load_recording(tmp_path / "cut.json")
+    open(tmp_path / "mixed.json", "w").write('[{"time": 0, "head": {"position": [0, 1.6, 0]}},\n 5,\n {"time": 1}]')
+    with pytest.raises(RecordingError, match=r"mixed.json, line 2: a frame is int 5, not an object"):
+        formats.load_recording(tmp_path / "mixed.json")
     open(tmp_path / "scalar.json", "w").write('{"head": 1}')
     with pytest.raises(RecordingError, match=r"scalar.json, line 1: expected a list of frame objects"):
         formats.load_recording(tmp_path / "scalar.json")
