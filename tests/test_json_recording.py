@@ -151,3 +151,12 @@ def test_a_folder_gives_only_its_recordings(tmp_path):
     assert sorted(convert.collect_inputs([str(tmp_path)])) == want
     assert sorted(cli.expand_inputs([str(tmp_path)])) == want
     assert convert.collect_inputs([str(tmp_path / "manifest.jsonl")]) == [str(take)]
+
+
+def test_a_matrix_that_is_not_a_rigid_transform_is_a_lost_sample():
+    from blender_manikin.core.io_json import flatten
+    for bad in ([float("nan")] * 16, [1e308] * 16, [0.0] * 16):
+        flat = flatten({"viewer": {"transform": {"matrix": bad}}})
+        assert len(flat) == 7 and all(np.isnan(v) for v in flat.values())
+    eye = flatten({"viewer": {"transform": {"matrix": list(np.eye(4).reshape(-1))}}})
+    assert eye["viewer_transform_rotation_w"] == 1.0 and eye["viewer_transform_position_y"] == 0.0

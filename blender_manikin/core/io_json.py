@@ -101,9 +101,13 @@ def flatten(obj, prefix="", out=None):
                 m = np.asarray(obj, np.float64).reshape(4, 4).T        # column-major
                 base = prefix[: -len("matrix")].rstrip("_") if prefix.lower().endswith("matrix") else prefix
                 base = base or "pose"
+                if not (np.all(np.isfinite(m)) and np.abs(m).max() < 1e6
+                        and abs(np.linalg.det(m[:3, :3]) - 1.0) < 0.1):
+                    m = np.full((4, 4), np.nan)            # a lost or corrupt sample (not a rotation)
                 for a, v in zip("xyz", m[:3, 3]):
                     out[f"{base}_position_{a}"] = float(v)
-                q = matrix_to_quat(m[:3, :3])
+                with np.errstate(invalid="ignore"):
+                    q = matrix_to_quat(m[:3, :3])
                 for a, v in zip("wxyz", q):
                     out[f"{base}_rotation_{a}"] = float(v)
             elif len(obj) in (3, 4):
