@@ -8,7 +8,10 @@ read back by the detection: single clips (1-10 s), and takes of 10 clips one aft
 (each clip moved and turned to start where the one before ended, as one longer recording).
 Prints, per row, how many readings the hands' reach alone (the rule before this module) and
 the three cues (walking, then head turns, then reach) got right, and which cue decided; then
-the real VR recordings of ``../shared/data/vr`` (Beat Saber, Unity axes).
+the real VR recordings of ``../shared/data/vr`` (Beat Saber, Unity axes).  A second table
+writes the same headsets and controllers without orientations (a logger of positions only):
+the axes read, and the heading :func:`.axes_detect.heading_from_positions` gives against the
+hips' facing, beside the single direction unrotated devices faced before.
 
     .venv/bin/python benchmarks/bench_axes.py [--max-clips N]
 
@@ -34,16 +37,23 @@ from blender_manikin.core import device_offsets as do  # noqa: E402
 from blender_manikin.core import rotations as rot  # noqa: E402
 from blender_manikin.core.devices import DEVICE_JOINT  # noqa: E402
 from blender_manikin.core.recording import from_blender  # noqa: E402
+from blender_manikin.core.skeleton import J  # noqa: E402
 
 DEVICES = ("head", "left_hand", "right_hand")
 CONVENTIONS = ("unity", "openxr")
 TAKE_CLIPS = 10
 
 
-def clip_devices(path, headset):
+def clip_devices(path, headset, facing=False):
     """``(time, pos, rotm)``: the clip's devices in Blender axes (metres; ``(T, 3)``,
-    ``(T, 3, 3)``), the headset and grips (``openxr_generic``) or the joints themselves."""
+    ``(T, 3, 3)``), the headset and grips (``openxr_generic``) or the joints themselves; with
+    ``facing``, also the hips' level facing direction ``(T, 3)`` (the truth for a heading)."""
     _, _, pos, world, fps = load_clip(path)
+    if facing:
+        side = pos[:, J["right_hip"]] - pos[:, J["left_hip"]]
+        f = np.cross([0.0, 0.0, 1.0], side)
+        f[:, 2] = 0.0
+        f /= np.maximum(np.linalg.norm(f, axis=-1, keepdims=True), 1e-9)
     offsets = do.get_preset("openxr_generic")["devices"]
     P, R = {}, {}
     for d in DEVICES:
@@ -52,6 +62,8 @@ def clip_devices(path, headset):
             P[d], R[d] = do.remove_offsets(pos[:, j], world[:, j], offsets[d], device=d)
         else:
             P[d], R[d] = pos[:, j].copy(), world[:, j].copy()
+    if facing:
+        return np.arange(len(pos)) / fps, P, R, f
     return np.arange(len(pos)) / fps, P, R
 
 
@@ -83,6 +95,20 @@ def stitch(clips):
             {d: np.concatenate(v) for d, v in R_all.items()})
 
 
+def stitch_facing(clips):
+    """:func:`stitch` of ``(t, P, R, facing)`` clips, the facing turned with each clip."""
+    t, P, R = stitch([c[:3] for c in clips])
+    facing, prev = [], None
+    for c in clips:
+        yaw = 0.0
+        if prev is not None:
+            yaw = _heading(prev) - _heading(c[2]["head"][0])
+        Rz = rot.axis_angle_rotation(np.array([0.0, 0.0, 1.0]), yaw)
+        facing.append(c[3] @ Rz.T)
+        prev = (Rz @ c[2]["head"][-1])
+    return t, P, R, np.concatenate(facing)
+
+
 def read_both_ways(t, P, R, truth):
     """``(reach_right, chosen_right, cue)`` for the take written in ``truth`` axes."""
     pos, quat = {}, {}
@@ -107,6 +133,26 @@ def tally(takes):
             chosen += c
             cues[cue] += 1
     return n, reach, chosen, cues
+
+
+def positions_only(takes):
+    """``(readings, right, heading errors, fixed errors)`` for ``takes`` (each ``(t, P, R,
+    facing)``) written without orientations in both conventions: the axes
+    :func:`.axes_detect.choose_axes` picks; the degrees between
+    :func:`.axes_detect.heading_from_positions` (read the right way) and the hips' facing, every
+    frame; and those of the unrotated devices read before (facing one way all along)."""
+    n = right = 0
+    errors, fixed = [], []
+    for t, P, R, facing in takes:
+        fixed.append(np.degrees(np.arccos(np.clip(-facing[:, 1], -1.0, 1.0))))   # identity: facing -Y
+        for truth in CONVENTIONS:
+            pos = {d: from_blender(P[d], None, truth)[0] for d in DEVICES}
+            chosen, _ = ad.choose_axes(t, pos, None, CONVENTIONS)
+            n += 1
+            right += chosen == truth
+        f = ad.heading_from_positions(t, P)
+        errors.append(np.degrees(np.arccos(np.clip(np.sum(f * facing, -1), -1.0, 1.0))))
+    return n, right, np.concatenate(errors), np.concatenate(fixed)
 
 
 def vr_rows():
@@ -152,6 +198,25 @@ def main(argv=None):
             row(name, head, TAKE_CLIPS, tally(groups))
     for name, counts in vr_rows():
         row(name, "headset", "whole replay", counts)
+    print("\npositions only (no orientation columns): the axes from walking and reaching against the heading "
+          "from the hands' left-right line and the walking direction; that heading against the hips' facing")
+    print("| recordings | clips per take | readings | axes right | heading error median / 90th pct [deg] "
+          "| facing one way (before) [deg] |")
+    print("|---|---:|---:|---:|---|---|")
+    for name, (source, _) in DATASETS.items():
+        if not os.path.exists(source):
+            continue
+        files = dataset.build_cache(source, verbose=False)
+        files = files[:args.max_clips] if args.max_clips else files
+        order = np.random.default_rng(0).permutation(len(files))
+        clips = [clip_devices(files[i], True, facing=True) for i in order]
+        clips = [c for c in clips if len(c[0]) >= 4]
+        for per, takes in ((1, clips), (TAKE_CLIPS, [stitch_facing(clips[k:k + TAKE_CLIPS])
+                                                     for k in range(0, len(clips) - TAKE_CLIPS + 1, TAKE_CLIPS)])):
+            n, right, err, fixed = positions_only(takes)
+            print(f"| {name} | {per} | {n} | {100 * right / n:.1f} % | "
+                  f"{np.median(err):.1f} / {np.percentile(err, 90):.1f} | "
+                  f"{np.median(fixed):.1f} / {np.percentile(fixed, 90):.1f} |")
 
 
 if __name__ == "__main__":
