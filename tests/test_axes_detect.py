@@ -46,6 +46,15 @@ def walking_take(seconds=8.0):
     return _take(seconds, xy, yaw, 0.25 * np.sin(2 * np.pi * 0.3 * t), 0.1 * np.sin(2 * np.pi * 0.2 * t))
 
 
+def stepping_back_take(seconds=4.0):
+    """Walking backwards at 0.9 m/s along a slow curve, facing ahead."""
+    t = np.arange(int(seconds * RATE)) / RATE
+    yaw = 0.15 * t
+    fwd = np.stack([np.sin(yaw), -np.cos(yaw)], -1)
+    xy = np.cumsum(-0.9 * fwd / RATE, 0)
+    return _take(seconds, xy, yaw, 0.2 * np.sin(2 * np.pi * 0.3 * t), np.zeros_like(t), swing=0.05)
+
+
 def looking_around_take(seconds=8.0):
     """Standing (1 cm of sway) and looking left and right, up and down."""
     t = np.arange(int(seconds * RATE)) / RATE
@@ -154,7 +163,8 @@ def _heading_error_deg(quat, body_yaw):
 
 
 @pytest.mark.parametrize("axes", ["unity", "openxr"])
-@pytest.mark.parametrize("make,yaw", [(walking_take, lambda t: 0.2 * t), (looking_around_take, lambda t: 0 * t)])
+@pytest.mark.parametrize("make,yaw", [(walking_take, lambda t: 0.2 * t), (looking_around_take, lambda t: 0 * t),
+                                      (stepping_back_take, lambda t: 0.15 * t)])
 def test_positions_without_orientations(tmp_path, axes, make, yaw):
     """A logger that writes positions only: the axes from the walking direction (or the reach)
     against the hands' left-right line, and level orientations facing that heading; the body was
@@ -167,7 +177,8 @@ def test_positions_without_orientations(tmp_path, axes, make, yaw):
         data += list(p.T)
     path = tmp_path / "positions.csv"
     np.savetxt(path, np.stack(data, -1), delimiter=",", header=",".join(cols), comments="", fmt="%.6f")
-    # standing with the hands at the sides, the axes cannot be told without orientations
+    # standing with the hands at the sides, the axes cannot be told without orientations; a step
+    # back is a walk backwards (it says the other convention), but it does not turn the body
     rec = formats.load_recording(path, axes=None if make is walking_take else axes)
     line = rec.metadata["detected"]
     assert "no orientation columns for head, left_hand, right_hand: level, facing the hands' left-right line" in line

@@ -239,12 +239,13 @@ HANDS_APART = 0.3
 HEADING_SMOOTH_S = 0.3
 
 
-def heading_from_positions(time, pos):
+def heading_from_positions(time, pos, walking=True):
     """``(T, 3)`` unit horizontal forward direction of a body whose devices have no orientations,
     Blender axes (+Z up): from the hands' left-right line (the body faces ``up × (right - left)``),
-    weighted by how far apart they are sideways (full at :data:`HANDS_APART`), and the head's
-    walking direction, weighted by its speed from half :data:`WALK_SPEED` up (up to 1.5: a walk
-    outweighs the hands' swing); frames with neither take the heading of their neighbours;
+    weighted by how far apart they are sideways (full at :data:`HANDS_APART`), and (``walking``)
+    the line the head walks along, weighted by its speed from half :data:`WALK_SPEED` up (up to
+    1.5: a walk outweighs the hands' swing), turned forward by the hands' line where that is
+    clear (a step back is not a turn); frames with neither take the heading of their neighbours;
     smoothed (:data:`HEADING_SMOOTH_S`, which also evens out the arms' swing).  A take that
     neither walks nor reaches cannot tell its axes this way (:func:`choose_axes`), but read
     mirrored it only moves the hands a few centimetres front to back.  time ``(T,)`` seconds; pos:
@@ -266,7 +267,10 @@ def heading_from_positions(time, pos):
     v[:, 2] = 0.0
     speed = np.linalg.norm(v, axis=-1)
     walk = v * (np.clip(speed / WALK_SPEED - 0.5, 0.0, 1.5) / np.maximum(speed, 1e-9))[:, None]
-    f = lateral + walk
+    # a walk gives the heading's line; the hands' left and right give its sign (a step back)
+    back = (np.sum(walk * lateral, -1) < 0) & (np.linalg.norm(lateral, axis=-1) > 0.2)
+    walk[back] *= -1.0
+    f = lateral + walk if walking else lateral
     w = np.linalg.norm(f, axis=-1)
     known = w > 0.2
     if not known.any():
@@ -294,7 +298,7 @@ def _positions_only_evidence(time, pos, axes):
     rows = np.isfinite(time) & np.isfinite(pos["head"]).all(-1)
     b = {d: to_blender(np.asarray(p, np.float64)[rows], None, axes)[0] for d, p in pos.items()}
     t = time[rows]
-    fwd = heading_from_positions(t, b)
+    fwd = heading_from_positions(t, b, walking=False)     # the hands' line alone: the walk is the evidence
     everything = np.ones(len(t), bool)
     return FacingEvidence(walk=walking_seconds(t, b["head"], fwd, 2), pivot=0.0,
                           reach=reach_ahead(b, fwd, everything))
