@@ -99,8 +99,8 @@ def device_of_object_name(name):
 
 
 def canonical_device(name):
-    """The device named ``name`` (case-, space- and dash-insensitive, or an alias, also with one
-    of the endings of :data:`_SUFFIXES`), or ``None``."""
+    """The device named ``name`` (case-, space- and dash-insensitive, or an alias, also with up to
+    three of the endings of :data:`_SUFFIXES`: ``left_hand_grip_pose``), or ``None``."""
     key = str(name).strip().lower().replace(" ", "_").replace("-", "_")
     keys = [key]
     for _ in range(3):                 # "left_hand_grip_pose_transform": three endings

@@ -21,8 +21,9 @@ from .recording import Recording, RecordingError
 @dataclass(frozen=True)
 class ReaderFormat:
     """A recording format: ``extensions`` (lower case, with the dot), ``read(path, axes, units)``
-    → :class:`Recording`, an optional ``sniff(head_bytes) -> bool`` that recognises the format
-    from the first bytes of a file whatever its name, and the device offsets ``auto`` means for
+    → :class:`Recording` (the CSV and JSON readers also take ``layout`` and ``rate``), an
+    optional ``sniff(head_bytes) -> bool`` that recognises the format from the first bytes of a
+    file whatever its name, and the device offsets ``auto`` means for
     it (``"none"``: its poses are the joints' poses).  kind: ``"trackers"`` (device poses: read
     into a :class:`Recording`) or ``"keypoints"`` (3D joint positions: ``read`` gives a
     :class:`.io_keypoints.KeypointRecording`; :func:`.solve.solve_recording` solves them by
