@@ -202,3 +202,23 @@ def test_hands_without_orientations_face_the_heads_heading(tmp_path):
         in rec.metadata["detected"]
     head_yaw = 0.2 * t + 0.25 * np.sin(2 * np.pi * 0.3 * t)
     assert _heading_error_deg(rec.streams["left_hand"].quat, head_yaw).max() < 0.1
+
+
+@pytest.mark.parametrize("axes", ["unity", "openxr"])
+def test_a_native_csv_without_axes_that_walks_backwards_is_warned_about(tmp_path, axes):
+    """A native CSV that states no axes is read as OpenXR (its documented default); a Unity
+    recording read so walks backwards, and the summary says what to do."""
+    from blender_manikin.core.io_csv import read_csv, write_csv
+    from blender_manikin.core.recording import Recording, TrackerStream
+    t, pos, quat = walking_take()
+    rec = Recording(streams={d: TrackerStream(d, t, pos[d], quat[d], np.ones(len(t), bool))
+                             for d in ("head", "left_hand", "right_hand")}, source="walk", metadata={})
+    stated = write_csv(tmp_path / "stated.csv", rec, axes=axes) or tmp_path / "stated.csv"
+    text = open(stated).read()
+    (tmp_path / "unstated.csv").write_text(text.replace(f"# axes: {axes}\n", ""))
+    warned = [w for w in read_csv(tmp_path / "unstated.csv").warnings if "no '# axes:' line" in w]
+    if axes == "unity":
+        assert len(warned) == 1 and "walks backwards 7.9 s more than forwards: a Unity recording?" in warned[0]
+    else:
+        assert warned == []
+    assert not [w for w in read_csv(stated).warnings if "no '# axes:' line" in w]

@@ -311,6 +311,7 @@ def read_csv(path, axes=None, units=None, block_bytes=None) -> Recording:
 
     # --- axes and units: option wins over metadata
     warnings = []
+    axes_stated = axes is not None or "axes" in metadata
     axes_used = _resolve("axes", axes, metadata, meta_line, canonical_axes, "openxr", path, warnings)
     units_used = _resolve("units", units, metadata, meta_line, canonical_units, "m", path, warnings)
 
@@ -374,7 +375,35 @@ def read_csv(path, axes=None, units=None, block_bytes=None) -> Recording:
     metadata["device_labels"] = labels
     metadata["axes"] = axes_used
     metadata["units"] = units_used
+    if not axes_stated:
+        back = _walked_backwards(streams)
+        if back >= WALK_BACK_WARN_S:
+            warnings.append(f"no '# axes:' line, so read as openxr; that way the performer walks backwards "
+                            f"{back:.1f} s more than forwards: a Unity recording? (add '# axes: unity' or "
+                            f"pass --axes unity if the body walks backwards)")
     return Recording(streams=streams, source=path, metadata=metadata, warnings=warnings)
+
+
+#: seconds of net backward walking, read with the default axes, above which a native CSV that
+#: states no axes is warned about (:func:`_walked_backwards`; people walk the way they face)
+WALK_BACK_WARN_S = 2.0
+
+
+def _walked_backwards(streams):
+    """Seconds the head walks backwards less forwards (:func:`.axes_detect.walking_seconds`),
+    Blender axes, or 0 without a head with enough samples."""
+    from .axes_detect import walking_seconds
+    from .rotations import quat_to_matrix
+    head = streams.get("head")
+    if head is None or len(head.time) < 3:
+        return 0.0
+    ok = head.valid & np.isfinite(head.pos).all(-1) & np.isfinite(head.quat).all(-1)
+    if ok.sum() < 3:
+        return 0.0
+    fwd = quat_to_matrix(head.quat[ok]) @ np.array([0.0, -1.0, 0.0])
+    fwd[:, 2] = 0.0
+    fwd /= np.maximum(np.linalg.norm(fwd, axis=-1, keepdims=True), 1e-9)
+    return -walking_seconds(head.time[ok], head.pos[ok], fwd, 2)
 
 
 def _metadata_line(s, line, metadata, meta_line):
