@@ -213,7 +213,8 @@ def test_a_native_csv_without_axes_that_walks_backwards_is_warned_about(tmp_path
     t, pos, quat = walking_take()
     rec = Recording(streams={d: TrackerStream(d, t, pos[d], quat[d], np.ones(len(t), bool))
                              for d in ("head", "left_hand", "right_hand")}, source="walk", metadata={})
-    stated = write_csv(tmp_path / "stated.csv", rec, axes=axes) or tmp_path / "stated.csv"
+    stated = tmp_path / "stated.csv"
+    write_csv(stated, rec, axes=axes)
     text = open(stated).read()
     (tmp_path / "unstated.csv").write_text(text.replace(f"# axes: {axes}\n", ""))
     warned = [w for w in read_csv(tmp_path / "unstated.csv").warnings if "no '# axes:' line" in w]
