@@ -36,6 +36,7 @@ from blender_manikin.core import axes_detect as ad  # noqa: E402
 from blender_manikin.core import device_offsets as do  # noqa: E402
 from blender_manikin.core import rotations as rot  # noqa: E402
 from blender_manikin.core.devices import DEVICE_JOINT  # noqa: E402
+from blender_manikin.core.features import heading_yaw  # noqa: E402
 from blender_manikin.core.recording import from_blender  # noqa: E402
 from blender_manikin.core.skeleton import J  # noqa: E402
 
@@ -67,11 +68,6 @@ def clip_devices(path, headset, facing=False):
     return np.arange(len(pos)) / fps, P, R
 
 
-def _heading(R):
-    f = R @ np.array([0.0, -1.0, 0.0])          # a Blender-axes device looks along local -Y
-    return float(np.arctan2(f[1], f[0]))
-
-
 def stitch(clips):
     """One take of ``clips`` (each ``(time, pos, rotm)``) one after the other: each clip turned
     about the vertical and moved so that its head starts where, and facing as, the last one's
@@ -80,7 +76,7 @@ def stitch(clips):
     t0 = 0.0
     for k, (t, P, R) in enumerate(clips):
         if k:
-            yaw = _heading(R_all["head"][-1][-1]) - _heading(R["head"][0])
+            yaw = heading_yaw(R_all["head"][-1][-1]) - heading_yaw(R["head"][0])
             Rz = rot.axis_angle_rotation(np.array([0.0, 0.0, 1.0]), yaw)
             start, end = P["head"][0], P_all["head"][-1][-1]
             P = {d: (p - start) @ Rz.T + end for d, p in P.items()}
@@ -102,7 +98,7 @@ def stitch_facing(clips):
     for c in clips:
         yaw = 0.0
         if prev is not None:
-            yaw = _heading(prev) - _heading(c[2]["head"][0])
+            yaw = heading_yaw(prev) - heading_yaw(c[2]["head"][0])
         Rz = rot.axis_angle_rotation(np.array([0.0, 0.0, 1.0]), yaw)
         facing.append(c[3] @ Rz.T)
         prev = (Rz @ c[2]["head"][-1])

@@ -102,7 +102,6 @@ if __package__:   # run as a plain script (blender --python cli.py), _script_mai
     FORMATS = _formats.writer_names()
     #: formats written by Blender (need bpy); the others are written by the numpy core
     BLENDER_FORMATS = tuple(n for n, f in _formats.WRITERS.items() if f.needs_blender)
-    INPUT_EXTENSIONS = _formats.input_extensions()
 
 
 def _add_solve_options(s):

@@ -143,7 +143,10 @@ def test_a_world_space_log_far_from_the_origin(tmp_path, axes, units, scale, ori
     line = rec.metadata["detected"]
     height = 1.61 - origin[2]
     assert f"units {units} (head at {height:.2f} m)" in line and f"axes {axes} (" in line, line
-    assert (up_how or "from the hands below") in line if up_how else "from the hands below" not in line
+    if up_how:
+        assert up_how in line, line
+    else:
+        assert "from the hands below" not in line, line
     np.testing.assert_allclose(rec.streams["head"].pos, pos["head"] / scale, atol=1e-5)
 
 

@@ -60,8 +60,13 @@ def test_npz_writer(tmp_path):
     assert not os.path.exists(str(path) + ".tmp.npz")
 
 
-def test_cli_choices_come_from_the_registry():
+def test_cli_choices_come_from_the_registry(tmp_path):
     from blender_manikin import cli
     assert cli.FORMATS == tuple(formats.WRITERS) and set(cli.BLENDER_FORMATS) == {"blend", "fbx"}
-    assert cli.INPUT_EXTENSIONS == formats.input_extensions()
+    # a folder gives every file with a reader's extension (shared ones only when they look like
+    # recordings: tests/test_json_recording.py), and nothing else
+    own = [e for e in formats.input_extensions() if e not in formats.SHARED_EXTENSIONS]
+    for e in own + [".txt", ".blend"]:
+        (tmp_path / f"take{e}").write_bytes(b"")
+    assert sorted(cli.expand_inputs([str(tmp_path)])) == sorted(str(tmp_path / f"take{e}") for e in own)
     assert cli.parse_formats("npz,json") == ("npz", "json")

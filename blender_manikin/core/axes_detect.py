@@ -52,7 +52,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .rotations import normalize, quat_rotate, quat_to_matrix
+from .rotations import axis_angle_to_quat, normalize, quat_rotate, quat_to_matrix
 from .smoothing import smooth_frames
 
 #: each Y-up convention's up axis (index) and the head's local forward axis, in its own
@@ -283,11 +283,21 @@ def heading_from_positions(time, pos, walking=True):
     return np.stack([np.cos(ang), np.sin(ang), np.zeros(T)], -1)
 
 
-def heading_quats(forward):
-    """``(T, 4)`` wxyz: level device orientations (Blender device axes: -Y forward, +Z up) facing
-    ``forward`` ``(T, 3)``."""
-    psi = np.arctan2(forward[:, 0], -forward[:, 1])
-    return np.stack([np.cos(psi / 2), np.zeros_like(psi), np.zeros_like(psi), np.sin(psi / 2)], -1)
+def heading_quats(yaw):
+    """``(T, 4)`` wxyz: level device orientations (Blender device axes: -Y forward, +Z up) turned
+    ``yaw`` ``(T,)`` radians about +Z (the angle of :func:`.features.heading_yaw`)."""
+    return axis_angle_to_quat(np.asarray(yaw, np.float64)[:, None] * np.array([0.0, 0.0, 1.0]))
+
+
+def yaw_of(forward):
+    """``(T,)`` radians: the yaw (:func:`.features.heading_yaw`'s angle) of level ``forward``
+    directions ``(T, 3)``, Blender axes."""
+    return np.arctan2(forward[:, 0], -forward[:, 1])
+
+
+def forward_of(yaw):
+    """``(T, 3)``: the level forward direction of ``yaw`` ``(T,)`` radians (:func:`yaw_of`'s inverse)."""
+    return np.stack([np.sin(yaw), -np.cos(yaw), np.zeros_like(yaw)], -1)
 
 
 def _positions_only_evidence(time, pos, axes):

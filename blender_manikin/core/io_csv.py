@@ -392,7 +392,8 @@ WALK_BACK_WARN_S = 2.0
 def _walked_backwards(streams):
     """Seconds the head walks backwards less forwards (:func:`.axes_detect.walking_seconds`),
     Blender axes, or 0 without a head with enough samples."""
-    from .axes_detect import walking_seconds
+    from .axes_detect import forward_of, walking_seconds
+    from .features import heading_yaw
     from .rotations import quat_to_matrix
     head = streams.get("head")
     if head is None or len(head.time) < 3:
@@ -400,9 +401,7 @@ def _walked_backwards(streams):
     ok = head.valid & np.isfinite(head.pos).all(-1) & np.isfinite(head.quat).all(-1)
     if ok.sum() < 3:
         return 0.0
-    fwd = quat_to_matrix(head.quat[ok]) @ np.array([0.0, -1.0, 0.0])
-    fwd[:, 2] = 0.0
-    fwd /= np.maximum(np.linalg.norm(fwd, axis=-1, keepdims=True), 1e-9)
+    fwd = forward_of(heading_yaw(quat_to_matrix(head.quat[ok])))
     return -walking_seconds(head.time[ok], head.pos[ok], fwd, 2)
 
 

@@ -52,7 +52,8 @@ from .recording import (Recording, RecordingError, TrackerStream, UNITS, canonic
                         read_file_bytes, to_blender)
 from . import rotations as rot
 from .rotations import normalize
-from .axes_detect import choose_axes, heading_from_positions, heading_quats, length_units, up_axis
+from .axes_detect import choose_axes, heading_from_positions, heading_quats, length_units, up_axis, yaw_of
+from .features import heading_yaw
 
 _POS_WORDS = ("pos", "position", "p", "loc", "location", "")
 _ROT_WORDS = ("rot", "rotation", "quat", "quaternion", "q", "orientation", "euler", "eul", "angles", "ang")
@@ -379,9 +380,8 @@ def read_wide_csv(path, axes=None, units=None, layout=None, rate=None) -> Record
     delim = (layout or {}).get("delimiter") or sniff_delimiter(header_text)
     header = [c.strip().strip('"') for c in header_text.split(delim)]
     body = rows[1:]
-    tuples = bool(body) and tuple_header(header, body[0][1], delim) != header
-    if tuples:
-        header = tuple_header(header, body[0][1], delim)
+    spread = tuple_header(header, body[0][1], delim) if body else header
+    tuples, header = spread != header, spread
     decimal = (layout or {}).get("decimal") or \
         ("," if delim != "," and any("," in ln for _, ln in body[:200]) else ".")
 
@@ -538,16 +538,14 @@ def read_wide_table(path, header, hline, table, axes=None, units=None, layout=No
     rot_note = ""
     if unrotated:      # no orientation columns: level, facing the head's (or the body's) heading
         if "head" in unrotated:
-            heading = heading_from_positions(t, {d: streams[d][0] for d in ("head", "left_hand", "right_hand")})
+            yaw = yaw_of(heading_from_positions(t, {d: streams[d][0] for d in ("head", "left_hand", "right_hand")}))
             rot_note = (f"no orientation columns for {', '.join(unrotated)}: level, facing the hands' left-right line "
                         "and the walking direction")
         else:
-            fwd = rot.quat_to_matrix(streams["head"][1]) @ np.array([0.0, -1.0, 0.0])
-            fwd[:, 2] = 0.0
-            heading = normalize(np.where(np.linalg.norm(fwd, axis=-1, keepdims=True) > 1e-6, fwd, [0.0, -1.0, 0.0]))
+            yaw = np.nan_to_num(heading_yaw(rot.quat_to_matrix(streams["head"][1])))   # a lost head: -Y
             rot_note = f"no orientation columns for {', '.join(unrotated)}: level, facing the head's heading"
         for d in unrotated:
-            streams[d][1] = heading_quats(heading)
+            streams[d][1] = heading_quats(yaw)
     for d in list(streams):
         p, q = streams[d]
         ok = np.all(np.isfinite(p), -1) & np.all(np.isfinite(q), -1)
