@@ -131,7 +131,8 @@ def _add_solve_options(s):
                         "performer of --height standing in the take (an origin on a desk); moved to 0")
     s.add_argument("--offsets", default="auto", metavar="auto|none|PRESET|FILE",
                    help="device-to-joint offsets: a preset name, a JSON file, or auto (default: the "
-                        "recording's '# offsets:' metadata, beat_saber for .bsor and Beat Saber .xror, "
+                        "recording's '# offsets:' metadata, a Beat Saber replay's own saber offsets or the game's "
+                        "defaults for its version and controllers (beat_saber, beat_saber_xr_touch, ...), "
                         "openxr_generic for other .xror, else none, or openxr_generic where the take shows a "
                         "headset: its T-pose, or a head named hmd, Main Camera, ...)")
     s.add_argument("--bvh-units", choices=("cm", "m"), default="cm")

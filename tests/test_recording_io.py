@@ -232,37 +232,6 @@ def test_bsor_synthetic_placeholder_and_repeated_times(tmp_path):
     assert "playerName" not in md and "playerID" not in md
 
 
-@pytest.mark.parametrize("controller,hmd,platform,tracking,want", [
-    ("OpenVR Controller(Knuckles Right) - Right", "VIVE Pro 2", "steam", "OpenVR", "beat_saber"),
-    ("Oculus Touch", "Quest 2", "oculus", "Oculus", "beat_saber_touch"),
-    ("Meta Quest Touch Plus (Right Controller)", "Quest 3", "oculus", "Oculus", "beat_saber_touch"),
-    ("Unknown", "Oculus Quest 2", "oculus", "Oculus", "beat_saber_touch"),    # the headset decides
-    ("OpenVR Controller(vive_controller)", "Quest 2", "steam", "OpenVR", "beat_saber"),   # the controller wins
-    ("Test Controller", "Test HMD", "steam", "OpenVR", "beat_saber"),
-])
-def test_bsor_offsets_preset_from_the_controller(tmp_path, controller, hmd, platform, tracking, want):
-    """The game holds the saber differently on Touch controllers: --offsets auto follows the header."""
-    from blender_manikin.core import solve as cs
-    data, _ = synthetic_bsor(n=30, controller=controller, hmd=hmd, platform=platform, trackingSystem=tracking)
-    path = tmp_path / "c.bsor"
-    path.write_bytes(data)
-    rec = load_recording(path)
-    assert rec.metadata["offsets"] == want
-    assert cs.resolve_offsets("auto", rec) == want and cs.resolve_offsets("quest_touch", rec) == "quest_touch"
-
-
-@pytest.mark.parametrize("version,warned", [("1.29.1_4575554838", False), ("1.27.0_3631158313", False),
-                                             ("1.29.4_123", True), ("1.40.3_999", True), ("oops", False)])
-def test_bsor_from_a_game_newer_than_the_presets_says_so(version, warned):
-    from blender_manikin.core.io_bsor import parse_bsor
-    data, _ = synthetic_bsor(n=30, gameVersion=version)
-    rec = parse_bsor(data)
-    hit = [w for w in rec.warnings if w.startswith("Beat Saber ")]
-    assert bool(hit) == warned
-    if warned:
-        assert "offsets are the game's up to 1.29.1" in hit[0] and version.split("_")[0] in hit[0]
-
-
 def test_bsor_time_jump_back_keeps_strictly_increasing():
     data, t = synthetic_bsor(n=300, backwards=(200, 0.5))      # rewind by 0.5 s at frame 200
     rec = parse_bsor(data, path="rewind.bsor")

@@ -65,14 +65,40 @@ collected by the xrizer project, ``src/input/profiles/*.rs``):
 * ``index_knuckles``: Valve Index raw (OpenVR) pose; grip origin
   (0, -0.015, 0.13) m, XYZ rotation (15.392°, ∓2.071°, ±0.303°) (upper
   signs for the left hand).
-* ``vive_wand``: HTC Vive wand raw (OpenVR) pose; identity (SteamVR's grip
-  pose for the wand is its raw pose).
-* ``beat_saber``: BSOR saber poses, Valve controllers on SteamVR: the game
-  puts the saber at ``raw · R_x(-16.3°) · T(0, 0.022, -0.01)`` (Unity axes,
-  rotate then translate in local space), then ``index_knuckles``' raw → grip.
-* ``beat_saber_touch``: BSOR saber poses, Touch controllers:
-  ``raw · R_x(-4.3°) · T(0, -0.008, 0)`` (Unity), then ``quest_touch``'s
-  raw → grip.
+* ``vive_wand``: HTC Vive wand raw (OpenVR) pose; grip origin (0, -0.015,
+  0.097) m, rotated 5.037° about X (SteamVR's ``vr_controller_vive_1_5``
+  render model; xrizer takes the wand's grip for its raw pose, but Beat
+  Games' own measurement of the wand's OpenVR pose in its OpenXR grip pose,
+  below, agrees with the render model to 0.8 mm and 0.04°).
+* Beat Saber replays (BSOR, and XROR converted from them): the hand poses
+  are the game's saber poses.  Where the game holds the saber depends on
+  its version, the VR runtime and the controller's maker:
+
+  - ``beat_saber``, ``beat_saber_touch``, ``beat_saber_vive``: game 1.29.1
+    and before on SteamVR with Valve Index, Oculus/Meta Touch or HTC Vive
+    controllers.  The game puts the saber at ``raw · R_x(a) · T(t)`` (Unity
+    axes, rotate then translate in local space;
+    ``OpenVRHelper.AdjustControllerTransform``): Valve a = -16.3°, t = (0,
+    0.022, -0.01); other makers a = -4.3°, t = (0, -0.008, 0); then the
+    controller's raw → grip (``index_knuckles``, ``quest_touch``,
+    ``vive_wand``).
+  - ``beat_saber_oculus``: game 1.29.1 and before on the Oculus runtime
+    (Oculus PC app, Quest): ``OculusVRHelper`` puts the saber at
+    ``node · R_x(-40°) · T(0, 0, 0.055)`` on the runtime's own controller
+    pose, which sits at R_x(60°), (0, -0.01964, 0.04598) m in the OpenXR
+    grip pose (Unity axes, right hand; the game's
+    ``kOculusTouchOriginOffsetToLegacy``).
+  - ``beat_saber_xr``, ``beat_saber_xr_touch``, ``beat_saber_xr_vive``:
+    game 1.29.4 and later (OpenXR, ``UnityXRHelper``): the controller's pose
+    is its OpenXR grip pose, and the game's default saber pose in it is, per
+    maker (Unity axes, right hand; the left mirrored): Valve (0, 0, 0.12) m,
+    R_x(-0.14°); Oculus (0.01, -0.045, 0.1) m, R_x(20°); HTC (0, 0.008,
+    0.095) m, R_x(-0.04°).
+
+  A replay that records the player's own saber offsets (the BSOR
+  saber-offsets block, :mod:`.io_bsor`) is solved with those instead
+  (:func:`beat_saber_replay_offsets`): they include the player's in-game
+  controller settings, which the presets take as zero.
 * ``openxr_hand_tracking``: hands tracked without controllers, recorded as
   the ``XR_HAND_JOINT_WRIST_EXT`` joint of OpenXR hand tracking
   (``XR_EXT_hand_tracking``; Quest hand tracking through OpenXR, Ultraleap):
@@ -84,13 +110,15 @@ collected by the xrizer project, ``src/input/profiles/*.rs``):
   Unity axes, ``--axes unity``, takes this preset too).  The head is the
   headset's view pose, as for controllers.
 
-The Beat Saber numbers are the game's built-in controller adjustments
-before version 1.29.4 (``OpenVRHelper.AdjustControllerTransform``, as
-reproduced by the DefaultOffsetRestorer mod), applied to the runtime's raw
-controller pose; the user's own in-game controller offsets are assumed zero.
-Check on real data: on the shared real BSOR sample (Valve Index, game
-1.29.1) the ``beat_saber`` wrists stay within arm's reach of the shoulders
-(estimated from the head) far more consistently than the raw saber poses.
+The Beat Saber numbers are the game's (``OpenVRHelper``, ``OculusVRHelper``,
+``UnityXRHelper``; as the DefaultOffsetRestorer mod reproduces them and as
+published reconstructions of the game's code state them).  Checks: Beat
+Games' measurement of the Index's OpenVR pose in its OpenXR grip pose
+(``kValveIndexOriginOffsetToLegacy``) agrees with ``index_knuckles`` to 0.3
+mm and 0.55° (``tests/test_beat_saber_offsets.py``), and on the shared real
+BSOR sample (Valve Index, game 1.29.1) the ``beat_saber`` wrists stay within
+arm's reach of the shoulders (estimated from the head) far more consistently
+than the raw saber poses.
 Pelvis and foot trackers have no preset offset (identity): a T-pose
 calibration (:mod:`.calibration`) measures their whole offset, translation and
 rotation, however they are strapped on; an entry that is not the identity is
@@ -196,7 +224,8 @@ def _beat_saber_adjust(pitch_deg, translate):
 
 _RAW_TO_GRIP = {
     "openxr_generic": {"left": (np.eye(3), np.zeros(3)), "right": (np.eye(3), np.zeros(3))},
-    "vive_wand": {"left": (np.eye(3), np.zeros(3)), "right": (np.eye(3), np.zeros(3))},
+    "vive_wand": {"left": (_rx(5.037), np.array([0.0, -0.015, 0.097])),
+                  "right": (_rx(5.037), np.array([0.0, -0.015, 0.097]))},
     "quest_touch": {
         "left": (_rx(20.6), np.array([0.007, -0.00182941, 0.1019482])),
         "right": (_rx(20.6), np.array([-0.007, -0.00182941, 0.1019482])),
@@ -206,31 +235,73 @@ _RAW_TO_GRIP = {
         "right": (_euler_xyz(15.392, 2.071, -0.303), np.array([0.0, -0.015, 0.13])),
     },
 }
-_RAW_TO_GRIP["beat_saber"] = {
-    side: _compose(_inverse(_beat_saber_adjust(-16.3, (0.0, 0.022, -0.01))), _RAW_TO_GRIP["index_knuckles"][side])
-    for side in ("left", "right")
-}
-_RAW_TO_GRIP["beat_saber_touch"] = {
-    side: _compose(_inverse(_beat_saber_adjust(-4.3, (0.0, -0.008, 0.0))), _RAW_TO_GRIP["quest_touch"][side])
-    for side in ("left", "right")
-}
 
+
+def _unity_pose(quat_xyzw, pos, side="right"):
+    """``(R, p)`` in OpenXR axes of a local pose given in Unity axes (quaternion x, y, z, w,
+    metres); ``side="left"`` mirrors a right hand's pose for the left hand (x → -x, as the game
+    mirrors its per-controller poses)."""
+    x, y, z, w = (float(v) for v in quat_xyzw)
+    R = quat_to_matrix(np.array([w, x, y, z]))
+    p = np.asarray(pos, dtype=np.float64)
+    if side == "left":
+        Mx = np.diag([-1.0, 1.0, 1.0])
+        R, p = Mx @ R @ Mx, Mx @ p
+    return _unity_local_to_openxr(R, p)
+
+
+#: the Oculus runtime's own controller pose (Beat Saber 1.29.1 and before on it) in the OpenXR grip
+#: pose: Unity axes, right hand, quaternion x, y, z, w (the game's kOculusTouchOriginOffsetToLegacy)
+OVR_NODE_IN_GRIP = ((0.5, 0.0, 0.0, 0.866025388), (0.0, -0.01964, 0.04598))
+#: the grip pose in the controller pose the game reads (``GetNodePose``), per runtime and controller
+BEAT_SABER_NODES = {
+    "openxr": _RAW_TO_GRIP["openxr_generic"],
+    "openvr_index": _RAW_TO_GRIP["index_knuckles"],
+    "openvr_touch": _RAW_TO_GRIP["quest_touch"],
+    "openvr_vive": _RAW_TO_GRIP["vive_wand"],
+    "ovr": {side: _inverse(_unity_pose(*OVR_NODE_IN_GRIP, side=side)) for side in ("left", "right")},
+}
+#: Beat Saber 1.29.4 and later: the default saber pose in the OpenXR grip pose per controller maker
+#: (Unity axes, right hand: quaternion x, y, z, w, position; ``UnityXRHelper``'s *OffsetDefaultPose)
+BEAT_SABER_XR_DEFAULT = {
+    "valve": ((-0.0012371338, 0.0, 0.0, 0.9999992), (0.0, 0.0, 0.12)),
+    "oculus": ((0.17364818, 0.0, 0.0, 0.9848077), (0.01, -0.045, 0.1)),
+    "htc": ((-0.00032738686, 0.0, 0.0, 0.99999994), (0.0, 0.008, 0.095)),
+}
+# earlier games: the game's adjustment (pitch, translation) on the node pose, and that node
+_LEGACY = {"beat_saber": ((-16.3, (0.0, 0.022, -0.01)), "openvr_index"),
+           "beat_saber_touch": ((-4.3, (0.0, -0.008, 0.0)), "openvr_touch"),
+           "beat_saber_vive": ((-4.3, (0.0, -0.008, 0.0)), "openvr_vive"),
+           "beat_saber_oculus": ((-40.0, (0.0, 0.0, 0.055)), "ovr")}
+for _name, (_adjust, _node) in _LEGACY.items():
+    _RAW_TO_GRIP[_name] = {side: _compose(_inverse(_beat_saber_adjust(*_adjust)), BEAT_SABER_NODES[_node][side])
+                           for side in ("left", "right")}
+for _name, _maker in (("beat_saber_xr", "valve"), ("beat_saber_xr_touch", "oculus"), ("beat_saber_xr_vive", "htc")):
+    _RAW_TO_GRIP[_name] = {side: _inverse(_unity_pose(*BEAT_SABER_XR_DEFAULT[_maker], side=side))
+                           for side in ("left", "right")}
+
+_BS = "Beat Saber replay saber poses"
 _DESCRIPTIONS = {
     "none": "Device poses are the joint poses (no offset).",
     "openxr_generic": "OpenXR grip poses of any controller and an OpenXR view pose for the head.",
     "quest_touch": "Meta/Oculus Touch controllers, raw device pose as reported by SteamVR/OpenVR.",
     "index_knuckles": "Valve Index (Knuckles) controllers, raw device pose as reported by SteamVR/OpenVR.",
-    "vive_wand": "HTC Vive wands, raw device pose as reported by SteamVR/OpenVR (equals their grip pose).",
-    "beat_saber": "Beat Saber replay (BSOR) saber poses, Valve controllers on SteamVR, game <= 1.29.1 "
-                  "default offsets.",
-    "beat_saber_touch": "Beat Saber replay (BSOR) saber poses, Touch controllers, game <= 1.29.1 default "
-                        "offsets.",
+    "vive_wand": "HTC Vive wands, raw device pose as reported by SteamVR/OpenVR.",
+    "beat_saber": f"{_BS}, game 1.29.1 or earlier on SteamVR, Valve Index controllers (the game's default offsets).",
+    "beat_saber_touch": f"{_BS}, game 1.29.1 or earlier on SteamVR, Oculus/Meta Touch controllers.",
+    "beat_saber_vive": f"{_BS}, game 1.29.1 or earlier on SteamVR, HTC Vive wands.",
+    "beat_saber_oculus": f"{_BS}, game 1.29.1 or earlier on the Oculus runtime (Oculus PC app, Quest).",
+    "beat_saber_xr": f"{_BS}, game 1.29.4 or later (OpenXR), Valve Index controllers.",
+    "beat_saber_xr_touch": f"{_BS}, game 1.29.4 or later (OpenXR), Oculus/Meta Touch controllers.",
+    "beat_saber_xr_vive": f"{_BS}, game 1.29.4 or later (OpenXR), HTC Vive wands.",
     "openxr_hand_tracking": "Hand tracking without controllers: OpenXR hand-tracking wrist joint poses "
                             "(XR_EXT_hand_tracking) and an OpenXR view pose for the head.",
 }
 
 PRESET_NAMES = ("none", "openxr_generic", "quest_touch", "index_knuckles", "vive_wand", "beat_saber",
-                "beat_saber_touch", "openxr_hand_tracking")
+                "beat_saber_touch", "beat_saber_vive", "beat_saber_oculus", "beat_saber_xr", "beat_saber_xr_touch",
+                "beat_saber_xr_vive", "openxr_hand_tracking")
+
 
 
 def _entry(R_blender, p_blender):
@@ -243,22 +314,49 @@ def _identity_entry():
 
 
 def _build_preset(name):
-    devices = {}
     if name == "none":
-        for d in DEVICES:
-            devices[d] = _identity_entry()
-    else:
-        R, p = _head_from_hmd()
-        devices["head"] = _entry(_M @ R, _M @ p)
-        for side in ("left", "right"):
-            if name == "openxr_hand_tracking":
-                R, p = _hand_joint_to_wrist(side)
-            else:
-                R, p = _compose(_RAW_TO_GRIP[name][side], _grip_to_wrist(side))
-            devices[f"{side}_hand"] = _entry(_M @ R, _M @ p)
-        for d in ("pelvis", "left_foot", "right_foot"):
-            devices[d] = _identity_entry()
-    return {"name": name, "description": _DESCRIPTIONS[name], "devices": devices}
+        return {"name": name, "description": _DESCRIPTIONS[name],
+                "devices": {d: _identity_entry() for d in DEVICES}}
+    if name == "openxr_hand_tracking":
+        return _offsets_from_grip(name, _DESCRIPTIONS[name], None)
+    return _offsets_from_grip(name, _DESCRIPTIONS[name], _RAW_TO_GRIP[name])
+
+
+def _offsets_from_grip(name, description, grip_in_device):
+    """An offsets dict (headset view pose for the head, trackers identity) whose hands are
+    controllers with the OpenXR grip pose at ``grip_in_device[side] = (R, p)`` (OpenXR axes), or,
+    with ``grip_in_device`` None, OpenXR hand-tracking wrist joints."""
+    R, p = _head_from_hmd()
+    devices = {"head": _entry(_M @ R, _M @ p)}
+    for side in ("left", "right"):
+        if grip_in_device is None:
+            R, p = _hand_joint_to_wrist(side)
+        else:
+            R, p = _compose(grip_in_device[side], _grip_to_wrist(side))
+        devices[f"{side}_hand"] = _entry(_M @ R, _M @ p)
+    for d in ("pelvis", "left_foot", "right_foot"):
+        devices[d] = _identity_entry()
+    return {"name": name, "description": description, "devices": devices}
+
+
+def beat_saber_replay_offsets(saber_offsets, node="openxr", description=""):
+    """Offsets of a Beat Saber replay from the saber offsets it records (BSOR's saber-offsets block).
+
+    saber_offsets: ``{"left"|"right": (pos (3,), quat (4,))}``: each saber's handle in its
+    controller's node pose as the recorder read them, Unity axes, metres, quaternion x, y, z, w.
+    node: what the game's controller pose was (:data:`BEAT_SABER_NODES`): ``"openxr"`` (game
+    1.29.4 and later: the OpenXR grip pose), ``"openvr_index"``, ``"openvr_touch"``,
+    ``"openvr_vive"`` (earlier games on SteamVR: that controller's raw OpenVR pose) or ``"ovr"``
+    (earlier games on the Oculus runtime).  Returns an offsets dict named ``beat_saber_replay``."""
+    if node not in BEAT_SABER_NODES:
+        raise ValueError(f"unknown controller pose {shown(node)}: expected one of {', '.join(BEAT_SABER_NODES)}")
+    grip_in_saber = {}
+    for side in ("left", "right"):
+        pos, quat = saber_offsets[side]
+        saber_in_node = _unity_pose(quat, pos)
+        grip_in_saber[side] = _compose(_inverse(saber_in_node), BEAT_SABER_NODES[node][side])
+    description = description or "Beat Saber replay saber poses, with the saber offsets the replay records."
+    return _offsets_from_grip("beat_saber_replay", description, grip_in_saber)
 
 
 _PRESETS = {name: _build_preset(name) for name in PRESET_NAMES}

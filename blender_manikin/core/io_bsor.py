@@ -22,15 +22,28 @@ little-endian; checked against a real replay, version 1, game 1.29.1)::
                N × 92 bytes: float32 time (song time, s), int32 fps,
                    then head, left hand, right hand, each 7 × float32
                    px, py, pz, qx, qy, qz, qw
-    (notes, walls, heights, pauses ... blocks follow; not read)
+    then blocks read only to reach the saber offsets (each a uint8 block id first):
+               2 notes: int32 count, then per note int32 id, float32
+                   event time, spawn time, int32 event type (0 good, 1 bad,
+                   2 miss, 3 bomb), and for good and bad cuts 72 bytes of
+                   cut info
+               3 walls: int32 count × 16 bytes;  4 heights: × 8;
+               5 pauses: × 12 (int64 duration, float32 time)
+               6 saber offsets (newer recorders): float32 × 14: the left
+                   saber's handle position (3) and rotation (4, x y z w) in
+                   its controller's pose as the game read it, then the
+                   right's (BeatLeader's ``ReplayRecorder.TryGetSaberOffsets``)
+               7 custom data (not read)
 
 Poses are in Unity axes (left-handed, +Y up, +Z forward), metres; the hand
 poses are the game's *saber* poses, the head pose is the HMD (eye centre).
-The game holds the saber differently on Touch controllers than on Valve ones,
-so the reader names the device-offset preset in ``metadata["offsets"]`` from the
-header's ``controller`` (and ``hmd``, ``platform``, ``trackingSystem``) text
-(:func:`beat_saber_offsets`): ``beat_saber_touch`` for Oculus/Meta Touch
-controllers, else ``beat_saber`` (Valve Index and other SteamVR controllers).
+Where the game holds the saber depends on the game's version, the VR runtime
+and the controller's maker (:mod:`.device_offsets`), so the reader names the
+device offsets in ``metadata["offsets"]``: the replay's own saber offsets when
+it records them (an offsets dict, :func:`.device_offsets.beat_saber_replay_offsets`:
+they include the player's in-game controller settings), else the preset of the
+game's defaults that its header's ``gameVersion``, ``controller`` (and ``hmd``,
+``platform``, ``trackingSystem``) text implies (:func:`beat_saber_offsets`).
 
 Repairs (each reported in :attr:`Recording.warnings`):
 
@@ -60,6 +73,7 @@ from .recording import (
     Recording, RecordingError, TrackerStream, UNITS, canonical_axes, canonical_units,
     increasing_mask, read_file_bytes, time_spikes, to_blender,
 )
+from .device_offsets import beat_saber_replay_offsets
 from .rotations import normalize
 
 MAGIC = 0x442D3D69
@@ -72,9 +86,13 @@ _INFO_STRINGS_2 = ("mode", "environment", "modifiers")
 _PRIVATE = ("playerID", "playerName")
 #: words in a replay's controller or headset names that mean Oculus/Meta Touch controllers (lower case)
 TOUCH_WORDS = ("touch", "oculus", "quest", "rift", "meta")
-#: words that mean Valve or HTC controllers, whatever the headset (a Quest streamed to SteamVR
+#: words that mean Valve Index controllers, whatever the headset (a Quest streamed to SteamVR
 #: with Index controllers is rare, an Index headset with Touch controllers rarer still)
-VALVE_WORDS = ("knuckles", "index", "vive", "wand")
+VALVE_WORDS = ("knuckles", "index", "valve")
+#: words that mean HTC Vive wands (lower case; "vive_controller" is SteamVR's name for a wand)
+HTC_WORDS = ("vive_controller", "vive controller", "wand", "htc")
+#: words in a replay's trackingSystem / platform that mean the Oculus runtime (lower case)
+OCULUS_RUNTIME_WORDS = ("oculus", "ovr", "quest", "meta")
 _SPEED_MODIFIERS = {"SS": 0.85, "FS": 1.2, "SF": 1.5}
 _MAX_STRING = 1 << 20
 
@@ -176,47 +194,146 @@ def pose_frame_masks(t, pose, warnings, devices=FRAME_DEVICES, time_name="song t
     return ok, keep
 
 
-def beat_saber_offsets(controller="", *headset) -> str:
-    """The device-offset preset of a Beat Saber recording from its hardware names.
-
-    controller: the controller's name as the recorder wrote it (BSOR ``controller``, e.g.
-    ``"OpenVR Controller(Knuckles Right) - Right"``; XROR's controller device names).
-    headset: other names (``hmd``, ``platform``, ``trackingSystem``) that decide when the
-    controller's name does not.  Returns ``"beat_saber_touch"`` when the controller (or, failing
-    that, the headset or platform) names Oculus/Meta Touch hardware, else ``"beat_saber"``.
-    """
-    def has(text, words):
-        text = str(text or "").lower()
-        return any(w in text for w in words)
-
-    if has(controller, VALVE_WORDS):
-        return "beat_saber"
-    if has(controller, TOUCH_WORDS):
-        return "beat_saber_touch"
-    if any(has(h, VALVE_WORDS) for h in headset):
-        return "beat_saber"
-    if any(has(h, TOUCH_WORDS) for h in headset):
-        return "beat_saber_touch"
-    return "beat_saber"
-
-
-#: the last game version whose saber offsets the ``beat_saber`` presets reproduce: the game moved to
-#: OpenXR in 1.29.4 and holds the saber at other, per-controller offsets since
-PRESET_GAME_VERSION = (1, 29, 1)
-
-
-def game_version_warning(version) -> str | None:
-    """A warning when Beat Saber ``version`` (``"1.34.2_1234567"``) is newer than the one the
-    presets describe (:data:`PRESET_GAME_VERSION`), else None (also for an unreadable one)."""
+def parse_game_version(version):
+    """``(major, minor, patch)`` of a Beat Saber version string (``"1.34.2_1234567"``), None when
+    unreadable."""
     try:
         parts = tuple(int(x) for x in str(version).split("_")[0].split(".")[:3])
     except ValueError:
         return None
-    if len(parts) < 2 or parts <= PRESET_GAME_VERSION:
+    return parts if len(parts) >= 2 else None
+
+
+#: the last game version whose default saber offsets were checked on a real replay here
+PRESET_GAME_VERSION = (1, 29, 1)
+#: the first game version on OpenXR (``UnityXRHelper``): the controller pose the game reads is the
+#: OpenXR grip pose, and the game holds the saber at other default offsets
+OPENXR_GAME_VERSION = (1, 29, 4)
+
+
+def _maker(controller, headset):
+    """``"valve"``, ``"oculus"`` or ``"htc"`` from the controller's name, else the headset's (and
+    platform's) names, else ``"valve"``."""
+    def has(text, words):
+        text = str(text or "").lower()
+        return any(w in text for w in words)
+
+    for names in ((controller,), headset):
+        for maker, words in (("htc", HTC_WORDS), ("valve", VALVE_WORDS), ("oculus", TOUCH_WORDS)):
+            if any(has(n, words) for n in names):
+                return maker
+    return "valve"
+
+
+def _oculus_runtime(runtime):
+    """Whether a game before 1.29.4 ran on the Oculus runtime (its ``OculusVRHelper``) rather than
+    SteamVR: the first of the ``runtime`` names that names either decides (none: SteamVR)."""
+    for text in runtime:
+        text = str(text or "").lower()
+        if "openvr" in text or "steam" in text:
+            return False
+        if any(w in text for w in OCULUS_RUNTIME_WORDS):
+            return True
+    return False
+
+
+def beat_saber_offsets(controller="", *headset, game_version=None, runtime=()) -> str:
+    """The device-offset preset of a Beat Saber recording's defaults (:mod:`.device_offsets`).
+
+    controller: the controller's name as the recorder wrote it (BSOR ``controller``, e.g.
+    ``"OpenVR Controller(Knuckles Right) - Right"``; XROR's controller device names).
+    headset: other names (``hmd``, ``platform``, ``trackingSystem``) that decide the maker when
+    the controller's name does not.  game_version: the game's version string (None or
+    unreadable: taken as 1.29.1 or earlier).  runtime: names of the VR runtime, most telling first
+    (BSOR ``trackingSystem``, ``platform``): ``OpenVR``/``steam`` or ``Oculus``/``quest``.  Returns ``beat_saber_xr``,
+    ``beat_saber_xr_touch`` or ``beat_saber_xr_vive`` for game 1.29.4 and later (Valve, Oculus,
+    HTC controllers); before it, ``beat_saber_oculus`` on the Oculus runtime, else (SteamVR)
+    ``beat_saber``, ``beat_saber_touch`` or ``beat_saber_vive``.
+    """
+    maker = _maker(controller, headset)
+    version = parse_game_version(game_version)
+    if version is not None and version >= OPENXR_GAME_VERSION:
+        return {"valve": "beat_saber_xr", "oculus": "beat_saber_xr_touch", "htc": "beat_saber_xr_vive"}[maker]
+    if maker == "oculus" and _oculus_runtime(runtime):
+        return "beat_saber_oculus"
+    return {"valve": "beat_saber", "oculus": "beat_saber_touch", "htc": "beat_saber_vive"}[maker]
+
+
+#: what each controller pose of :data:`.device_offsets.BEAT_SABER_NODES` is, for the summary
+BEAT_SABER_NODE_NAMES = {"openxr": "the OpenXR grip pose", "openvr_index": "the Index controller's OpenVR pose",
+                         "openvr_touch": "the Touch controller's OpenVR pose",
+                         "openvr_vive": "the Vive wand's OpenVR pose", "ovr": "the Oculus runtime's pose"}
+
+
+def beat_saber_node(version, controller="", *headset, runtime=()) -> str:
+    """Which controller pose (:data:`.device_offsets.BEAT_SABER_NODES`) a replay's saber offsets
+    are measured from: the OpenXR grip pose from game 1.29.4 on, else the runtime's pose of the
+    controller (arguments as :func:`beat_saber_offsets`)."""
+    preset = beat_saber_offsets(controller, *headset, game_version=version, runtime=runtime)
+    return {"beat_saber": "openvr_index", "beat_saber_touch": "openvr_touch", "beat_saber_vive": "openvr_vive",
+            "beat_saber_oculus": "ovr"}.get(preset, "openxr")
+
+
+_CUT_BYTES = 72           # a good or bad cut's info in the notes block
+_RECORD_BYTES = {3: 16, 4: 8, 5: 12}     # walls, heights, pauses
+
+
+def read_saber_offsets(r, warnings):
+    """The saber offsets of the blocks after the frames (``r`` just past them), or None.
+
+    Returns ``{"left"|"right": (pos (3,), quat (4,) x, y, z, w)}`` (Unity axes, metres), None when
+    the file has no saber-offsets block or one the recorder left empty (all zero, identity: it
+    found no controller).  A tail that cannot be read, or offsets that are not a rigid pose within
+    half a metre of the controller, add a warning and give None: the motion is read all the same."""
+    try:
+        while r.o < len(r.b):
+            at = r.o
+            block = r.unpack("<B", "block id")
+            if block == 2:
+                n = r.unpack("<i", "note count")
+                if n < 0:
+                    raise RecordingError(f"negative note count {n}", path=r.path, offset=at + 1)
+                for _ in range(n):
+                    kind = r.unpack("<iffi", "note")[3]
+                    if kind in (0, 1):
+                        r.need(_CUT_BYTES, "note cut info")
+                        r.o += _CUT_BYTES
+            elif block in _RECORD_BYTES:
+                n = r.unpack("<i", "record count")
+                if n < 0:
+                    raise RecordingError(f"negative record count {n}", path=r.path, offset=at + 1)
+                r.need(n * _RECORD_BYTES[block], f"block {block}")
+                r.o += n * _RECORD_BYTES[block]
+            elif block == 6:
+                v = np.array(r.unpack("<14f", "saber offsets"), dtype=np.float64)
+                sides = {"left": (v[0:3], v[3:7]), "right": (v[7:10], v[10:14])}
+                if all(not p.any() and np.allclose(q, [0, 0, 0, 1]) for p, q in sides.values()):
+                    return None
+                for side, (p, q) in sides.items():
+                    if (not np.all(np.isfinite(v)) or abs(np.linalg.norm(q) - 1.0) > 0.01
+                            or np.linalg.norm(p) > 0.5):
+                        warnings.append(f"saber offsets at byte offset {at} are not a saber held in the hand "
+                                        f"({side}: position {np.round(p, 3).tolist()} m, rotation "
+                                        f"{np.round(q, 3).tolist()}): the game's default offsets are used")
+                        return None
+                return {side: (p, q / np.linalg.norm(q)) for side, (p, q) in sides.items()}
+            else:
+                return None          # custom data (7) or a block this reader does not know
+    except RecordingError as exc:
+        warnings.append(f"the blocks after the motion frames could not be read ({exc}); the game's default "
+                        f"saber offsets are used")
+    return None
+
+
+def game_version_warning(version) -> str | None:
+    """A warning when Beat Saber ``version`` is newer than the ones the presets were checked
+    against on real replays (1.29.1 and earlier), else None (also for an unreadable one)."""
+    parts = parse_game_version(version)
+    if parts is None or parts <= PRESET_GAME_VERSION:
         return None
-    return (f"Beat Saber {str(version).split('_')[0]}: the beat_saber offsets are the game's up to "
-            f"{'.'.join(map(str, PRESET_GAME_VERSION))} (it holds the saber at other offsets since its move to "
-            f"OpenXR in 1.29.4); if the hands look turned, edit the offsets")
+    return (f"Beat Saber {str(version).split('_')[0]}: the replay does not record the player's saber offsets, so "
+            f"the game's defaults for {'.'.join(map(str, OPENXR_GAME_VERSION))} and later are used (not checked "
+            f"on a real replay here); if the hands look turned, edit the offsets")
 
 
 def pose_frames_to_streams(t, pose, ok, devices, axes, units):
@@ -294,11 +411,24 @@ def parse_bsor(data: bytes, path="<bytes>", axes=None, units=None) -> Recording:
     meta.update(format="bsor", bsor_version=int(version), axes=axes, units=units,
                 frames_in_file=int(n), frames_kept=int(keep.sum()), time_scale=float(speed),
                 game_fps_median=float(np.median(fps[keep])) if keep.any() else float("nan"))
-    meta["offsets"] = beat_saber_offsets(info.get("controller"), info.get("hmd"), info.get("platform"),
-                                         info.get("trackingSystem"))
-    newer = game_version_warning(info.get("gameVersion", ""))
-    if newer:
-        warnings.append(newer)
+    r.o += n * FRAME_BYTES
+    saber = read_saber_offsets(r, warnings)
+    game = info.get("gameVersion", "")
+    runtime = (info.get("trackingSystem"), info.get("platform"))
+    if saber is not None:
+        node = beat_saber_node(game, info.get("controller"), info.get("hmd"), info.get("platform"),
+                               runtime=runtime)
+        meta["saber_offsets"] = {side: {"pos": [float(v) for v in saber[side][0]],
+                                        "rot_xyzw": [float(v) for v in saber[side][1]]} for side in saber}
+        meta["offsets"] = beat_saber_replay_offsets(
+            saber, node, f"the player's saber offsets the replay records (Beat Saber {str(game).split('_')[0]}, "
+                         f"from {BEAT_SABER_NODE_NAMES[node]})")
+    else:
+        meta["offsets"] = beat_saber_offsets(info.get("controller"), info.get("hmd"), info.get("platform"),
+                                             game_version=game, runtime=runtime)
+        newer = game_version_warning(game)
+        if newer:
+            warnings.append(newer)
     if info.get("leftHanded"):
         warnings.append("the replay was played in left-handed mode: check that left and right are not swapped")
     return Recording(streams=streams, source=path, metadata=meta, warnings=warnings)

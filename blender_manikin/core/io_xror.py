@@ -14,8 +14,10 @@ Schema this reader relies on (checked on ``../shared/data/vr/xror-beatsaber-samp
   or whose axes are not a pose is left out with a warning, its numbers skipped;
 * Unity axes (left-handed, +Y up, +Z forward) and metres, by the format's convention;
 * ``info.software.app.name`` names the application (``Beat Saber``: the hand poses are saber
-  poses, so the ``beat_saber`` device offsets apply, or ``beat_saber_touch`` when the
-  controllers' names say Oculus/Meta Touch, as for ``.bsor``, :func:`.io_bsor.beat_saber_offsets`; any other app: the
+  poses, so the preset of the game's default saber offsets for its version
+  (``info.software.app.version``), runtime and controllers applies, as for ``.bsor``
+  (:func:`.io_bsor.beat_saber_offsets`: ``beat_saber`` for Valve controllers on game 1.29.1 and
+  before, ``beat_saber_touch``, ``beat_saber_xr`` ...); any other app: the
   format's default, ``openxr_generic``: the HEAD device is the headset's pose between the eyes,
   as XR runtimes report it, and the hands are taken as controller grip poses, or, when every
   hand device's ``type`` says ``HAND`` (tracked hands, no controller), as OpenXR hand-tracking
@@ -207,7 +209,8 @@ def parse_xror(data: bytes, path="<bytes>", axes=None, units=None) -> Recording:
     if offsets == "beat_saber":            # Touch or Valve controllers: the game holds the saber differently
         hands = [str(d.get("name", "")) for d in hand_devices]
         heads = [str(d.get("name", "")) for d, n in zip(used, names) if n == "head"]
-        offsets = beat_saber_offsets(" ".join(hands), *heads, meta["runtime"], meta["api"])
+        offsets = beat_saber_offsets(" ".join(hands), *heads, meta["runtime"], meta["api"],
+                                     game_version=meta["app_version"], runtime=(meta["runtime"], meta["api"]))
         newer = game_version_warning(meta["app_version"])
         if newer:
             warnings.append(newer)

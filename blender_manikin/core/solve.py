@@ -292,7 +292,8 @@ def fix_swapped_sides(pos, quat, valid, fps):
 def resolve_offsets(offsets, recording):
     """``"auto"`` → the preset the recording implies, else ``offsets`` unchanged.
 
-    auto: the file's ``# offsets: PRESET`` metadata when it names a preset; else the default of
+    auto: the file's ``# offsets: PRESET`` metadata when it names a preset, or the offsets the file
+    records (a dict: a Beat Saber replay's own saber offsets, :mod:`.io_bsor`); else the default of
     the file's format (:mod:`.formats`: ``beat_saber`` for a ``.bsor`` replay, whose hand poses
     are saber poses; ``none`` otherwise: the device poses are taken as joint poses).
     """
@@ -302,6 +303,8 @@ def resolve_offsets(offsets, recording):
     meta = (getattr(recording, "metadata", None) or {}).get("offsets")
     if isinstance(meta, str) and meta.strip() in device_offsets.PRESET_NAMES:
         return meta.strip()
+    if isinstance(meta, dict) and meta.get("devices"):
+        return meta
     return formats.default_offsets(str(getattr(recording, "source", "")))
 
 
@@ -322,13 +325,17 @@ def offsets_note(setting, resolved, recording=None, guessed=None):
     (:mod:`.offsets_auto`; ``guessed``: why).  ``None`` when nothing needs saying: a typed preset
     or offsets the user gave (they know what they chose), or ``auto`` giving ``none`` for a format
     whose poses are the joints' own."""
-    if not (isinstance(setting, str) and setting.lower() == "auto") or not isinstance(resolved, str):
+    if not (isinstance(setting, str) and setting.lower() == "auto"):
+        return None
+    meta = (getattr(recording, "metadata", None) or {}).get("offsets")
+    if isinstance(resolved, dict) and resolved is meta:
+        return f"offsets {resolved.get('name', 'custom')} (auto: {resolved.get('description') or 'from the file'})"
+    if not isinstance(resolved, str):
         return None
     if guessed:
         return f"offsets {resolved} (auto: {guessed}; choose offsets none if the head samples are the head joint's)"
     if resolved == "none":
         return None
-    meta = (getattr(recording, "metadata", None) or {}).get("offsets")
     why = "from the file" if isinstance(meta, str) and meta.strip() == resolved else "the format's default"
     return f"offsets {resolved} (auto: {why})"
 
