@@ -284,7 +284,9 @@ def read_saber_offsets(r, warnings):
     Returns ``{"left"|"right": (pos (3,), quat (4,) x, y, z, w)}`` (Unity axes, metres), None when
     the file has no saber-offsets block or one the recorder left empty (all zero, identity: it
     found no controller).  A tail that cannot be read, or offsets that are not a rigid pose within
-    half a metre of the controller, add a warning and give None: the motion is read all the same."""
+    half a metre of the controller, add a warning and give None: the motion is read all the same.
+    The recorder measures the saber's handle transform while the frames hold the saber's own
+    transform; the two are taken to be one (not checked on a replay that records offsets)."""
     try:
         while r.o < len(r.b):
             at = r.o
