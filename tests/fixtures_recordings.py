@@ -188,13 +188,15 @@ XROR_POSE_AXES = ["x", "y", "z", "i", "j", "k", "1"]
 
 
 def xror_bytes(t, pose, joints=("HEAD", "HAND_LEFT", "HAND_RIGHT"), app="Some App", axes=None, width=None,
-               names=None):
+               names=None, software=None):
     """An XROR document (BSON, fpzip-compressed float32 frames), as the xror repository writes it.
 
     t ``(n,)`` seconds; pose ``(n, D, 7)`` position x, y, z and quaternion x, y, z, w per device
     (Unity axes, metres); joints: the XROR joint name of each device.  axes / width: corrupt the
     device axes list or cut the frame width (for error tests).  Needs pymongo's bson and fpzip
-    (requirements-xror.txt).  names: each device's hardware name (default: its joint name)."""
+    (requirements-xror.txt).  names: each device's hardware name (default: its joint name).
+    software: more ``info.software`` fields (``runtime``, ``api``; an ``app_version`` key sets
+    ``app.version``, default "1"), as the xror repository's BSOR conversion fills them."""
     import bson
     import fpzip
     n = len(t)
@@ -205,7 +207,8 @@ def xror_bytes(t, pose, joints=("HEAD", "HAND_LEFT", "HAND_RIGHT"), app="Some Ap
     doc = {"$schema": "https://metaguard.github.io/xror/schema/v1.0.0/schema.json",
            "info": {"hardware": {"devices": [{"name": nm, "type": "x", "joint": j, "axes": axes or XROR_POSE_AXES}
                                              for j, nm in zip(joints, names or joints)]},
-                    "software": {"app": {"name": app, "version": "1"}}},
+                    "software": {"app": {"name": app, "version": (software or {}).get("app_version", "1")},
+                                 **{k: v for k, v in (software or {}).items() if k != "app_version"}}},
            "frames": fpzip.compress(np.ascontiguousarray(rows[None, None])), "events": []}
     return bson.encode(doc)
 

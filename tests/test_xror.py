@@ -16,14 +16,14 @@ VR = os.path.join(os.path.dirname(ROOT), "shared", "data", "vr")
 
 
 def _xror(n=120, devices=("HEAD", "HAND_LEFT", "HAND_RIGHT"), app="Some App", axes=None, width=None, seed=0,
-          names=None):
+          names=None, software=None):
     rng = np.random.default_rng(seed)
     t = np.arange(n) / 90.0
     pose = np.zeros((n, len(devices), 7))
     pose[..., :3] = rng.normal(size=(n, len(devices), 3)) * 0.1 + [0, 1.5, 0]
     q = rng.normal(size=(n, len(devices), 4))
     pose[..., 3:] = q / np.linalg.norm(q, axis=-1, keepdims=True)
-    return xror_bytes(t, pose, devices, app=app, axes=axes, width=width, names=names), t, pose
+    return xror_bytes(t, pose, devices, app=app, axes=axes, width=width, names=names, software=software), t, pose
 
 
 def test_synthetic_xror_reads_in_blender_axes(tmp_path):
@@ -59,14 +59,22 @@ def test_auto_offsets_of_an_xror_take_by_its_app(tmp_path):
     assert formats.default_offsets("x.xror") == "openxr_generic" and formats.default_offsets("x.csv") == "none"
 
 
-@pytest.mark.parametrize("names,want", [
-    (("VIVE Pro 2", "OpenVR Controller(Knuckles Left) - Left", "OpenVR Controller(Knuckles Right) - Right"),
+_QUEST = {"runtime": "oculus", "api": "Oculus", "app_version": "1.29.1_123"}   # a Quest BSOR's, converted
+
+
+@pytest.mark.parametrize("names,software,want", [
+    (("VIVE Pro 2", "OpenVR Controller(Knuckles Left) - Left", "OpenVR Controller(Knuckles Right) - Right"), None,
      "beat_saber"),
-    (("Oculus Quest2", "Oculus Touch Controller - Left", "Oculus Touch Controller - Right"), "beat_saber_touch"),
-    (("Meta Quest 3", "Left Controller", "Right Controller"), "beat_saber_touch"),
+    (("Oculus Quest2", "Oculus Touch Controller - Left", "Oculus Touch Controller - Right"), None, "beat_saber_touch"),
+    (("Meta Quest 3", "Left Controller", "Right Controller"), None, "beat_saber_touch"),
+    (("Oculus Quest2", "Oculus Touch Controller - Left", "Oculus Touch Controller - Right"), _QUEST,
+     "beat_saber_oculus"),
+    (("Meta Quest 3", "Left Controller", "Right Controller"), dict(_QUEST, app_version="1.37.0_9"),
+     "beat_saber_xr_touch"),
 ])
-def test_a_beat_saber_session_on_touch_controllers_gets_the_touch_preset(tmp_path, names, want):
-    data, _, _ = _xror(app="Beat Saber", names=names)
+def test_a_beat_saber_session_gets_the_preset_of_its_controllers_runtime_and_version(tmp_path, names, software,
+                                                                                     want):
+    data, _, _ = _xror(app="Beat Saber", names=names, software=software)
     (tmp_path / "bs.xror").write_bytes(data)
     assert formats.load_recording(tmp_path / "bs.xror").metadata["offsets"] == want
 

@@ -210,7 +210,7 @@ def parse_xror(data: bytes, path="<bytes>", axes=None, units=None) -> Recording:
         hands = [str(d.get("name", "")) for d in hand_devices]
         heads = [str(d.get("name", "")) for d, n in zip(used, names) if n == "head"]
         offsets = beat_saber_offsets(" ".join(hands), *heads, meta["runtime"], meta["api"],
-                                     game_version=meta["app_version"], runtime=(meta["runtime"], meta["api"]))
+                                     game_version=meta["app_version"], runtime=(meta["api"], meta["runtime"]))
         newer = game_version_warning(meta["app_version"])
         if newer:
             warnings.append(newer)
