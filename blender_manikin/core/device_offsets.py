@@ -222,6 +222,8 @@ def _beat_saber_adjust(pitch_deg, translate):
     return _unity_local_to_openxr(R_u, p_u)
 
 
+# preset -> side -> (R, p): the OpenXR grip pose in the pose the recording holds (a controller's raw
+# pose, a Beat Saber saber ...), OpenXR axes, metres
 _RAW_TO_GRIP = {
     "openxr_generic": {"left": (np.eye(3), np.zeros(3)), "right": (np.eye(3), np.zeros(3))},
     "vive_wand": {"left": (_rx(5.037), np.array([0.0, -0.015, 0.097])),
