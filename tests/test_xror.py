@@ -166,3 +166,21 @@ def test_the_real_sample_matches_its_bsor():
         assert np.abs(sx.time - sb.time).max() < 1e-6
         assert np.abs(sx.pos - sb.pos).max() < 1e-6
         assert np.abs(np.abs((sx.quat * sb.quat).sum(-1)) - 1.0).max() < 1e-6
+
+
+@pytest.mark.parametrize("app,activity,scale", [
+    ("Beat Saber", {"modifiers": "FS,GN"}, 1.2),                  # Faster Song: song time runs 1.2x
+    ("Beat Saber", {"modifiers": "SS", "speed": 1.5}, 0.85 * 1.5),  # Slower Song, in practice at 1.5x
+    ("Beat Saber", {}, 1.0),
+    ("Some App", {"modifiers": "FS"}, 1.0),                       # another app's times are its own
+])
+def test_a_beat_saber_sessions_song_time_becomes_real_time(tmp_path, app, activity, scale):
+    """XROR from a BSOR keeps its song times and the play's modifiers (info.software.activity):
+    the frames are read on real time, as the .bsor would be."""
+    data, t, _ = _xror(app=app, software={"activity": activity} if activity else None)
+    (tmp_path / "s.xror").write_bytes(data)
+    rec = formats.load_recording(tmp_path / "s.xror")
+    assert rec.metadata["time_scale"] == pytest.approx(scale)
+    kept = rec.streams["head"].time
+    assert kept[-1] == pytest.approx(np.float32(t[-1]) / scale, rel=1e-6)
+    assert any("song speed" in w for w in rec.warnings) == (scale != 1.0)

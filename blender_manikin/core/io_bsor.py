@@ -338,6 +338,30 @@ def game_version_warning(version) -> str | None:
             f"on a real replay here); if the hands look turned, edit the offsets")
 
 
+def song_speed(modifiers, practice=0.0, warnings=None) -> float:
+    """How much faster than real time a Beat Saber song ran: the speed modifiers' factors (SS
+    0.85, FS 1.2, SF 1.5; ``modifiers`` comma separated or a list) times the practice speed
+    (``practice``, 0 or 1: none).  Frame times are song times, so real time is frame time / this.
+    A factor other than 1 appends a warning to ``warnings`` when given."""
+    if isinstance(modifiers, (list, tuple)):
+        mods = [str(m) for m in modifiers]
+    else:
+        mods = str(modifiers or "").split(",")
+    speed = 1.0
+    for m in mods:
+        speed *= _SPEED_MODIFIERS.get(m.strip().upper(), 1.0)
+    try:
+        practice = float(practice or 0.0)
+    except (TypeError, ValueError):
+        practice = 0.0
+    if np.isfinite(practice) and practice > 0 and abs(practice - 1.0) > 1e-6:
+        speed *= practice
+    if abs(speed - 1.0) > 1e-9 and warnings is not None:
+        warnings.append(f"song speed x{speed:g} (modifiers {','.join(m.strip() for m in mods if m.strip())!r}, "
+                        f"practice speed {practice:g}): frame times divided by {speed:g} to get real time")
+    return speed
+
+
 def pose_frames_to_streams(t, pose, ok, devices, axes, units):
     """``{device: TrackerStream}`` (Blender axes, metres) from pose frames ``(N, D, 7)``
     (position, quaternion x, y, z, w) in ``axes`` and ``units``, times ``t`` ``(N,)`` seconds."""
@@ -395,18 +419,7 @@ def parse_bsor(data: bytes, path="<bytes>", axes=None, units=None) -> Recording:
         pose = frames["pose"].astype(np.float64)          # (N, 3 devices, 7)
     fps = frames["fps"].astype(np.int64)
     ok, keep = pose_frame_masks(t, pose, warnings)
-    speed = 1.0
-    mods = [m.strip().upper() for m in info.get("modifiers", "").split(",") if m.strip()]
-    for m in mods:
-        if m in _SPEED_MODIFIERS:
-            speed *= _SPEED_MODIFIERS[m]
-    practice = info.get("speed", 0.0)
-    if np.isfinite(practice) and practice > 0 and abs(practice - 1.0) > 1e-6:
-        speed *= practice
-    if abs(speed - 1.0) > 1e-9:
-        warnings.append(f"song speed x{speed:g} (modifiers {info.get('modifiers')!r}, practice speed "
-                        f"{practice:g}): frame times divided by {speed:g} to get real time")
-
+    speed = song_speed(info.get("modifiers", ""), info.get("speed", 0.0), warnings)
     streams = pose_frames_to_streams(t[keep] / speed, pose[keep], ok[keep], FRAME_DEVICES, axes, units)
 
     meta = {k: v for k, v in info.items() if k not in _PRIVATE}

@@ -23,7 +23,10 @@ Schema this reader relies on (checked on ``../shared/data/vr/xror-beatsaber-samp
   hand device's ``type`` says ``HAND`` (tracked hands, no controller), as OpenXR hand-tracking
   wrist joints, ``openxr_hand_tracking``;
   :mod:`.formats`);
-* as in BSOR, frame 0 is all zeros and the first frames may share time 0.
+* as in BSOR, frame 0 is all zeros and the first frames may share time 0, and a Beat Saber
+  session's frame times are song times: with a speed modifier in
+  ``info.software.activity.modifiers`` (SS, FS, SF) or a practice speed (``activity.speed``)
+  they are divided by the song's speed, as for ``.bsor`` (:func:`.io_bsor.song_speed`).
 
 ``events`` (note cuts and the like) are not read.  Needs the ``bson`` codec of ``pymongo`` and
 the ``fpzip`` package (``pip install 'blender-manikin[xror]'``).
@@ -34,7 +37,9 @@ import os
 
 import numpy as np
 
-from .io_bsor import beat_saber_offsets, game_version_warning, pose_frame_masks, pose_frames_to_streams
+from .io_bsor import (
+    beat_saber_offsets, game_version_warning, pose_frame_masks, pose_frames_to_streams, song_speed,
+)
 from .recording import Recording, RecordingError, canonical_axes, canonical_units, read_file_bytes
 
 #: XROR joint names -> devices
@@ -192,16 +197,20 @@ def parse_xror(data: bytes, path="<bytes>", axes=None, units=None) -> Recording:
     ok, keep = pose_frame_masks(t, pose, warnings, devices=names, time_name="time")
     if not keep.any():
         raise RecordingError("no frame has a valid pose", path=path)
-    streams = pose_frames_to_streams(t[keep], pose[keep], ok[keep], names, axes, units)
     info = doc.get("info", {}) if isinstance(doc.get("info"), dict) else {}
     software = info.get("software", {}) if isinstance(info.get("software"), dict) else {}
     app = software.get("app", {}) if isinstance(software.get("app"), dict) else {}
+    activity = software.get("activity", {}) if isinstance(software.get("activity"), dict) else {}
+    speed = 1.0
+    if APP_OFFSETS.get(str(app.get("name", "")).strip().lower()) == "beat_saber":   # frame times are song times
+        speed = song_speed(activity.get("modifiers", ""), activity.get("speed", 0.0), warnings)
+    streams = pose_frames_to_streams(t[keep] / speed, pose[keep], ok[keep], names, axes, units)
     meta = {"format": "xror", "schema": str(doc.get("$schema", "")), "axes": axes, "units": units,
             "app": str(app.get("name", "")), "app_version": str(app.get("version", "")),
             "api": str(software.get("api", "")), "runtime": str(software.get("runtime", "")),
             "hardware": [str(d.get("name", "")) for d in devices],
             "frames_in_file": int(frames.shape[0]), "frames_kept": int(keep.sum())}
-    activity = software.get("activity", {}) if isinstance(software.get("activity"), dict) else {}
+    meta["time_scale"] = float(speed)
     if "height" in activity:
         meta["height"] = float(activity["height"])
     offsets = APP_OFFSETS.get(meta["app"].strip().lower())
