@@ -93,7 +93,8 @@ collected by the xrizer project, ``src/input/profiles/*.rs``):
     is its OpenXR grip pose, and the game's default saber pose in it is, per
     maker (Unity axes, right hand; the left mirrored): Valve (0, 0, 0.12) m,
     R_x(-0.14°); Oculus (0.01, -0.045, 0.1) m, R_x(20°); HTC (0, 0.008,
-    0.095) m, R_x(-0.04°).
+    0.095) m, R_x(-0.04°); other makers (Pico, Windows Mixed Reality) none:
+    the saber is the grip pose, ``openxr_generic``.
 
   A replay that records the player's own saber offsets (the BSOR
   saber-offsets block, :mod:`.io_bsor`) is solved with those instead

@@ -213,7 +213,8 @@ OPENXR_GAME_VERSION = (1, 29, 4)
 
 def _maker(controller, headset):
     """``"valve"``, ``"oculus"`` or ``"htc"`` from the controller's name, else the headset's (and
-    platform's) names, else ``"valve"``."""
+    platform's) names, else ``"other"`` (a maker the game has no offsets for: Pico, Windows Mixed
+    Reality ...)."""
     def has(text, words):
         text = str(text or "").lower()
         return any(w in text for w in words)
@@ -222,7 +223,7 @@ def _maker(controller, headset):
         for maker, words in (("htc", HTC_WORDS), ("valve", VALVE_WORDS), ("oculus", TOUCH_WORDS)):
             if any(has(n, words) for n in names):
                 return maker
-    return "valve"
+    return "other"
 
 
 def _oculus_runtime(runtime):
@@ -245,18 +246,23 @@ def beat_saber_offsets(controller="", *headset, game_version=None, runtime=()) -
     headset: other names (``hmd``, ``platform``, ``trackingSystem``) that decide the maker when
     the controller's name does not.  game_version: the game's version string (None or
     unreadable: taken as 1.29.1 or earlier).  runtime: names of the VR runtime, most telling first
-    (BSOR ``trackingSystem``, ``platform``): ``OpenVR``/``steam`` or ``Oculus``/``quest``.  Returns ``beat_saber_xr``,
-    ``beat_saber_xr_touch`` or ``beat_saber_xr_vive`` for game 1.29.4 and later (Valve, Oculus,
-    HTC controllers); before it, ``beat_saber_oculus`` on the Oculus runtime, else (SteamVR)
-    ``beat_saber``, ``beat_saber_touch`` or ``beat_saber_vive``.
+    (BSOR ``trackingSystem``, ``platform``): ``OpenVR``/``steam`` or ``Oculus``/``quest``.
+    Returns, for game 1.29.4 and later, ``beat_saber_xr``, ``beat_saber_xr_touch`` or
+    ``beat_saber_xr_vive`` (Valve, Oculus, HTC controllers), or ``openxr_generic`` for a maker
+    the game has no offsets for (it holds the saber at the grip pose); before 1.29.4,
+    ``beat_saber_oculus`` on the Oculus runtime, else (SteamVR) ``beat_saber``,
+    ``beat_saber_touch`` or ``beat_saber_vive``, and ``beat_saber`` when the names say nothing
+    (the game's offsets for other makers sit on a raw pose this reader has no grip for).
     """
     maker = _maker(controller, headset)
     version = parse_game_version(game_version)
     if version is not None and version >= OPENXR_GAME_VERSION:
-        return {"valve": "beat_saber_xr", "oculus": "beat_saber_xr_touch", "htc": "beat_saber_xr_vive"}[maker]
+        return {"valve": "beat_saber_xr", "oculus": "beat_saber_xr_touch", "htc": "beat_saber_xr_vive",
+                "other": "openxr_generic"}[maker]
     if maker == "oculus" and _oculus_runtime(runtime):
         return "beat_saber_oculus"
-    return {"valve": "beat_saber", "oculus": "beat_saber_touch", "htc": "beat_saber_vive"}[maker]
+    return {"valve": "beat_saber", "oculus": "beat_saber_touch", "htc": "beat_saber_vive",
+            "other": "beat_saber"}[maker]
 
 
 #: what each controller pose of :data:`.device_offsets.BEAT_SABER_NODES` is, for the summary
