@@ -271,17 +271,25 @@ BEAT_SABER_XR_DEFAULT = {
     "oculus": ((0.17364818, 0.0, 0.0, 0.9848077), (0.01, -0.045, 0.1)),
     "htc": ((-0.00032738686, 0.0, 0.0, 0.99999994), (0.0, 0.008, 0.095)),
 }
-# earlier games: the game's adjustment (pitch, translation) on the node pose, and that node
-_LEGACY = {"beat_saber": ((-16.3, (0.0, 0.022, -0.01)), "openvr_index"),
-           "beat_saber_touch": ((-4.3, (0.0, -0.008, 0.0)), "openvr_touch"),
-           "beat_saber_vive": ((-4.3, (0.0, -0.008, 0.0)), "openvr_vive"),
-           "beat_saber_oculus": ((-40.0, (0.0, 0.0, 0.055)), "ovr")}
-for _name, (_adjust, _node) in _LEGACY.items():
-    _RAW_TO_GRIP[_name] = {side: _compose(_inverse(_beat_saber_adjust(*_adjust)), BEAT_SABER_NODES[_node][side])
-                           for side in ("left", "right")}
-for _name, _maker in (("beat_saber_xr", "valve"), ("beat_saber_xr_touch", "oculus"), ("beat_saber_xr_vive", "htc")):
-    _RAW_TO_GRIP[_name] = {side: _inverse(_unity_pose(*BEAT_SABER_XR_DEFAULT[_maker], side=side))
-                           for side in ("left", "right")}
+#: Beat Saber 1.29.1 and earlier: per preset, the game's adjustment of the controller pose it read
+#: (pitch in degrees, translation in metres: Rotate then Translate, Unity axes) and which pose that
+#: was (:data:`BEAT_SABER_NODES`)
+BEAT_SABER_LEGACY = {"beat_saber": ((-16.3, (0.0, 0.022, -0.01)), "openvr_index"),
+                     "beat_saber_touch": ((-4.3, (0.0, -0.008, 0.0)), "openvr_touch"),
+                     "beat_saber_vive": ((-4.3, (0.0, -0.008, 0.0)), "openvr_vive"),
+                     "beat_saber_oculus": ((-40.0, (0.0, 0.0, 0.055)), "ovr")}
+#: Beat Saber 1.29.4 and later: the preset of each controller maker's default saber pose
+BEAT_SABER_XR_PRESETS = {"valve": "beat_saber_xr", "oculus": "beat_saber_xr_touch", "htc": "beat_saber_xr_vive"}
+#: what each controller pose of :data:`BEAT_SABER_NODES` is, for the solve summary
+BEAT_SABER_NODE_NAMES = {"openxr": "the OpenXR grip pose", "openvr_index": "the Index controller's OpenVR pose",
+                         "openvr_touch": "the Touch controller's OpenVR pose",
+                         "openvr_vive": "the Vive wand's OpenVR pose", "ovr": "the Oculus runtime's pose"}
+_RAW_TO_GRIP.update({name: {side: _compose(_inverse(_beat_saber_adjust(*adjust)), BEAT_SABER_NODES[node][side])
+                            for side in ("left", "right")}
+                     for name, (adjust, node) in BEAT_SABER_LEGACY.items()})
+_RAW_TO_GRIP.update({name: {side: _inverse(_unity_pose(*BEAT_SABER_XR_DEFAULT[maker], side=side))
+                            for side in ("left", "right")}
+                     for maker, name in BEAT_SABER_XR_PRESETS.items()})
 
 _BS = "Beat Saber replay saber poses"
 _DESCRIPTIONS = {

@@ -73,7 +73,9 @@ from .recording import (
     Recording, RecordingError, TrackerStream, UNITS, canonical_axes, canonical_units,
     increasing_mask, read_file_bytes, time_spikes, to_blender,
 )
-from .device_offsets import beat_saber_replay_offsets
+from .device_offsets import (
+    BEAT_SABER_LEGACY, BEAT_SABER_NODE_NAMES, BEAT_SABER_XR_PRESETS, beat_saber_replay_offsets,
+)
 from .rotations import normalize
 
 MAGIC = 0x442D3D69
@@ -257,18 +259,11 @@ def beat_saber_offsets(controller="", *headset, game_version=None, runtime=()) -
     maker = _maker(controller, headset)
     version = parse_game_version(game_version)
     if version is not None and version >= OPENXR_GAME_VERSION:
-        return {"valve": "beat_saber_xr", "oculus": "beat_saber_xr_touch", "htc": "beat_saber_xr_vive",
-                "other": "openxr_generic"}[maker]
+        return BEAT_SABER_XR_PRESETS.get(maker, "openxr_generic")
     if maker == "oculus" and _oculus_runtime(runtime):
         return "beat_saber_oculus"
     return {"valve": "beat_saber", "oculus": "beat_saber_touch", "htc": "beat_saber_vive",
             "other": "beat_saber"}[maker]
-
-
-#: what each controller pose of :data:`.device_offsets.BEAT_SABER_NODES` is, for the summary
-BEAT_SABER_NODE_NAMES = {"openxr": "the OpenXR grip pose", "openvr_index": "the Index controller's OpenVR pose",
-                         "openvr_touch": "the Touch controller's OpenVR pose",
-                         "openvr_vive": "the Vive wand's OpenVR pose", "ovr": "the Oculus runtime's pose"}
 
 
 def beat_saber_node(version, controller="", *headset, runtime=()) -> str:
@@ -276,8 +271,7 @@ def beat_saber_node(version, controller="", *headset, runtime=()) -> str:
     are measured from: the OpenXR grip pose from game 1.29.4 on, else the runtime's pose of the
     controller (arguments as :func:`beat_saber_offsets`)."""
     preset = beat_saber_offsets(controller, *headset, game_version=version, runtime=runtime)
-    return {"beat_saber": "openvr_index", "beat_saber_touch": "openvr_touch", "beat_saber_vive": "openvr_vive",
-            "beat_saber_oculus": "ovr"}.get(preset, "openxr")
+    return BEAT_SABER_LEGACY[preset][1] if preset in BEAT_SABER_LEGACY else "openxr"
 
 
 _CUT_BYTES = 72           # a good or bad cut's info in the notes block

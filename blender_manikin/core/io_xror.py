@@ -201,8 +201,9 @@ def parse_xror(data: bytes, path="<bytes>", axes=None, units=None) -> Recording:
     software = info.get("software", {}) if isinstance(info.get("software"), dict) else {}
     app = software.get("app", {}) if isinstance(software.get("app"), dict) else {}
     activity = software.get("activity", {}) if isinstance(software.get("activity"), dict) else {}
+    offsets = APP_OFFSETS.get(str(app.get("name", "")).strip().lower())
     speed = 1.0
-    if APP_OFFSETS.get(str(app.get("name", "")).strip().lower()) == "beat_saber":   # frame times are song times
+    if offsets == "beat_saber":            # the frame times are song times
         speed = song_speed(activity.get("modifiers", ""), activity.get("speed", 0.0), warnings)
     streams = pose_frames_to_streams(t[keep] / speed, pose[keep], ok[keep], names, axes, units)
     meta = {"format": "xror", "schema": str(doc.get("$schema", "")), "axes": axes, "units": units,
@@ -213,9 +214,8 @@ def parse_xror(data: bytes, path="<bytes>", axes=None, units=None) -> Recording:
     meta["time_scale"] = float(speed)
     if "height" in activity:
         meta["height"] = float(activity["height"])
-    offsets = APP_OFFSETS.get(meta["app"].strip().lower())
     hand_devices = [d for d, n in zip(used, names) if n.endswith("_hand")]
-    if offsets == "beat_saber":            # Touch or Valve controllers: the game holds the saber differently
+    if offsets == "beat_saber":            # where the game holds the saber: version, runtime, controllers
         hands = [str(d.get("name", "")) for d in hand_devices]
         heads = [str(d.get("name", "")) for d, n in zip(used, names) if n == "head"]
         offsets = beat_saber_offsets(" ".join(hands), *heads, meta["runtime"], meta["api"],
