@@ -381,15 +381,21 @@ RIG_STYLES = {
          "knee": "LowerLeg", "ankle": "Foot", "foot": "ToeBase"},
         lambda s, side: f"J_Bip_{side[0].upper()}_{s}"), root="Root", stature=1.45, torso=1.1, arm=0.95, leg=0.92,
         arm_down=35.0, twist={}, facing="-Y", units=1.0, y_up=False, location=(0.6, 1.2, 0.0)),
-    # Auto-Rig Pro's deforming bones (as exported): root.x is the hips bone, the limbs' deforming
-    # bones are the *_stretch ones; a Blender rig, the object turned 30° about Z and moved
+    # Auto-Rig Pro's deforming bones as its export writes them with twist bones: root.x is the
+    # hips bone; each limb segment split in two along its length (``twist_in_chain``), the upper
+    # arm into c_arm_twist_offset > arm_stretch, the thigh into thigh_twist > thigh_stretch, the
+    # forearm into forearm_stretch > forearm_twist, the shin into leg_stretch > leg_twist; a
+    # Blender rig, the object turned 30° about Z and moved
     "auto_rig_pro": dict(names=_sided_names(
         {"pelvis": "root.x", "spine1": "spine_01.x", "spine2": "spine_02.x", "spine3": "spine_03.x",
          "neck": "neck.x", "head": "head.x"},
-        {"collar": "shoulder", "shoulder": "arm_stretch", "elbow": "forearm_stretch", "wrist": "hand",
-         "hip": "thigh_stretch", "knee": "leg_stretch", "ankle": "foot", "foot": "toes_01"},
-        lambda s, side: f"{s}.{side[0]}"), root="c_traj", stature=1.70, torso=1.03, arm=1.08, leg=0.97,
-        arm_down=50.0, twist={}, facing="-Y", units=1.0, y_up=False, yaw_deg=30.0, location=(1.5, -0.5, 0.0)),
+        {"collar": "shoulder", "shoulder": ["c_arm_twist_offset", "arm_stretch"],
+         "elbow": ["forearm_stretch", "forearm_twist"], "wrist": "hand", "hip": ["thigh_twist", "thigh_stretch"],
+         "knee": ["leg_stretch", "leg_twist"], "ankle": "foot", "foot": "toes_01"},
+        lambda s, side: [f"{x}.{side[0]}" for x in s] if isinstance(s, list) else f"{s}.{side[0]}"),
+        root="c_traj", stature=1.70, torso=1.03, arm=1.08, leg=0.97, arm_down=50.0, twist={}, facing="-Y",
+        units=1.0, y_up=False, yaw_deg=30.0, location=(1.5, -0.5, 0.0),
+        twist_in_chain=("shoulder", "elbow", "hip", "knee")),
     # Character Creator 3/4 as an FBX in centimetres lands (+Y up, object 90° about X, 0.01): two
     # neck bones, CC_Base_Pelvis between the hips bone and the thighs (``hips_parent``), two twist
     # bones per limb segment as CC makes them (``twist_chain``: Twist01 under the segment's bone at

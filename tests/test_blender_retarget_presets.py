@@ -1,6 +1,7 @@
 """Retargeting in Blender onto characters named and standing as the engines and rigging tools
 give them (tests/blender_util.py ``RIG_STYLES``): the Unreal Mannequin (UE4 and UE5, twist bones,
-IK bones, fingers, centimetres, facing +Y), a VRoid / VRM character, an Auto-Rig Pro rig, a
+IK bones, fingers, centimetres, facing +Y), a VRoid / VRM character, an Auto-Rig Pro export (each
+limb segment split into a twist and a stretch bone), a
 Character Creator 3/4 character (centimetres, +Y up; a pelvis bone between the hips bone and the
 thighs, twist bones) and a Daz Genesis 8 figure (decimetres; Bend/Twist chains, four spine bones).
 
@@ -137,7 +138,9 @@ def test_retarget_onto_an_engine_or_tool_rig(addon, style, tmp_path):
     src = _write_source(res)
     char, spec = styled_character(style)
     names = [b.name for b in char.data.bones]
-    preset = bone_maps.validate_bone_map(bone_maps.preset(style), names)
+    # the preset as choosing it by name gives it: fitted to the character (its twist bones)
+    preset = bone_maps.validate_bone_map(
+        bone_maps.fit_twist(bone_maps.preset(style), retarget_apply.bone_list(char)), names)
     # every bone the style's table names is what the preset maps (the preset's names are real)
     assert {j: b for j, b in preset.bones.items()} == {
         j: (v if isinstance(v, str) else v[0]) for j, v in spec["names"].items()}

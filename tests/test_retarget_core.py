@@ -771,21 +771,142 @@ def test_guess_orders_twist_bones_base_to_tip_and_keeps_them_below_their_segment
     rt.make_plan(body, rig, bm2)                                         # a map the retarget accepts
 
 
-def test_auto_rig_pro_preset_names_its_deforming_bones():
-    """Auto-Rig Pro deforms with root.x, spine_0N.x, shoulder.l, arm_stretch.l, forearm_stretch.l,
-    hand.l, thigh_stretch.l, leg_stretch.l, foot.l, toes_01.l (arm.l, forearm.l, thigh.l and leg.l
-    are mechanism bones of the control rig): the preset names those and the guess picks it."""
-    out = [("c_traj", None), ("root.x", "c_traj"), ("spine_01.x", "root.x"), ("spine_02.x", "spine_01.x"),
-           ("spine_03.x", "spine_02.x"), ("neck.x", "spine_03.x"), ("head.x", "neck.x")]
-    for s in ("l", "r"):
-        out += [(f"shoulder.{s}", "spine_03.x"), (f"arm_stretch.{s}", f"shoulder.{s}"),
-                (f"forearm_stretch.{s}", f"arm_stretch.{s}"), (f"hand.{s}", f"forearm_stretch.{s}"),
-                (f"index1.{s}", f"hand.{s}"), (f"thigh_stretch.{s}", "root.x"),
-                (f"leg_stretch.{s}", f"thigh_stretch.{s}"), (f"foot.{s}", f"leg_stretch.{s}"),
-                (f"toes_01.{s}", f"foot.{s}")]
-    bones = _bones(out)
-    arp = bmaps.validate_bone_map(bmaps.preset("auto_rig_pro"), [b[0] for b in bones])
-    assert arp.bones["left_shoulder"] == "arm_stretch.l" and arp.bones["right_knee"] == "leg_stretch.r"
+def _arp_rig(body, twist="c_arm_twist_offset", seed=5):
+    """An Auto-Rig Pro rig as its export writes it: ``(TargetRig, bones)``, bones as
+    :func:`bone_maps.guess_bone_map` takes them (name, parent, head, tail; metres, A-pose, rolls).
+
+    twist: the upper arm's twist bone (``c_arm_twist_offset``, or ``arm_twist`` as some exports
+    name it): each limb segment split in two along its length, ``{twist}.l`` from the shoulder
+    half-way and ``arm_stretch.l`` on to the elbow under it, ``thigh_twist.l`` > ``thigh_stretch.l``
+    from the hip, ``forearm_stretch.l`` > ``forearm_twist.l`` > ``hand.l``, ``leg_stretch.l`` >
+    ``leg_twist.l`` > ``foot.l``.  ``None``: exported without twist bones (each segment one
+    *_stretch bone)."""
+    rng = np.random.default_rng(seed)
+    P, ydir = _joint_rig_geometry(body, _scales(1.05, 0.97, 1.03), 50.0)
+    bones, B = [], []
+
+    def add(name, parent, head, y, tail=None):
+        head = np.asarray(head, float)
+        bones.append((name, parent, head, head + 0.1 * rot.normalize(y) if tail is None else tail))
+        B.append(_frame(y, rng))
+
+    add("c_traj", None, np.zeros(3), [0, 1.0, 0])
+    prev = "c_traj"
+    for jn, b in (("pelvis", "root.x"), ("spine1", "spine_01.x"), ("spine2", "spine_02.x"),
+                  ("spine3", "spine_03.x"), ("neck", "neck.x"), ("head", "head.x")):
+        add(b, prev, P[J[jn]], ydir[J[jn]])
+        prev = b
+    for side, s in (("left", "l"), ("right", "r")):
+        add(f"shoulder.{s}", "spine_03.x", P[J[f"{side}_collar"]], ydir[J[f"{side}_collar"]])
+        chains = ((f"shoulder.{s}", ("shoulder", "elbow", "wrist"),
+                   (f"{twist}.{s}", f"arm_stretch.{s}"), (f"forearm_stretch.{s}", f"forearm_twist.{s}"),
+                   f"hand.{s}"),
+                  ("root.x", ("hip", "knee", "ankle"), (f"thigh_twist.{s}", f"thigh_stretch.{s}"),
+                   (f"leg_stretch.{s}", f"leg_twist.{s}"), f"foot.{s}"))
+        for parent, (a, m, e), upper, lower, end in chains:
+            pa, pm, pe = (P[J[f"{side}_{n}"]] for n in (a, m, e))
+            for (hd, tl), names in (((pa, pm), upper), ((pm, pe), lower)):
+                if twist is None:       # one *_stretch bone over the whole segment
+                    stretch = next(n for n in names if "_stretch." in n)
+                    add(stretch, parent, hd, tl - hd, tl)
+                    parent = stretch
+                    continue
+                half = 0.5 * (hd + tl)
+                add(names[0], parent, hd, tl - hd, half)
+                add(names[1], names[0], half, tl - hd, tl)
+                parent = names[1]
+            add(end, parent, pe, ydir[J[f"{side}_{e}"]])
+        add(f"toes_01.{s}", f"foot.{s}", P[J[f"{side}_foot"]], ydir[J[f"{side}_foot"]])
+        add(f"index1.{s}", f"hand.{s}", P[J[f"{side}_wrist"]] + 0.08 * rot.normalize(ydir[J[f"{side}_wrist"]]),
+            ydir[J[f"{side}_wrist"]])
+    rig = rt.TargetRig([b[0] for b in bones], [b[1] for b in bones], np.array(B), np.array([b[2] for b in bones]))
+    return rig, bones
+
+
+@pytest.mark.parametrize("twist", ["c_arm_twist_offset", "arm_twist", None])
+def test_auto_rig_pro_preset_fits_its_export_with_and_without_twist_bones(twist):
+    """Auto-Rig Pro deforms with root.x, spine_0N.x, shoulder.l, the limbs' *_stretch bones,
+    hand.l, foot.l, toes_01.l (arm.l, forearm.l, thigh.l and leg.l are mechanism bones of the
+    control rig).  Exported with twist bones, the upper arm and thigh start with their twist bone
+    (c_arm_twist_offset.l or arm_twist.l, thigh_twist.l) and the *_stretch bone hangs under it
+    from half-way: fitted to such a rig, the preset makes that twist bone the segment's bone, so
+    the arm pivots at the shoulder, not half-way along it, and the skin of both halves follows."""
+    body, local, root, pos, wrot = _smooth_source(frames=40, seed=7)
+    rig, bones = _arp_rig(body, twist=twist)
+    names = [b[0] for b in bones]
+    fitted = bmaps.validate_bone_map(bmaps.fit_twist(bmaps.preset("auto_rig_pro"), bones), names)
+    assert fitted.bones["pelvis"] == "root.x" and fitted.bones["right_knee"] == "leg_stretch.r"
+    if twist is None:
+        assert fitted.twist == {} and fitted.bones == bmaps.preset("auto_rig_pro").bones
+    else:
+        assert fitted.bones["left_shoulder"] == f"{twist}.l" and fitted.bones["right_hip"] == "thigh_twist.r"
+        assert fitted.twist["left_shoulder"] == ["arm_stretch.l"] and fitted.twist["right_hip"] == ["thigh_stretch.r"]
+        assert fitted.twist["left_elbow"] == ["forearm_twist.l"] and fitted.twist["right_knee"] == ["leg_twist.r"]
+        with pytest.raises(ValueError, match="has no bone"):      # the unfitted preset names bones it lacks
+            bmaps.validate_bone_map(bmaps.preset("auto_rig_pro"), names)
     bm, notes = bmaps.guess_bone_map(bones)
-    assert bm.name == "auto_rig_pro" and bm.bones == arp.bones
+    assert bm.name == "auto_rig_pro" and bm.bones == fitted.bones and bm.twist == fitted.twist
     assert all(n.confidence == 1.0 for n in notes)
+
+    # every segment of the character points where the performer's does, from the joint it
+    # starts at; both halves of a split segment turn together
+    res = rt.retarget(wrot, pos, body, rig, fitted, "scaled")
+    assert _seg_dirs(res, rig, fitted, pos, wrot, body).max() < 1e-7
+    hw, i = res.world_heads(), rig.index
+    for side, s in (("left", "l"), ("right", "r")):
+        for a, b, c in (("shoulder", "elbow", "wrist"), ("hip", "knee", "ankle")):
+            d_src = rot.normalize(pos[:, J[f"{side}_{b}"]] - pos[:, J[f"{side}_{a}"]])
+            d_tgt = rot.normalize(hw[:, i[fitted.bones[f"{side}_{b}"]]] - hw[:, i[fitted.bones[f"{side}_{a}"]]])
+            assert np.abs(d_tgt - d_src).max() < 1e-7, (side, a)
+            for tb in fitted.twist.get(f"{side}_{a}", ()):          # the lower half on the same line
+                d_half = rot.normalize(hw[:, i[tb]] - hw[:, i[fitted.bones[f"{side}_{a}"]]])
+                assert np.abs(d_half - d_src).max() < 1e-7, tb
+    if twist is None:
+        return
+    # the map ARP exports were given before (the *_stretch bones, no twist bones) left the twist
+    # bones above them at rest: each upper arm and thigh turned about its middle, the elbows and
+    # knees centimetres to decimetres away from where the shoulder and hip joints put them
+    old = rt.retarget(wrot, pos, body, rig, bmaps.BoneMap("old", bmaps.preset("auto_rig_pro").bones), "scaled")
+    ho = old.world_heads()
+    seg = {}
+    for side, s in (("left", "l"), ("right", "r")):
+        for a, b, top in (("shoulder", "elbow", f"{twist}.{s}"), ("hip", "knee", f"thigh_twist.{s}")):
+            d_src = rot.normalize(pos[:, J[f"{side}_{b}"]] - pos[:, J[f"{side}_{a}"]])
+            d_old = rot.normalize(ho[:, i[fitted.bones[f"{side}_{b}"]]] - ho[:, i[top]])
+            seg[(side, a)] = float(np.degrees(np.arccos(np.clip(np.sum(d_old * d_src, -1), -1, 1))).max())
+    assert min(seg.values()) > 5.0, seg
+
+    # the split segment's twist ramps along it: the top half (the segment's bone now) keeps a
+    # quarter, the lower half three quarters, as one twist bone half-way along
+    plain = bmaps.BoneMap("no twist", dict(fitted.bones))
+    r0 = rt.retarget(wrot, pos, body, rig, plain, "scaled")
+    ey = np.array([0, 1.0, 0])
+    for main, tw in ((f"{twist}.l", "arm_stretch.l"), ("thigh_twist.r", "thigh_stretch.r"),
+                     ("forearm_stretch.r", "forearm_twist.r"), ("leg_stretch.l", "leg_twist.l")):
+        tau = np.unwrap(rot.twist_angle(r0.basis_rot[:, i[main]], ey))
+        assert np.ptp(tau) > 0.2, main               # the motion does twist these segments
+        assert np.abs(res.orientations[:, i[main]]
+                      - r0.orientations[:, i[main]] @ rot.axis_angle_rotation(ey, -0.75 * tau)).max() < 1e-9
+        rel = np.swapaxes(res.orientations[:, i[main]], -1, -2) @ res.orientations[:, i[tw]]
+        expect = rot.axis_angle_rotation(ey, 0.5 * tau) @ (rig.rest_rot[i[main]].T @ rig.rest_rot[i[tw]])
+        assert np.abs(rel - expect).max() < 1e-9, tw
+    # hands and feet keep their orientations whatever the twist bones do
+    for b in ("hand.l", "foot.r", "head.x"):
+        assert np.abs(res.world_orientations()[:, i[b]] - r0.world_orientations()[:, i[b]]).max() < 1e-9
+
+
+def test_a_twist_bone_above_its_segment_starts_it_only_from_the_segment_base():
+    """The fit makes a listed twist bone above the segment's bone the segment's bone only when it
+    hangs between that bone and the bone of the joint above, its head not past the segment
+    bone's: an ARP-named bone elsewhere (under the clavicle beside the arm, or above the
+    clavicle's bone) is left out."""
+    body = sk.make_body(1.75)
+    _, bones = _arp_rig(body)
+    beside = [(n, "shoulder.l" if n == "arm_stretch.l" else p, h, t) for n, p, h, t in bones]
+    fit = bmaps.fit_twist(bmaps.preset("auto_rig_pro"), beside)
+    assert fit.bones["left_shoulder"] == "arm_stretch.l" and "left_shoulder" not in fit.twist
+    assert fit.bones["right_shoulder"] == "c_arm_twist_offset.r"
+    # a twist bone whose head lies past the segment bone's (here: moved down to the elbow)
+    past = [(n, p, h + (t - h) * 3 if n == "c_arm_twist_offset.l" else h, t) for n, p, h, t in bones]
+    fit = bmaps.fit_twist(bmaps.preset("auto_rig_pro"), past)
+    assert fit.bones["left_shoulder"] == "arm_stretch.l" and fit.bones["right_shoulder"] == "c_arm_twist_offset.r"

@@ -35,12 +35,15 @@ of a generated rig are driven by constraints, so keying them needs those constra
 ``rigify_fk`` maps the FK controls instead), ``rigify_fk``, ``rigify_metarig``, ``mixamo``
 (``mixamorig:`` prefix), ``mixamo_plain`` (no prefix), ``ue4``, ``ue5`` (Unreal mannequins; UE5's
 five spine bones get spine1/2/3 on ``spine_01/03/05``), ``vrm`` (VRoid / VRM 0.x ``J_Bip_*``),
-``auto_rig_pro`` (ARP's deforming bones, as exported: ``root.x``, ``arm_stretch.l``, ...),
+``auto_rig_pro`` (ARP's deforming bones, as exported: ``root.x``, ``arm_stretch.l``, ..., and
+the twist bones each limb segment is split with: ``c_arm_twist_offset.l`` or ``arm_twist.l``,
+``forearm_twist.l``, ``thigh_twist.l``, ``leg_twist.l``),
 ``cc4`` (Reallusion Character Creator 3/4, ``CC_Base_*``, with each limb segment's Twist01/02
 pair), ``daz_genesis8`` (Daz Genesis 8 and 3: ``hip``, ``abdomenLower``, ``lShldrBend``, ..., with
 the Bend/Twist chains' Twist bones).  Twist bones, ``rigify``'s and the Unreal mannequins' too,
 are fitted to the rig they are used on (:func:`fit_twist`): those it lacks, or has elsewhere than
-below their segment's bone, are left out.
+below their segment's bone, are left out, and one the rig has between the segment's bone and
+the joint above it starts the segment (ARP's upper arm and thigh): it becomes the segment's bone.
 
 :func:`guess_bone_map` guesses a map for an unknown rig from bone names and hierarchy.
 """
@@ -280,15 +283,24 @@ def _vrm() -> BoneMap:
 
 
 def _arp() -> BoneMap:
-    # Auto-Rig Pro's deforming bones: root.x is the hips; an arm's and a leg's deforming bones are
-    # the *_stretch ones (arm.l, forearm.l, thigh.l, leg.l are non-deforming mechanism bones of the
-    # control rig, and absent from an exported one).  Its twist bones (arm_twist.l, ...) are not
-    # mapped: they need not hang below the segment's bone, which a twist list requires.
+    # Auto-Rig Pro's deforming bones as its export writes them: root.x is the hips; a limb's
+    # deforming bones are the *_stretch ones (arm.l, forearm.l, thigh.l, leg.l are non-deforming
+    # mechanism bones of the control rig, and absent from an exported one).  Exported with twist
+    # bones, each limb segment is split in two along its length: the upper arm into
+    # c_arm_twist_offset.l (arm_twist.l in some exports) from the shoulder half-way and
+    # arm_stretch.l on to the elbow under it, the thigh into thigh_twist.l > thigh_stretch.l; the
+    # forearm into forearm_stretch.l > forearm_twist.l (the hand under it), the shin into
+    # leg_stretch.l > leg_twist.l (the foot under it); a second twist bone per segment is named
+    # *_twist_2.  The twist bones above their segment's *_stretch bone start the segment:
+    # fit_twist makes them its bone on a rig that has them, the *_stretch bone a twist bone.
     center = {"pelvis": "root.x", "spine1": "spine_01.x", "spine2": "spine_02.x", "spine3": "spine_03.x",
               "neck": "neck.x", "head": "head.x"}
     stems = dict(zip(_LIMB_PARTS, ("shoulder", "arm_stretch", "forearm_stretch", "hand", "thigh_stretch",
                                    "leg_stretch", "foot", "toes_01")))
-    return _sided(center, stems, lambda s, side: f"{s}.{'l' if side == 'left' else 'r'}", None, "auto_rig_pro")
+    tw = {"shoulder": ["c_arm_twist_offset", "arm_twist", "arm_twist_2"],
+          "elbow": ["forearm_twist", "forearm_twist_2"],
+          "hip": ["thigh_twist", "thigh_twist_2"], "knee": ["leg_twist", "leg_twist_2"]}
+    return _sided(center, stems, lambda s, side: f"{s}.{'l' if side == 'left' else 'r'}", tw, "auto_rig_pro")
 
 
 def _cc4() -> BoneMap:
@@ -377,6 +389,15 @@ def _along(ends: Mapping, main: str, name: str) -> float:
     return float(np.dot(hn - h, t - h))
 
 
+def _length2(ends: Mapping, name: str) -> float:
+    """Bone ``name``'s squared length (armature units; 0 without positions)."""
+    h, t = ends.get(name, (None, None))
+    if h is None or t is None:
+        return 0.0
+    d = np.asarray(t, np.float64) - np.asarray(h, np.float64)
+    return float(d @ d)
+
+
 def _rig_tables(bones):
     """``(parent, ends)`` of ``bones`` ``[(name, parent, head, tail)]`` (heads / tails may be
     missing or None)."""
@@ -392,18 +413,39 @@ def fit_twist(bmap, bones) -> BoneMap:
     it.  For a preset on a rig of its tool (a rig exported without twist bones, or with them
     elsewhere, keeps the rest of the preset); a user's own map is validated as it is.
 
+    A listed twist bone the rig has *above* the segment's bone instead -- between it and the
+    bone of the joint above, with its head at or before the segment bone's -- starts the
+    segment: it becomes the segment's bone and the segment's bone one of its twist bones (the
+    topmost such bone, when there are several).  Auto-Rig Pro's export splits the upper arm and
+    the thigh so (``c_arm_twist_offset.l`` from the shoulder half-way, ``arm_stretch.l`` on to
+    the elbow under it); mapped to the lower bone, the segment would pivot half-way along it.
+
     bones: ``[(name, parent or None, head (3,), tail (3,))]`` in armature space, as
     :func:`guess_bone_map` takes them."""
     bm = as_bone_map(bmap)
     parent, ends = _rig_tables(bones)
+    mapped = set(bm.bones.values())
+    out = dict(bm.bones)
     twist = {}
     for j, v in bm.twist.items():
         main = bm.bones.get(j)
-        keep = [b for b in v if b in parent and main is not None and main in _ancestors(parent, b)]
+        if main is None or main not in parent:
+            continue
+        listed = [b for b in v if b in parent]
+        above = []                                  # listed bones above main, nearest first
+        for a in _ancestors(parent, main):
+            if a in mapped:
+                break
+            if a in listed and _along(ends, main, a) <= 0.01 * _length2(ends, main):
+                above.append(a)
+        if above:
+            listed = [b for b in listed if b != above[-1]] + [main]
+            main = out[j] = above[-1]
+        keep = [b for b in listed if main in _ancestors(parent, b)]
         keep.sort(key=lambda b: _along(ends, main, b))
         if keep:
             twist[j] = keep
-    return BoneMap(bm.name, dict(bm.bones), twist)
+    return BoneMap(bm.name, out, twist)
 
 
 def _match_preset(bones):
