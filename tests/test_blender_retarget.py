@@ -181,6 +181,8 @@ meta = bpy.context.active_object
 assert bpy.ops.pose.rigify_generate() == {'FINISHED'}
 rig = next(o for o in bpy.data.objects if o.type == 'ARMATURE' and o not in (meta, src))
 bmap, _ = retarget_apply.resolve_bone_map("auto", rig)
+# the DEF bones mapped directly: they follow the rig's constraints, which the notes say
+_, _, notes_def = retarget_apply.retarget_onto(src, rig, "rigify", None, "scaled", False)
 action, out, notes = retarget_apply.retarget_onto(src, rig, "auto", None, "scaled", False)
 paths = sorted({fc.data_path for fc in keying.action_fcurves(action, rig)})
 pos, _ = res.fk()
@@ -207,7 +209,8 @@ ankle_travel = float(out.plan.leg_ratio * np.linalg.norm(pos[25, sk.J["right_ank
 print(json.dumps({"map": bmap.name, "switch_keyed": 'pose.bones["upper_arm_parent.L"]["IK_FK"]' in paths,
                   "rig_switch": float(rig.pose.bones["upper_arm_parent.L"]["IK_FK"]), "worst": worst,
                   "foot_travel": foot_travel, "ankle_travel": ankle_travel,
-                  "leg_reach_error": float(np.nansum(out.reach_error[[5, 25], 3]))}), flush=True)
+                  "leg_reach_error": float(np.nansum(out.reach_error[[5, 25], 3])),
+                  "notes": notes, "notes_def": notes_def}), flush=True)
 """
 
 
@@ -235,6 +238,10 @@ def test_retarget_onto_a_rig_generated_by_rigify():
         pytest.skip(out["skip"])
     assert r.returncode in (0, -11, 139), r.stderr[-3000:]
     assert out["map"] == "rigify_fk" and out["switch_keyed"]
+    # keyed controls carry no constraints of their own; the DEF bones do, and the user is told
+    assert not any("constraints" in n for n in out["notes"]), out["notes"]
+    held = [n for n in out["notes_def"] if "follow constraints that set their rotation" in n]
+    assert len(held) == 1 and held[0].count("DEF-") == 4 and "more" in held[0], out["notes_def"]
     assert out["rig_switch"] == 1.0                     # as the new action keys it
     for bone, ang in out["worst"].items():
         assert ang < 3.0, (bone, ang)

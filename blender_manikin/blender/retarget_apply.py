@@ -173,6 +173,27 @@ def _constrained_parents(obj, target: rt.TargetRig, keyed):
     return False
 
 
+#: constraint types that set a bone's rotation themselves: keys on the bone do not show under them
+_OVERRIDING = frozenset({'COPY_ROTATION', 'COPY_TRANSFORMS', 'CHILD_OF', 'DAMPED_TRACK', 'LOCKED_TRACK',
+                         'TRACK_TO', 'STRETCH_TO', 'IK', 'SPLINE_IK', 'ARMATURE', 'TRANSFORM'})
+
+
+def overriding_constraints(obj, names):
+    """``[(bone, constraint name)]``: the bones ``names`` of ``obj`` with an active constraint
+    (not muted, influence above 0) that sets their rotation itself (Copy Transforms / Rotation,
+    Child Of, tracking, Stretch To, IK, Armature, Transformation): while it is on, the keys the
+    retarget gives those bones do not show (e.g. the DEF bones of a generated Rigify rig, or the
+    deforming bones of a rig whose controls drive them)."""
+    out = []
+    for n in names:
+        pb = obj.pose.bones.get(n)
+        for c in (pb.constraints if pb is not None else ()):
+            if c.type in _OVERRIDING and not c.mute and c.influence > 0.0:
+                out.append((n, c.name))
+                break
+    return out
+
+
 def _bases_from_evaluated_parents(obj, res: rt.RetargetResult, target: rt.TargetRig, keyed, context):
     """``(quaternions (T, B, 4), root_location (T, 3))`` putting each keyed bone at its retargeted
     armature-space orientation (and the root bone at its head) under its parent *as the rig
@@ -367,6 +388,12 @@ def retarget_onto(source_obj, target_obj, bone_map="auto", map_path=None, root_m
     src_action = source_obj.animation_data.action
     if character_swivel.has_rig_parts(target_obj):
         character_swivel.remove_character_rig(target_obj, context)
+    held = overriding_constraints(target_obj, [target.names[k] for k in np.nonzero(res.keyed)[0]])
+    if held:
+        shown = ", ".join(f"{b} ({c})" for b, c in held[:4]) + (f" and {len(held) - 4} more" if len(held) > 4 else "")
+        notes.append(f"{len(held)} of the bones this map keys follow constraints that set their rotation: "
+                     f"{shown}; their new keys do not show while those constraints are on: map the rig's "
+                     f"controls instead, or mute the constraints")
     prev = target_obj.animation_data.action if target_obj.animation_data else None
     action = key_retarget(target_obj, res, target, frames, f"MANIKIN_retarget_{src_action.name}",
                           switches=_ik_fk_switches(target_obj, bmap))
