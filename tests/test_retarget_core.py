@@ -910,3 +910,85 @@ def test_a_twist_bone_above_its_segment_starts_it_only_from_the_segment_base():
     past = [(n, p, h + (t - h) * 3 if n == "c_arm_twist_offset.l" else h, t) for n, p, h, t in bones]
     fit = bmaps.fit_twist(bmaps.preset("auto_rig_pro"), past)
     assert fit.bones["left_shoulder"] == "arm_stretch.l" and fit.bones["right_shoulder"] == "c_arm_twist_offset.r"
+
+
+def _mpfb_rig(body, seed=6):
+    """MakeHuman / MPFB's default skeleton (as its names and hierarchy go): ``(TargetRig, bones)``.
+
+    No bone named hips or pelvis: ``root`` is the hips, with the spine (spine05 up to spine01,
+    then neck01-03 and head) and each leg's ``pelvis.L`` above it; every limb segment is two bones
+    (upperarm01.L > upperarm02.L, lowerarm01/02, upperleg01/02, lowerleg01/02), the hand is
+    ``wrist.L``, a ``shoulder01.L`` sits between the clavicle and the upper arm."""
+    rng = np.random.default_rng(seed)
+    P, ydir = _joint_rig_geometry(body, _scales(0.97, 1.04, 0.98), 45.0)
+    bones, B = [], []
+
+    def add(name, parent, head, y):
+        head = np.asarray(head, float)
+        bones.append((name, parent, head, head + 0.1 * rot.normalize(y)))
+        B.append(_frame(y, rng))
+
+    add("root", None, P[0], P[J["spine1"]] - P[0])
+    sp = [P[0] + (P[J["neck"]] - P[0]) * (i + 0.5) / 5 for i in range(5)]
+    prev = "root"
+    for i, h in enumerate(sp):
+        add(f"spine0{5 - i}", prev, h, P[J["neck"]] - P[0])
+        prev = f"spine0{5 - i}"
+    for i in range(3):
+        add(f"neck0{i + 1}", prev, P[J["neck"]] + (P[J["head"]] - P[J["neck"]]) * i / 3, P[J["head"]] - P[J["neck"]])
+        prev = f"neck0{i + 1}"
+    add("head", prev, P[J["head"]], [0, 0, 1.0])
+    for side, s in (("left", "L"), ("right", "R")):
+        c, a = P[J[f"{side}_collar"]], P[J[f"{side}_shoulder"]]
+        add(f"clavicle.{s}", "spine01", c, a - c)
+        add(f"shoulder01.{s}", f"clavicle.{s}", 0.5 * (c + a), a - c)
+        for parent, stems, (ja, jm, je), end in (
+                (f"shoulder01.{s}", ("upperarm", "lowerarm"), ("shoulder", "elbow", "wrist"), "wrist"),
+                (f"pelvis.{s}", ("upperleg", "lowerleg"), ("hip", "knee", "ankle"), "foot")):
+            if end == "foot":
+                add(f"pelvis.{s}", "root", P[0], P[J[f"{side}_hip"]] - P[0])
+            pts = [P[J[f"{side}_{n}"]] for n in (ja, jm, je)]
+            for stem, (hd, tl) in zip(stems, ((pts[0], pts[1]), (pts[1], pts[2]))):
+                add(f"{stem}01.{s}", parent, hd, tl - hd)
+                add(f"{stem}02.{s}", f"{stem}01.{s}", 0.5 * (hd + tl), tl - hd)
+                parent = f"{stem}02.{s}"
+            add(f"{end}.{s}", parent, pts[2], ydir[J[f"{side}_{je}"]])
+        add(f"toe1-1.{s}", f"foot.{s}", P[J[f"{side}_foot"]], ydir[J[f"{side}_foot"]])
+    rig = rt.TargetRig([b[0] for b in bones], [b[1] for b in bones], np.array(B), np.array([b[2] for b in bones]))
+    return rig, bones
+
+
+def test_guess_maps_a_makehuman_skeleton_from_where_the_legs_and_spine_meet():
+    """A rig with no bone named hips or pelvis gets, as its pelvis, the bone where the legs and the
+    spine meet (MPFB's ``root``), not the root-most spine bone (spine05, which the legs do not
+    hang from: mapped there, the character's legs stayed behind at rest while its body moved);
+    each segment's second bone (upperarm02.L, ...) shares the segment's twist."""
+    body, local, root, pos, wrot = _smooth_source(frames=40, seed=7)
+    rig, bones = _mpfb_rig(body)
+    bm, notes = bmaps.guess_bone_map(bones)
+    by = {n.joint: n for n in notes}
+    assert bm.bones["pelvis"] == "root" and "legs and the spine meet" in by["pelvis"].why
+    assert [bm.bones[j] for j in ("spine1", "spine2", "spine3", "neck", "head")] == \
+        ["spine05", "spine03", "spine01", "neck01", "head"]
+    assert [bm.bones[f"left_{j}"] for j in ("collar", "shoulder", "elbow", "wrist", "hip", "knee", "ankle", "foot")] \
+        == ["clavicle.L", "upperarm01.L", "lowerarm01.L", "wrist.L", "upperleg01.L", "lowerleg01.L", "foot.L",
+            "toe1-1.L"]
+    assert bm.twist == {f"{side}_{j}": [f"{stem}02.{side[0].upper()}"]
+                        for side in ("left", "right") for j, stem in (("shoulder", "upperarm"), ("elbow", "lowerarm"),
+                                                                       ("hip", "upperleg"), ("knee", "lowerleg"))}
+    bmaps.validate_bone_map(bm, rig.names)
+    res = rt.retarget(wrot, pos, body, rig, bm, "scaled")
+    assert _seg_dirs(res, rig, bm, pos, wrot, body).max() < 1e-7
+    # the feet go where the body's do, relative to the pelvis, scaled by the leg ratio
+    hw, i, k = res.world_heads(), rig.index, res.plan.leg_ratio
+    for side, s in (("left", "L"), ("right", "R")):
+        rel_t = hw[:, i[f"foot.{s}"]] - hw[:, i["root"]]
+        rel_s = pos[:, J[f"{side}_ankle"]] - pos[:, 0]
+        assert np.abs(np.linalg.norm(rel_t, axis=-1) - k * np.linalg.norm(rel_s, axis=-1)).max() < 0.01
+    # mapped to the root-most spine bone, as the guess did before, the legs stayed where they
+    # stood at rest while the body walked 0.8 m away from them
+    old = bmaps.BoneMap("old", dict(bm.bones, pelvis="spine05", spine1="spine04"), bm.twist)
+    ro = rt.retarget(wrot, pos, body, rig, old, "scaled")
+    assert np.ptp(ro.world_heads()[:, i["upperleg01.L"]], axis=0).max() < 1e-12
+    drift = np.linalg.norm(ro.world_heads()[:, i["upperleg01.L"]] - ro.world_heads()[:, i["spine05"]], axis=-1)
+    assert np.ptp(drift) > 0.5

@@ -545,6 +545,8 @@ def _role(tokens):
     return None, twist
 
 
+#: the part that follows each limb segment's
+_NEXT_ROLE = {"upperarm": "forearm", "forearm": "hand", "thigh": "shin", "shin": "foot"}
 _ROLE_JOINT = {"collar": "collar", "upperarm": "shoulder", "forearm": "elbow", "hand": "wrist",
                "thigh": "hip", "shin": "knee", "foot": "ankle", "toe": "foot"}
 
@@ -562,8 +564,11 @@ def guess_bone_map(bones, min_preset_fraction: float = 0.85, use_presets: bool =
     ``Left/Right``, ``L_/R_``) and the hierarchy: each limb part must descend from the previous
     part of its chain, the spine bones are the chain from the hips to the neck (spine1/2/3 spread
     over however many there are), and ties go to the bone nearest the root, then to names without
-    a number.  Bones named twist/roll below a segment's bone become its twist bones, base to
-    tip by where their heads lie along it.  ``use_presets=False`` skips the presets (names and
+    a number.  Without a bone named hips or pelvis, the pelvis is the bone where the legs and
+    the spine meet (MakeHuman / MPFB's ``root``), else the root-most spine bone.  Bones named
+    twist/roll below a segment's bone become its twist bones, base to tip by where their heads
+    lie along it, and so do the further bones of a segment split in several bones named alike
+    (MPFB's ``upperarm02.L`` under ``upperarm01.L``, above the forearm's bone).  ``use_presets=False`` skips the presets (names and
     hierarchy only).
 
     Returns ``(BoneMap, notes)``: ``notes`` is a list of :class:`GuessNote`, one per source joint,
@@ -627,9 +632,21 @@ def guess_bone_map(bones, min_preset_fraction: float = 0.85, use_presets: bool =
     hips = pick("pelvis", "hips", None)
     spines = [n for n in cands("spine", None) if hips is None or hips in ancestors(n)]
     if hips is None and spines:
-        hips = spines.pop(0)
+        # where the legs and the spine meet (MakeHuman / MPFB's default skeleton: the hips bone is
+        # "root", above spine05 and the thighs' pelvis.L / pelvis.R); else the root-most spine bone
+        legs = [cands("thigh", side) for side in SIDES]
+        meet = None
+        if all(legs):
+            common = [a for a in [spines[0]] + ancestors(spines[0]) if all(a in ancestors(c[0]) for c in legs)]
+            meet = common[0] if common else None
+        if meet is not None and meet != spines[0]:
+            hips = meet
+            spines = [n for n in spines if hips in ancestors(n)]
+            notes["pelvis"] = GuessNote("pelvis", hips, 0.6, "no hips/pelvis bone: where the legs and the spine meet")
+        else:
+            hips = spines.pop(0)
+            notes["pelvis"] = GuessNote("pelvis", hips, 0.5, "no hips/pelvis bone: the root-most spine bone")
         bmap["pelvis"] = hips
-        notes["pelvis"] = GuessNote("pelvis", hips, 0.5, "no hips/pelvis bone: the root-most spine bone")
     neck = pick("neck", "neck", None, hips)
     if neck is not None:
         spines = [s for s in spines if s in ancestors(neck)]
@@ -660,8 +677,13 @@ def guess_bone_map(bones, min_preset_fraction: float = 0.85, use_presets: bool =
             if j in bmap:
                 # only bones below the segment's bone can share its twist (the retarget
                 # requires it), listed base to tip by where they sit along it
+                # (and bones named like the segment below its bone and above the next one's, the
+                # rest of a segment split in several bones: MPFB's upperarm01 > upperarm02)
+                nxt = bmap.get(f"{side}_{_ROLE_JOINT[_NEXT_ROLE[role]]}")
+                split = [t for t in cands(role, side) if t not in bmap.values() and bmap[j] in ancestors(t)
+                         and (nxt is None or t in ancestors(nxt))]
                 tb = [t for t in cands(role, side, twist=True) if t not in bmap.values()
-                      and bmap[j] in ancestors(t)]
+                      and bmap[j] in ancestors(t)] + split
                 tb.sort(key=lambda t: _along(ends, bmap[j], t))
                 if tb:
                     twist[j] = tb
