@@ -187,7 +187,8 @@ def test_the_detection_line_reads_like_a_sentence(tmp_path):
     line = formats.load_recording(path).metadata["detected"]
     assert line == ("wide layout: head=hmd_*, hands=left_controller_*/right_controller_*; quaternions x,y,z,w; "
                     "time=timestamp in ms; units cm (head at 1.62 m); axes unity (left-handed), from the "
-                    "hands' reach ahead of the head")
+                    "hands' reach ahead of the head, the weakest cue: if the body faces backwards, set the "
+                    "axes to openxr (Axes, --axes)")
 
 
 def test_given_axes_and_units_override_the_detection(tmp_path):

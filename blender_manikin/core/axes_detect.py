@@ -333,4 +333,6 @@ def choose_axes(time, pos, quats_for, candidates):
     if ev[pivot].pivot >= PIVOT_MIN:
         return pivot, f"from the head's turns (about a point {100 * ev[pivot].pivot:.0f} cm behind it)"
     reach = max(candidates, key=lambda a: ev[a].reach)
-    return reach, "from the hands' reach ahead of the head"
+    other = next(a for a in candidates if a != reach)
+    return reach, (f"from the hands' reach ahead of the head, the weakest cue: if the body faces "
+                   f"backwards, set the axes to {other} (Axes, --axes)")

@@ -568,8 +568,8 @@ def guess_bone_map(bones, min_preset_fraction: float = 0.85, use_presets: bool =
     the spine meet (MakeHuman / MPFB's ``root``), else the root-most spine bone.  Bones named
     twist/roll below a segment's bone become its twist bones, base to tip by where their heads
     lie along it, and so do the further bones of a segment split in several bones named alike
-    (MPFB's ``upperarm02.L`` under ``upperarm01.L``, above the forearm's bone).  ``use_presets=False`` skips the presets (names and
-    hierarchy only).
+    (MPFB's ``upperarm02.L`` under ``upperarm01.L``, above the forearm's bone).
+    ``use_presets=False`` skips the presets (names and hierarchy only).
 
     Returns ``(BoneMap, notes)``: ``notes`` is a list of :class:`GuessNote`, one per source joint,
     for the user to confirm.
