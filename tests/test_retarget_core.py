@@ -867,6 +867,12 @@ def test_auto_rig_pro_preset_fits_its_export_with_and_without_twist_bones(twist)
     # bones above them at rest: each upper arm and thigh turned about its middle, the elbows and
     # knees centimetres to decimetres away from where the shoulder and hip joints put them
     old = rt.retarget(wrot, pos, body, rig, bmaps.BoneMap("old", bmaps.preset("auto_rig_pro").bones), "scaled")
+    assert res.plan.notes == []
+    # such a map (a saved one, say) is told what is wrong, once per split upper arm and thigh
+    said = [n for n in old.plan.notes if "starts the same segment" in n]
+    assert len(said) == 4 and any(n.startswith(f"'arm_stretch.l' (left_shoulder) hangs under '{twist}.l'")
+                                  and n.endswith(f"map left_shoulder to '{twist}.l' with 'arm_stretch.l' as its "
+                                                 f"twist bone") for n in said), said
     ho = old.world_heads()
     seg = {}
     for side, s in (("left", "l"), ("right", "r")):

@@ -367,6 +367,7 @@ def retarget_onto(source_obj, target_obj, bone_map="auto", map_path=None, root_m
         progress(0.6)
     res = rt.retarget(wr, pos, body, target, bmap, root_motion)
     notes = [f"{g.joint}: {g.bone or 'no bone'} ({g.why})" for g in guess if g.confidence < 0.5]
+    notes += list(res.plan.notes)             # what the retarget assumed of the rig (facing, legs)
     # With keep_ends every limb lands on its target; without, the legs still do when the root
     # motion is scaled or in place: transferred segment directions on a character with other
     # thigh : shank proportions would make planted feet slide (3-4 cm/s at +-12 %), so the legs

@@ -276,6 +276,42 @@ def twist_shares(along) -> np.ndarray:
     return 0.5 * (p[:-1] + p[1:])
 
 
+def _segments_starting_above(tg, bone_of, chain_child, twist_of, heads_w, G0):
+    """Notes on mapped limb bones (upper arm, forearm, thigh, shin) that hang, part-way along
+    their segment, under an unmapped bone that starts the same segment higher up (an Auto-Rig
+    Pro export's arm_stretch.l under c_arm_twist_offset.l, mapped by hand): that bone keeps its
+    rest pose, so the segment turns about the mapped bone's head, part-way along it.  Such an
+    unmapped ancestor: its head behind the mapped head along the segment by more than a tenth
+    of it, its own axis within 10° of the segment and the mapped head within a twentieth of
+    the segment of that axis.  heads_w ``(B, 3)``, G0 ``(B, 3, 3)``: rest heads and orientations, world."""
+    out = []
+    mapped = set(int(b) for b in bone_of if b >= 0)
+    limb_segments = [J[f"{side}_{part}"] for side in ("left", "right") for part in ("shoulder", "elbow", "hip", "knee")]
+    for j in limb_segments:
+        k, c = int(bone_of[j]), int(chain_child[j])
+        if k < 0 or c < 0:
+            continue
+        seg = heads_w[bone_of[c]] - heads_w[k]
+        length = float(np.linalg.norm(seg))
+        if length < 1e-6:
+            continue
+        d = seg / length
+        u = int(tg.parents[k])
+        while u >= 0 and u not in mapped and u not in twist_of:
+            back = float((heads_w[k] - heads_w[u]) @ d)
+            y = G0[u] @ _EY
+            off = heads_w[k] - heads_w[u] - ((heads_w[k] - heads_w[u]) @ y) * y
+            if back > 0.1 * length and float(y @ d) > np.cos(np.radians(10.0)) \
+                    and float(np.linalg.norm(off)) < 0.05 * length:
+                out.append(f"{tg.names[k]!r} ({JOINT_NAMES[j]}) hangs under {tg.names[u]!r}, which starts the "
+                           f"same segment {100 * back:.0f} cm above it and is not mapped: it keeps its rest pose, "
+                           f"so the segment turns about {tg.names[k]!r}'s head; map {JOINT_NAMES[j]} to "
+                           f"{tg.names[u]!r} with {tg.names[k]!r} as its twist bone")
+                break
+            u = int(tg.parents[u])
+    return out
+
+
 def _is_ancestor(a, b, parents):
     """True when index ``a`` is a proper ancestor of ``b``."""
     n = parents[b]
@@ -381,6 +417,8 @@ def make_plan(body: Body, target: TargetRig, bone_map, facing_yaw: Optional[floa
                 continue
             d = G0[k] @ _EY
         align[j] = rot.rotation_between(d, a) @ G0[k]
+
+    notes += _segments_starting_above(tg, bone_of, chain_child, twist_of, heads_w, G0)
 
     # each segment's twist shared by where its bones sit between its head and the next joint's
     twist_share = {}
