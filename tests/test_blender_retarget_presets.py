@@ -372,3 +372,27 @@ def test_a_saved_and_reloaded_ue5_map_gives_the_same_keys(addon, tmp_path):
         np.testing.assert_array_equal(k_file[ch], k_preset[ch], err_msg=str(ch))
     for n in M_preset:
         np.testing.assert_array_equal(M_file[n], M_preset[n], err_msg=n)
+
+
+def test_a_saved_map_that_splits_a_segment_is_told_what_to_map(addon, tmp_path):
+    """An Auto-Rig Pro export with twist bones and a map saved for the *_stretch bones alone (as
+    the preset was before it took ARP's twist bones): the retarget's notes name each upper arm
+    and thigh that would turn about its middle, and the map that fixes it; the preset itself
+    (fitted to the character) gives no notes and the upper arm turns at the shoulder."""
+    res = synthetic_result(T=T, fps=FPS, seed=6, stature=SRC_STATURE, with_targets=False)
+    src = _write_source(res)
+    char, spec = styled_character("auto_rig_pro")
+    path = tmp_path / "arp_stretch_only.json"
+    bone_maps.save_bone_map(path, bone_maps.BoneMap("stretch_only", dict(bone_maps.preset("auto_rig_pro").bones)))
+    _, _, notes = retarget_apply.retarget_onto(src, char, "file", str(path), "scaled", False)
+    said = [n for n in notes if "starts the same segment" in n]
+    assert len(said) == 4, notes
+    assert any(n.startswith("'thigh_stretch.r' (right_hip) hangs under 'thigh_twist.r'") for n in said), said
+    _, _, notes = retarget_apply.retarget_onto(src, char, "auto_rig_pro", None, "scaled", False)
+    assert notes == []
+    pos, _ = res.fk()
+    M, _ = _evaluate(char)
+    arm = _world_heads(char, M, "forearm_stretch.l") - _world_heads(char, M, "c_arm_twist_offset.l")
+    src_arm = (pos[:, sk.J["left_elbow"]] - pos[:, sk.J["left_shoulder"]]) @ spec["F"].T
+    cos = np.sum(rot.normalize(arm) * rot.normalize(src_arm), -1)
+    assert np.degrees(np.arccos(np.clip(cos, -1, 1))).max() < 0.1
