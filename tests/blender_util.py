@@ -656,3 +656,59 @@ class PanelLayout:
 
     def separator(self, **k):
         pass
+
+
+def live_auto_rig_pro_character(name="ARP", stature=1.7, seed=11):
+    """A character built the way a live Auto-Rig Pro rig works, as far as a retarget sees it
+    (ARP itself is a commercial add-on, not available to the tests): deforming bones (root.x,
+    spine_01.x, spine_02.x -- two spine bones, ARP's default --, neck.x, head.x, shoulder.l,
+    arm_stretch.l, forearm_stretch.l, hand.l, thigh_stretch.l, leg_stretch.l, foot.l, toes_01.l)
+    that follow the FK controls (c_root_master.x, c_spine_01.x, ..., c_arm_fk.l, c_thigh_fk.l, ...,
+    under c_traj) through Copy Transforms constraints; a limb's constraints weigh in by its IK/FK
+    switch, the ``ik_fk_switch`` property of c_hand_ik.l / c_foot_ik.l (1: FK; 0, the rig's
+    state here: the limb stays as its IK would hold it, at rest), through drivers.  Returns the
+    object (+Z up, facing -Y, A-pose rest, rolled bones)."""
+    import bpy
+    P = humanoid_joints(stature, 40.0)
+    deform = {"pelvis": "root.x", "spine1": "spine_01.x", "spine2": "spine_02.x", "neck": "neck.x", "head": "head.x"}
+    ctrl = {"pelvis": "c_root_master.x", "spine1": "c_spine_01.x", "spine2": "c_spine_02.x", "neck": "c_neck.x",
+            "head": "c_head.x"}
+    for side in ("left", "right"):
+        s = side[0]
+        for part, d, c in (("collar", "shoulder", "c_shoulder"), ("shoulder", "arm_stretch", "c_arm_fk"),
+                           ("elbow", "forearm_stretch", "c_forearm_fk"), ("wrist", "hand", "c_hand_fk"),
+                           ("hip", "thigh_stretch", "c_thigh_fk"), ("knee", "leg_stretch", "c_leg_fk"),
+                           ("ankle", "foot", "c_foot_fk"), ("foot", "toes_01", "c_toes_fk")):
+            deform[f"{side}_{part}"] = f"{d}.{s}"
+            ctrl[f"{side}_{part}"] = f"{c}.{s}"
+    bones = [("c_traj", None, np.zeros(3), np.array([0.0, 0.3, 0.0]))]
+    bones += humanoid_bones(P, ctrl, root="c_traj")
+    bones += humanoid_bones(P, deform)
+    for s in ("l", "r"):
+        for b, j in ((f"c_hand_ik.{s}", f"{'left' if s == 'l' else 'right'}_wrist"),
+                     (f"c_foot_ik.{s}", f"{'left' if s == 'l' else 'right'}_ankle")):
+            h = P[sk.J[j]]
+            bones.append((b, "c_traj", h, h + np.array([0.0, -0.1, 0.0])))
+    obj = build_armature(name, bones, seed)
+    switch_of = {}
+    for side in ("left", "right"):
+        s = side[0]
+        for part in ("shoulder", "elbow", "wrist"):
+            switch_of[deform[f"{side}_{part}"]] = f"c_hand_ik.{s}"
+        for part in ("hip", "knee", "ankle", "foot"):
+            switch_of[deform[f"{side}_{part}"]] = f"c_foot_ik.{s}"
+    for s in ("l", "r"):
+        for b in (f"c_hand_ik.{s}", f"c_foot_ik.{s}"):
+            obj.pose.bones[b]["ik_fk_switch"] = 0.0
+    for j, d in deform.items():
+        c = obj.pose.bones[d].constraints.new('COPY_TRANSFORMS')
+        c.target, c.subtarget = obj, ctrl[j]
+        if d in switch_of:
+            fc = c.driver_add("influence")
+            var = fc.driver.variables.new()
+            var.name, var.type = "fk", 'SINGLE_PROP'
+            var.targets[0].id = obj
+            var.targets[0].data_path = f'pose.bones["{switch_of[d]}"]["ik_fk_switch"]'
+            fc.driver.expression = "fk"
+    bpy.context.view_layer.update()
+    return obj

@@ -35,7 +35,8 @@ from blender_manikin.core import rotations as rot  # noqa: E402
 from blender_manikin.core import skeleton as sk  # noqa: E402
 
 from blender_util import (RIG_STYLES, build_armature, humanoid_bones, humanoid_joints,  # noqa: E402
-                          planted_feet_result, style_twist, styled_character, synthetic_result)
+                          live_auto_rig_pro_character, planted_feet_result, style_twist, styled_character,
+                          synthetic_result)
 
 T = 60
 FPS = 24.0                       # the factory scene's rate: one source frame per scene frame
@@ -396,3 +397,50 @@ def test_a_saved_map_that_splits_a_segment_is_told_what_to_map(addon, tmp_path):
     src_arm = (pos[:, sk.J["left_elbow"]] - pos[:, sk.J["left_shoulder"]]) @ spec["F"].T
     cos = np.sum(rot.normalize(arm) * rot.normalize(src_arm), -1)
     assert np.degrees(np.arccos(np.clip(cos, -1, 1))).max() < 0.1
+
+
+def test_a_live_auto_rig_pro_rig_is_keyed_on_its_fk_controls(addon):
+    """A live Auto-Rig Pro rig (deforming bones following FK controls through constraints, the
+    limbs by their IK/FK switch; ``live_auto_rig_pro_character``): the guess keys its FK controls
+    (``auto_rig_pro_fk``; the spine3 control it lacks folded, with a note), keys the switches
+    (``ik_fk_switch`` of c_hand_ik / c_foot_ik) to FK in the new action without changing the rig,
+    and the deforming arms and legs point where the performer's do.  Keyed on its deforming bones
+    instead (the ``auto_rig_pro`` preset), the notes say that they follow constraints."""
+    res = synthetic_result(T=T, fps=FPS, seed=3, stature=SRC_STATURE, with_targets=False)
+    src = _write_source(res)
+    char = live_auto_rig_pro_character()
+    bmap, guess = retarget_apply.resolve_bone_map("auto", char)
+    assert bmap.name == "auto_rig_pro_fk" and "spine3" not in bmap.bones
+    assert [(g.joint, g.why) for g in guess if g.confidence < 0.5] == [
+        ("spine3", "the rig has no 'c_spine_03.x': folded into its neighbours")]
+    action, out, notes = retarget_apply.retarget_onto(src, char, "auto", None, "scaled", False)
+    assert notes == ["spine3: no bone (the rig has no 'c_spine_03.x': folded into its neighbours)"], notes
+    paths = {fc.data_path for fc in keying.action_fcurves(action, char)}
+    for b in ("c_hand_ik.l", "c_hand_ik.r", "c_foot_ik.l", "c_foot_ik.r"):
+        assert f'pose.bones["{b}"]["ik_fk_switch"]' in paths, b
+    assert 'pose.bones["c_arm_fk.l"].rotation_quaternion' in paths
+    assert 'pose.bones["c_root_master.x"].location' in paths
+    assert not any("stretch" in p for p in paths)               # the deforming bones are not keyed
+    pos, _ = res.fk()
+    M, _ = _evaluate(char)
+    worst = {}
+    for bone, a, b in (("arm_stretch.l", "left_shoulder", "left_elbow"),
+                       ("forearm_stretch.r", "right_elbow", "right_wrist"),
+                       ("thigh_stretch.l", "left_hip", "left_knee"), ("leg_stretch.r", "right_knee", "right_ankle"),
+                       ("spine_01.x", "spine1", "spine2")):
+        d = _world_heads(char, M, {"arm_stretch.l": "forearm_stretch.l", "forearm_stretch.r": "hand.r",
+                                   "thigh_stretch.l": "leg_stretch.l", "leg_stretch.r": "foot.r",
+                                   "spine_01.x": "spine_02.x"}[bone]) - _world_heads(char, M, bone)
+        cos = np.sum(rot.normalize(d) * rot.normalize(pos[:, sk.J[b]] - pos[:, sk.J[a]]), -1)
+        worst[bone] = float(np.degrees(np.arccos(np.clip(cos, -1, 1))).max())
+    assert max(worst.values()) < 0.1, worst
+    # the switches are keys of the new action (FK, held), not a change to the rig
+    for fc in keying.action_fcurves(action, char):
+        if fc.data_path.endswith('["ik_fk_switch"]'):
+            co = np.empty(2 * len(fc.keyframe_points), dtype=np.float32)
+            fc.keyframe_points.foreach_get("co", co)
+            assert np.all(co[1::2] == 1.0) and fc.keyframe_points[0].interpolation == 'CONSTANT'
+
+    _, _, notes = retarget_apply.retarget_onto(src, char, "auto_rig_pro", None, "scaled", False)
+    held = [n for n in notes if "follow constraints that set their rotation" in n]
+    assert len(held) == 1 and held[0].startswith("21 of the bones this map keys"), notes

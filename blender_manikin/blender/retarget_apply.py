@@ -65,23 +65,36 @@ def bone_list(obj):
 def resolve_bone_map(choice, target_obj, path=None):
     """``(BoneMap, notes)`` for the panel's / command line's choice: ``"auto"`` (guessed from the
     target's bone names and hierarchy: notes list each joint's bone and why), a preset name of
-    :data:`..core.bone_maps.PRESETS` (its twist lists fitted to the rig,
-    :func:`..core.bone_maps.fit_twist`), ``"file"`` with ``path`` (a saved map, JSON), or a
-    :class:`..core.bone_maps.BoneMap` (the panel's edited list), used as it is."""
+    :data:`..core.bone_maps.PRESETS` (fitted to the rig, :func:`..core.bone_maps.fit_preset`:
+    its twist lists, and joints whose bone the rig lacks left out, each with a note), ``"file"``
+    with ``path`` (a saved map, JSON), or a :class:`..core.bone_maps.BoneMap` (the panel's
+    edited list), used as it is."""
     if isinstance(choice, bone_maps.BoneMap):
         return choice, []
     key = str(choice or "auto").lower()
     if key == "auto":
         bmap, notes = bone_maps.guess_bone_map(bone_list(target_obj))
+        # a generated Rigify rig's DEF bones and a live Auto-Rig Pro rig's deforming bones follow
+        # their controls through constraints: the FK controls are what to key
         if bmap.name == "rigify" and _is_generated_rigify(target_obj):
-            # a generated rig's DEF bones follow constraints: its FK controls are what to key
             return bone_maps.preset("rigify_fk"), notes
-        return bmap, notes
-    if key == "file":
+        if bmap.name == "auto_rig_pro" and _is_live_auto_rig_pro(target_obj):
+            key = "auto_rig_pro_fk"
+        else:
+            return bmap, notes
+    elif key == "file":
         if not path:
             raise ValueError("no bone map file chosen")
         return bone_maps.load_bone_map(path), []
-    return bone_maps.fit_twist(bone_maps.preset(key), bone_list(target_obj)), []
+    bones = bone_list(target_obj)
+    try:
+        bmap, missing = bone_maps.fit_preset(bone_maps.preset(key), bones)
+    except ValueError:
+        # not a rig of that kind: the preset as it is (the map editor shows which of its bones the
+        # character lacks; the retarget refuses it, naming them)
+        return bone_maps.fit_twist(bone_maps.preset(key), bones), []
+    return bmap, [bone_maps.GuessNote(j, None, 0.0, f"the rig has no {b!r}: folded into its neighbours")
+                  for j, b in missing]
 
 
 def _is_generated_rigify(obj):
@@ -90,12 +103,23 @@ def _is_generated_rigify(obj):
     return "upper_arm_fk.L" in bones and "DEF-upper_arm.L" in bones
 
 
+def _is_live_auto_rig_pro(obj):
+    """An Auto-Rig Pro rig with its controls (not an export of its deforming bones)."""
+    bones = obj.data.bones
+    return "c_arm_fk.l" in bones and "c_thigh_fk.l" in bones and "arm_stretch.l" in bones
+
+
+#: IK/FK switch properties (pose bone custom properties; 1 is FK): Rigify's ``IK_FK`` (on the
+#: limbs' parent controls), Auto-Rig Pro's ``ik_fk_switch`` (on c_hand_ik.l, c_foot_ik.l, ...)
+IK_FK_PROPERTIES = ("IK_FK", "ik_fk_switch")
+
+
 def _ik_fk_switches(obj, bmap):
-    """Pose bones of a generated Rigify rig whose ``IK_FK`` switch must be 1 (FK) for the FK
-    controls ``bmap`` keys to move the limbs."""
-    if not any(b.endswith(("_fk.L", "_fk.R")) for b in bmap.bones.values()):
+    """``[(pose bone, property)]``: the IK/FK switches of a generated Rigify rig or a live
+    Auto-Rig Pro rig that must be 1 (FK) for the FK controls ``bmap`` keys to move the limbs."""
+    if not any(b.endswith(("_fk.L", "_fk.R", "_fk.l", "_fk.r")) for b in bmap.bones.values()):
         return []
-    return [pb.name for pb in obj.pose.bones if "IK_FK" in pb.keys()]
+    return [(pb.name, p) for pb in obj.pose.bones for p in IK_FK_PROPERTIES if p in pb.keys()]
 
 
 def _frames_of(action, obj):
@@ -252,8 +276,9 @@ def key_retarget(target_obj, res: rt.RetargetResult, target: rt.TargetRig, frame
                  switches=()):
     """A NEW action ``name`` on ``target_obj`` with the keys of ``res``; returns it.  The previous
     action stays (fake user), the keyed bones' rotation modes are recorded (:data:`PROP_MODES`).
-    switches: pose bones whose ``["IK_FK"]`` property is keyed to 1 (FK) in the action (a Rigify
-    rig keyed on its FK controls), so the rig itself is not changed."""
+    switches: ``[(pose bone, property)]`` IK/FK switches keyed to 1 (FK) in the action (a Rigify or
+    Auto-Rig Pro rig keyed on its FK controls, :func:`_ik_fk_switches`), so the rig itself is not
+    changed."""
     keyed = [k for k in range(target.num_bones) if res.keyed[k]]
     prev = target_obj.animation_data.action if target_obj.animation_data else None
     action = keying.new_action(name)
@@ -269,7 +294,7 @@ def key_retarget(target_obj, res: rt.RetargetResult, target: rt.TargetRig, frame
         _rest_bones_no_longer_keyed(target_obj, prev, set(modes))
         # the switches first: the bases below are taken with the rig in FK
         keying.key_channels(action, target_obj, frames,
-                            [(f'pose.bones["{b}"]["IK_FK"]', 0, b, np.ones(len(frames))) for b in switches],
+                            [(f'pose.bones["{b}"]["{p}"]', 0, b, np.ones(len(frames))) for b, p in switches],
                             'CONSTANT')
         quats, root_loc = res.quaternions, res.root_location
         if _constrained_parents(target_obj, target, keyed):

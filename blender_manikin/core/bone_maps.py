@@ -35,6 +35,7 @@ of a generated rig are driven by constraints, so keying them needs those constra
 ``rigify_fk`` maps the FK controls instead), ``rigify_fk``, ``rigify_metarig``, ``mixamo``
 (``mixamorig:`` prefix), ``mixamo_plain`` (no prefix), ``ue4``, ``ue5`` (Unreal mannequins; UE5's
 five spine bones get spine1/2/3 on ``spine_01/03/05``), ``vrm`` (VRoid / VRM 0.x ``J_Bip_*``),
+``auto_rig_pro_fk`` (a live ARP rig's FK controls: ``c_root_master.x``, ``c_arm_fk.l``, ...),
 ``auto_rig_pro`` (ARP's deforming bones, as exported: ``root.x``, ``arm_stretch.l``, ..., and
 the twist bones each limb segment is split with: ``c_arm_twist_offset.l`` or ``arm_twist.l``,
 ``forearm_twist.l``, ``thigh_twist.l``, ``leg_twist.l``),
@@ -303,6 +304,19 @@ def _arp() -> BoneMap:
     return _sided(center, stems, lambda s, side: f"{s}.{'l' if side == 'left' else 'r'}", tw, "auto_rig_pro")
 
 
+def _arp_fk() -> BoneMap:
+    # A live Auto-Rig Pro rig's FK controls (its deforming bones follow them through the rig's
+    # mechanism): c_root_master.x moves the hips with everything above and below them; the
+    # limbs follow their FK controls while the IK/FK switch (the ik_fk_switch property of
+    # c_hand_ik.l and c_foot_ik.l) is 1, which the retarget keys.  spine_03 is optional in ARP
+    # (two spine bones by default): a rig without it has spine3 folded into its neighbours.
+    center = {"pelvis": "c_root_master.x", "spine1": "c_spine_01.x", "spine2": "c_spine_02.x",
+              "spine3": "c_spine_03.x", "neck": "c_neck.x", "head": "c_head.x"}
+    stems = dict(zip(_LIMB_PARTS, ("c_shoulder", "c_arm_fk", "c_forearm_fk", "c_hand_fk", "c_thigh_fk", "c_leg_fk",
+                                   "c_foot_fk", "c_toes_fk")))
+    return _sided(center, stems, lambda s, side: f"{s}.{'l' if side == 'left' else 'r'}", None, "auto_rig_pro_fk")
+
+
 def _cc4() -> BoneMap:
     # Reallusion Character Creator 3/4 (``CC_Base_``): CC_Base_Hip carries the root motion; its
     # child CC_Base_Pelvis (the thighs' parent) is left unmapped, as is NeckTwist02.  Each limb
@@ -338,6 +352,7 @@ _PRESET_FACTORIES = {
     "ue5": lambda: _ue(5),
     "vrm": _vrm,
     "auto_rig_pro": _arp,
+    "auto_rig_pro_fk": _arp_fk,
     "cc4": _cc4,
     "daz_genesis8": _daz_genesis8,
 }
@@ -446,6 +461,25 @@ def fit_twist(bmap, bones) -> BoneMap:
         if keep:
             twist[j] = keep
     return BoneMap(bm.name, out, twist)
+
+
+def fit_preset(bmap, bones, max_missing: float = 1 / 3):
+    """``(BoneMap, missing)``: a preset fitted to a rig of its tool: its twist lists fitted
+    (:func:`fit_twist`) and the joints whose bone the rig lacks left unmapped (folded into their
+    neighbours: a rig built with fewer spine bones, without toes, ...).  ``missing``: ``[(joint,
+    bone)]`` left out.  Raises ``ValueError`` naming the missing bones when the rig lacks the
+    pelvis bone or more than ``max_missing`` of the preset's bones (not a rig of that tool).
+
+    bones: as :func:`guess_bone_map` takes them."""
+    bm = fit_twist(bmap, bones)
+    have = {b[0] for b in bones}
+    missing = [(j, b) for j, b in bm.bones.items() if b not in have]
+    if missing and ("pelvis" in dict(missing) or len(missing) > max_missing * len(bm.bones)):
+        raise ValueError(f"bone map {bm.name!r}: the target rig has no bone(s) "
+                         f"{', '.join(f'{b!r} ({j})' for j, b in missing)}: is it a rig of that kind?")
+    gone = dict(missing)
+    return BoneMap(bm.name, {j: b for j, b in bm.bones.items() if j not in gone},
+                   {j: v for j, v in bm.twist.items() if j not in gone}), missing
 
 
 def _match_preset(bones):
