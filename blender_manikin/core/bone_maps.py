@@ -45,6 +45,8 @@ the Bend/Twist chains' Twist bones).  Twist bones, ``rigify``'s and the Unreal m
 are fitted to the rig they are used on (:func:`fit_twist`): those it lacks, or has elsewhere than
 below their segment's bone, are left out, and one the rig has between the segment's bone and
 the joint above it starts the segment (ARP's upper arm and thigh): it becomes the segment's bone.
+A preset chosen by name is fitted with :func:`fit_preset`, which also leaves out the joints whose
+bone the rig lacks (ARP's optional third spine bone).
 
 :func:`guess_bone_map` guesses a map for an unknown rig from bone names and hierarchy.
 """
@@ -579,7 +581,7 @@ def _role(tokens):
     return None, twist
 
 
-#: the part that follows each limb segment's
+#: the limb part whose bone ends each limb segment (the next one down the chain)
 _NEXT_ROLE = {"upperarm": "forearm", "forearm": "hand", "thigh": "shin", "shin": "foot"}
 _ROLE_JOINT = {"collar": "collar", "upperarm": "shoulder", "forearm": "elbow", "hand": "wrist",
                "thigh": "hip", "shin": "knee", "foot": "ankle", "toe": "foot"}
