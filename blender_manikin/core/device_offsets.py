@@ -314,7 +314,6 @@ PRESET_NAMES = ("none", "openxr_generic", "quest_touch", "index_knuckles", "vive
                 "beat_saber_xr_vive", "openxr_hand_tracking")
 
 
-
 def _entry(R_blender, p_blender):
     q = matrix_to_quat(R_blender)
     return {"pos": [round(float(v), 7) for v in p_blender], "rot": [round(float(v), 9) for v in q]}

@@ -213,17 +213,19 @@ PRESET_GAME_VERSION = (1, 29, 1)
 OPENXR_GAME_VERSION = (1, 29, 4)
 
 
+def _says(text, words):
+    """Whether ``text`` (any value; None: empty) holds one of ``words`` (lower case)."""
+    text = str(text or "").lower()
+    return any(w in text for w in words)
+
+
 def _maker(controller, headset):
     """``"valve"``, ``"oculus"`` or ``"htc"`` from the controller's name, else the headset's (and
     platform's) names, else ``"other"`` (a maker the game has no offsets for: Pico, Windows Mixed
     Reality ...)."""
-    def has(text, words):
-        text = str(text or "").lower()
-        return any(w in text for w in words)
-
     for names in ((controller,), headset):
         for maker, words in (("htc", HTC_WORDS), ("valve", VALVE_WORDS), ("oculus", TOUCH_WORDS)):
-            if any(has(n, words) for n in names):
+            if any(_says(n, words) for n in names):
                 return maker
     return "other"
 
@@ -232,10 +234,9 @@ def _oculus_runtime(runtime):
     """Whether a game before 1.29.4 ran on the Oculus runtime (its ``OculusVRHelper``) rather than
     SteamVR: the first of the ``runtime`` names that names either decides (none: SteamVR)."""
     for text in runtime:
-        text = str(text or "").lower()
-        if "openvr" in text or "steam" in text:
+        if _says(text, ("openvr", "steam")):
             return False
-        if any(w in text for w in OCULUS_RUNTIME_WORDS):
+        if _says(text, OCULUS_RUNTIME_WORDS):
             return True
     return False
 

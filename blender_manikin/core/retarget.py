@@ -286,8 +286,7 @@ def _segments_starting_above(tg, bone_of, chain_child, twist_of, heads_w, G0):
     the segment of that axis.  heads_w ``(B, 3)``, G0 ``(B, 3, 3)``: rest heads and orientations, world."""
     out = []
     mapped = set(int(b) for b in bone_of if b >= 0)
-    limb_segments = [J[f"{side}_{part}"] for side in ("left", "right") for part in ("shoulder", "elbow", "hip", "knee")]
-    for j in limb_segments:
+    for j in [j for _, base, mid, _ in LIMBS for j in (base, mid)]:
         k, c = int(bone_of[j]), int(chain_child[j])
         if k < 0 or c < 0:
             continue
