@@ -242,6 +242,19 @@ def test_bsor_time_jump_back_keeps_strictly_increasing():
     assert any("did not increase" in w and "pause, rewind" in w for w in rec.warnings)
 
 
+def test_bsor_left_handed_replay_keeps_the_hands_as_recorded():
+    """Left-handed mode mirrors the map, not the player: the recorded left hand is the left
+    controller (as BeatLeader's replayers read it), so nothing is swapped or mirrored."""
+    plain, _ = synthetic_bsor(n=120)
+    lefty, _ = synthetic_bsor(n=120, leftHanded=True)
+    a, b = parse_bsor(plain, path="plain.bsor"), parse_bsor(lefty, path="lefty.bsor")
+    assert b.metadata["leftHanded"] is True and a.metadata["leftHanded"] is False
+    for d in a.devices:
+        np.testing.assert_array_equal(b.streams[d].pos, a.streams[d].pos)
+        np.testing.assert_array_equal(b.streams[d].quat, a.streams[d].quat)
+    assert b.warnings == a.warnings
+
+
 def test_bsor_speed_modifier_rescales_time():
     data, _ = synthetic_bsor(n=100, modifiers="FS,DA")
     rec = parse_bsor(data)

@@ -45,6 +45,13 @@ they include the player's in-game controller settings), else the preset of the
 game's defaults that its header's ``gameVersion``, ``controller`` (and ``hmd``,
 ``platform``, ``trackingSystem``) text implies (:func:`beat_saber_offsets`).
 
+Left-handed mode (``info["leftHanded"]``) mirrors the map, not the player: the replay's left
+hand is still the player's left controller, where it was in the room.  BeatLeader's own web
+replayer shows such a replay against the unmirrored map by mirroring the player (the recorded
+left hand drawn as the right saber, x negated), and ArcViewer by mirroring the map and drawing
+the hands as recorded; both read the recorded hands as the physical ones, and so does this
+reader (no swap, no warning; ``metadata["leftHanded"]`` keeps the flag).
+
 Repairs (each reported in :attr:`Recording.warnings`):
 
 * a device sample is invalid when its numbers are not finite, its
@@ -445,6 +452,4 @@ def parse_bsor(data: bytes, path="<bytes>", axes=None, units=None) -> Recording:
         newer = game_version_warning(game)
         if newer:
             warnings.append(newer)
-    if info.get("leftHanded"):
-        warnings.append("the replay was played in left-handed mode: check that left and right are not swapped")
     return Recording(streams=streams, source=path, metadata=meta, warnings=warnings)
