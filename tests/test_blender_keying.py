@@ -120,6 +120,37 @@ def test_resolve_writes_new_action_and_keeps_first(scene):
     assert first.armature.animation_data.action == second.action
 
 
+def test_resolve_makes_a_new_armature_when_the_last_cannot_take_it(scene):
+    """Reuse Armature: the last solve's armature parked in an excluded collection, or with an NLA
+    strip being edited (tweak mode), gets no new action; the solve goes onto a new armature and
+    the live rig is built on it, the old one untouched."""
+    from blender_manikin.blender import live_rig
+    res = synthetic_result(T=T, fps=24.0)
+    first = writer.write_result(res)
+    old, act1 = first.armature, first.action
+    ad = old.animation_data
+    track = ad.nla_tracks.new()
+    strip = track.strips.new(act1.name, 1, act1)
+    ad.action = None
+    track.select = strip.select = True
+    ad.use_tweak_mode = True
+    second = writer.write_result(res, writer.WriteOptions(armature=old, key_pose=False))
+    live_rig.build_live_rig(second.armature, res, frames=second.frames)
+    assert second.created_armature and second.armature != old
+    assert ad.use_tweak_mode and ad.action == act1 and not live_rig.is_live_rig(old)
+    ad.use_tweak_mode = False
+    parked = bpy.data.collections.new("old takes")
+    scene.collection.children.link(parked)
+    for c in list(old.users_collection):
+        c.objects.unlink(old)
+    parked.objects.link(old)
+    bpy.context.view_layer.layer_collection.children["old takes"].exclude = True
+    third = writer.write_result(res, writer.WriteOptions(armature=old, key_pose=False))
+    live_rig.build_live_rig(third.armature, res, frames=third.frames)
+    assert third.created_armature and third.armature not in (old, second.armature)
+    assert not live_rig.is_live_rig(old)
+
+
 def test_tracker_empties(scene):
     res = synthetic_result(T=T, fps=24.0)
     out = writer.write_result(res, writer.WriteOptions(create_trackers=True))

@@ -11,7 +11,7 @@ from blender_manikin.core import bone_maps  # noqa: E402
 from blender_manikin.core import rotations as rot  # noqa: E402
 from blender_manikin.core import skeleton as sk  # noqa: E402
 
-from blender_util import fresh_scene, mixamo_style_character, synthetic_result  # noqa: E402
+from blender_util import evaluated_heads, fresh_scene, mixamo_style_character, synthetic_result  # noqa: E402
 
 T = 30
 
@@ -96,6 +96,31 @@ def test_retarget_directions_without_keep_ends_and_a_saved_map(addon, tmp_path):
         retarget_apply.retarget_onto(src, src)
 
 
+def test_a_character_in_nla_tweak_mode_is_refused_leaving_nothing(addon):
+    """A character whose NLA strip is being edited (Tab in the NLA editor) cannot take a new
+    action: the retarget says so and leaves nothing behind (no stray action kept by a fake user)."""
+    _, src = _source()
+    char = mixamo_style_character(stature=1.95)
+    walk = bpy.data.actions.new("walk")
+    keying.assign_action(char, walk)
+    keying.key_channels(walk, char, [1.0, 10.0], [('pose.bones["mixamorig:Hips"].location', 0, "Hips", [0.0, 0.1])])
+    ad = char.animation_data
+    track = ad.nla_tracks.new()
+    strip = track.strips.new("walk", 1, walk)
+    ad.action = None
+    track.select = strip.select = True
+    ad.use_tweak_mode = True
+    actions = set(bpy.data.actions.keys())
+    s = bpy.context.scene.manikin
+    s.armature, s.retarget_target, s.retarget_keep_ends = src, char, True
+    bpy.context.view_layer.objects.active = src
+    with pytest.raises(RuntimeError, match="tweak mode"):
+        bpy.ops.manikin.retarget()
+    assert set(bpy.data.actions.keys()) == actions
+    assert ad.use_tweak_mode and ad.action == walk and len(char.data.bones) == len(char.pose.bones)
+    assert not any(b.name.startswith("MANIKIN_") for b in char.data.bones)
+
+
 def test_live_rig_source_is_sampled_by_evaluation(addon):
     """A live-rig solve (constraints, no FK keys on the limbs) is read by evaluating it: the same
     joints as the FK solve it came from."""
@@ -115,6 +140,24 @@ def test_live_rig_source_is_sampled_by_evaluation(addon):
     not_elbows = [j for j in range(sk.NUM_JOINTS) if j not in (sk.J["left_elbow"], sk.J["right_elbow"])]
     assert np.degrees(rot.geodesic_angle(wr[:, not_elbows], wr_fk[:, not_elbows])).max() < 0.05
     np.testing.assert_allclose(np.angle(np.exp(1j * (sw - sw_fk))), 0.0, atol=1e-4)
+
+
+def test_a_moved_solve_is_read_where_it_stands_with_or_without_the_live_rig(addon):
+    """The solved armature moved and turned in the scene (the take placed on the set) is read in
+    the world, as the live rig's evaluation reads it, from plain FK keys too."""
+    from blender_manikin.blender import live_rig
+    _, src = _source()
+    src.location, src.rotation_euler = (2.0, -1.0, 0.3), (0.0, 0.0, 0.7)
+    bpy.context.view_layer.update()
+    frames, wr_fk, pos_fk, _, _ = retarget_apply.sample_source(src)
+    heads, _ = evaluated_heads(src, frames[[0, 12, 29]])
+    np.testing.assert_allclose(pos_fk[[0, 12, 29]], heads, atol=1e-4)
+    res, _ = live_rig.result_from_fk_action(src, 24.0)
+    live_rig.build_live_rig(src, res, frames=frames)
+    _, wr, pos, _, _ = retarget_apply.sample_source(src)
+    np.testing.assert_allclose(pos_fk, pos, atol=1e-4)
+    hands = [sk.J["left_wrist"], sk.J["right_wrist"], sk.J["pelvis"], sk.J["head"]]
+    assert np.degrees(rot.geodesic_angle(wr[:, hands], wr_fk[:, hands])).max() < 0.05
 
 
 def test_cli_retargets_onto_a_character_from_a_blend_and_the_fbx_round_trip_holds(tmp_path, monkeypatch):

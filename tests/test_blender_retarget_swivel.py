@@ -186,6 +186,36 @@ def test_option_off_adds_nothing_and_a_new_retarget_removes_the_rig(addon):
     plain()
 
 
+def test_a_linked_character_gets_plain_keys_on_its_targets(addon, tmp_path):
+    """A character linked from a library (a library override, as a studio's asset is) cannot take
+    the rig's bones: keep-ends with the live swivel gives it plain keys, its hands and feet on their
+    targets, and says so, instead of failing."""
+    src, char = _take()
+    path = str(tmp_path / "characters.blend")
+    coll = bpy.data.collections.new("Characters")
+    coll.objects.link(char)
+    bpy.data.libraries.write(path, {coll}, fake_user=True)
+    data = char.data
+    bpy.data.objects.remove(char)
+    bpy.data.armatures.remove(data)
+    bpy.data.collections.remove(coll)
+    with bpy.data.libraries.load(path, link=True) as (_, dst):
+        dst.collections = ["Characters"]
+    scene = bpy.context.scene
+    over = dst.collections[0].override_hierarchy_create(scene, bpy.context.view_layer)
+    if over.name not in scene.collection.children:
+        scene.collection.children.link(over)
+    char = next(o for o in over.all_objects if o.type == 'ARMATURE')
+    assert char.override_library is not None and not char.data.is_editable
+    action, res, notes = retarget_apply.retarget_onto(src, char, "auto", None, "as_is", True, live_swivel=True)
+    assert char.animation_data.action == action and not cs.is_character_rig(char)
+    assert any("no live swivel" in n for n in notes)
+    k = int(_reachable_frames(res)[0])
+    scene.frame_set(1 + k)
+    hand = _world_pose(char, [LIMB_BONES[0][2]])[0][0]
+    assert np.linalg.norm(hand - res.end_targets[k, 0]) < MM
+
+
 def test_bake_gives_plain_fk_keys_of_the_live_pose(addon):
     src, char = _take()
     live, res, _ = retarget_apply.retarget_onto(src, char, "auto", None, "as_is", True)

@@ -372,6 +372,49 @@ def test_swivel_tools_operators(live):
         swivel_tools.unregister()
 
 
+def test_swivel_tools_keep_the_animators_other_keys(live):
+    """Key / Smooth / Reset Swivel change the keys they are about and no other: the interpolation,
+    handles, key type and easing an animator gave other keys of the curve in the Graph Editor stay."""
+    from blender_manikin.operators import swivel_tools
+    res, obj, _, _, frames = live
+    swivel_tools.register()
+    try:
+        scene = bpy.context.scene
+        bpy.context.view_layer.objects.active = obj
+        fc = lr.swivel_fcurve(obj, "left_arm")
+        kp = fc.keyframe_points
+        kp[2].interpolation = 'BEZIER'
+        kp[2].handle_right_type = kp[2].handle_left_type = 'FREE'
+        kp[2].handle_right = (kp[2].co[0] + 0.5, kp[2].co[1] + 0.7)
+        kp[3].interpolation = 'CONSTANT'
+        kp[4].type = 'BREAKDOWN'
+        kp[5].easing = 'EASE_IN'
+        fc.update()
+
+        def edited():
+            k = lr.swivel_fcurve(obj, "left_arm").keyframe_points
+            return (k[2].interpolation, k[2].handle_right_type, tuple(k[2].handle_right), k[3].interpolation,
+                    k[4].type, k[5].easing, [tuple(k[i].co) for i in range(2, 6)])
+        before = edited()
+        # a slider edit keyed on a later frame
+        scene.frame_set(int(frames[15]))
+        obj[writer.SWIVEL_PROPS["left_arm"]] = 1.5
+        assert bpy.ops.manikin.key_swivel(limb='left_arm') == {'FINISHED'}
+        f, v = lr.read_keys(lr.swivel_fcurve(obj, "left_arm"))
+        assert len(f) == T and abs(v[15] - 1.5) < 1e-6
+        assert edited() == before
+        # smoothing frames 12-20 and resetting the current frame leave keys 2-5 as they were
+        scene.frame_start, scene.frame_end = int(frames[12]), int(frames[20])
+        assert bpy.ops.manikin.smooth_swivel(limb='left_arm', sigma=2.0) == {'FINISHED'}
+        assert edited() == before
+        assert bpy.ops.manikin.reset_swivel(limb='left_arm', scope='CURRENT') == {'FINISHED'}
+        f, v = lr.read_keys(lr.swivel_fcurve(obj, "left_arm"))
+        assert len(f) == T and abs(v[15] - writer.unwrap_swivel(res.swivel)[15, 0]) < 1e-5
+        assert edited() == before
+    finally:
+        swivel_tools.unregister()
+
+
 def test_make_live_from_fk_solve_operator():
     """The 'Make Live Rig' button reads a plain solve action back and converts it exactly."""
     from blender_manikin.operators import swivel_tools

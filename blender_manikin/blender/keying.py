@@ -182,6 +182,96 @@ def set_keys(fcurve, frames, values, interpolation: str = 'LINEAR'):
     return fcurve
 
 
+#: per-key attributes :func:`update_keys` carries over (enums read and written as their values)
+_KEY_ATTRS = (("interpolation", np.int32), ("handle_left_type", np.int32), ("handle_right_type", np.int32),
+              ("type", np.int32), ("easing", np.int32), ("back", np.float32), ("amplitude", np.float32),
+              ("period", np.float32), ("select_control_point", bool), ("select_left_handle", bool),
+              ("select_right_handle", bool))
+
+
+def update_keys(fcurve, frames, values, drop=None, interpolation: str | None = None):
+    """Write keys ``(frames[k], values[k])`` into ``fcurve`` in bulk, keeping every other key as
+    the animator left it (interpolation, handles and their types, key type, easing, selection).
+
+    A key already at one of ``frames`` (within 1e-4) gets the new value and keeps its attributes,
+    its handles moved with it; ``drop``: ``(len(keyframe_points),)`` bool, existing keys to
+    remove first.  New keys take ``interpolation`` (None: that of the key before them, else of
+    the first key, else ``'LINEAR'``).  Returns ``fcurve``."""
+    kp = fcurve.keyframe_points
+    n = len(kp)
+    nf = np.asarray(frames, dtype=np.float64).ravel()
+    nv = np.asarray(values, dtype=np.float64).ravel()
+    if nf.shape != nv.shape:
+        raise ValueError(f"frames {nf.shape} and values {nv.shape} differ")
+    old = {name: np.empty(n, dt) for name, dt in _KEY_ATTRS}
+    co, hl, hr = np.empty(2 * n, np.float32), np.empty(2 * n, np.float32), np.empty(2 * n, np.float32)
+    if n:
+        for name, buf in old.items():
+            kp.foreach_get(name, buf)
+        kp.foreach_get("co", co)
+        kp.foreach_get("handle_left", hl)
+        kp.foreach_get("handle_right", hr)
+    co, hl, hr = co.reshape(n, 2).astype(np.float64), hl.reshape(n, 2), hr.reshape(n, 2)
+    keep = np.ones(n, bool) if drop is None else ~np.asarray(drop, bool).ravel()
+    kept = np.nonzero(keep)[0]
+    kept = kept[np.argsort(co[kept, 0], kind="stable")]
+    # the kept key at each new frame, if any
+    match = np.full(len(nf), -1)
+    if len(kept):
+        pos = np.clip(np.searchsorted(co[kept, 0], nf), 0, len(kept) - 1)
+        for d in (pos, np.maximum(pos - 1, 0)):
+            ok = (match < 0) & (np.abs(co[kept[d], 0] - nf) < 1e-4)
+            match[ok] = kept[d][ok]
+    unmatched = np.setdiff1d(kept, match[match >= 0])
+    rows = np.concatenate([unmatched, match[match >= 0]]).astype(int)   # old keys written back
+    m = len(rows) + int(np.sum(match < 0))
+    # new keys' interpolation
+    items = bpy.types.Keyframe.bl_rna.properties["interpolation"].enum_items
+    if interpolation is not None:
+        new_interp = np.full(int(np.sum(match < 0)), items[interpolation].value, np.int32)
+    else:
+        fresh = nf[match < 0]
+        if len(kept):
+            before = np.clip(np.searchsorted(co[kept, 0], fresh, side="right") - 1, 0, len(kept) - 1)
+            new_interp = old["interpolation"][kept[before]]
+        else:
+            new_interp = np.full(len(fresh), items['LINEAR'].value, np.int32)
+    if n:
+        kp.clear()
+    if m == 0:
+        fcurve.update()
+        return fcurve
+    kp.add(m)
+    out = {}
+    for name, dt in _KEY_ATTRS:
+        buf = np.empty(m, dt)
+        kp.foreach_get(name, buf)                # the defaults of a new key
+        buf[:len(rows)] = old[name][rows]
+        out[name] = buf
+    out["interpolation"][len(rows):] = new_interp
+    oco = np.empty((m, 2))
+    ohl, ohr = np.empty((m, 2)), np.empty((m, 2))
+    oco[:len(rows)] = co[rows]
+    ohl[:len(rows)], ohr[:len(rows)] = hl[rows], hr[rows]
+    # matched keys: the new value, handles moved with it
+    j = np.arange(len(unmatched), len(rows))
+    dv = nv[match >= 0] - co[match[match >= 0], 1]
+    oco[j, 1] = nv[match >= 0]
+    ohl[j, 1] += dv
+    ohr[j, 1] += dv
+    # new keys
+    fresh = np.stack([nf[match < 0], nv[match < 0]], -1)
+    oco[len(rows):] = ohl[len(rows):] = ohr[len(rows):] = fresh
+    order = np.argsort(oco[:, 0], kind="stable")
+    for name, buf in out.items():
+        kp.foreach_set(name, buf[order])
+    kp.foreach_set("co", oco[order].astype(np.float32).ravel())
+    kp.foreach_set("handle_left", ohl[order].astype(np.float32).ravel())
+    kp.foreach_set("handle_right", ohr[order].astype(np.float32).ravel())
+    fcurve.update()
+    return fcurve
+
+
 def key_channels(action, id_owner, frames, channels, interpolation: str = 'LINEAR'):
     """Key many channels of ``id_owner`` in ``action`` at the same ``frames``.
 

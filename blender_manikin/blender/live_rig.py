@@ -928,7 +928,8 @@ def smooth_values(frames, values, sigma: float, method: str = 'GAUSSIAN', mask=N
 
 
 def smooth_swivel(obj, limbs, frame_start, frame_end, sigma: float, method: str = 'GAUSSIAN'):
-    """Smooth the swivel keys of ``limbs`` with frames in ``[frame_start, frame_end]`` (bulk rewrite).
+    """Smooth the swivel keys of ``limbs`` with frames in ``[frame_start, frame_end]`` (bulk; the
+    keys keep their interpolation and handles, keys outside the range are not touched).
 
     Returns the number of keys changed.
     """
@@ -941,8 +942,7 @@ def smooth_swivel(obj, limbs, frame_start, frame_end, sigma: float, method: str 
         mask = (f >= frame_start - 1e-6) & (f <= frame_end + 1e-6)
         if not mask.any():
             continue
-        interp = _interpolation_of(fc)
-        keying.set_keys(fc, f, smooth_values(f, v, sigma, method, mask), interp)
+        keying.update_keys(fc, f[mask], smooth_values(f, v, sigma, method, mask)[mask])
         count += int(mask.sum())
     return count
 
@@ -951,8 +951,8 @@ def reset_swivel(obj, limbs, frame_start=None, frame_end=None):
     """Copy the solved swivel (``["swivel_solved_<limb>"]`` keys) back onto the swivel keys.
 
     Keys of the swivel curve inside ``[frame_start, frame_end]`` (None: all)
-    are replaced by the solved keys in that range; keys outside are kept.
-    Returns the number of limbs reset.
+    are replaced by the solved keys in that range; keys outside are kept as they are (values,
+    interpolation, handles).  Returns the number of limbs reset.
     """
     done = 0
     for limb in limbs:
@@ -964,23 +964,19 @@ def reset_swivel(obj, limbs, frame_start=None, frame_end=None):
         f, v = read_keys(fc)
         lo = -np.inf if frame_start is None else frame_start - 1e-6
         hi = np.inf if frame_end is None else frame_end + 1e-6
-        keep = (f < lo) | (f > hi)
         take = (fs >= lo) & (fs <= hi)
-        nf = np.concatenate([f[keep], fs[take]])
-        nv = np.concatenate([v[keep], vs[take]])
-        order = np.argsort(nf, kind="stable")
-        interp = _interpolation_of(solved)
-        keying.set_keys(fc, nf[order], nv[order], interp)
+        keying.update_keys(fc, fs[take], vs[take], drop=(f >= lo) & (f <= hi),
+                           interpolation=_interpolation_of(solved))
         done += 1
     return done
 
 
 def key_swivel(obj, limbs, frame: float, values=None):
-    """Key the swivel of ``limbs`` at scene ``frame`` (bulk rewrite of the curve).
+    """Key the swivel of ``limbs`` at scene ``frame`` (the curve's other keys are not touched).
 
     values: limb -> radians; default each property's current value (what the
-    slider shows, including unkeyed edits).  An existing key at ``frame`` is
-    replaced.  Returns the number of keys written.
+    slider shows, including unkeyed edits).  An existing key at ``frame`` takes the
+    value (keeping its interpolation and handles).  Returns the number of keys written.
     """
     ad = obj.animation_data
     if ad is None or ad.action is None:
@@ -992,12 +988,6 @@ def key_swivel(obj, limbs, frame: float, values=None):
             continue
         value = float(obj[prop] if values is None or limb not in values else values[limb])
         fc = swivel_fcurve(obj, limb, create=True)
-        f, v = read_keys(fc)
-        interp = _interpolation_of(fc)
-        keep = np.abs(f - frame) > 1e-4
-        nf = np.append(f[keep], frame)
-        nv = np.append(v[keep], value)
-        order = np.argsort(nf, kind="stable")
-        keying.set_keys(fc, nf[order], nv[order], interp)
+        keying.update_keys(fc, [frame], [value])
         n += 1
     return n

@@ -149,17 +149,17 @@ def sample_source(obj, context=None, frames=None, progress=None):
     if frames is None:
         frames = _frames_of(ad.action, obj)
     frames = np.asarray(frames, dtype=np.float64)
+    W = np.array(obj.matrix_world, dtype=np.float64)
+    Rw = rot.orthonormalize(W[:3, :3])
     if not live_rig.is_live_rig(obj):           # plain FK keys: read them, no evaluation
         fps = float(context.scene.render.fps) / float(context.scene.render.fps_base)
         res, key_frames = live_rig.result_from_fk_action(obj, fps)
         if len(key_frames) == len(frames) and np.allclose(key_frames, frames):
-            pos, wr = res.fk()
-            return frames, wr, pos, res.swivel, body
+            pos, wr = res.fk()                  # armature space: into the world, as evaluated below
+            return frames, Rw @ wr, pos @ W[:3, :3].T + W[:3, 3], res.swivel, body
     # the live rig: Blender evaluates it frame by frame (constraints, drivers); the matrices are
     # read in bulk and converted all at once
     _, rest = arm_mod.rest_matrices(obj)
-    W = np.array(obj.matrix_world, dtype=np.float64)
-    Rw = rot.orthonormalize(W[:3, :3])
     scene = context.scene
     keep = scene.frame_current, scene.frame_subframe
     T = len(frames)
@@ -382,10 +382,19 @@ def retarget_onto(source_obj, target_obj, bone_map="auto", map_path=None, root_m
         live_swivel = bool(keep_ends)
     if target_obj is None or target_obj == source_obj:
         raise ValueError("choose a target armature other than the solved one")
+    if target_obj.animation_data is not None and target_obj.animation_data.use_tweak_mode:
+        # its action cannot be changed while an NLA strip's action is being edited
+        raise ValueError(f"{target_obj.name!r} is in NLA tweak mode (a strip's action is being edited): "
+                         f"leave it (Tab in the NLA editor), then retarget")
     bmap, guess = resolve_bone_map(bone_map, target_obj, map_path)
     # only the bones the map drives and those above them: the retarget's arrays hold a row per
     # bone and frame, and fingers, face and props keep their rest pose under their parent anyway
     target = target_rig_from_object(target_obj).restricted_to(bone_maps.as_bone_map(bmap).target_bones())
+    # the live swivel adds bones: a linked character's armature (a library override's) cannot take
+    # them, so it gets plain keys
+    linked = live_swivel and not (getattr(target_obj.data, "is_editable", True) and target_obj.data.library is None)
+    if linked:
+        live_swivel = False
     frames, wr, pos, swivel, body = sample_source(
         source_obj, context, progress=None if progress is None else (lambda f: progress(0.6 * f)))
     if progress is not None:
@@ -393,6 +402,10 @@ def retarget_onto(source_obj, target_obj, bone_map="auto", map_path=None, root_m
     res = rt.retarget(wr, pos, body, target, bmap, root_motion)
     notes = [f"{g.joint}: {g.bone or 'no bone'} ({g.why})" for g in guess if g.confidence < 0.5]
     notes += list(res.plan.notes)             # what the retarget assumed of the rig (facing, legs)
+    if linked:
+        notes.append(f"no live swivel: {target_obj.name!r}'s armature is linked from "
+                     f"{target_obj.data.library.filepath if target_obj.data.library else 'a library'} and "
+                     f"cannot take its bones; the limbs are keyed as plain keys")
     # With keep_ends every limb lands on its target; without, the legs still do when the root
     # motion is scaled or in place: transferred segment directions on a character with other
     # thigh : shank proportions would make planted feet slide (3-4 cm/s at +-12 %), so the legs

@@ -191,11 +191,22 @@ def _remove_ids(ids):
             pass
 
 
+def can_take_a_solve(obj, context) -> bool:
+    """Whether the armature ``obj`` of an earlier solve can be given a new action and rig: in the
+    view layer (not in an excluded collection: the live rig is built in edit mode) and not in NLA
+    tweak mode (its action cannot be changed while a strip's is being edited)."""
+    ad = obj.animation_data
+    if ad is not None and ad.use_tweak_mode:
+        return False
+    context.view_layer.update()             # its bases as the collections now are
+    return context.view_layer.objects.get(obj.name) is not None
+
+
 def write_result(result, options: WriteOptions | None = None, context=None) -> WriteOutput:
     """Write ``result`` into the scene of ``context`` (default ``bpy.context``).
 
     Creates a new armature (or reuses ``options.armature`` when it is a
-    MANIKIN armature of the same body), a NEW action assigned to it (not
+    MANIKIN armature of the same body that :func:`can_take_a_solve`), a NEW action assigned to it (not
     with ``options.key_pose`` False: the caller keys the armature, e.g. the
     live rig's own action), the swivel custom properties, and optionally
     tracker empties.  All or nothing.
@@ -214,7 +225,7 @@ def write_result(result, options: WriteOptions | None = None, context=None) -> W
     try:
         try:
             reuse = obj is not None and arm_mod.armature_matches_body(obj, result.body) \
-                and obj.name in scene.objects
+                and obj.name in scene.objects and can_take_a_solve(obj, context)
         except ReferenceError:                  # deleted while the solve ran
             reuse, obj = False, None
         if not reuse:
