@@ -229,3 +229,43 @@ def test_a_native_csv_without_axes_that_walks_backwards_is_warned_about(tmp_path
     else:
         assert warned == []
     assert not [w for w in read_csv(stated).warnings if "no '# axes:' line" in w]
+
+
+@pytest.mark.parametrize("axes", ["unity", "openxr"])
+def test_a_wide_csv_whose_time_column_holds_milliseconds_is_read_the_right_way(tmp_path, axes):
+    """A logger that writes milliseconds under a plain ``time`` header: the walking direction still
+    decides the axes (measured in seconds, not in a thousandth of the speed), where the hands at the
+    sides alone would read the take mirrored."""
+    from fixtures_recordings import write_wide_poses
+    t, pos, quat = walking_take()
+    names = {"head": "hmd", "left_hand": "left_controller", "right_hand": "right_controller"}
+    path = write_wide_poses(tmp_path / "walk_ms.csv", t * 1000.0, pos, quat, names, axes)
+    rec = formats.load_recording(path)
+    line = rec.metadata["detected"]
+    assert "time=time in ms" in line and f"axes {axes} (" in line and "from the walking direction (" in line, line
+    np.testing.assert_allclose(rec.streams["head"].time, t, atol=1e-6)
+    assert rec.metadata["layout"]["time"] == {"column": "time", "unit": "ms"}
+
+
+@pytest.mark.parametrize("orientations", [True, False])
+@pytest.mark.parametrize("axes", ["unity", "openxr"])
+def test_repeated_rows_do_not_hide_the_walking_direction(tmp_path, axes, orientations):
+    """A logger that writes some rows twice (the same time: two callbacks in one frame): the
+    repeats are no step in time, so the walk still decides the axes, and quietly (no division by a
+    zero time step on the console).  Read with the repeats, the walk vanished and, without
+    orientation columns, the hands at the sides read the take mirrored."""
+    import warnings
+    from fixtures_recordings import write_wide_poses
+    t, pos, quat = walking_take()
+    names = {"head": "hmd", "left_hand": "left_controller", "right_hand": "right_controller"}
+    path = write_wide_poses(tmp_path / "walk.csv", t, pos, quat, names, axes)
+    lines = path.read_text().splitlines()
+    header = lines[0].split(",")
+    keep = [i for i, c in enumerate(header) if orientations or "_rot_" not in c]
+    rows = [lines[0]] + [ln for k, ln in enumerate(lines[1:]) for _ in range(2 if k % 10 == 3 else 1)]
+    path.write_text("\n".join(",".join(r.split(",")[i] for i in keep) for r in rows) + "\n")
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        rec = formats.load_recording(path)
+    line = rec.metadata["detected"]
+    assert f"axes {axes} (" in line and "from the walking direction (" in line, line

@@ -160,3 +160,32 @@ def test_a_matrix_that_is_not_a_rigid_transform_is_a_lost_sample():
         assert len(flat) == 7 and all(np.isnan(v) for v in flat.values())
     eye = flatten({"viewer": {"transform": {"matrix": list(np.eye(4).reshape(-1))}}})
     assert eye["viewer_transform_rotation_w"] == 1.0 and eye["viewer_transform_position_y"] == 0.0
+
+
+def test_a_first_row_without_a_time_does_not_lose_every_time(tmp_path):
+    """A JSON Lines log that opens with a session line (``{"app": ..., "fps": 72}``), or a wide CSV
+    whose first row's time cell is empty: the times count from the first row that has one.
+    Counting from the missing one made every time NaN ("head has no usable samples")."""
+    path = unity_json(tmp_path / "take.jsonl", per_line=True)
+    text = open(path).read()
+    open(path, "w").write(json.dumps({"app": "MyGame", "fps": 72, "device": "Quest 3"}) + "\n" + text)
+    rec = formats.load_recording(path)
+    t, pos, _ = _take()
+    for d in DEVICES:
+        s = rec.streams[d]
+        assert s.usable.sum() == len(t)
+        np.testing.assert_allclose(s.time[s.usable], t - t[0], atol=2e-6)
+        np.testing.assert_allclose(s.pos[s.usable], pos[d], atol=1e-5)
+    from fixtures_recordings import write_wide_poses
+    _, _, quat = _take()
+    names = {"head": "hmd", "left_hand": "left_controller", "right_hand": "right_controller"}
+    csv = write_wide_poses(tmp_path / "take.csv", t + 5.0, pos, quat, names, "unity")
+    lines = open(csv).read().splitlines()
+    lines[1] = "," + lines[1].split(",", 1)[1]
+    open(csv, "w").write("\n".join(lines) + "\n")
+    rec = formats.load_recording(csv)
+    assert np.isnan(rec.streams["head"].time[0])
+    np.testing.assert_allclose(rec.streams["head"].time[1:], t[1:] - t[1], atol=2e-6)
+    from blender_manikin.core.resample import resample
+    times = resample(rec, 30.0, floor=None, check_units=False)[0]
+    assert times[-1] - times[0] == pytest.approx(t[-1] - t[1], abs=0.04)

@@ -494,3 +494,30 @@ def test_bsor_frame_with_a_corrupt_time_is_dropped_alone(tmp_path):
     assert not any("did not increase" in w for w in rec.warnings)
     times = resample(rec, 30.0)[0]
     assert times[-1] == pytest.approx(t[-1], abs=1 / 30)
+
+
+def test_csv_empty_cells_are_lost_samples(tmp_path):
+    """pandas' ``to_csv`` (and a spreadsheet) writes a lost sample's NaN as an empty cell: the
+    sample is lost, as ``nan`` is, in the fast and the exact parser alike; an empty time is still
+    an error naming its line."""
+    path, _ = write_recording_csv(tmp_path, duration=0.5)
+    lines = open(path).read().splitlines()
+    hi = next(i for i, ln in enumerate(lines) if ln.startswith("time,"))
+    rows = [k for k in range(hi + 1, len(lines)) if ",left_hand," in lines[k]][5:8]
+    for k in rows:
+        f = lines[k].split(",")
+        f[2:9] = [""] * 7
+        lines[k] = ",".join(f)
+    for name, text in (("empty.csv", "\n".join(lines) + "\n"), ("empty_crlf.csv", "\r\n".join(lines) + "\r\n")):
+        p = tmp_path / name
+        p.write_text(text, newline="")
+        rec = read_csv(p)
+        s = rec.streams["left_hand"]
+        assert (~s.usable).sum() == 3 and np.isnan(s.pos[~s.usable]).all()
+        assert s.usable.sum() == len(s) - 3
+    f = lines[rows[0]].split(",")
+    f[0] = ""
+    lines[rows[0]] = ",".join(f)
+    (tmp_path / "no_time.csv").write_text("\n".join(lines) + "\n")
+    with pytest.raises(RecordingError, match=rf"no_time.csv, line {rows[0] + 1}: column 'time': the cell is empty"):
+        read_csv(tmp_path / "no_time.csv")

@@ -443,6 +443,23 @@ def test_whole_milliseconds_are_not_times_of_day(tmp_path):
     np.testing.assert_allclose(rec.streams["head"].time, plain.streams["head"].time, atol=1e-3)
 
 
+@pytest.mark.parametrize("name,scale,unit", [("timestamp", 1.0, "s"), ("timestamp", 1e3, "ms"),
+                                             ("time", 1e3, "ms"), ("time_ms", 1e3, "ms")])
+def test_a_timestamp_in_unix_seconds_is_read_in_seconds(tmp_path, name, scale, unit):
+    """A ``timestamp`` column is as often Unix time in seconds (Python's ``time.time()``) as
+    milliseconds: its steps decide, as a ``time`` column's do, so a 90 Hz take keeps its length."""
+    src = tmp_path / "plain.csv"
+    write_wide(src, **FAMILIES["openxr_dotted_m"])
+    plain = formats.load_recording(src)
+    path = _relocale(src, tmp_path / "stamped.csv", ",", time=lambda s: f"{(1.7e9 + s) * scale:.6f}")
+    text = open(path).read()
+    open(path, "w").write(name + text[len("time"):])
+    rec = formats.load_recording(path)
+    assert f"time={name} in {unit}" in rec.metadata["detected"]
+    np.testing.assert_allclose(rec.streams["head"].time - rec.streams["head"].time[0],
+                               plain.streams["head"].time - plain.streams["head"].time[0], atol=1e-4)
+
+
 def test_unity_vector_and_quaternion_tuples(tmp_path):
     """A logger that writes Unity's Vector3 / Quaternion ToString() into one field each:
     "(0.10000, 1.60000, 0.20000)" and "(x, y, z, w)"; the layout file names the spread columns."""

@@ -184,3 +184,17 @@ def test_a_beat_saber_sessions_song_time_becomes_real_time(tmp_path, app, activi
     kept = rec.streams["head"].time
     assert kept[-1] == pytest.approx(np.float32(t[-1]) / scale, rel=1e-6)
     assert any("song speed" in w for w in rec.warnings) == (scale != 1.0)
+
+
+@pytest.mark.parametrize("height", [None, "1.80m", {"value": 1.8}])
+def test_a_height_that_is_not_a_number_does_not_stop_the_motion(tmp_path, height):
+    """``info.software.activity.height`` is the player's height setting, not motion: a null (an
+    app that does not know it), a text or an object is left out with a warning, the take read."""
+    data, t, _ = _xror(app="Beat Saber")
+    doc = bson.decode(data)
+    doc["info"]["software"]["activity"] = {"height": height}
+    (tmp_path / "take.xror").write_bytes(bson.encode(doc))
+    rec = formats.load_recording(tmp_path / "take.xror")
+    assert "height" not in rec.metadata and len(rec.streams["head"].time) == len(t)
+    assert any(w.startswith("info.software.activity.height ") and "is not a number: left out" in w
+               for w in rec.warnings)

@@ -52,6 +52,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .recording import increasing_mask
 from .rotations import axis_angle_to_quat, normalize, quat_rotate, quat_to_matrix
 from .smoothing import smooth_frames
 
@@ -141,9 +142,11 @@ class FacingEvidence:
 
 
 def _rows(time, pos, quat):
-    """``(T,)`` bool: the rows where the time and the head's position and rotation are finite."""
-    ok = np.isfinite(time) & np.isfinite(pos["head"]).all(-1) & np.isfinite(quat["head"]).all(-1)
-    return ok
+    """``(T,)`` bool: the rows where the time and the head's position and rotation are finite and
+    the time goes on (:func:`.recording.increasing_mask`: a repeated row is no step in time, and
+    its zero time step would make the speeds infinite)."""
+    ok = np.isfinite(pos["head"]).all(-1) & np.isfinite(quat["head"]).all(-1)
+    return ok & increasing_mask(np.where(ok, time, np.nan))
 
 
 def _forward(quat, axes):
@@ -260,6 +263,7 @@ def heading_from_positions(time, pos, walking=True):
     lateral *= (np.clip(spread / HANDS_APART, 0.0, 1.0) / np.maximum(spread, 1e-9))[:, None]
     head = np.asarray(pos["head"], np.float64)
     ok = np.isfinite(head).all(-1)
+    ok &= increasing_mask(np.where(ok, time, np.nan))            # a repeated row is no step in time
     v = np.zeros((T, 3))
     if ok.sum() >= 3:
         path = smooth_frames(head[ok], HIGH_PASS_S * fps)
@@ -305,7 +309,8 @@ def _positions_only_evidence(time, pos, axes):
     walking and reaching cues against the heading :func:`heading_from_positions` gives there."""
     from .recording import to_blender
     time = np.asarray(time, np.float64)
-    rows = np.isfinite(time) & np.isfinite(pos["head"]).all(-1)
+    rows = np.isfinite(pos["head"]).all(-1)
+    rows &= increasing_mask(np.where(rows, time, np.nan))
     b = {d: to_blender(np.asarray(p, np.float64)[rows], None, axes)[0] for d, p in pos.items()}
     t = time[rows]
     fwd = heading_from_positions(t, b, walking=False)     # the hands' line alone: the walk is the evidence

@@ -21,8 +21,8 @@ Format (UTF-8, optional BOM)::
   line, and listed in ``metadata["ignored_devices"]``; a solve missing a device it needs then
   names them too.
 * ``px, py, pz``: position in ``units`` (default metres); ``qw, qx, qy, qz``:
-  orientation quaternion (normalised on reading).  ``nan`` marks lost
-  tracking.
+  orientation quaternion (normalised on reading).  ``nan`` or an empty cell
+  marks lost tracking.
 * ``valid`` (optional): 1/0 (or true/false); 0 marks a sample whose pose the
   tracking system flagged as not tracked.
 * Column order is free; extra columns are ignored; the header names are
@@ -72,7 +72,11 @@ def _split(line):
 
 
 def _to_float(values, name, lines, path):
-    """Vectorised str → float64 with a line-accurate error on failure."""
+    """Vectorised str → float64 with a line-accurate error on failure.  An empty cell of a pose
+    column is a lost sample (NaN), as pandas' ``to_csv`` and spreadsheets write one; the time
+    must be a number."""
+    if name != "time":
+        values = [v if v else "nan" for v in values]
     try:
         return np.array(values, dtype=np.float64)
     except ValueError:
@@ -80,9 +84,8 @@ def _to_float(values, name, lines, path):
             try:
                 float(s)
             except ValueError:
-                text = str(s) if s else "(empty)"
-                raise RecordingError(f"column '{name}': {text!r} is not a number", path=path,
-                                     line=int(ln)) from None
+                problem = f"{s!r} is not a number" if s else "the cell is empty"
+                raise RecordingError(f"column '{name}': {problem}", path=path, line=int(ln)) from None
         raise
 
 

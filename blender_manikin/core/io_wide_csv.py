@@ -21,8 +21,9 @@ Detected:
   ``"euler"`` states the order and unit;
 * field separators (:func:`sniff_delimiter`: commas, semicolons or tabs) and decimal commas (a
   file not separated by commas with commas in its numbers);
-* time: a ``time``/``t``/``seconds`` column (seconds), ``timestamp``/``time_ms`` (milliseconds
-  when the steps say so), ``delta_time_ms``/``dt`` (per-row deltas), ISO 8601 date-times or times
+* time: a ``time``/``t``/``seconds``/``timestamp`` column, in seconds, or in milliseconds, µs or
+  ns when its steps say so (no tracker samples slower than 2 Hz), ``time_ms`` (milliseconds; a
+  layout file's ``"unit"`` decides too), ``delta_time_ms``/``dt`` (per-row deltas), ISO 8601 date-times or times
   of day (:func:`iso_seconds`), or only a frame counter
   (``frame``, ``frame_index``, ...) with the rate given (``rate``); an unnamed first column
   (a pandas index) is ignored;
@@ -61,6 +62,8 @@ _FRAMES = ("frame", "frame_index", "frame_number", "frame_no", "frame_id", "fram
 _TIME_S = ("time", "t", "seconds", "time_s", "secs", "datetime", "date_time", "time_utc", "utc_time",
            "timestamp_utc", "time_of_day")
 _TIME_MS = ("timestamp", "time_ms", "timestamp_ms", "ms")
+#: of those, the names that say milliseconds (a ``timestamp`` may be in seconds, as Unix time is)
+_NAMED_MS = ("time_ms", "timestamp_ms", "ms")
 _DELTA_MS = ("delta_time_ms", "dt_ms", "delta_ms", "frame_time_ms")
 _DELTA_S = ("delta_time", "dt", "delta_time_s")
 #: field separators, in the order a tie goes: commas; semicolons (spreadsheets and loggers on a
@@ -245,24 +248,26 @@ def _time(col, values, header=None, rate=None, path=None):
     i, name = col
     col_name = header[i] if header is not None else name
     v = values[:, i]
+    finite = v[np.isfinite(v)]
+    v0 = finite[0] if finite.size else np.nan        # a first row without a time (a JSON Lines header)
     if name == "frames":
         if not rate:
             raise RecordingError(f"the only time is the frame counter {col_name!r}: give the tracker rate "
                                  f"(--rate HZ, or \"rate\" in a layout file's \"time\")", path=path)
-        return (v - v[0]) / float(rate), f"time={col_name} (frames) at {float(rate):g} Hz"
+        return (v - v0) / float(rate), f"time={col_name} (frames) at {float(rate):g} Hz"
     if name in _DELTA_MS + _DELTA_S:
         v = np.cumsum(np.nan_to_num(v)) * (1e-3 if name in _DELTA_MS else 1.0)
         return v - v[0], f"time=cumulative {col_name}" + (" in ms" if name in _DELTA_MS else " in s")
     steps = np.diff(v[np.isfinite(v)])
     med = float(np.median(steps)) if steps.size else 0.0
     if name in ("time_us", "time_ns"):
-        return (v - v[0]) * (1e-6 if name == "time_us" else 1e-9), f"time={col_name} in {name[5:]}"
-    if name == "time":
-        return v - v[0], f"time={col_name} in s"
-    if name in _TIME_MS or med > 0.5:                  # no tracker samples slower than 2 Hz
+        return (v - v0) * (1e-6 if name == "time_us" else 1e-9), f"time={col_name} in {name[5:]}"
+    if name == "seconds_stated":                       # a layout file's "unit": "s"
+        return v - v0, f"time={col_name} in s"
+    if name in _NAMED_MS or med > 0.5:                 # no tracker samples slower than 2 Hz
         scale, unit = (1e-3, "ms") if med < 500 else (1e-6, "µs") if med < 5e5 else (1e-9, "ns")
-        return (v - v[0]) * scale, f"time={col_name} in {unit}"
-    return v - v[0], f"time={col_name} in s"
+        return (v - v0) * scale, f"time={col_name} in {unit}"
+    return v - v0, f"time={col_name} in s"
 
 
 LAYOUT_VERSION = 1
@@ -355,7 +360,7 @@ def _layout_groups(layout, header, path, hline):
         groups[dev] = {"pos": {a: col(c) for a, c in zip("xyz", cols["pos"])}, "rot": rot,
                        "prefix": _prefix_of(cols["pos"]) or d}
     unit = layout["time"]["unit"]
-    name = {"s": "time", "ms": "time_ms", "us": "time_us", "ns": "time_ns", "delta_ms": "delta_time_ms",
+    name = {"s": "seconds_stated", "ms": "time_ms", "us": "time_us", "ns": "time_ns", "delta_ms": "delta_time_ms",
             "delta_s": "delta_time", "frames": "frames", "iso8601": "time"}[unit]
     return groups, (col(layout["time"]["column"]), name), []
 

@@ -40,6 +40,7 @@ import numpy as np
 from .io_bsor import (
     beat_saber_offsets, game_version_warning, pose_frame_masks, pose_frames_to_streams, song_speed,
 )
+from .plain import shown
 from .recording import Recording, RecordingError, canonical_axes, canonical_units, read_file_bytes
 
 #: XROR joint names -> devices
@@ -212,8 +213,12 @@ def parse_xror(data: bytes, path="<bytes>", axes=None, units=None) -> Recording:
             "hardware": [str(d.get("name", "")) for d in devices],
             "frames_in_file": int(frames.shape[0]), "frames_kept": int(keep.sum())}
     meta["time_scale"] = float(speed)
-    if "height" in activity:
-        meta["height"] = float(activity["height"])
+    if "height" in activity:               # the player's height setting: informative only
+        try:
+            meta["height"] = float(activity["height"])
+        except (TypeError, ValueError):
+            warnings.append(f"info.software.activity.height {shown(activity['height'])} is not a number: "
+                            "left out")
     hand_devices = [d for d, n in zip(used, names) if n.endswith("_hand")]
     if offsets == "beat_saber":            # where the game holds the saber: version, runtime, controllers
         hands = [str(d.get("name", "")) for d in hand_devices]
