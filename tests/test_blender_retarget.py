@@ -121,6 +121,59 @@ def test_a_character_in_nla_tweak_mode_is_refused_leaving_nothing(addon):
     assert not any(b.name.startswith("MANIKIN_") for b in char.data.bones)
 
 
+def test_bones_keep_their_rotation_modes_and_the_characters_own_actions_still_play(addon):
+    """A character animated in Euler (and axis-angle) rotations is keyed in those modes: its bones'
+    modes are not switched to quaternions, so its own actions, reassigned, still play; the new keys
+    put the hands and feet where quaternion keys would and do not spin between frames."""
+    res, src = _source()
+    reference = mixamo_style_character("Reference", stature=1.95)
+    retarget_apply.retarget_onto(src, reference, "mixamo", None, "as_is", True, live_swivel=False)
+    char = mixamo_style_character(stature=1.95)
+    modes = {"mixamorig:LeftArm": 'XYZ', "mixamorig:LeftForeArm": 'ZXY', "mixamorig:RightUpLeg": 'YZX',
+             "mixamorig:Spine": 'AXIS_ANGLE', "mixamorig:Hips": 'ZYX'}
+    for name, mode in modes.items():
+        char.pose.bones[name].rotation_mode = mode
+    own = bpy.data.actions.new("character_wave")                     # the animator's Euler action
+    keying.assign_action(char, own)
+    wave = np.array([0.0, 0.4, -0.3])
+    keying.key_channels(own, char, [1.0, 30.0], [('pose.bones["mixamorig:LeftArm"].rotation_euler', i,
+                                                  "mixamorig:LeftArm", [0.0, v]) for i, v in enumerate(wave)])
+    action, out, _ = retarget_apply.retarget_onto(src, char, "mixamo", None, "as_is", True, live_swivel=False)
+    assert {n: char.pose.bones[n].rotation_mode for n in modes} == modes
+    paths = {fc.data_path: fc for fc in keying.action_fcurves(action, char)}
+    assert 'pose.bones["mixamorig:LeftArm"].rotation_euler' in paths
+    assert 'pose.bones["mixamorig:Spine"].rotation_axis_angle' in paths
+    assert 'pose.bones["mixamorig:LeftArm"].rotation_quaternion' not in paths
+    from mathutils import Euler, Matrix
+    for name, mode in modes.items():      # continuous keys: as Blender's compatible Euler, no spin
+        path = f'pose.bones["{name}"].' + ("rotation_axis_angle" if mode == 'AXIS_ANGLE' else "rotation_euler")
+        fcs = sorted((f for f in keying.action_fcurves(action, char) if f.data_path == path),
+                     key=lambda f: f.array_index)
+        v = np.array([[k.co[1] for k in fc.keyframe_points] for fc in fcs]).T
+        if mode == 'AXIS_ANGLE':
+            R = rot.axis_angle_to_matrix(v[:, 1:] * v[:, :1])
+            step = rot.geodesic_angle(R[1:], R[:-1])
+            assert np.all(np.abs(np.diff(v[:, 0])) <= step + 1e-5), name
+            continue
+        R = rot.fixed_axes_euler_to_matrix(v, mode)
+        e = [Matrix(R[0].tolist()).to_euler(mode)]
+        for t in range(1, T):
+            e.append(Matrix(R[t].tolist()).to_euler(mode, Euler(e[-1], mode)))
+        blender = np.abs(np.diff(np.array(e), axis=0)).sum()
+        assert np.abs(np.diff(v, axis=0)).sum() <= blender + 1e-4, (name, blender)
+    sc = bpy.context.scene
+    for k in (0, 13, 29):
+        sc.frame_set(1 + k)
+        for bone in ("mixamorig:LeftHand", "mixamorig:RightFoot", "mixamorig:Head", "mixamorig:LeftForeArm"):
+            assert np.linalg.norm(_bone_world(char, bone)[0] - _bone_world(reference, bone)[0]) < 1e-4, (k, bone)
+    # the animator's own action, assigned again, plays: the arm where its Euler keys put it
+    keying.assign_action(char, own)
+    sc.frame_set(30)
+    assert np.allclose(char.pose.bones["mixamorig:LeftArm"].rotation_euler, wave, atol=1e-6)
+    M = np.array(char.pose.bones["mixamorig:LeftArm"].matrix_basis)[:3, :3]
+    assert np.abs(M - rot.fixed_axes_euler_to_matrix(wave, "XYZ")).max() < 1e-5
+
+
 def test_live_rig_source_is_sampled_by_evaluation(addon):
     """A live-rig solve (constraints, no FK keys on the limbs) is read by evaluating it: the same
     joints as the FK solve it came from."""

@@ -216,8 +216,17 @@ def test_a_linked_character_gets_plain_keys_on_its_targets(addon, tmp_path):
     assert np.linalg.norm(hand - res.end_targets[k, 0]) < MM
 
 
-def test_bake_gives_plain_fk_keys_of_the_live_pose(addon):
+#: rotation modes an animator gave the left arm's bones (the others stay quaternions)
+EULER_ARM = dict(zip(LIMB_BONES[0], ('XYZ', 'ZXY', 'AXIS_ANGLE')))
+
+
+@pytest.mark.parametrize("modes", [{}, EULER_ARM], ids=["quaternions", "euler_arm"])
+def test_bake_gives_plain_fk_keys_of_the_live_pose(addon, modes):
+    """The bake keys the live pose as plain FK, each bone in its own rotation mode (its modes are
+    not switched, so the character's other actions keyed in them still play)."""
     src, char = _take()
+    for name, mode in modes.items():
+        char.pose.bones[name].rotation_mode = mode
     live, res, _ = retarget_apply.retarget_onto(src, char, "auto", None, "as_is", True)
     sc = bpy.context.scene
     bpy.context.view_layer.objects.active = char
@@ -253,7 +262,9 @@ def test_bake_gives_plain_fk_keys_of_the_live_pose(addon):
     baked_paths = {fc.data_path: len(fc.keyframe_points) for fc in fcs}
     for bones in LIMB_BONES:
         for bone in bones:
-            assert baked_paths[f'pose.bones["{bone}"].rotation_quaternion'] == T
+            mode = modes.get(bone, 'QUATERNION')
+            assert char.pose.bones[bone].rotation_mode == mode
+            assert baked_paths[f'pose.bones["{bone}"].{keying.ROTATION_PATHS.get(mode, "rotation_euler")}'] == T
     # the baked keys reproduce the live pose, the edit included
     for f in frames:
         sc.frame_set(int(f))

@@ -162,3 +162,46 @@ def test_frame_from_axes_keeps_the_first_axis_and_is_a_rotation(order):
     np.testing.assert_allclose(np.einsum("ti,ti->t", np.cross(a, b), R[..., j]), 0.0, atol=1e-9)
     with pytest.raises(ValueError, match="names one axis twice"):
         rot.frame_from_axes(a, b, "xx")
+
+
+@pytest.mark.parametrize("order", ["XYZ", "XZY", "YXZ", "YZX", "ZXY", "ZYX"])
+def test_fixed_axes_euler_round_trip_and_continuity_through_gimbal_lock(order):
+    """Blender's Euler modes: any rotation decomposes and composes back; a path turning through
+    the middle axis's +-90 degrees (gimbal lock) is keyed without the 180-360 degree jumps of the
+    plain decomposition, as Blender's compatible Euler keys it."""
+    rng = np.random.default_rng(7)
+    R = rot.quat_to_matrix(rot.normalize(rng.normal(size=(500, 4))))
+    e = rot.matrix_to_fixed_axes_euler(R, order)
+    np.testing.assert_allclose(rot.fixed_axes_euler_to_matrix(e, order), R, atol=1e-12)
+    t = np.linspace(0.0, 1.0, 400)
+    ang = np.zeros((400, 3))
+    mid = "XYZ".index(order[1])
+    ang[:, mid] = np.radians(-170 + 340 * t)                  # through +-90: both gimbal locks
+    ang[:, (mid + 1) % 3] = np.radians(30 * np.sin(6 * t))
+    ang[:, (mid + 2) % 3] = np.radians(20 * t)
+    path = rot.fixed_axes_euler_to_matrix(ang, order)
+    plain = rot.matrix_to_fixed_axes_euler(path, order)
+    assert np.degrees(np.abs(np.diff(plain, axis=0)).max()) > 170             # the jumps this is for
+    cont = rot.euler_continuous(plain, order)
+    np.testing.assert_allclose(rot.fixed_axes_euler_to_matrix(cont, order), path, atol=1e-12)
+    assert np.degrees(np.abs(np.diff(cont, axis=0)).max()) < 1.0               # 0.85 degrees a step
+    # whole turns are taken off too, and several bones go at once (T, bones, 3)
+    both = np.stack([plain + 2 * np.pi, plain], 1)
+    np.testing.assert_allclose(rot.euler_continuous(both, order)[1:], np.stack([cont, cont], 1)[1:]
+                               + np.array([2 * np.pi, 0.0])[None, :, None], atol=1e-9)
+
+
+def test_axis_angle_continuous_keeps_the_rotation_and_its_axis():
+    rng = np.random.default_rng(8)
+    q = rot.normalize(rng.normal(size=(60, 2, 4)))
+    aa = rot.quat_to_axis_angle_continuous(q)
+    np.testing.assert_allclose(rot.axis_angle_to_matrix(aa[..., 1:] * aa[..., :1]), rot.quat_to_matrix(q), atol=1e-12)
+    # through no rotation at all: the axis is carried over, the angle passes 0 smoothly
+    ang = np.linspace(-0.3, 0.3, 7)
+    axis = rot.normalize(np.array([1.0, 2.0, 2.0]))
+    qs = rot.axis_angle_to_quat(axis * ang[:, None])
+    out = rot.quat_to_axis_angle_continuous(qs)
+    np.testing.assert_allclose(np.abs(out[:, 1:] @ axis), 1.0, atol=1e-12)     # along the one axis
+    np.testing.assert_allclose(rot.axis_angle_to_matrix(out[:, 1:] * out[:, :1]),
+                               rot.axis_angle_to_matrix(axis * ang[:, None]), atol=1e-12)
+    assert np.all(np.isfinite(out)) and np.abs(out[3, 1:] - out[2, 1:]).max() < 1e-12     # no axis at 0

@@ -519,8 +519,9 @@ def bake_character_rig(obj, frame_start=None, frame_end=None, context=None, remo
 
     Every integer scene frame in ``[frame_start, frame_end]`` (default: the live action's frame
     range) is evaluated and the bones the rig drives (:func:`rig_driven_bones`: upper arms,
-    forearms, hands, thighs, shins, feet and their twist bones) get ``rotation_quaternion`` keys
-    on each (``location`` too where the pose moved a bone off its rest offset).  The new action
+    forearms, hands, thighs, shins, feet and their twist bones) get rotation keys on each, in each
+    bone's own rotation mode (the character's other actions keep playing; ``location`` too where
+    the pose moved a bone off its rest offset).  The new action
     (``<live action>_baked``) is a copy of the live one with those curves replaced and the rig's
     own curves (controls, swivel frames, swivel properties) left out; it is assigned, the live
     action is kept (fake user).  remove_rig: remove the rig (:func:`remove_character_rig`), so
@@ -544,7 +545,9 @@ def bake_character_rig(obj, frame_start=None, frame_end=None, context=None, remo
     bones = obj.data.bones
     parents = [bones[n].parent.name if bones[n].parent is not None else None for n in names]
     frames = np.arange(frame_start, frame_end + 1)
-    ch = live_rig.fk_key_channels(obj, names, parents, frames, context)
+    # each bone keyed in its own rotation mode: the character's other actions still play on it
+    ch = live_rig.fk_key_channels(obj, names, parents, frames, context,
+                                  modes={n: obj.pose.bones[n].rotation_mode for n in names})
 
     action = live.copy()
     action.name = f"{live.name}_baked"
@@ -554,8 +557,6 @@ def bake_character_rig(obj, frame_start=None, frame_end=None, context=None, remo
     try:
         keying.assign_action(obj, action)
         _remove_fcurves(action, obj, _rig_path)
-        for n in names:
-            obj.pose.bones[n].rotation_mode = 'QUATERNION'
         keying.key_channels(action, obj, frames.astype(np.float64), ch, interpolation)
     except BaseException:
         keying.assign_action(obj, live)

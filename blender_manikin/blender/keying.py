@@ -22,6 +22,8 @@ import numpy as np
 
 import bpy
 
+from ..core import rotations as rot
+
 
 def is_slotted(action) -> bool:
     """True when ``action`` is written through the slotted (layers / channelbags) API.
@@ -270,6 +272,40 @@ def update_keys(fcurve, frames, values, drop=None, interpolation: str | None = N
     kp.foreach_set("handle_right", ohr[order].astype(np.float32).ravel())
     fcurve.update()
     return fcurve
+
+
+#: the F-curve property of a pose bone's rotation in each rotation mode (every Euler order:
+#: ``rotation_euler``)
+ROTATION_PATHS = {'QUATERNION': "rotation_quaternion", 'AXIS_ANGLE': "rotation_axis_angle"}
+
+
+def rotation_channels(bones, quats, modes=None):
+    """Keying channels (:func:`key_channels`) for the rotations ``quats`` ``(T, B, 4)`` wxyz of
+    pose bones ``bones`` (B names; each bone's basis, as ``rotation_quaternion`` holds it,
+    sign-continuous over the frames), each in its rotation mode (``modes``: B modes, default all
+    ``'QUATERNION'``): ``rotation_quaternion`` as given, ``rotation_axis_angle`` (angle, x, y, z)
+    or ``rotation_euler`` (radians about x, y, z in that Euler order), continuous over the frames
+    as Blender's own keying keeps them (:func:`..core.rotations.euler_continuous`).  So a bone
+    keeps its mode, and the animator's other actions, keyed in it, still play on it.  Each
+    bone's channels are grouped under its name.  Bones of one mode are converted together."""
+    q = np.asarray(quats, np.float64)
+    modes = ['QUATERNION'] * len(bones) if modes is None else list(modes)
+    values = [None] * len(bones)
+    for mode in dict.fromkeys(modes):
+        ks = [k for k, m in enumerate(modes) if m == mode]
+        if mode == 'QUATERNION':
+            v = q[:, ks]
+        elif mode == 'AXIS_ANGLE':
+            v = rot.quat_to_axis_angle_continuous(q[:, ks])
+        else:
+            v = rot.euler_continuous(rot.matrix_to_fixed_axes_euler(rot.quat_to_matrix(q[:, ks]), mode), mode)
+        for n, k in enumerate(ks):
+            values[k] = v[:, n]
+    ch = []
+    for name, mode, v in zip(bones, modes, values):
+        path = f'pose.bones["{name}"].{ROTATION_PATHS.get(mode, "rotation_euler")}'
+        ch += [(path, i, name, v[:, i]) for i in range(v.shape[1])]
+    return ch
 
 
 def key_channels(action, id_owner, frames, channels, interpolation: str = 'LINEAR'):

@@ -755,13 +755,15 @@ def check_frame_range(frame_start, frame_end):
     return frame_start, frame_end
 
 
-def fk_key_channels(obj, names, parents, frames, context=None):
+def fk_key_channels(obj, names, parents, frames, context=None, modes=None):
     """Keying channels (:func:`.keying.key_channels`) that reproduce, as plain FK, the pose Blender
     evaluates for bones ``names`` of ``obj`` on the scene frames ``frames``.
 
     parents: per bone, the bone its keys are relative to (its parent in the armature the keys go
-    to; None: none).  ``rotation_quaternion`` (w, x, y, z, sign-continuous) for every bone,
-    ``location`` (bone rest frame) for bones without a parent or moved off their rest offset."""
+    to; None: none).  ``rotation_quaternion`` (w, x, y, z, sign-continuous) for every bone, or
+    with ``modes`` (bone name → rotation mode) in each bone's mode
+    (:func:`.keying.rotation_channels`); ``location`` (bone rest frame) for bones without a
+    parent or moved off their rest offset."""
     bones = obj.data.bones
     sampled = list(dict.fromkeys(list(names) + [p for p in parents if p is not None]))
     idx = {n: k for k, n in enumerate(sampled)}
@@ -772,10 +774,8 @@ def fk_key_channels(obj, names, parents, frames, context=None):
     has_parent = np.array([p is not None for p in parents])
     basis = pose_basis(rest[own], rest[par], M[:, own], M[:, par], has_parent)
     q = rot.quat_continuous(rot.matrix_to_quat(rot.orthonormalize(basis[..., :3, :3])), axis=0)
-    ch = []
+    ch = keying.rotation_channels(names, q, [(modes or {}).get(n, 'QUATERNION') for n in names])
     for k, n in enumerate(names):
-        for i in range(4):
-            ch.append((f'pose.bones["{n}"].rotation_quaternion', i, n, q[:, k, i]))
         if parents[k] is None or np.max(np.abs(basis[:, k, :3, 3])) > 1e-6:
             for i in range(3):
                 ch.append((f'pose.bones["{n}"].location', i, n, basis[:, k, i, 3]))

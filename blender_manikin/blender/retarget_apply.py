@@ -8,12 +8,13 @@ gather → create, as the solve does:
    frame (``frame_set``: about a millisecond a frame);
 2. the numpy core retargets (:func:`..core.retarget.retarget`, and with ``keep_ends`` the hands
    and feet are solved again on the target's own limb lengths);
-3. :func:`key_retarget` writes a NEW action on the target: ``rotation_quaternion`` of every mapped
-   (and twist) bone and the root bone's ``location``, bulk-keyed on both action APIs.  The
-   target's previous action is kept (with a fake user) and never modified; the keyed bones'
-   rotation mode is set to quaternions (recorded in the action's ``manikin_rotation_modes``
-   custom property so it can be restored).  All or nothing: on an error the new action is removed
-   and the previous one assigned back.
+3. :func:`key_retarget` writes a NEW action on the target: the rotation of every mapped (and
+   twist) bone, in the bone's own rotation mode (quaternion, Euler or axis-angle keys,
+   :func:`.keying.rotation_channels`: the character's other actions, keyed in those modes, still
+   play), and the root bone's ``location``, bulk-keyed on both action APIs.  The target's
+   previous action is kept (with a fake user) and never modified; the keyed bones and their
+   modes are recorded in the action's ``manikin_rotation_modes`` custom property.  All or
+   nothing: on an error the new action is removed and the previous one assigned back.
 
 Frames are scene frames; positions in the scene's unit (the solve is written in it,
 :mod:`.units`; the core's "metres" are whatever unit its inputs share); the MANIKIN armature is
@@ -301,18 +302,15 @@ def key_retarget(target_obj, res: rt.RetargetResult, target: rt.TargetRig, frame
             if switches:
                 bpy.context.scene.frame_set(int(frames[0]))
             quats, root_loc = _bases_from_evaluated_parents(target_obj, res, target, keyed, bpy.context)
-        ch = []
-        for k in keyed:
-            path = f'pose.bones["{target.names[k]}"].rotation_quaternion'
-            for i in range(4):
-                ch.append((path, i, target.names[k], quats[:, k, i]))
+        # each bone keyed in its own rotation mode: the character's other actions still play on it
+        names = [target.names[k] for k in keyed]
+        ch = keying.rotation_channels(names, quats[:, keyed],
+                                      [target_obj.pose.bones[n].rotation_mode for n in names])
         if res.root_bone is not None:
             rb = res.root_bone
             for i in range(3):
                 ch.append((f'pose.bones["{rb}"].location', i, rb, root_loc[:, i]))
         keying.key_channels(action, target_obj, frames, ch, interpolation)
-        for k in keyed:
-            target_obj.pose.bones[target.names[k]].rotation_mode = 'QUATERNION'
     except BaseException:
         if prev is not None:
             keying.assign_action(target_obj, prev)

@@ -475,3 +475,55 @@ def fixed_axes_euler_to_matrix(angles_xyz, order):
     rev = order.upper()[::-1]
     return euler_to_matrix(a[..., [_EULER_AXIS[c] for c in rev]], rev)
 
+
+
+def matrix_to_fixed_axes_euler(R, order):
+    """Inverse of :func:`fixed_axes_euler_to_matrix`: ``(..., 3)`` radians about x, y and z (in
+    that order) of rotations ``R`` ``(..., 3, 3)`` for a Blender rotation mode ``order`` (``"XYZ"``:
+    ``R = Rz(z) @ Ry(y) @ Rx(x)``); the middle axis's angle in ``[-pi/2, pi/2]``."""
+    rev = order.upper()[::-1]
+    ang = matrix_to_euler(R, rev)
+    out = np.empty_like(ang)
+    for n, c in enumerate(rev):
+        out[..., _EULER_AXIS[c]] = ang[..., n]
+    return out
+
+
+def euler_continuous(angles_xyz, order):
+    """Fixed-axes Euler angles (:func:`fixed_axes_euler_to_matrix`) ``(T, ..., 3)`` radians made
+    continuous along axis 0, as Blender's compatible Euler does: each frame takes, of the two
+    decompositions of its rotation (the angles ``(a, b, c)`` in ``order`` and ``(a + pi, pi - b,
+    c + pi)``) each turned by whole turns nearest the frame before, the one nearer it.  The same
+    rotations; keys of them interpolate without a spin."""
+    e = _f64(angles_xyz).copy()
+    if e.shape[0] < 2:
+        return e
+    mid = _EULER_AXIS[order.upper()[1]]
+    alt = e + np.pi
+    alt[..., mid] = np.pi - e[..., mid]
+    two_pi = 2.0 * np.pi
+    for t in range(1, e.shape[0]):
+        prev = e[t - 1]
+        a = e[t] + two_pi * np.round((prev - e[t]) / two_pi)
+        b = alt[t] + two_pi * np.round((prev - alt[t]) / two_pi)
+        nearer = np.abs(b - prev).sum(-1) < np.abs(a - prev).sum(-1)
+        e[t] = np.where(nearer[..., None], b, a)
+    return e
+
+
+def quat_to_axis_angle_continuous(q):
+    """``(T, ..., 4)`` wxyz quaternions → ``(T, ..., 4)`` (angle, x, y, z), Blender's axis-angle
+    rotation mode, continuous along axis 0: the quaternions' signs made continuous first (the angle
+    may pass 180 degrees rather than flip its axis), and where the rotation is nearly none (no
+    axis to read) the axis of the frame before (the first frames': +Y, Blender's default)."""
+    q = quat_continuous(normalize(q), axis=0)
+    v = q[..., 1:]
+    s = vector_norm(v)
+    angle = 2.0 * np.arctan2(s, q[..., 0])
+    axis = np.where((s > 1e-9)[..., None], v / np.maximum(s, 1e-12)[..., None], np.nan)
+    last = np.broadcast_to(np.array([0.0, 1.0, 0.0]), axis.shape[1:]).copy()
+    for t in range(axis.shape[0]):                        # carry the last axis over axis-less frames
+        bad = np.isnan(axis[t, ..., 0])
+        axis[t][bad] = last[bad]
+        last = axis[t]
+    return np.concatenate([angle[..., None], axis], -1)
