@@ -173,7 +173,15 @@ def test_required_devices():
     times, pos, *_ = resample(rec, 30, required=("head",))
     assert set(pos) == {"head", "left_hand"}
     rec = make_recording(duration=1.0, nan=("head", 0.0, 2.0))
-    with pytest.raises(RecordingError, match="head has no usable samples"):
+    with pytest.raises(RecordingError, match=r"head has no usable samples \(all invalid or NaN: \d+ with "
+                                             r"not-a-number values\)"):
+        resample(rec, 30)
+    # positions only, the quaternions written as zeros: the error says that is why
+    rec = make_recording(duration=1.0)
+    rec.streams["head"].quat[:] = 0.0
+    rec.streams["head"].valid[:5] = False
+    with pytest.raises(RecordingError, match=r"head has no usable samples \(all invalid or NaN: 5 marked not "
+                                             r"tracked, \d+ with a zero quaternion \(no orientation"):
         resample(rec, 30)
 
 

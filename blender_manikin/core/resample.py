@@ -263,6 +263,22 @@ def _check_grid_length(prep, t0, t1, fps, path):
                          f"Trim in the panel, solve the part before or after it)", path=path)
 
 
+def _unusable_why(valid, finite, nonzero):
+    """What left a device without a usable sample, for the error: ``"all invalid or NaN: 12
+    marked not tracked, 300 with a zero quaternion (no orientation: qw, qx, qy, qz all 0)"``."""
+    parts = []
+    for n, what in ((int((~valid).sum()), "marked not tracked"),
+                    (int((valid & ~finite).sum()), "with not-a-number values"),
+                    (int((valid & finite & ~nonzero).sum()),
+                     "with a zero quaternion (no orientation: qw, qx, qy, qz all 0)")):
+        if n:
+            parts.append(f"{n} {what}")
+    rest = int(valid.size) - int((~valid | ~finite | ~nonzero).sum())
+    if rest:
+        parts.append(f"{rest} at the tracking origin or spikes")
+    return "all invalid or NaN: " + ", ".join(parts) if parts else "none in the file"
+
+
 def resample(recording: Recording, fps, t_start=None, t_end=None, required=REQUIRED_DEVICES,
              gap_factor=3.0, freeze_s=0.1, move_tol=0.002, check_units=True, jump_m=0.25, floor=0.0):
     """Resample every device of ``recording`` onto one frame grid.
@@ -336,7 +352,8 @@ def resample(recording: Recording, fps, t_start=None, t_end=None, required=REQUI
             ok[spikes] = False
         if ok.sum() == 0:
             if d in required and not _one_hand_absent(absent + [d], required, recording.devices):
-                raise RecordingError(f"{d} has no usable samples (all invalid or NaN)", path=path)
+                raise RecordingError(f"{d} has no usable samples ({_unusable_why(s.valid, finite, nonzero)})",
+                                     path=path)
             if d in required:
                 absent.append(d)
             else:
