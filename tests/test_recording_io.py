@@ -263,6 +263,20 @@ def test_bsor_speed_modifier_rescales_time():
     assert any("song speed" in w for w in rec.warnings)
 
 
+@pytest.mark.parametrize("speed", [1e30, -2.0, 0.01, float("nan")])
+def test_bsor_corrupt_practice_speed_is_not_applied(speed):
+    """A practice speed the game cannot play at (a corrupt header field) would shrink the take to
+    a frame or stretch it to hours: it is read as none, with a warning naming it."""
+    data, t = synthetic_bsor(n=180, speed=speed)
+    rec = parse_bsor(data, path="corrupt_speed.bsor")
+    s = rec.streams["head"]
+    assert s.time[-1] - s.time[0] == pytest.approx(t[-1] - t[1], abs=1e-4)
+    assert rec.metadata["time_scale"] == 1.0
+    assert any(w.startswith(f"practice speed {speed:g} is not one the game plays at") for w in rec.warnings)
+    ok, _ = synthetic_bsor(n=180, speed=1.5)                      # a real practice speed still counts
+    assert parse_bsor(ok, path="practice.bsor").metadata["time_scale"] == pytest.approx(1.5)
+
+
 def test_bsor_invalid_device_sample_kept_but_flagged():
     data, t = synthetic_bsor(n=50)
     raw = bytearray(data)

@@ -346,6 +346,10 @@ def game_version_warning(version) -> str | None:
             f"on a real replay here); if the hands look turned, edit the offsets")
 
 
+#: practice speeds taken as such (the game's practice menu offers 50-200 %); outside, a corrupt field
+PRACTICE_SPEED_MIN, PRACTICE_SPEED_MAX = 0.25, 4.0
+
+
 def song_speed(modifiers, practice=0.0, warnings=None) -> float:
     """How much faster than real time a Beat Saber song ran: the speed modifiers' factors (SS
     0.85, FS 1.2, SF 1.5; ``modifiers`` comma separated or a list) times the practice speed
@@ -362,7 +366,13 @@ def song_speed(modifiers, practice=0.0, warnings=None) -> float:
         practice = float(practice or 0.0)
     except (TypeError, ValueError):
         practice = 0.0
-    if np.isfinite(practice) and practice > 0 and abs(practice - 1.0) > 1e-6:
+    if not np.isfinite(practice) or not (0.0 <= practice <= PRACTICE_SPEED_MAX) \
+            or 0.0 < practice < PRACTICE_SPEED_MIN:
+        if warnings is not None:      # a corrupt header field: a take of one frame, or of hours
+            warnings.append(f"practice speed {practice:g} is not one the game plays at "
+                            f"({PRACTICE_SPEED_MIN:g}-{PRACTICE_SPEED_MAX:g}): read as 1 (no practice speed)")
+        practice = 0.0
+    if practice > 0 and abs(practice - 1.0) > 1e-6:
         speed *= practice
     if abs(speed - 1.0) > 1e-9 and warnings is not None:
         warnings.append(f"song speed x{speed:g} (modifiers {','.join(m.strip() for m in mods if m.strip())!r}, "
