@@ -154,6 +154,20 @@ BAD_FILES = [
 ]
 
 
+def test_csv_rows_repeating_a_time_are_ignored_with_a_warning(tmp_path):
+    """A logger that writes a frame twice (the same time for one device): the first row is kept,
+    the repeat ignored and counted; a time going back is still an error (above)."""
+    path = tmp_path / "twice.csv"
+    path.write_text("time,device,px,py,pz,qw,qx,qy,qz\n0,head,0,1.6,0,1,0,0,0\n0,left_hand,0,1,0,1,0,0,0\n"
+                    "0.01,head,0,1.6,0,1,0,0,0\n0.01,head,0,1.7,0,1,0,0,0\n0.02,head,0,1.6,0,1,0,0,0\n",
+                    encoding="utf-8")
+    rec = load_recording(path)
+    np.testing.assert_allclose(rec.streams["head"].time, [0.0, 0.01, 0.02])
+    np.testing.assert_allclose(rec.streams["head"].pos[1], [0.0, 0.0, 1.6], atol=1e-9)   # the first row
+    assert any(w.startswith("head: 1 row(s) repeating the time of the row before ignored (first at line 5)")
+               for w in rec.warnings), rec.warnings
+
+
 @pytest.mark.parametrize("block_bytes", [None, 7])
 @pytest.mark.parametrize("content,problem,line", BAD_FILES)
 def test_csv_errors_name_file_line_and_problem(tmp_path, monkeypatch, content, problem, line, block_bytes):

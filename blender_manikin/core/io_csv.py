@@ -13,7 +13,8 @@ Format (UTF-8, optional BOM)::
 * One row per device sample.  ``time`` is seconds; each device has its own
   timestamps (rates may differ and jitter) and its time must strictly
   increase from row to row of that device (rows of different devices may
-  interleave in any order).
+  interleave in any order); a row repeating the time of the device's row before
+  is ignored, with a warning.
 * ``device``: ``head``, ``left_hand``, ``right_hand``, and optionally
   ``pelvis``, ``left_foot``, ``right_foot`` (case-insensitive; aliases such as
   ``hmd`` are accepted, see :data:`.recording.DEVICE_ALIASES`).  Rows of other names (extra
@@ -358,6 +359,12 @@ def read_csv(path, axes=None, units=None, block_bytes=None) -> Recording:
         if idx.size == 0:
             continue
         td = t[idx]
+        repeat = np.nonzero(np.diff(td) == 0)[0] + 1
+        if repeat.size:             # a logger that writes a frame twice: the first of each kept
+            warnings.append(f"{d}: {repeat.size} row(s) repeating the time of the row before ignored "
+                            f"(first at line {int(lines[idx[repeat[0]]])})")
+            idx = np.delete(idx, repeat)
+            td = t[idx]
         nonincr = np.nonzero(np.diff(td) <= 0)[0]
         if nonincr.size:
             k = int(nonincr[0])
