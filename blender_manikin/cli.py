@@ -11,10 +11,12 @@ or wide layout, ``.bsor`` Beat Saber replay, ``.xror`` XROR), 3D keypoints (a Fr
 recording folder, ``.npy`` / ``.npz`` arrays, a keypoint CSV; solved by HybrIK IK, see
 :mod:`blender_manikin.core.keypoint_solve`) or a folder (its recordings, sorted).  For every
 input the scene is reset to an empty factory scene, the recording is solved and
-``DIR/STEM.<ext>`` is written for each format.  One line per converted input on stdout
+``DIR/STEM.<ext>`` is written for each format (inputs that share a name, ``take.csv`` in two
+folders, are told apart as ``convert`` does: ``take-<hash>.<ext>``).  One line per converted input on stdout
 (``OK INPUT -> outputs (summary)``); problems on stderr as ``ERROR INPUT: message``; a bad
 file does not stop the others.  Exit status 0 only when every input converted, 1 when any
-failed, 2 for usage errors.
+failed, 2 for usage errors, 130 when Ctrl-C stopped the batch (the inputs after it not started, no
+output left half-written under its name).
 
 Options of ``solve`` (they mirror the panel; ``--help`` has them all):
 
@@ -93,7 +95,10 @@ from __future__ import annotations
 import argparse
 import contextlib
 import os
+import shutil
+import signal
 import sys
+import tempfile
 
 DEFAULT_FORMATS = ("blend", "fbx", "json")
 if __package__:   # run as a plain script (blender --python cli.py), _script_main imports the package
@@ -406,17 +411,22 @@ def export_fbx(path, output, preset="blender"):
     fbx_presets.export_fbx(path, output.armature, preset, extra_objects=list(output.trackers.values()))
 
 
-def convert_one_core(path, out_dir, args, formats):
+def convert_one_core(path, out_dir, args, formats, stem=None):
     """Solve one recording with the numpy core and write JSON / BVH (no Blender needed);
     returns ``(written paths, outcome)``."""
     from .core.solve import solve_recording
     out = solve_recording(path, solve_settings(args))
-    return write_core_formats(path, out_dir, out.result, args, formats), out
+    return write_core_formats(path, out_dir, out.result, args, formats, stem), out
 
 
-def write_core_formats(path, out_dir, result, args, formats):
+def _stem(path):
+    """The output name of the input ``path`` (``.`` and ``dir/`` name the folder)."""
+    return os.path.splitext(os.path.basename(os.path.abspath(path)))[0]
+
+
+def write_core_formats(path, out_dir, result, args, formats, stem=None):
     """Write ``result`` in each of ``formats`` the numpy core writes; returns the paths."""
-    stem = os.path.splitext(os.path.basename(os.path.normpath(path)))[0]
+    stem = stem or _stem(path)
     written = []
     for fmt in formats:
         writer = _formats.WRITERS[fmt]
@@ -428,7 +438,7 @@ def write_core_formats(path, out_dir, result, args, formats):
     return written
 
 
-def convert_one(path, out_dir, args, formats):
+def convert_one(path, out_dir, args, formats, stem=None):
     """Solve one recording and write its outputs in Blender; returns ``(written paths, job)``."""
     import bpy
     from .blender.solve_job import SolveJob
@@ -449,20 +459,57 @@ def convert_one(path, out_dir, args, formats):
                                                    live_swivel=getattr(args, "live_swivel", None))
         job.info.extend(f"retarget: {n}" for n in notes)
         export = SimpleNamespace(armature=char, trackers={})          # the character is what is exported
-    stem = os.path.splitext(os.path.basename(os.path.normpath(path)))[0]
+    stem = stem or _stem(path)
     preset = getattr(args, "fbx_preset", "blender")
-    blender_writers = {"fbx": lambda dst: export_fbx(dst, export, preset),
+    blender_writers = {"fbx": lambda dst: _write_fbx(dst, export, preset),
                        "blend": lambda dst: bpy.ops.wm.save_as_mainfile(filepath=dst, copy=True, compress=True)}
     written = []
     for fmt in formats:
         writer = _formats.WRITERS[fmt]
         dst = os.path.join(out_dir, f"{stem}{writer.extension}")
         if writer.needs_blender:
-            blender_writers[fmt](dst)
+            # an absolute path: a Blender binary resolves a relative one against $PWD, which a
+            # pipeline's subprocess(cwd=...) leaves pointing at its own folder, not this one
+            blender_writers[fmt](os.path.abspath(dst))
             written.append(dst)
         else:
-            written += write_core_formats(path, out_dir, job.result, args, [fmt])
+            written += write_core_formats(path, out_dir, job.result, args, [fmt], stem)
     return written, job
+
+
+def _write_fbx(dst, output, preset):
+    """:func:`export_fbx` to ``dst`` through a temporary folder beside it, renamed when complete
+    (the exporter writes as it goes: an error or Ctrl-C would leave a truncated file at ``dst``)."""
+    tmp_dir = tempfile.mkdtemp(prefix=".manikin-fbx-", dir=os.path.dirname(dst))
+    try:
+        tmp = os.path.join(tmp_dir, os.path.basename(dst))
+        export_fbx(tmp, output, preset)
+        os.replace(tmp, dst)
+    finally:
+        shutil.rmtree(tmp_dir, ignore_errors=True)
+
+
+@contextlib.contextmanager
+def _ctrl_c():
+    """Ctrl-C stops the batch: yields a list that holds the signal once one came.  Blender's
+    operators turn the ``KeyboardInterrupt`` into a ``RuntimeError`` (which would only fail the
+    file being written), and a Blender binary's own handler ignores the first Ctrl-C."""
+    got = []
+
+    def handler(signum, frame):
+        got.append(signum)
+        raise KeyboardInterrupt
+
+    try:
+        old = signal.signal(signal.SIGINT, handler)
+    except ValueError:            # not the main thread: leave the handler as it is
+        yield got
+        return
+    try:
+        yield got
+    finally:
+        if old is not None:       # None: a handler not set from Python (Blender's own)
+            signal.signal(signal.SIGINT, old)
 
 
 @contextlib.contextmanager
@@ -544,19 +591,32 @@ def main(argv=None):
     if not inputs:
         print("blender_manikin: error: no recordings found in the inputs", file=sys.stderr)
         return 1
-    failed = 0
-    for path in inputs:
+    from .core.convert import output_stems
+    stems = output_stems(inputs)          # two inputs named alike never write the same file
+    failed = done = 0
+    path = inputs[0]
+    with _ctrl_c() as interrupted:
         try:
-            if not os.path.isfile(path) and not is_keypoint_input(path):
-                raise FileNotFoundError("no such file")
-            with quiet_stdout():
-                written, job = convert(path, args.out, args, formats)
-        except Exception as exc:      # one bad input does not stop the others
-            failed += 1
-            print(f"ERROR {path}: {error_message(exc)}", file=sys.stderr, flush=True)
-            continue
-        print(f"OK {path} -> {', '.join(written)} ({job.summary()})", flush=True)
-        save_layout_once(args, job.recording)
+            for path in inputs:
+                try:
+                    if not os.path.isfile(path) and not is_keypoint_input(path):
+                        raise FileNotFoundError("no such file")
+                    with quiet_stdout():
+                        written, job = convert(path, args.out, args, formats, stems[path])
+                except Exception as exc:      # one bad input does not stop the others
+                    if interrupted:           # Ctrl-C, turned into an error by a Blender operator
+                        raise KeyboardInterrupt from exc
+                    failed += 1
+                    done += 1
+                    print(f"ERROR {path}: {error_message(exc)}", file=sys.stderr, flush=True)
+                    continue
+                done += 1
+                print(f"OK {path} -> {', '.join(written)} ({job.summary()})", flush=True)
+                save_layout_once(args, job.recording)
+        except KeyboardInterrupt:
+            print(f"blender_manikin: interrupted during {path}: {done - failed} input(s) converted, "
+                  f"{len(inputs) - done} not", file=sys.stderr, flush=True)
+            return 130
     return 1 if failed else 0
 
 

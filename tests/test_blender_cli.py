@@ -1,8 +1,11 @@
 """The headless batch converter (cli.py / python -m blender_manikin)."""
 import json
 import os
+import shutil
+import signal
 import subprocess
 import sys
+import time
 
 import pytest
 
@@ -146,3 +149,67 @@ def test_implausible_stature_is_flagged_in_the_summary(tmp_path, capsys, monkeyp
     rec = write_recording_csv(tmp_path / "ok.csv", synthetic_result(T=30, fps=30.0, stature=1.75))
     assert cli.main(["solve", str(rec), "--out", str(tmp_path / "o"), "--format", "json"]) == 0
     assert "estimated stature" not in capsys.readouterr().out
+
+
+def test_inputs_named_alike_each_get_their_own_outputs(folder, tmp_path, capsys, monkeypatch):
+    """Two takes with one name (walk.csv in two folders, walk.csv beside walk.CSV) are not written
+    over one another: each gets its own outputs, told apart by a short hash as `convert` does."""
+    monkeypatch.setattr(solve_job, "run_solver", stub_solver)
+    (tmp_path / "b").mkdir()
+    other = write_recording_csv(tmp_path / "b" / "walk.csv", synthetic_result(T=25, fps=30.0, seed=3))
+    beside = write_recording_csv(folder / "walk.CSV", synthetic_result(T=15, fps=30.0, seed=4))
+    out = tmp_path / "out"
+    assert cli.main(["solve", str(folder / "walk.csv"), str(other), str(beside), "--out", str(out),
+                     "--format", "json,bvh", "--height", "1.8"]) == 0
+    written = [ln.split(" -> ")[1].split(" (")[0].split(", ") for ln in capsys.readouterr().out.splitlines()]
+    assert len(written) == 3 and len({p for w in written for p in w}) == 6
+    assert sorted(os.listdir(out)) == sorted(os.path.basename(p) for w in written for p in w)
+    frames = sorted(len(json.loads((out / n).read_text())["positions"]) for n in os.listdir(out) if n.endswith(".json"))
+    assert frames == [15, 25, 30]
+    # a single input keeps its plain name, and a FreeMoCap session solved as "." is named after its folder
+    session = tmp_path / "session"
+    shutil.copytree(os.path.join(ROOT, "examples", "example_keypoints"), session)
+    monkeypatch.chdir(session)
+    assert cli.main(["solve", ".", "--out", str(tmp_path / "kp"), "--format", "json"]) == 0
+    assert os.listdir(tmp_path / "kp") == ["session.json"]
+def test_ctrl_c_stops_the_batch_and_leaves_no_truncated_fbx(folder, tmp_path, capsys, monkeypatch):
+    """Ctrl-C while the first take's FBX is written (the exporter writes as it goes, and Blender's
+    operator turns the KeyboardInterrupt into an error): the batch stops with 130, the take's
+    .fbx is not left truncated under its name, and the next take is not started."""
+    monkeypatch.setattr(solve_job, "run_solver", stub_solver)
+    real = cli.export_fbx
+
+    def export_fbx(path, output, preset="blender"):
+        real(path, output, preset)
+        with open(path, "r+b") as f:           # the exporter's first part is on disk ...
+            f.truncate(1000)
+        try:
+            os.kill(os.getpid(), signal.SIGINT)  # ... when Ctrl-C comes
+            time.sleep(1.0)
+        except KeyboardInterrupt:
+            raise RuntimeError("Error: Python: Traceback (most recent call last):\nKeyboardInterrupt") from None
+
+    monkeypatch.setattr(cli, "export_fbx", export_fbx)
+    out = tmp_path / "out"
+    code = cli.main(["solve", str(folder / "walk.csv"), str(folder / "wave.csv"), "--out", str(out),
+                     "--format", "json,fbx", "--height", "1.8"])
+    cap = capsys.readouterr()
+    assert code == 130 and cap.out == "" and "interrupted" in cap.err
+    assert os.listdir(out) == ["walk.json"]      # written before the FBX; nothing of wave.csv
+
+
+def test_blender_binary_writes_where_it_runs_whatever_pwd_says(tmp_path):
+    """A relative --out is the folder the command runs in: a pipeline's subprocess.run(cwd=...) keeps
+    its own $PWD, which a Blender binary resolves relative paths against; the .blend and .fbx must
+    land beside the JSON, not under $PWD."""
+    blender, _ = blender_binary()
+    job, stale = tmp_path / "job", tmp_path / "stale"
+    (stale / "o").mkdir(parents=True)
+    shutil.copytree(os.path.join(ROOT, "examples", "example_keypoints"), job / "take")   # no network needed
+    p = subprocess.run([blender, "-b", "--factory-startup", "--python",
+                        os.path.join(ROOT, "blender_manikin", "cli.py"), "--", "solve", "take",
+                        "--out", "o", "--format", "blend,fbx,json"], cwd=job, capture_output=True, text=True,
+                       timeout=300, env=blender_binary_env(PWD=str(stale)))
+    assert p.returncode == 0, (p.stdout, p.stderr)
+    assert sorted(os.listdir(job / "o")) == ["take.blend", "take.fbx", "take.json"]
+    assert os.listdir(stale / "o") == []

@@ -132,3 +132,32 @@ def test_partial_outputs_of_a_killed_run_are_removed_and_nothing_else(tmp_path):
         (out / name).write_text("x")
     assert convert.remove_partial_outputs(out) == len(partial)
     assert sorted(os.listdir(out)) == sorted(kept)
+
+
+def test_a_rerun_writes_new_formats_and_never_reuses_an_earlier_inputs_name(tmp_path, monkeypatch):
+    """Reruns into one --out: more formats asked for are written (not skipped as converted), a take
+    named as an earlier run's gets a name of its own (the earlier outputs stay), and the manifest's
+    outputs are found from whichever folder the rerun starts in."""
+    a, b = tmp_path / "a" / "take.csv", tmp_path / "b" / "take.csv"
+    for p in (a, b):
+        p.parent.mkdir()
+        shutil.copy(EXAMPLE, p)
+    here = tmp_path / "here"
+    here.mkdir()
+    monkeypatch.chdir(here)
+
+    def run(inputs, fmts):
+        return convert.run([str(p) for p in inputs], "out", fmts, SolveSettings(fps=30.0), workers=1,
+                           progress=False, log=lambda m: None)
+
+    assert run([a], ["json"])[0] == 0
+    first = (here / "out" / "take.json").read_bytes()
+    code, recs = run([a], ["json", "npz"])
+    assert code == 0 and len(recs) == 1 and (here / "out" / "take.npz").is_file()
+    code, recs = run([b], ["json"])
+    assert code == 0 and recs[0]["outputs"] != [str(here / "out" / "take.json")]
+    assert (here / "out" / "take.json").read_bytes() == first and os.path.isfile(recs[0]["outputs"][0])
+    monkeypatch.chdir(tmp_path)
+    code, recs = convert.run([str(a), str(b)], str(here / "out"), ["json"], SolveSettings(fps=30.0), workers=1,
+                             progress=False, log=lambda m: None)
+    assert code == 0 and recs == []

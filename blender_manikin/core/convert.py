@@ -12,7 +12,8 @@ dask-kubernetes: any ``distributed`` scheduler address).
   name, renamed when complete, so memory per worker is bounded by one recording.
 * ``DIR/manifest.jsonl`` gets one line per finished input: status (``ok``/``error``), frames,
   seconds, stature, quality notes, outputs, and the error.  A rerun skips the inputs already
-  converted (every output present), so a crashed or killed job resumes where it stopped; a bad
+  converted (every output present, one in each format asked for), so a crashed or killed job
+  resumes where it stopped, and a rerun with more formats writes them; a bad
   file never stops the others.  The exit code is 0 only when every input converted.
 
 Needs the ``[dask]`` extra (``dask[distributed]``); no bpy.
@@ -92,13 +93,14 @@ def _read_manifest_file(path):
 
 
 def output_stems(paths):
-    """``{input: output stem}``: the file name without extension, made unique with a short hash
-    of the folder when two inputs share a name."""
-    stems = {p: os.path.splitext(os.path.basename(p))[0] for p in paths}
+    """``{input: output stem}``: the file (or FreeMoCap folder) name without extension, made unique
+    with a short hash of the input's absolute path when two inputs share a name (in different
+    folders, or side by side with different extensions: ``take.csv`` and ``take.bsor``)."""
+    stems = {p: os.path.splitext(os.path.basename(os.path.abspath(p)))[0] for p in paths}
     counts = {}
     for s in stems.values():
         counts[s] = counts.get(s, 0) + 1
-    return {p: (s if counts[s] == 1 else f"{s}-{hashlib.sha1(os.path.dirname(p).encode()).hexdigest()[:8]}")
+    return {p: (s if counts[s] == 1 else f"{s}-{hashlib.sha1(os.path.abspath(p).encode()).hexdigest()[:8]}")
             for p, s in stems.items()}
 
 
@@ -119,8 +121,11 @@ def read_manifest(out_dir):
     return records
 
 
-def is_done(record):
-    return bool(record) and record.get("status") == "ok" and all(os.path.isfile(p) for p in record.get("outputs", []))
+def is_done(record, fmts=()):
+    """Whether ``record`` converted its input, every output is present, and one is in each of ``fmts``."""
+    outputs = record.get("outputs", []) if record else []
+    return (bool(record) and record.get("status") == "ok" and all(os.path.isfile(p) for p in outputs)
+            and all(any(p.endswith(formats.WRITERS[f].extension) for p in outputs) for f in fmts))
 
 
 # --------------------------------------------------------------------------
@@ -196,18 +201,20 @@ def run(inputs, out_dir, fmts, settings: SolveSettings, scheduler=None, workers=
     if bad:
         raise ValueError(f"convert writes {', '.join(n for n, w in formats.WRITERS.items() if not w.needs_blender)}"
                          f" (without Blender); not {', '.join(bad)}")
+    out_dir = os.path.abspath(out_dir)       # the manifest's outputs hold wherever a rerun starts
     os.makedirs(out_dir, exist_ok=True)
     removed = remove_partial_outputs(out_dir)
     if removed:
         log(f"removed {removed} partial output(s) a killed run left in {out_dir}")
-    stems = output_stems(inputs)
     done = read_manifest(out_dir)
-    todo = [p for p in inputs if not is_done(done.get(p))]
+    # the names of earlier runs' inputs count too: a later take.csv never writes over an earlier one's
+    stems = output_stems(list(dict.fromkeys(list(inputs) + list(done))))
+    todo = [p for p in inputs if not is_done(done.get(p), fmts)]
     skipped = len(inputs) - len(todo)
     if skipped:
         log(f"{skipped} of {len(inputs)} input(s) already converted (manifest): skipped")
     if not todo:
-        return 0 if all(is_done(done.get(p)) for p in inputs) else 1, []
+        return 0 if all(is_done(done.get(p), fmts) for p in inputs) else 1, []
     client, cluster = _client(scheduler, workers)
     try:
         log(f"dask dashboard: {client.dashboard_link}")
