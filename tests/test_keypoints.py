@@ -140,6 +140,55 @@ def test_keypoint_csv_with_gaps_and_a_mapping_file(tmp_path, motion):
     assert rec2.layout == "coco17" and np.isfinite(rec2.points).all()
 
 
+@pytest.mark.parametrize("column, scale, offset, unit", [
+    ("timestamp", 1.0, 0.0, ""),                 # seconds
+    ("timestamp", 1.0, 1.7e9, ""),               # Unix seconds
+    ("time", 1e3, 0.0, ", in ms"),
+    ("timestamp", 1e3, 0.0, ", in ms"),
+    ("timestamp", 1e9, 1.7e18, ", in ns"),       # Unix nanoseconds
+])
+def test_keypoint_csv_times_are_read_in_the_unit_their_steps_say(tmp_path, motion, column, scale, offset, unit):
+    # a time in ms was read as seconds (0.03 Hz: 8 s became 8000 s, 240000 frames), a timestamp
+    # in seconds as ms (30000 Hz: the take one frame long), one in ns ran out of memory
+    body, pos, world = motion
+    p = tmp_path / "times.csv"
+    write_layout_csv(p, "coco17", body, pos, world)
+    lines = p.read_text().splitlines()
+    lines[0] = lines[0].replace("time,", f"{column},", 1)
+    for k in range(1, len(lines)):
+        t = float(lines[k].split(",", 1)[0])
+        lines[k] = repr(offset + t * scale) + "," + lines[k].split(",", 1)[1]
+    p.write_text("\n".join(lines) + "\n")
+    rec = read_keypoints(p)
+    assert f"30 Hz (from the times{unit})" in rec.metadata["detected"]
+    assert rec.time[-1] - rec.time[0] == pytest.approx(239 / 30.0, rel=1e-6)
+    fps = 1.0 / np.median(np.diff(rec.time))
+    assert ks.resample_points(rec.time, rec.points, fps)[0].shape == (240,)
+
+
+def test_freemocap_csv_exports_are_read_as_keypoints(tmp_path, motion):
+    # FreeMoCap writes output_data/mediapipe_body_3d_xyz.csv (body_nose_x, ..., no time) and
+    # <recording>_by_trajectory.csv (timestamp, empty without timestamps, and timestamp_by_camera
+    # first; hand points after the body's): both were taken for tracker CSVs and refused with
+    # "wrong header: expected the column names 'time,device,px,...'"
+    body, pos, world = motion
+    clean = write_layout_csv(tmp_path / "plain.csv", "mediapipe33", body, pos, world)
+    lines = (tmp_path / "plain.csv").read_text().splitlines()
+    head = lines[0].split(",")[1:]
+    body_csv = tmp_path / "mediapipe_body_3d_xyz.csv"
+    body_csv.write_text("\n".join([",".join(f"body_{c}" for c in head)]
+                                  + [ln.split(",", 1)[1] for ln in lines[1:]]) + "\n")
+    by_traj = tmp_path / "take_by_trajectory.csv"
+    by_traj.write_text("\n".join([",".join(["timestamp", "timestamp_by_camera"] + [f"body_{c}" for c in head]
+                                           + ["right_hand_wrist_x", "right_hand_wrist_y", "right_hand_wrist_z"])]
+                                 + [',"{}",' + ln.split(",", 1)[1] + ",1,2,3" for ln in lines[1:]]) + "\n")
+    for p in (body_csv, by_traj):
+        assert is_keypoint_input(p)
+        rec = read_keypoints(p)
+        assert rec.layout == "mediapipe33" and "30 Hz (assumed: set the rate)" in rec.metadata["detected"]
+        np.testing.assert_allclose(rec.points - rec.points[:1, :1], clean - clean[:1, :1], atol=2e-6)
+
+
 @pytest.mark.parametrize("content, problem", [
     (b"\x93NUMPY garbage", "not a readable .npy array"),
 ])

@@ -10,9 +10,11 @@ Inputs:
 * ``.npz``: one such array under ``keypoints`` / ``joints3d`` / ``joints`` / ``positions`` /
   ``points`` / ``pose3d`` / ``kp3d`` (or the only 2-3-D array), with optional ``fps``,
   ``time`` (seconds), ``confidence`` ``(T, K)`` and ``layout``;
-* CSV: a ``time`` column (seconds; or ``timestamp`` in ms, or only ``frame`` with a rate) and
-  ``<point>_x``, ``<point>_y``, ``<point>_z`` columns named after the layout's points (empty
-  cells for missing points), or other names through a mapping file
+* CSV: a ``time`` / ``timestamp`` column (seconds, or ms, µs or ns when its steps say so: no
+  keypoints are sampled slower than 2 Hz; or only ``frame`` with a rate) and
+  ``<point>_x``, ``<point>_y``, ``<point>_z`` columns named after the layout's points (also with
+  FreeMoCap's ``body_`` prefix, :func:`.keypoint_layouts.point_key`; empty cells for missing
+  points), or other names through a mapping file
   (``{"layout": "coco17", "columns": {"nose": "Nose", ...}}``: layout point → column prefix).
 
 The layout (:mod:`.keypoint_layouts`) is given (``layout=``, ``--layout``), stored in the file,
@@ -41,7 +43,7 @@ import numpy as np
 from . import keypoint_layouts as kl
 from . import rotations as rot
 from .plain import shown
-from .recording import RecordingError, UNITS, canonical_units
+from .recording import RecordingError, UNITS, canonical_units, time_unit_of_step
 
 #: points with a confidence below this are treated as missing
 MIN_CONFIDENCE = 0.3
@@ -242,12 +244,13 @@ def _finish(X, conf, name, src, decided, hands, units, up, handed, rate, time):
         time = np.asarray(time, np.float64).reshape(-1)
         if time.shape[0] != T:
             raise RecordingError(f"{time.shape[0]} times for {T} frames", path=src)
+        time, unit_note = _time_in_seconds(time)
         d = np.diff(time)
         if not np.all(np.isfinite(time)) or np.any(d <= 0):
             k = int(np.nonzero(~np.isfinite(time[1:]) | (d <= 0))[0][0]) + 1
             raise RecordingError(f"time {shown(float(time[k]))} s of frame {k} is not after the previous "
                                  f"frame's {shown(float(time[k - 1]))} s", path=src)
-        decided.append(f"{1.0 / np.median(d):.3g} Hz (from the times)")
+        decided.append(f"{1.0 / np.median(d):.3g} Hz (from the times{unit_note})")
     missing = float(np.mean(~np.isfinite(X[..., 0])))
     if missing > 0:
         decided.append(f"{100.0 * missing:.1f}% of points missing")
@@ -257,6 +260,14 @@ def _finish(X, conf, name, src, decided, hands, units, up, handed, rate, time):
 
 
 # --------------------------------------------------------------------------
+def _time_in_seconds(time):
+    """``(seconds, note)``: times read in the unit their steps say
+    (:func:`.recording.time_unit_of_step`); note says a unit other than seconds (", in ms")."""
+    d = np.diff(time[np.isfinite(time)])
+    scale, unit = time_unit_of_step(float(np.median(d)) if d.size else 0.0)
+    return (time, "") if unit == "s" else (time * scale, f", in {unit}")
+
+
 def _load_npy(path):
     try:
         return np.load(path, allow_pickle=False)
@@ -354,9 +365,20 @@ def _layout_from_count(X, path):
                          f"(--layout {'|'.join(names)})", path=path)
 
 
+def _point_prefixes(cols):
+    """``{point name: column prefix}`` of the ``<prefix>_x/_y/_z`` columns in ``cols``, the prefix
+    read as a point name by :func:`.keypoint_layouts.point_key` (FreeMoCap's ``body_nose_x``
+    is ``nose``); the first column wins."""
+    out = {}
+    for c in cols:
+        if c.endswith(("_x", "_y", "_z")):
+            out.setdefault(kl.point_key(c[:-2]), c[:-2])
+    return out
+
+
 def _layout_from_columns(cols):
     """The layout whose points all have ``_x/_y/_z`` columns in ``cols`` (most points wins)."""
-    have = {c[:-2] for c in cols if c.endswith(("_x", "_y", "_z"))}
+    have = _point_prefixes(cols)
     best = None
     for name, lay in kl.LAYOUTS.items():
         if all(p in have for p in lay.points) and (best is None or len(lay.points) > len(kl.LAYOUTS[best].points)):
@@ -396,7 +418,8 @@ def _load_csv(path, mapping, rate):
             raise RecordingError("no keypoint layout's columns found: expected <point>_x, <point>_y, <point>_z "
                                  f"for every point of one of {', '.join(kl.LAYOUTS)} (or a mapping file)",
                                  path=path, line=hline)
-        prefix = {p: p for p in kl.LAYOUTS[name].points}
+        have = _point_prefixes(cols)
+        prefix = {p: have[p] for p in kl.LAYOUTS[name].points}
     idx = []
     for p in kl.LAYOUTS[name].points:
         for ax in "xyz":
@@ -425,15 +448,16 @@ def _load_csv(path, mapping, rate):
                 raise RecordingError(f"column {cols[i]!r}: {cell!r} is not a number", path=path, line=ln) from None
         if tcol is not None:
             try:
-                tv[k] = float(r[cols.index(tcol)])
+                cell = r[cols.index(tcol)].strip()
+                tv[k] = float(cell) if cell else np.nan      # FreeMoCap leaves it empty without timestamps
             except ValueError:
                 raise RecordingError(f"column {tcol!r}: {r[cols.index(tcol)]!r} is not a number",
                                      path=path, line=ln) from None
     time = None
-    if tcol in ("time", "t", "seconds"):
-        time = tv
-    elif tcol == "timestamp":
-        time = tv / 1000.0
+    if tcol is not None and not np.isfinite(tv).any():
+        tcol = None                             # a time column with no time in it: the rate decides
+    if tcol in ("time", "t", "seconds", "timestamp"):
+        time = tv                               # its unit from its steps (_time_in_seconds)
     elif tcol == "frame" and rate:
         time = (tv - tv[0]) / float(rate)
     return X.reshape(len(data), -1, 3), time, name, rate

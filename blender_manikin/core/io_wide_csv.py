@@ -50,7 +50,7 @@ import numpy as np
 from .devices import DEVICES, canonical_device, snake_name
 from .plain import shown
 from .recording import (Recording, RecordingError, TrackerStream, UNITS, canonical_axes, canonical_units,
-                        read_file_bytes, to_blender)
+                        read_file_bytes, time_unit_of_step, to_blender)
 from . import rotations as rot
 from .rotations import normalize
 from .axes_detect import choose_axes, heading_from_positions, heading_quats, length_units, up_axis, yaw_of
@@ -264,10 +264,8 @@ def _time(col, values, header=None, rate=None, path=None):
         return (v - v0) * (1e-6 if name == "time_us" else 1e-9), f"time={col_name} in {name[5:]}"
     if name == "seconds_stated":                       # a layout file's "unit": "s"
         return v - v0, f"time={col_name} in s"
-    if name in _NAMED_MS or med > 0.5:                 # no tracker samples slower than 2 Hz
-        scale, unit = (1e-3, "ms") if med < 500 else (1e-6, "µs") if med < 5e5 else (1e-9, "ns")
-        return (v - v0) * scale, f"time={col_name} in {unit}"
-    return v - v0, f"time={col_name} in s"
+    scale, unit = time_unit_of_step(med, milliseconds=name in _NAMED_MS)      # no tracker under 2 Hz
+    return (v - v0) * scale, f"time={col_name} in {unit}"
 
 
 LAYOUT_VERSION = 1

@@ -172,6 +172,17 @@ def from_blender(pos, quat, axes):
 TIME_SPIKE_S = 1.0
 
 
+def time_unit_of_step(step, milliseconds=False):
+    """``(factor to seconds, unit)`` of a time column whose median step is ``step`` (in its own
+    unit): no tracker or keypoint stream is sampled slower than 2 Hz, so a step over 0.5 is not
+    seconds but milliseconds (steps under 500), microseconds (under 5e5) or nanoseconds; with
+    ``milliseconds`` (a column named so) at least milliseconds.  ``(1.0, "s")`` otherwise.
+    The readers that know a file's time column (wide CSV and JSON, keypoints) decide with this."""
+    if step <= 0.5 and not milliseconds:
+        return 1.0, "s"
+    return (1e-3, "ms") if step < 500 else (1e-6, "µs") if step < 5e5 else (1e-9, "ns")
+
+
 def time_spikes(time) -> np.ndarray:
     """``(N,)`` bool: single samples whose time leaps more than :data:`TIME_SPIKE_S` ahead of the
     sample before them while the sample after them goes on from that one (a corrupt timestamp,
