@@ -189,6 +189,41 @@ def test_freemocap_csv_exports_are_read_as_keypoints(tmp_path, motion):
         np.testing.assert_allclose(rec.points - rec.points[:1, :1], clean - clean[:1, :1], atol=2e-6)
 
 
+def test_a_tilted_floor_is_levelled_from_the_planted_feet(tmp_path):
+    # keypoints in a camera's frame (OpenCV: +Y down, +Z ahead), the camera pitched 20° down and
+    # rolled 5°: the up axis was snapped to -Y and the tilt kept, so the body leant 20° and,
+    # walking away from the camera, climbed a slope: its feet 0.6 m above the floor by the end
+    body, pos, world = hinge_motion(frames=1, seed=0)
+    t = np.arange(600) / 30.0
+    s = 0.8 * (np.floor(t / 2.0) + np.clip(t % 2.0 - 1.0, 0.0, 1.0))     # walks in bursts, feet still between
+    path = np.stack([np.sin(0.15 * s), -np.cos(0.15 * s), 0 * s], -1) * np.gradient(s)[:, None]
+    pos, world = pos + path.cumsum(0)[:, None], np.repeat(world, 600, axis=0)
+    clean = kl.keypoints_from_body22(pos, world, "coco17", body.stature)
+    pitch, roll = np.radians(20.0), np.radians(5.0)
+    cam = np.array([[1.0, 0, 0], [0, 0, -1], [0, 1, 0]])
+    cam = (rot.axis_angle_rotation(np.array([0.0, 0, 1]), roll)
+           @ rot.axis_angle_rotation(np.array([1.0, 0, 0]), pitch) @ cam)
+    np.save(tmp_path / "camera.npy", (clean - [0.0, -8.0, 1.6]) @ cam.T)
+    np.save(tmp_path / "level.npy", to_y_up(clean))
+    rec = read_keypoints(tmp_path / "camera.npy")
+    assert re.search(r"floor levelled \(tilted 2\d\.\d° in the file, from the planted feet\)", rec.metadata["detected"])
+    ankles = rec.points[:, [kl.LAYOUTS["coco17"].index(f"{s}_ankle") for s in ("left", "right")], 2].min(-1)
+    assert np.ptp(np.percentile(ankles.reshape(10, -1), 5, axis=1)) < 0.02     # the same floor all along
+    level = read_keypoints(tmp_path / "level.npy")
+    assert "floor levelled" not in level.metadata["detected"]
+    # a slope walked up in a level frame (the plants climb 17°, the trunks stay upright): left as it is
+    uphill = clean + np.stack([0 * s, 0 * s, 0.3 * s], -1)[:, None]
+    np.save(tmp_path / "uphill.npy", to_y_up(uphill))
+    hill = read_keypoints(tmp_path / "uphill.npy")
+    assert "floor levelled" not in hill.metadata["detected"]
+    np.testing.assert_allclose(hill.points - hill.points[:1, :1], uphill - uphill[:1, :1], atol=1e-6)
+
+    def lean(r):                                # degrees the trunk leans off the vertical
+        up = r.points[:, 5:7].mean(1) - r.points[:, 11:13].mean(1)
+        return np.degrees(np.arccos(np.median(up[:, 2] / np.linalg.norm(up, axis=-1))))
+    assert abs(lean(rec) - lean(level)) < 1.5                            # upright (it leant 20°)
+
+
 @pytest.mark.parametrize("content, problem", [
     (b"\x93NUMPY garbage", "not a readable .npy array"),
 ])

@@ -22,7 +22,8 @@ or told from the point count (17 points: COCO-17 or Human3.6M-17, told apart by 
 points: COCO's nose sits near its ears, Human3.6M's pelvis far from its right ankle) or the
 CSV's column names.  Units (m, cm, mm) come from the leg's length, the up axis from the
 shoulders standing above the ankles, and the handedness from the face or the feet pointing
-forward of the body's left-right axis.  What was decided is said in one line
+forward of the body's left-right axis; a floor tilted in the file (a pitched camera's frame) is
+levelled from the planted feet (:func:`_floor_tilt`).  What was decided is said in one line
 (``metadata["detected"]``), e.g. ``keypoints: coco17 (17 points, told from the point count and
 the nose near the ears); units mm (leg 0.86 m); up +Y, right-handed (nose ahead of the ears);
 30 Hz (assumed: set the rate)``.
@@ -251,6 +252,12 @@ def _finish(X, conf, name, src, decided, hands, units, up, handed, rate, time):
             raise RecordingError(f"time {shown(float(time[k]))} s of frame {k} is not after the previous "
                                  f"frame's {shown(float(time[k - 1]))} s", path=src)
         decided.append(f"{1.0 / np.median(d):.3g} Hz (from the times{unit_note})")
+    # a floor tilted in the file (camera coordinates, a capture volume set up off level)
+    tilt = _floor_tilt(X, lay, time)
+    if tilt is not None:
+        R, deg = tilt
+        X = X @ R.T
+        decided.append(f"floor levelled (tilted {deg:.1f}° in the file, from the planted feet)")
     missing = float(np.mean(~np.isfinite(X[..., 0])))
     if missing > 0:
         decided.append(f"{100.0 * missing:.1f}% of points missing")
@@ -507,6 +514,78 @@ def _up_matrix(X, lay, up, path):
     x[0 if a != 0 else 1] = 1.0
     y = np.cross(z, x)
     return np.stack([x, y, z]), f"{'+' if s > 0 else '-'}{'xyz'[a].upper()}", how
+
+
+#: points whose lowest one stands on the floor (those a layout has)
+_FOOT_POINTS = ("ankle", "heel", "foot_index", "big_toe", "small_toe", "foot")
+#: a lowest foot point slower than this (m/s, horizontally) is planted (as the solve's contacts)
+_PLANTED_SPEED = 0.25
+#: metres (a standard deviation) the planted feet must spread along a direction for it to tilt
+#: the floor fully (a ridge: a direction spread this much counts half, one twice as wide 80 %)
+_LEVEL_SPREAD = 0.15
+#: degrees: a floor tilted less is left as it is; more than _LEVEL_MAX is not a floor
+_LEVEL_MIN, _LEVEL_MAX = 2.0, 45.0
+
+
+def _floor_tilt(X, lay, time):
+    """``(R (3, 3), degrees)`` levelling the floor the planted feet stand on, or None.
+
+    X ``(T, K, 3)`` metres, +Z up as far as the axes go (a camera's or a capture's frame turned
+    by a signed axis permutation keeps its tilt).  Per frame the lowest foot point; where it is
+    still (planted) it stands on the floor; a plane ``z = a x + b y + c`` is fitted to those
+    places (ridge: a direction they span less than :data:`_LEVEL_SPREAD` metres hardly tilts it;
+    refitted to the places within 5 cm of it, so a foot resting off the floor does not count)."""
+    idx = [lay.index(f"{s}_{n}") for s in ("left", "right") for n in _FOOT_POINTS if f"{s}_{n}" in lay]
+    F = X[:, idx]
+    z = np.where(np.isfinite(F[..., 2]), F[..., 2], np.inf)
+    k = np.argmin(z, axis=1)
+    low = F[np.arange(len(F)), k]                                     # (T, 3), NaN where no foot
+    t = np.asarray(time, np.float64)
+    v = np.full(len(t), np.inf)
+    if len(t) > 2:
+        v[1:-1] = np.linalg.norm(low[2:, :2] - low[:-2, :2], axis=-1) / (t[2:] - t[:-2])
+    ok = np.isfinite(low).all(-1) & (v < _PLANTED_SPEED)
+    if ok.sum() < 30:
+        return None
+    P = low[ok]
+    keep = np.ones(len(P), bool)
+    for last in (False, False, False, True):
+        Q = P[keep]
+        m = Q.mean(0)
+        A = Q[:, :2] - m[:2]
+        ridge = len(Q) * _LEVEL_SPREAD ** 2 if last else 1e-9 * len(Q)
+        a = np.linalg.solve(A.T @ A + ridge * np.eye(2), A.T @ (Q[:, 2] - m[2]))
+        if not last:                            # a plant off the floor (a foot on a step) left out
+            res = P[:, 2] - (m[2] + (P[:, :2] - m[:2]) @ a)
+            keep = np.abs(res - np.median(res[keep])) < 0.05
+            if keep.sum() < 10:
+                return None
+    n = rot.normalize(np.array([-a[0], -a[1], 1.0]))
+    deg = float(np.degrees(np.arccos(np.clip(n[2], -1.0, 1.0))))
+    if not (_LEVEL_MIN <= deg <= _LEVEL_MAX):
+        return None
+    # people stand square to the floor they stand on: a camera's tilt turns their trunks with the
+    # floor, a slope or a staircase walked up in a level frame does not (the trunks stay upright
+    # while the plants climb), and is left as it is
+    up = _trunk_up(X, lay)
+    if up is None or np.dot(up, n) <= up[2]:
+        return None
+    return rot.rotation_between(n, np.array([0.0, 0.0, 1.0])), deg
+
+
+def _trunk_up(X, lay):
+    """``(3,)`` unit: the mean direction from the hips' midpoint to the shoulders' over the frames
+    that have all four, or None (a layout without them, no such frame)."""
+    names = ("left_hip", "right_hip", "left_shoulder", "right_shoulder")
+    if not all(n in lay for n in names):
+        return None
+    hip = X[:, [lay.index(n) for n in names[:2]]].mean(1)
+    sho = X[:, [lay.index(n) for n in names[2:]]].mean(1)
+    d = sho - hip
+    d = d[np.isfinite(d).all(-1) & (np.linalg.norm(np.nan_to_num(d), axis=-1) > 1e-6)]
+    if not len(d):
+        return None
+    return rot.normalize(rot.normalize(d).mean(0))
 
 
 def _handedness(X, lay, handed, path):
