@@ -14,10 +14,10 @@ so where the retarget puts the hands, feet and head is known from the performer'
   ``core/retarget.py``), ``F`` the turn from the performer's facing (-Y) to the character's;
 * the head and hands: the root plus each segment of the performer (in ``F``) times its region's
   ratio -- the retarget transfers segment directions, the character keeps its own lengths;
-* the feet: the root plus ``k F (ankle(t) - pelvis(t))``: the legs are solved onto the
-  performer's feet scaled like the root motion, so planted feet stay planted;
-* with "keep hands and feet on the trackers" (``keep_ends``, scaled root motion) the hands and
-  feet are re-solved onto the root plus ``k F (end(t) - pelvis(t))``.
+* the feet: the character's rest ankles plus ``k F (ankle(t) - ankle_rest)``: the legs are solved
+  onto the performer's feet scaled like the root motion, so planted feet stay planted;
+* with "keep hands and feet on the trackers" (``keep_ends``, scaled root motion) the hands are
+  re-solved onto the root plus ``k F (wrist(t) - pelvis(t))``, the feet as above.
 
 Planted feet: a walk whose feet are planted (``planted_feet_result``, ``contacts``) onto the same
 characters, and onto one whose thighs and shanks have other ratios than the performer's (a transfer
@@ -82,7 +82,8 @@ def _world_heads(obj, M, name):
 
 def _predicted(spec, obj, pos, body, root_bone):
     """Where the character's joints go under the default scaled retarget (module docstring):
-    ``{joint: (T, 3)}`` world metres for the pelvis and the end joints, and ``k``."""
+    ``{joint: (T, 3)}`` world metres for the pelvis and the end joints, ``k``, and ``{ankle: (3,)}``
+    the feet's targets less the root plus ``k F (ankle(t) - pelvis(t))``."""
     c = spec["stature"] / SRC_STATURE
     ratio = {"torso": c * spec["torso"], "arm": c * spec["arm"], "leg": c * spec["leg"]}
     k = ratio["leg"]
@@ -93,13 +94,16 @@ def _predicted(spec, obj, pos, body, root_bone):
     J = sk.J
     out = {"pelvis": root_rest + k * (pos[:, 0] - body.root_rest) @ F.T}
     out["head"] = out["pelvis"] + ratio["torso"] * P[:, J["head"]] @ F.T
+    C, S = spec["joints"], body.rest_positions()            # the character's and the performer's rest
+    feet = {f"{side}_ankle": (C[J[f"{side}_ankle"]] - C[0] - k * (S[J[f"{side}_ankle"]] - S[0])) @ F.T
+            for side in ("left", "right")}
     for side in ("left", "right"):
         sh = J[f"{side}_shoulder"]
         out[f"{side}_wrist"] = out["pelvis"] + (ratio["torso"] * P[:, sh] + ratio["arm"] * (
             P[:, J[f"{side}_wrist"]] - P[:, sh])) @ F.T
         # the legs are solved onto the performer's feet scaled like the root motion
-        out[f"{side}_ankle"] = out["pelvis"] + k * P[:, J[f"{side}_ankle"]] @ F.T
-    return out, k
+        out[f"{side}_ankle"] = out["pelvis"] + k * P[:, J[f"{side}_ankle"]] @ F.T + feet[f"{side}_ankle"]
+    return out, k, feet
 
 
 def _guess_differences(guessed, preset):
@@ -156,9 +160,10 @@ def test_retarget_onto_an_engine_or_tool_rig(addon, style, tmp_path):
         pb.rotation_mode = ('XYZ', 'QUATERNION', 'YZX')[k % 3]
     modes_before = {pb.name: pb.rotation_mode for pb in char.pose.bones}
     action, out, notes = retarget_apply.retarget_onto(src, char, style, None, "scaled", False)
-    assert notes == []
+    # a leg may fall short of its foot by millimetres where this take turns the pelvis far (checked below)
+    assert [n for n in notes if "leg: out of the character's reach" not in n] == []
     M, basis = _evaluate(char)
-    expect, k = _predicted(spec, char, pos, res.body, preset.bones["pelvis"])
+    expect, k, feet = _predicted(spec, char, pos, res.body, preset.bones["pelvis"])
     assert abs(out.plan.leg_ratio - k) < 1e-6                     # bones are stored in float32
     errors = {}
     for joint in ("pelvis",) + tuple(ENDS):
@@ -249,7 +254,7 @@ def test_retarget_onto_an_engine_or_tool_rig(addon, style, tmp_path):
     Mk, _ = _evaluate(char)
     end_err, reached = {}, {}
     for j, (base, mid) in LIMB_OF_END.items():
-        target = expect["pelvis"] + k * (pos[:, sk.J[j]] - pos[:, 0]) @ spec["F"].T
+        target = expect["pelvis"] + k * (pos[:, sk.J[j]] - pos[:, 0]) @ spec["F"].T + feet.get(j, 0.0)
         got = _world_heads(char, Mk, preset.bones[j])
         # reachable, judged from the character's own limb (base head to target, its two lengths)
         hb = _world_heads(char, Mk, preset.bones[base])

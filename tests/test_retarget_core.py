@@ -288,6 +288,42 @@ def test_keep_ends_scaled_targets_and_planted_foot():
                              + 1.1 * (anchor - body.root_rest))).max() < 1e-9
 
 
+def test_scaled_feet_stand_on_the_legs_whatever_bone_starts_the_hips():
+    """Blender's Human metarig (and the rig Rigify generates from it) starts its hips bone
+    (``spine``) 6 cm *below* its thighs' heads; the body model's pelvis sits 5 cm above its hips.
+    Measured from the hips bone, the scaled feet were out of the legs' reach (13 cm on the
+    bundled example: the knees never bent).  The feet's targets are the character's own rest
+    ankles plus the leg ratio times the performer's ankles' travel: reachable, a planted foot
+    planted, the knees bent."""
+    body, local, root, pos, wrot, sw = _hinge_source(T=30, seed=5)
+    anchor = np.array([0.10, -0.05, 0.09])                  # the left ankle planted here
+    root = np.broadcast_to(body.root_rest, (30, 3)).copy()
+    root[:, 0] += 0.03 * np.cos(np.arange(30) / 4)
+    root[:, 2] += -0.08 + 0.03 * np.sin(np.arange(30) / 5)  # knees bent
+    pos, wrot = sk.forward_kinematics(local, root, body)
+    sol = ls.solve_limbs(pos[:, None, J["left_hip"]], np.broadcast_to(anchor, (30, 1, 3)), sw[:, 2:3],
+                         body.limb_lengths()[2:3], wrot[:, None, J["pelvis"]], limb_ids=[2])
+    local = local.copy()
+    local[:, J["left_hip"]] = sol.base_local[:, 0]
+    local[:, J["left_knee"]] = sol.mid_local[:, 0]
+    pos, wrot = sk.forward_kinematics(local, root, body)
+    assert np.abs(pos[:, J["left_ankle"]] - anchor).max() < 1e-9
+    rig, bmap, P = mixamo_rig(body, scales=_scales(arm=1.1, leg=1.1, torso=1.1))
+    heads = rig.heads.copy()
+    heads[rig.index["mixamorig:Hips"]] = P[J["left_hip"]] * [0, 1, 1] - [0, 0, 0.06]   # 6 cm below the thighs
+    rig = rt.TargetRig(rig.names, rig.parents, rig.rest_rot, heads)
+    res = rt.retarget(wrot, pos, body, rig, bmap, "scaled")
+    out = rt.keep_ends_on_targets(res, wrot, pos, sw, limbs=("left_leg",), ends="scaled")
+    assert np.nanmax(out.reach_error[:, 2]) < 1e-9, np.nanmax(out.reach_error[:, 2])
+    foot = out.world_heads()[:, rig.index["mixamorig:LeftFoot"]]
+    assert np.abs(foot - foot[0]).max() < 1e-9             # planted
+    rest_ankle = body.rest_positions()[J["left_ankle"]]
+    assert np.abs(foot[0] - (P[J["left_ankle"]] + 1.1 * (anchor - rest_ankle))).max() < 1e-9
+    thigh, shin, ankle = (out.world_heads()[:, rig.index[f"mixamorig:Left{n}"]] for n in ("UpLeg", "Leg", "Foot"))
+    knee = np.degrees(np.arccos(np.sum(rot.normalize(shin - thigh) * rot.normalize(ankle - shin), -1)))
+    assert knee.min() > 10.0, knee.min()                  # the knee bends (it was straight)
+
+
 # ---------------------------------------------------------------------- (c) forward +Y, scale 0.01
 def test_rig_facing_plus_y_in_centimetres_with_y_up_data():
     body, local, root, pos, wrot = _smooth_source(frames=30)
@@ -617,6 +653,29 @@ def test_guess_bone_map(style, bones, preset):
         assert sorted(bm2.twist["left_elbow"]) == ["lowerarm_twist_01_l", "lowerarm_twist_02_l"]
         assert bm2.twist["right_shoulder"] == ["upperarm_twist_01_r", "upperarm_twist_02_r"]
     bmaps.validate_bone_map(bm2, names)
+
+
+def test_guess_maps_the_upper_arm_named_shldr():
+    """Daz Genesis 1/2 and Poser figures name the upper arm ``lShldr`` (and Diffeomorphic renames
+    Genesis 3/8's lShldrBend so when it merges the Bend/Twist bones); the guess did not know the
+    word: the upper arms stayed unmapped (the collars turned to point at the elbows) and the
+    report advised mapping the elbow to ``lShldr``."""
+    out = [("hip", None), ("pelvis", "hip"), ("abdomen", "hip"), ("abdomen2", "abdomen"), ("chest", "abdomen2"),
+           ("neck", "chest"), ("head", "neck")]
+    for s in "lr":
+        out += [(f"{s}Collar", "chest"), (f"{s}Shldr", f"{s}Collar"), (f"{s}ForeArm", f"{s}Shldr"),
+                (f"{s}Hand", f"{s}ForeArm"), (f"{s}Thumb1", f"{s}Hand"), (f"{s}Index1", f"{s}Hand"),
+                (f"{s}Thigh", "pelvis"), (f"{s}Shin", f"{s}Thigh"), (f"{s}Foot", f"{s}Shin"), (f"{s}Toe", f"{s}Foot")]
+    bm, notes = bmaps.guess_bone_map(_bones(out))
+    assert [bm.bones.get(j) for j in ("pelvis", "spine1", "spine2", "spine3", "neck", "head")] == \
+        ["hip", "abdomen", "abdomen2", "chest", "neck", "head"]
+    for side in ("left", "right"):
+        s = side[0]
+        assert [bm.bones.get(f"{side}_{j}") for j in ("collar", "shoulder", "elbow", "wrist", "hip", "knee", "ankle",
+                                                      "foot")] == \
+            [f"{s}{b}" for b in ("Collar", "Shldr", "ForeArm", "Hand", "Thigh", "Shin", "Foot", "Toe")]
+    assert all(n.bone is not None and n.confidence >= 0.6 for n in notes), [n for n in notes if n.confidence < 0.6]
+    bmaps.validate_bone_map(bm, [b[0] for b in out])
 
 
 def _cc4_bones(twist_under="segment", twist=True):

@@ -559,7 +559,7 @@ def _role(tokens):
         return "hand", twist
     if "forearm" in joined or "lowerarm" in joined or "elbow" in joined:
         return "forearm", twist
-    if "upperarm" in joined or "arm" in joined or "humerus" in joined:
+    if "upperarm" in joined or "arm" in joined or "humerus" in joined or "shldr" in joined:
         return "upperarm", twist
     if "clavicle" in joined or "collar" in joined or ("shoulder" in joined and side):
         return "collar", twist
@@ -595,7 +595,7 @@ def guess_bone_map(bones, min_preset_fraction: float = 0.85, use_presets: bool =
     first (names compared case-insensitively without a ``namespace:`` prefix, so
     ``mixamorig1:Hips`` matches ``mixamo``); it is used when at least ``min_preset_fraction`` of its
     joints are found.  Otherwise bones are classified from name tokens (hips/pelvis, spine/chest,
-    neck, head, shoulder/clavicle/collar, upperarm/arm, forearm/lowerarm, hand, thigh/upleg/
+    neck, head, shoulder/clavicle/collar, upperarm/arm/shldr, forearm/lowerarm, hand, thigh/upleg/
     upperleg, shin/calf/leg/lowerleg, foot, toe/ball; side from ``.L/.R``, ``_l/_r``,
     ``Left/Right``, ``L_/R_``) and the hierarchy: each limb part must descend from the previous
     part of its chain, the spine bones are the chain from the hips to the neck (spine1/2/3 spread

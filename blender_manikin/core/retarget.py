@@ -608,7 +608,8 @@ def keep_ends_on_targets(res: RetargetResult, world_rot, positions, swivel, limb
     skipped).  ends: ``"source"`` puts the ends on the performer's wrist / ankle positions (mapped
     into the target's place and facing, not scaled: the character touches what the performer
     touched); ``"scaled"`` on the root bone's position plus the leg ratio times the source's
-    pelvis-to-end offset (consistent with ``root_motion="scaled"``: a planted foot stays planted).
+    pelvis-to-end offset (consistent with ``root_motion="scaled"``: a planted foot stays planted), for
+    the feet from the character's own hips (:func:`_feet_rest_offsets`).
     end_positions: optional ``(T, L, 3)`` world targets for the ``limbs`` instead.
 
     Uses :func:`.limb_solver.solve_limbs` on the target's own upper / lower lengths with the
@@ -652,7 +653,7 @@ def keep_ends_on_targets(res: RetargetResult, world_rot, positions, swivel, limb
         tgt_w = (positions[:, je] - plan.c_s) @ F.T + plan.c_t
     elif ends == "scaled":
         off = (positions[:, je] - positions[:, :1]) @ F.T * plan.leg_ratio
-        tgt_w = res.root_head_world[:, None] + off
+        tgt_w = res.root_head_world[:, None] + off + _feet_rest_offsets(plan, ids)
     else:
         raise ValueError(f"ends must be 'source' or 'scaled', got {ends!r}")
     sol = solve_limbs(base_src, to_src(tgt_w), swivel[:, ids], lengths, world_rot[:, PARENTS[jb]],
@@ -667,6 +668,25 @@ def keep_ends_on_targets(res: RetargetResult, world_rot, positions, swivel, limb
     targets_out[:, ids] = tgt_w
     out.reach_error = reach
     out.end_targets = targets_out
+    return out
+
+
+def _feet_rest_offsets(plan: RetargetPlan, ids) -> np.ndarray:
+    """``(L, 3)`` world offsets added to the scaled end targets of limbs ``ids``: for a leg, where
+    the character's ankle sits from its root-motion bone's head at rest, less the leg ratio times
+    where the performer's ankle sits from its pelvis (in the character's facing); zero for an arm.
+    So a foot's target is the character's own rest ankle plus the leg ratio times the performer's
+    ankle's displacement from its rest: the character stands on its own legs at rest, whatever
+    bone its hips are (Blender's Human metarig's ``spine`` starts 6 cm *below* its thighs, the body
+    model's pelvis 5 cm above its hips: measured from the pelvis, its feet's targets were 13 cm out
+    of its legs' reach and its knees never bent).  Constant: a planted foot stays planted."""
+    out = np.zeros((len(ids), 3))
+    hw0 = plan.target.rest_world_heads()
+    P = plan.body.rest_positions()
+    for i, li in enumerate(ids):
+        if LIMB_NAMES[li].endswith("_leg"):
+            end = LIMBS[li][3]
+            out[i] = (hw0[plan.bone_of[end]] - plan.root_rest_world) - plan.leg_ratio * (plan.F @ (P[end] - P[0]))
     return out
 
 
