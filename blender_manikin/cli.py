@@ -12,8 +12,10 @@ recording folder, ``.npy`` / ``.npz`` arrays, a keypoint CSV; solved by HybrIK I
 :mod:`blender_manikin.core.keypoint_solve`) or a folder (its recordings, sorted).  For every
 input the scene is reset to an empty factory scene, the recording is solved and
 ``DIR/STEM.<ext>`` is written for each format (inputs that share a name, ``take.csv`` in two
-folders, are told apart as ``convert`` does: ``take-<hash>.<ext>``).  One line per converted input on stdout
-(``OK INPUT -> outputs (summary)``); problems on stderr as ``ERROR INPUT: message``; a bad
+folders, are told apart as ``convert`` does: ``take-<hash>.<ext>``); a file already there is
+replaced only when it is this tool's unchanged output of an earlier run, else the input stops
+with an error naming it (``--overwrite`` replaces it; :mod:`.core.output_guard`).  One line per
+converted input on stdout (``OK INPUT -> outputs (summary)``); problems on stderr as ``ERROR INPUT: message``; a bad
 file does not stop the others.  Exit status 0 only when every input converted, 1 when any
 failed, 2 for usage errors, 130 when Ctrl-C stopped the batch (the inputs after it not started, no
 output left half-written under its name).
@@ -265,6 +267,11 @@ def _keypoint_layouts():
     return tuple(LAYOUTS)
 
 
+OVERWRITE_HELP = ("replace files in --out that are in the way (default: only this tool's own outputs of an "
+                  "earlier run, unchanged since, are replaced; an input whose output would replace a file "
+                  "made or edited since stops with an error naming it)")
+
+
 def build_parser():
     p = argparse.ArgumentParser(
         prog="blender_manikin",
@@ -304,6 +311,7 @@ def build_parser():
     s.add_argument("--no-live-rig", dest="live_rig", action="store_false",
                    help="write plain FK keys only (default: the live swivel rig, whose elbows and knees "
                         "follow the swivel properties)")
+    s.add_argument("--overwrite", action="store_true", help=OVERWRITE_HELP)
     c = sub.add_parser("convert", help="convert many recordings in parallel on Dask, without Blender")
     c.add_argument("inputs", nargs="+", metavar="INPUT",
                    help="recording files, folders (recursive), globs, or manifest files (.txt/.lst/.jsonl)")
@@ -315,6 +323,7 @@ def build_parser():
                    help="a Dask scheduler address (tcp://host:8786), or local (default: a LocalCluster)")
     c.add_argument("--workers", type=int, default=None, help="LocalCluster workers (default: one per core)")
     c.add_argument("--no-progress", dest="progress", action="store_false", help="no progress bar on stderr")
+    c.add_argument("--overwrite", action="store_true", help=OVERWRITE_HELP)
     return p
 
 
@@ -338,6 +347,8 @@ def expand_inputs(inputs):
             found = sorted(os.path.join(item, n) for n in os.listdir(item)
                            if os.path.isfile(os.path.join(item, n))
                            and _formats.is_recording_file(os.path.join(item, n)))
+            if not found:               # said, so a folder given by mistake is not passed over unseen
+                print(f"blender_manikin: {item}: no recordings in this folder", file=sys.stderr)
             out.extend(found)
         else:
             out.append(item)
@@ -586,11 +597,15 @@ def main(argv=None):
     from .core.solve import error_message
     convert = convert_one if needs_blender else convert_one_core
 
+    if os.path.exists(args.out) and not os.path.isdir(args.out):
+        print(f"blender_manikin: error: --out {args.out} is a file, not a folder", file=sys.stderr)
+        return 2
     os.makedirs(args.out, exist_ok=True)
     inputs = expand_inputs(args.inputs)
     if not inputs:
         print("blender_manikin: error: no recordings found in the inputs", file=sys.stderr)
         return 1
+    from .core import output_guard
     from .core.convert import output_stems
     stems = output_stems(inputs)          # two inputs named alike never write the same file
     failed = done = 0
@@ -601,8 +616,13 @@ def main(argv=None):
                 try:
                     if not os.path.isfile(path) and not is_keypoint_input(path):
                         raise FileNotFoundError("no such file")
+                    # nothing the user made or changed is replaced (core/output_guard.py)
+                    dsts = [os.path.join(args.out, stems[path] + _formats.WRITERS[f].extension) for f in formats]
+                    output_guard.check_free(dsts, getattr(args, "overwrite", False))
+                    output_guard.claim(dsts)
                     with quiet_stdout():
                         written, job = convert(path, args.out, args, formats, stems[path])
+                    output_guard.record(written)
                 except Exception as exc:      # one bad input does not stop the others
                     if interrupted:           # Ctrl-C, turned into an error by a Blender operator
                         raise KeyboardInterrupt from exc

@@ -14,6 +14,7 @@ bpy = pytest.importorskip("bpy")
 from blender_manikin import cli  # noqa: E402
 from blender_manikin.blender import solve_job  # noqa: E402
 from blender_manikin.core import export_json  # noqa: E402
+from blender_manikin.core.output_guard import RECORD  # noqa: E402
 
 from blender_util import (BLENDER_BANNER, blender_binary, blender_binary_env, stub_solver, synthetic_result,  # noqa: E402
                           write_recording_csv)
@@ -163,7 +164,7 @@ def test_inputs_named_alike_each_get_their_own_outputs(folder, tmp_path, capsys,
                      "--format", "json,bvh", "--height", "1.8"]) == 0
     written = [ln.split(" -> ")[1].split(" (")[0].split(", ") for ln in capsys.readouterr().out.splitlines()]
     assert len(written) == 3 and len({p for w in written for p in w}) == 6
-    assert sorted(os.listdir(out)) == sorted(os.path.basename(p) for w in written for p in w)
+    assert sorted(n for n in os.listdir(out) if n != RECORD) == sorted(os.path.basename(p) for w in written for p in w)
     frames = sorted(len(json.loads((out / n).read_text())["positions"]) for n in os.listdir(out) if n.endswith(".json"))
     assert frames == [15, 25, 30]
     # a single input keeps its plain name, and a FreeMoCap session solved as "." is named after its folder
@@ -171,7 +172,42 @@ def test_inputs_named_alike_each_get_their_own_outputs(folder, tmp_path, capsys,
     shutil.copytree(os.path.join(ROOT, "examples", "example_keypoints"), session)
     monkeypatch.chdir(session)
     assert cli.main(["solve", ".", "--out", str(tmp_path / "kp"), "--format", "json"]) == 0
-    assert os.listdir(tmp_path / "kp") == ["session.json"]
+    assert [n for n in os.listdir(tmp_path / "kp") if n != RECORD] == ["session.json"]
+
+
+def test_outputs_never_replace_a_file_the_user_made_or_changed(tmp_path, capsys):
+    """A rerun into the same folder replaces its own earlier outputs; a file of the user's own with
+    an output's name, or an output edited since (a .blend an animator opened and saved), stops
+    that input with an error naming it and is left as it was; --overwrite replaces them."""
+    rec = write_recording_csv(tmp_path / "take.csv", synthetic_result(T=30, fps=30.0, stature=1.75))
+    out = tmp_path / "o"
+    args = ["solve", str(rec), "--out", str(out), "--format", "json,bvh"]
+    assert cli.main(args) == 0
+    assert cli.main(args) == 0                          # its own unchanged outputs: replaced
+    capsys.readouterr()
+    (out / "take.bvh").write_text("the animator's cleaned-up take\n")
+    assert cli.main(args) == 1
+    err = capsys.readouterr().err
+    assert f"ERROR {rec}: {out / 'take.bvh'} already exists" in err and "--overwrite" in err
+    assert (out / "take.bvh").read_text() == "the animator's cleaned-up take\n"
+    json_before = (out / "take.json").read_bytes()
+    assert cli.main(args) == 1 and (out / "take.json").read_bytes() == json_before     # nothing written
+    mine = tmp_path / "mine"
+    mine.mkdir()
+    (mine / "take.json").write_text("{}")                # the user's own file, never written by the tool
+    assert cli.main(["solve", str(rec), "--out", str(mine), "--format", "json"]) == 1
+    assert (mine / "take.json").read_text() == "{}"
+    assert cli.main(args + ["--overwrite"]) == 0
+    assert (out / "take.bvh").read_text().startswith("HIERARCHY")
+    assert cli.main(args) == 0                          # recorded again: a plain rerun replaces it
+    # --out naming a file is a usage error; a folder without recordings is said
+    assert cli.main(["solve", str(rec), "--out", str(rec), "--format", "json"]) == 2
+    assert "is a file, not a folder" in capsys.readouterr().err
+    (tmp_path / "empty").mkdir()
+    assert cli.main(["solve", str(tmp_path / "empty"), str(rec), "--out", str(out), "--format", "json"]) == 0
+    assert f"{tmp_path / 'empty'}: no recordings in this folder" in capsys.readouterr().err
+
+
 def test_ctrl_c_stops_the_batch_and_leaves_no_truncated_fbx(folder, tmp_path, capsys, monkeypatch):
     """Ctrl-C while the first take's FBX is written (the exporter writes as it goes, and Blender's
     operator turns the KeyboardInterrupt into an error): the batch stops with 130, the take's
@@ -195,7 +231,8 @@ def test_ctrl_c_stops_the_batch_and_leaves_no_truncated_fbx(folder, tmp_path, ca
                      "--format", "json,fbx", "--height", "1.8"])
     cap = capsys.readouterr()
     assert code == 130 and cap.out == "" and "interrupted" in cap.err
-    assert os.listdir(out) == ["walk.json"]      # written before the FBX; nothing of wave.csv
+    # written before the FBX; nothing of wave.csv
+    assert [n for n in os.listdir(out) if n != RECORD] == ["walk.json"]
 
 
 def test_blender_binary_writes_where_it_runs_whatever_pwd_says(tmp_path):
@@ -211,5 +248,5 @@ def test_blender_binary_writes_where_it_runs_whatever_pwd_says(tmp_path):
                         "--out", "o", "--format", "blend,fbx,json"], cwd=job, capture_output=True, text=True,
                        timeout=300, env=blender_binary_env(PWD=str(stale)))
     assert p.returncode == 0, (p.stdout, p.stderr)
-    assert sorted(os.listdir(job / "o")) == ["take.blend", "take.fbx", "take.json"]
+    assert sorted(n for n in os.listdir(job / "o") if n != RECORD) == ["take.blend", "take.fbx", "take.json"]
     assert os.listdir(stale / "o") == []

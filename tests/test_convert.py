@@ -6,6 +6,7 @@ import signal
 import subprocess
 import sys
 import time
+import types
 
 import numpy as np
 import pytest
@@ -14,6 +15,7 @@ pytest.importorskip("distributed")
 
 from blender_manikin.core import convert  # noqa: E402
 from blender_manikin.core.export_json import validate_document  # noqa: E402
+from blender_manikin.core.output_guard import RECORD  # noqa: E402
 from blender_manikin.core.solve import SolveSettings  # noqa: E402
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
@@ -91,7 +93,8 @@ def test_a_killed_run_resumes_without_missing_or_duplicated_outputs(tmp_path):
     lines = _manifest_lines(out)
     ok = [r["input"] for r in lines if r["status"] == "ok"]
     assert sorted(ok) == sorted(str(d / f"t{i:02d}.csv") for i in range(10))     # each exactly once
-    assert sorted(os.listdir(out)) == sorted([f"t{i:02d}.json" for i in range(10)] + [convert.MANIFEST])
+    assert sorted(n for n in os.listdir(out) if n != RECORD) == \
+        sorted([f"t{i:02d}.json" for i in range(10)] + [convert.MANIFEST])
     # the rerun's OK lines on stdout name only what it converted
     redone = [ln.split()[1] for ln in p.stdout.splitlines() if ln.startswith("OK ")]
     assert sorted(redone + first) == sorted(ok)
@@ -116,6 +119,30 @@ def test_inputs_from_globs_and_manifests_and_unique_stems(tmp_path):
     stems = convert.output_stems(["/a/x.csv", "/b/x.csv", "/a/y.csv"])
     assert stems["/a/y.csv"] == "y" and stems["/a/x.csv"] != stems["/b/x.csv"]
     assert all(s.startswith("x-") for k, s in stems.items() if k.endswith("x.csv"))
+
+
+def test_convert_never_replaces_a_file_the_user_made(tmp_path):
+    """An output whose name a file of the user's own already has stops that input (an error in
+    the manifest naming the file, the file left as it was); the other inputs convert;
+    --overwrite (``options.overwrite``) replaces it."""
+    d = tmp_path / "in"
+    d.mkdir()
+    for n in ("walk", "run"):
+        shutil.copy(EXAMPLE, d / f"{n}.csv")
+    out = tmp_path / "out"
+    out.mkdir()
+    (out / "walk.json").write_text("my notes on the walk")
+    inputs = convert.collect_inputs([str(d)])
+    code, records = convert.run(inputs, str(out), ["json"], SolveSettings(fps=30.0), workers=1, progress=False,
+                                log=lambda m: None)
+    by = {os.path.basename(r["input"]): r for r in records}
+    assert code == 1 and by["run.csv"]["status"] == "ok" and by["walk.csv"]["status"] == "error"
+    assert "walk.json already exists" in by["walk.csv"]["error"] and "--overwrite" in by["walk.csv"]["error"]
+    assert (out / "walk.json").read_text() == "my notes on the walk"
+    code, records = convert.run(inputs, str(out), ["json"], SolveSettings(fps=30.0), workers=1, progress=False,
+                                log=lambda m: None, options=types.SimpleNamespace(overwrite=True))
+    assert code == 0 and [os.path.basename(r["input"]) for r in records] == ["walk.csv"]
+    assert validate_document(json.loads((out / "walk.json").read_text())) == []
 
 
 def test_convert_refuses_blender_formats(tmp_path):

@@ -28,7 +28,7 @@ import re
 import sys
 import time
 
-from . import formats
+from . import formats, output_guard
 from .solve import SolveSettings, error_message, solve_recording
 
 MANIFEST = "manifest.jsonl"
@@ -213,8 +213,26 @@ def run(inputs, out_dir, fmts, settings: SolveSettings, scheduler=None, workers=
     skipped = len(inputs) - len(todo)
     if skipped:
         log(f"{skipped} of {len(inputs)} input(s) already converted (manifest): skipped")
+    # an output that would replace a file the user made or changed stops its input (output_guard)
+    blocked = []
+    for p in todo:
+        try:
+            output_guard.check_free([os.path.join(out_dir, stems[p] + formats.WRITERS[f].extension) for f in fmts],
+                                    bool(getattr(options, "overwrite", False)))
+        except output_guard.OutputInTheWay as exc:
+            blocked.append({"input": p, "status": "error", "outputs": [], "frames": 0, "seconds": 0.0,
+                            "stature": None, "notes": [], "error": str(exc)})
+    if blocked:
+        gone = {r["input"] for r in blocked}
+        todo = [p for p in todo if p not in gone]
+        with open(os.path.join(out_dir, MANIFEST), "a", encoding="utf-8") as man:
+            for rec in blocked:
+                man.write(json.dumps(rec) + "\n")
+                log(f"ERROR {rec['input']}: {rec['error']}")
     if not todo:
-        return 0 if all(is_done(done.get(p), fmts) for p in inputs) else 1, []
+        return 0 if all(is_done(done.get(p), fmts) for p in inputs) else 1, blocked
+    # claimed before they are written: what a killed run leaves under these names is replaceable
+    output_guard.claim([os.path.join(out_dir, stems[p] + formats.WRITERS[f].extension) for p in todo for f in fmts])
     client, cluster = _client(scheduler, workers)
     try:
         log(f"dask dashboard: {client.dashboard_link}")
@@ -222,10 +240,12 @@ def run(inputs, out_dir, fmts, settings: SolveSettings, scheduler=None, workers=
         futures = client.map(convert_task, todo, [out_dir] * len(todo), [stems[p] for p in todo],
                              [list(fmts)] * len(todo), [st] * len(todo), [model] * len(todo),
                              [options] * len(todo), pure=False)
-        records, failed = [], 0
+        records, failed = list(blocked), len(blocked)
         with open(os.path.join(out_dir, MANIFEST), "a", encoding="utf-8") as man:
             for i, fut in enumerate(as_completed(futures), 1):
                 rec = fut.result()
+                if rec["status"] == "ok":
+                    output_guard.record(rec["outputs"])
                 man.write(json.dumps(rec) + "\n")
                 man.flush()
                 os.fsync(man.fileno())
