@@ -259,24 +259,28 @@ def test_keep_ends_on_targets_mixamo():
     assert np.abs(out.world_orientations()[:, end_ids] - res.world_orientations()[:, end_ids]).max() < 1e-9
 
 
-def test_keep_ends_scaled_targets_and_planted_foot():
-    """ends='scaled' follows the scaled root; a foot planted in the source stays planted."""
+def _planted_left_foot_source():
+    """``(body, pos, wrot, sw, anchor)``: a hinge source whose pelvis bobs (knees bent) while its
+    left ankle stays planted at ``anchor`` (its left leg re-solved onto that fixed point)."""
     body, local, root, pos, wrot, sw = _hinge_source(T=30, seed=5)
-    # plant the left ankle: re-solve the source's left leg onto a fixed point below its hip
-    hip = pos[:, J["left_hip"]]
     anchor = np.array([0.10, -0.05, 0.09])
     root = np.broadcast_to(body.root_rest, (30, 3)).copy()
     root[:, 0] += 0.03 * np.cos(np.arange(30) / 4)
     root[:, 2] += -0.08 + 0.03 * np.sin(np.arange(30) / 5)
     pos, wrot = sk.forward_kinematics(local, root, body)
-    hip = pos[:, J["left_hip"]]
-    sol = ls.solve_limbs(hip[:, None], np.broadcast_to(anchor, (30, 1, 3)), sw[:, 2:3],
+    sol = ls.solve_limbs(pos[:, None, J["left_hip"]], np.broadcast_to(anchor, (30, 1, 3)), sw[:, 2:3],
                          body.limb_lengths()[2:3], wrot[:, None, J["pelvis"]], limb_ids=[2])
     local = local.copy()
     local[:, J["left_hip"]] = sol.base_local[:, 0]
     local[:, J["left_knee"]] = sol.mid_local[:, 0]
     pos, wrot = sk.forward_kinematics(local, root, body)
     assert np.abs(pos[:, J["left_ankle"]] - anchor).max() < 1e-9
+    return body, pos, wrot, sw, anchor
+
+
+def test_keep_ends_scaled_targets_and_planted_foot():
+    """ends='scaled' follows the scaled root; a foot planted in the source stays planted."""
+    body, pos, wrot, sw, anchor = _planted_left_foot_source()
     rig, bmap, P = mixamo_rig(body, scales=_scales(arm=1.1, leg=1.1, torso=1.1))
     res = rt.retarget(wrot, pos, body, rig, bmap, "scaled")
     out = rt.keep_ends_on_targets(res, wrot, pos, sw, limbs=("left_leg",), ends="scaled")
@@ -295,19 +299,7 @@ def test_scaled_feet_stand_on_the_legs_whatever_bone_starts_the_hips():
     bundled example: the knees never bent).  The feet's targets are the character's own rest
     ankles plus the leg ratio times the performer's ankles' travel: reachable, a planted foot
     planted, the knees bent."""
-    body, local, root, pos, wrot, sw = _hinge_source(T=30, seed=5)
-    anchor = np.array([0.10, -0.05, 0.09])                  # the left ankle planted here
-    root = np.broadcast_to(body.root_rest, (30, 3)).copy()
-    root[:, 0] += 0.03 * np.cos(np.arange(30) / 4)
-    root[:, 2] += -0.08 + 0.03 * np.sin(np.arange(30) / 5)  # knees bent
-    pos, wrot = sk.forward_kinematics(local, root, body)
-    sol = ls.solve_limbs(pos[:, None, J["left_hip"]], np.broadcast_to(anchor, (30, 1, 3)), sw[:, 2:3],
-                         body.limb_lengths()[2:3], wrot[:, None, J["pelvis"]], limb_ids=[2])
-    local = local.copy()
-    local[:, J["left_hip"]] = sol.base_local[:, 0]
-    local[:, J["left_knee"]] = sol.mid_local[:, 0]
-    pos, wrot = sk.forward_kinematics(local, root, body)
-    assert np.abs(pos[:, J["left_ankle"]] - anchor).max() < 1e-9
+    body, pos, wrot, sw, anchor = _planted_left_foot_source()
     rig, bmap, P = mixamo_rig(body, scales=_scales(arm=1.1, leg=1.1, torso=1.1))
     heads = rig.heads.copy()
     heads[rig.index["mixamorig:Hips"]] = P[J["left_hip"]] * [0, 1, 1] - [0, 0, 0.06]   # 6 cm below the thighs
