@@ -430,3 +430,24 @@ def test_stature_warning_names_the_likely_cause():
     assert "--units" not in low
     typed = stature_warning(2.5, 1.6, "height setting")
     assert "check the height setting (2.50 m)" in typed and "floor" not in typed
+
+
+@pytest.mark.parametrize("droop", [15.0, 25.0, 40.0, 55.0])
+def test_auto_calibration_finds_a_low_t_pose_or_an_a_pose(droop):
+    """*Auto* calibrates on a T-pose held up to 20° low and on an A-pose (20-65°), as the README
+    says: find_tpose wants the hands at shoulder height (arms more than about 12° low miss it, and
+    the take was sized by its head alone, the span proportional and the hands' rotations not
+    refined); the solve then asks find_apose.  Arms hanging relaxed (75°) are neither."""
+    from blender_manikin.core import solve as cs
+    body = make_body(BodyMeasurements(stature=1.80, arm_span=1.66))      # arms 6 % longer than proportional
+    pos, rot = body_frames(body, 60, heading=30.0, arm_down=droop)
+    targets, *_ = device_targets(pos, rot, get_preset("none"), "none")
+    b, _, info = cs.calibrate(cs.SolveSettings(fps=60.0), targets, np.arange(60) / 60.0, "none")
+    assert info[0].startswith(f"calibrated on a {'T' if droop < 20 else 'A'}-pose"), info
+    assert b.stature == pytest.approx(1.80, abs=0.01)
+    rest = b.rest_positions()
+    assert np.linalg.norm(rest[J["left_wrist"]] - rest[J["right_wrist"]]) == pytest.approx(1.66 + 0.02, abs=0.01)
+    from blender_manikin.core.calibration import find_apose
+    assert find_apose(targets).plausible
+    relaxed, *_ = device_targets(*body_frames(body, 60, arm_down=75.0), get_preset("none"), "none")
+    assert not find_apose(relaxed).plausible

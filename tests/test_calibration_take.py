@@ -98,3 +98,32 @@ def test_a_batch_reads_its_calibration_take_once(tmp_path, monkeypatch):
     os.utime(cal_path, ns=(1, 1))                              # the file changed
     cs.calibration_from_take(settings)
     assert len(reads) == 3
+
+
+def _lowered(rec, dz):
+    import copy
+    out = copy.deepcopy(rec)
+    for st in out.streams.values():
+        st.pos[:, 2] += dz
+    return out
+
+
+def test_an_eye_level_take_stands_on_the_floor_of_its_calibration_takes_performer(tmp_path):
+    """A session recorded with its origin at eye level (OpenXR LOCAL space: the floor 1.72 m down):
+    the take without a T-pose is sized by the calibration take, and its floor goes under that
+    performer, not under a 1.75 m default (a 1.90 m body hung from a floor 13 cm too high folds
+    its knees), as a typed height puts it."""
+    from examples.make_example_recording import synthesize
+    rec = synthesize(stature=1.90)
+    cal_path = str(tmp_path / "calibration.csv")
+    write_csv(cal_path, _lowered(rec, -1.72), axes="openxr", units="m", metadata={"offsets": "openxr_generic"})
+    take = _lowered(without_tpose(rec), -1.72)
+    take.metadata["offsets"] = "openxr_generic"
+    out = cs.solve_recording(take, cs.SolveSettings(fps=30.0, calibration_take=cal_path))
+    typed = cs.solve_recording(take, cs.SolveSettings(fps=30.0, height=1.90))
+    assert out.body.stature == pytest.approx(1.90, abs=0.005)
+    assert out.floor == pytest.approx(-1.72, abs=0.01) and out.floor == pytest.approx(typed.floor, abs=0.005)
+    assert "under the 1.90 m performer of the calibration take calibration.csv" in out.summary(), out.summary()
+    from blender_manikin.core.metrics import knee_flexion
+    assert np.median(np.linalg.norm(out.result.positions - typed.result.positions, axis=-1)) < 0.01
+    assert np.median(knee_flexion(out.result.positions)) < np.median(knee_flexion(typed.result.positions)) + 5.0

@@ -240,6 +240,22 @@ def test_the_floor_setting_puts_an_eye_level_origin_on_the_ground():
     np.testing.assert_allclose(high.result.positions, ref.result.positions, atol=1e-6)
 
 
+@pytest.mark.parametrize("units,factor", [("cm", 100.0), ("mm", 1000.0)])
+def test_metres_read_in_a_smaller_unit_are_an_error_not_an_eye_level_origin(tmp_path, units, factor):
+    """A take in metres read as centimetres (--units cm on a file that is in metres, or a file whose
+    units line is wrong) has its head 1.6 cm up: not an origin at eye level (that solved a 1.75 m body
+    on a floor put 1.6 m down, its hands at the tracked points' 1/100 scale); the head-height check
+    says what the positions look like."""
+    from blender_manikin.core.io_csv import write_csv
+    rec = load_recording(EXAMPLE)
+    path = str(tmp_path / "take.csv")
+    write_csv(path, rec, axes="openxr", units="m", metadata={"offsets": "openxr_generic"})
+    with pytest.raises(Exception, match=f"scaled down {int(factor)}x; they look like metres already, pass units=m"):
+        cs.solve_recording(path, cs.SolveSettings(fps=30.0, units=units))
+    low = _raised(rec, -1.6)          # a true eye-level origin is still found
+    assert cs.eye_level_origin(low, cs.SolveSettings()) and cs.hands_from_head(low) > 0.3
+
+
 def test_floor_settings_are_checked():
     assert cs.parse_floor(None) == 0.0 and cs.parse_floor("") == 0.0 and cs.parse_floor(" Height ") == "height"
     assert cs.parse_floor("-1.25") == -1.25 and cs.parse_floor(0.3) == 0.3
@@ -345,3 +361,21 @@ def test_a_recording_timed_in_milliseconds_solves_at_its_length(tmp_path):
     out = cs.solve_recording(path, cs.SolveSettings(fps=30.0))
     assert out.result.num_frames == 210 and "times read as milliseconds: samples every" in out.summary()
     assert any(n.startswith("calibrated on a T-pose at 0.53 s") for n in out.info)
+
+
+def test_the_summary_says_what_the_calibration_found_wrong_or_missing():
+    """The calibration's own notes reach the summary (the command line's OK line, the panel's box):
+    the problems of a pose that is not a still T-pose ("calibration: ... hold still"), a take
+    without a T-pose ("no T-pose found", the README's table) and a seated take's stature from its
+    head height."""
+    moving = cs.solve_recording(EXAMPLE, cs.SolveSettings(fps=30.0, calibration="TPOSE", tpose_time=1.3))
+    problems = [n for n in moving.info if n.startswith("calibration: ")]
+    assert problems and all(p in moving.summary() for p in problems), moving.summary()
+    rec = load_recording(EXAMPLE)
+    for st in rec.streams.values():
+        keep = st.time >= st.time[0] + 1.7
+        st.time, st.pos, st.quat, st.valid = st.time[keep], st.pos[keep], st.quat[keep], st.valid[keep]
+    none = cs.solve_recording(rec, cs.SolveSettings(fps=30.0))
+    assert "no T-pose found: stature from the standing head height" in none.summary()
+    seated = cs.solve_recording(rec, cs.SolveSettings(fps=30.0, posture="seated"))
+    assert "from the seated head height" in seated.summary(), seated.summary()

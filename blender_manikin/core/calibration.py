@@ -313,6 +313,77 @@ def find_tpose(targets: TrackerTargets, window=0.25, t0=0.0) -> TPoseCandidate:
                           span_ratio=sr, height_error=he, speed=sp)
 
 
+#: arm elevations (degrees below horizontal) :func:`find_apose` takes: a T-pose held low to an
+#: A-pose (relaxed arms hang 70-90°)
+APOSE_ELEVATION = (-20.0, 60.0)
+#: degrees an arm may point forward or back of the hands' line in :func:`find_apose`
+APOSE_SWING = 30.0
+
+
+def find_apose(targets: TrackerTargets, window=0.25, t0=0.0) -> TPoseCandidate:
+    """Propose the most still T- or A-pose-like moment by the arms, for poses :func:`find_tpose`
+    does not take (it wants the hands at shoulder height: arms more than about 12° low miss it).
+
+    Each arm is measured from where the head puts its shoulder (as :func:`calibrate` does): its
+    reach (the span ratio is the shoulders' width plus both reaches over the expected wrist
+    distance, :data:`TPOSE_WRIST_DISTANCE` of the stature), its elevation within
+    :data:`APOSE_ELEVATION` and its swing within :data:`APOSE_SWING`; ``height_error`` is how far
+    (m) the hands are outside those bounds.  The head must stand as a standing performer's, the
+    hands still.  Same fields as :func:`find_tpose`."""
+    for d in REQUIRED_DEVICES:
+        if d not in targets.pos:
+            raise ValueError(f"find_apose needs {d} targets")
+    fps = float(targets.fps)
+    n = targets.num_frames
+    w = max(1, int(round(window * fps)))
+    ok = np.ones(n, dtype=bool)
+    for d in REQUIRED_DEVICES:
+        v = targets.valid.get(d)
+        if v is not None:
+            ok &= np.asarray(v, dtype=bool)
+    head = np.asarray(targets.pos["head"], np.float64)
+    wl = np.asarray(targets.pos["left_hand"], np.float64)
+    wr = np.asarray(targets.pos["right_hand"], np.float64)
+    H_head = (head[:, 2] - SOLE) / HEAD_HEIGHT
+    standing = (H_head >= TPOSE_STATURE_RANGE[0]) & (H_head <= TPOSE_STATURE_RANGE[1])
+    H = np.maximum(H_head, 0.3)
+    lat = (wl - wr) * [1.0, 1.0, 0.0]
+    u = lat / np.maximum(np.linalg.norm(lat, axis=-1, keepdims=True), 1e-9)
+    fwd = np.cross(_Z, u)
+    centre = head + u * np.sum((0.5 * (wl + wr) - head) * u, -1, keepdims=True)
+    centre[:, 2] = head[:, 2] - (HEAD_HEIGHT - SHOULDER_HEIGHT) * H
+    half = 0.5 * SHOULDER_WIDTH * H[:, None]
+    reach, err = [], []
+    for wrist, s in ((wl, 1.0), (wr, -1.0)):
+        a = wrist - (centre + s * u * half)
+        out = s * np.sum(a * u, -1)
+        ahead = np.abs(np.sum(a * fwd, -1))
+        L = np.linalg.norm(a, axis=-1)
+        elev = np.degrees(np.arctan2(-a[:, 2], np.maximum(out, 1e-9)))
+        beyond = np.maximum(elev - APOSE_ELEVATION[1], 0.0) + np.maximum(APOSE_ELEVATION[0] - elev, 0.0)
+        err.append(L * np.sin(np.radians(np.minimum(beyond, 90.0)))
+                   + np.maximum(ahead - np.tan(np.radians(APOSE_SWING)) * np.maximum(out, 0.0), 0.0))
+        reach.append(L)
+    span_ratio = (SHOULDER_WIDTH * H + reach[0] + reach[1]) / (TPOSE_WRIST_DISTANCE * H)
+    height_err = 0.5 * (err[0] + err[1])
+    speed = np.zeros(n)
+    if n > 1:
+        speed[1:] = (np.linalg.norm(np.diff(wl, axis=0), axis=-1)
+                     + np.linalg.norm(np.diff(wr, axis=0), axis=-1)) * fps / 2
+        speed[0] = speed[1]
+    cost = np.abs(1.0 - span_ratio) + 3.0 * height_err / H + 0.5 * speed
+    cost = np.where(ok & standing & np.isfinite(cost), cost, 1e3)
+    mc = _window_mean(cost, w)
+    k = int(np.argmin(mc))
+    sr = float(_window_mean(span_ratio, w)[k])
+    he = float(_window_mean(height_err, w)[k])
+    sp = float(_window_mean(speed, w)[k])
+    lo, hi = TPOSE_SPAN_RATIO
+    plausible = bool(mc[k] < 1e2 and lo < sr < hi and he < 0.03 and sp < 0.3)
+    return TPoseCandidate(time=float(t0 + k / fps), frame=k, cost=float(mc[k]), plausible=plausible,
+                          span_ratio=sr, height_error=he, speed=sp)
+
+
 def _heading_matrix(x_axis):
     x = normalize(np.array([x_axis[0], x_axis[1], 0.0]))
     y = np.cross(_Z, x)

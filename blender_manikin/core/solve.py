@@ -154,7 +154,8 @@ class SolveOutcome:
         if self.body is not None:
             parts.append(f"stature {self.body.stature:.2f} m")
         for note in self.info:
-            if note.startswith(("offsets ", "trimmed to", "calibrated", "arm span", "estimated stature",
+            if note.startswith(("offsets ", "trimmed to", "calibrated", "calibration: ", "no T-pose found",
+                                "arm span", "estimated stature", "stature ",
                                 "head stands", "floor at",
                                 "left/right labels swapped back", "left and right controllers swapped back",
                                 "left and right foot trackers swapped back", "pelvis and left foot trackers",
@@ -430,32 +431,67 @@ def floor_note(settings: SolveSettings, floor: float, why=None):
 EYE_LEVEL_MAX = 0.5
 #: the stature an eye-level take is sized for when it has no T-pose and no typed height
 EYE_LEVEL_STATURE = 1.75
+#: metres the hands stay from the head (the median over their samples) in a take at a person's
+#: scale (about 0.5 m; a hand at the face 0.15 m): closer, the positions are scaled down (metres
+#: read as centimetres or millimetres), not an origin at eye level
+HANDS_FROM_HEAD_MIN = 0.1
+
+
+def hands_from_head(recording):
+    """The median distance (metres) of the hands' valid samples from the head at their times, or
+    None without hand samples (a take of the head alone)."""
+    head = recording.streams["head"]
+    hp = np.asarray(head.pos, np.float64)
+    ok = np.asarray(head.valid, bool) & np.all(np.isfinite(hp), -1)
+    if ok.sum() < 2:
+        return None
+    dist = []
+    for d in ("left_hand", "right_hand"):
+        s = recording.streams.get(d)
+        if s is None:
+            continue
+        p = np.asarray(s.pos, np.float64)
+        m = np.asarray(s.valid, bool) & np.all(np.isfinite(p), -1)
+        at = np.stack([np.interp(s.time[m], head.time[ok], hp[ok, k]) for k in range(3)], -1)
+        dist.append(np.linalg.norm(p[m] - at, axis=-1))
+    dist = np.concatenate(dist) if dist else np.zeros(0)
+    return float(np.median(dist)) if dist.size else None
 
 
 def eye_level_origin(recording, settings: SolveSettings) -> bool:
     """Whether ``recording`` (Blender axes, metres) has its origin at eye level: the floor setting
-    left at 0 and the standing head within :data:`EYE_LEVEL_MAX` of it."""
+    left at 0 and the standing head within :data:`EYE_LEVEL_MAX` of it, the hands at a person's
+    distance from it (:data:`HANDS_FROM_HEAD_MIN`: positions scaled down, as a wrong unit makes
+    them, are no eye level, and the head-height check then says what they look like)."""
     from .resample import STANDING_PERCENTILE
     if parse_floor(settings.floor) != 0.0 or "head" not in recording.streams:
         return False
     head = recording.streams["head"]
     z = np.asarray(head.pos, np.float64)[:, 2][np.asarray(head.valid, bool)]
     z = z[np.isfinite(z)]
-    return bool(z.size) and abs(float(np.percentile(z, STANDING_PERCENTILE))) < EYE_LEVEL_MAX
+    if not (z.size and abs(float(np.percentile(z, STANDING_PERCENTILE))) < EYE_LEVEL_MAX):
+        return False
+    reach = hands_from_head(recording)
+    return reach is None or reach >= HANDS_FROM_HEAD_MIN
 
 
 def eye_level_floor(settings: SolveSettings, targets: TrackerTargets):
     """``(floor, why)``: where the floor of an eye-level take (:func:`eye_level_origin`) is, metres
     in the recording's z, under a performer of the typed height, else of the stature the take's
     T-pose arm span gives (wrist to wrist :data:`.calibration.TPOSE_WRIST_DISTANCE` of it), else
-    of :data:`EYE_LEVEL_STATURE`, standing (its standing head height) or, with the *Seated*
-    posture, sitting (its median head height, :data:`.seated.SEATED_HEAD_HEIGHT` of the
-    stature); ``why`` says which, for the summary."""
+    of :data:`EYE_LEVEL_STATURE` (with a calibration take: the stature it calibrates), standing
+    (its standing head height) or, with the *Seated* posture, sitting (its median head height,
+    :data:`.seated.SEATED_HEAD_HEIGHT` of the stature); ``why`` says which, for the summary."""
     from . import calibration as cal
     from .seated import SEATED_HEAD_HEIGHT
     head = standing_head_height(targets)
     if settings.height:
         stature, why = float(settings.height), f"under the typed {float(settings.height):.2f} m"
+    elif settings.calibration_take:      # the body is the calibration take's: its floor is under that one
+        mode = str(settings.teleports or "keep").strip().lower()
+        stature = calibration_from_take(settings, mode)[0].stature
+        why = (f"under the {stature:.2f} m performer of the calibration take "
+               f"{os.path.basename(os.fspath(settings.calibration_take))}")
     else:
         guess = head - head_height_for(EYE_LEVEL_STATURE, settings.sole)
         cand = cal.find_tpose(move_floor(targets, guess))
@@ -527,8 +563,10 @@ def calibrate(settings: SolveSettings, targets: TrackerTargets, times, offsets):
             raise SolveError(f"T-pose time {settings.tpose_time:.3f} s is outside the recording "
                              f"(0-{dur:.3f} s after the first sample)")
         t = t0 + float(settings.tpose_time)
-    else:   # AUTO: the most T-pose-like moment, if it is plausible
+    else:   # AUTO: the most T-pose-like moment, if it is plausible, else an A-pose's
         cand = cal.find_tpose(targets, t0=t0)
+        if not cand.plausible:
+            cand = cal.find_apose(targets, t0=t0)
         if str(settings.posture or "").lower() == "seated" and not settings.height:
             seated = _seated_stature(targets, times, cand)
             if seated is not None:          # no standing T-pose: the seated head sizes the body
