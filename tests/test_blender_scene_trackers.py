@@ -5,6 +5,7 @@ import pytest
 bpy = pytest.importorskip("bpy")
 
 from blender_manikin.blender import keying, scene_trackers  # noqa: E402
+from mathutils import Matrix  # noqa: E402
 from blender_manikin.core import rotations as rot  # noqa: E402
 
 from blender_util import fresh_scene  # noqa: E402
@@ -101,3 +102,108 @@ def test_devices_are_mapped_by_the_objects_names(addon):
     assert s.pelvis.object == made["tracker_waist"] and s.right_foot.object == mine
     from blender_manikin.core.devices import device_of_object_name
     assert device_of_object_name("MANIKIN_left_hand.002") == "left_hand" and device_of_object_name("Cube") is None
+
+
+def _parented(name, seed):
+    """A keyed empty under a moving parent (sampled by stepping the scene)."""
+    sc = bpy.context.scene
+    root = bpy.data.objects.new(name + "_root", None)
+    sc.collection.objects.link(root)
+    act = keying.new_action(root.name)
+    keying.assign_action(root, act)
+    keying.key_channels(act, root, [1, N], [("location", 0, "", [0.0, 3.0]), ("rotation_euler", 2, "", [0.0, 1.0])])
+    obj = _keyed_empty(name, 'XYZ', seed=seed)
+    obj.parent = root
+    return obj
+
+
+def test_a_source_the_view_layer_does_not_evaluate_is_said_not_read_frozen():
+    """An object stepped through the scene is read from the evaluated scene; one disabled in the
+    viewports, or in a collection excluded from the view layer, is not evaluated there and keeps a
+    stale matrix (it was read as a tracker frozen for the whole take): an error names it."""
+    fresh_scene()
+    sc = bpy.context.scene
+    hidden = _parented("hidden", seed=5)
+    ref = scene_trackers.sample_sources(sc, {"left_hand": (hidden, "")}, 1, N)
+    assert ref.metadata["method"]["left_hand"] == "frame_set"
+    assert np.ptp(ref["left_hand"].pos, axis=0).max() > 1.0
+    hidden.hide_viewport = True
+    with pytest.raises(scene_trackers.SceneSourceError, match="left_hand: object 'hidden' cannot be read"):
+        scene_trackers.sample_sources(sc, {"left_hand": (hidden, "")}, 1, N)
+    hidden.hide_viewport = False
+    coll = bpy.data.collections.new("trackers")
+    sc.collection.children.link(coll)
+    coll.objects.link(hidden)
+    sc.collection.objects.unlink(hidden)
+    bpy.context.view_layer.layer_collection.children["trackers"].exclude = True
+    with pytest.raises(scene_trackers.SceneSourceError, match="disabled in the viewports"):
+        scene_trackers.sample_sources(sc, {"left_hand": (hidden, "")}, 1, N)
+    # a plain keyed object is read from its F-curves, hidden or not
+    plain = _keyed_empty("plain", 'XYZ', seed=6)
+    plain.hide_viewport = True
+    assert scene_trackers.sample_sources(sc, {"head": (plain, "")}, 1, N)["head"].valid.all()
+
+
+def test_keyed_visibility_off_is_tracking_lost():
+    """Visibility keyed off (an importer's or a plugin's "tracking lost") makes those samples lost,
+    for a plain keyed object and for one stepped through the scene (whose world matrix the view
+    layer leaves stale there); the samples around them are Blender's own."""
+    fresh_scene()
+    sc = bpy.context.scene
+    objs = {"head": _keyed_empty("plain", 'XYZ', seed=7), "left_hand": _parented("child", seed=8)}
+    lost = (np.arange(1, N + 1) >= 8) & (np.arange(1, N + 1) <= 12)
+    truth = {d: np.empty((N, 3)) for d in objs}
+    for k in range(N):
+        sc.frame_set(1 + k)
+        for d, o in objs.items():
+            truth[d][k] = np.array(o.matrix_world)[:3, 3]
+    for o in objs.values():
+        fc = keying.ensure_fcurve(o.animation_data.action, "hide_viewport", 0, "", o)
+        keying.set_keys(fc, np.arange(1, N + 1), lost.astype(float), 'CONSTANT')
+    rec = scene_trackers.sample_sources(sc, {d: (o, "") for d, o in objs.items()}, 1, N)
+    assert rec.metadata["method"] == {"head": "fcurves", "left_hand": "frame_set"}
+    for d in objs:
+        np.testing.assert_array_equal(rec[d].valid, ~lost)
+        np.testing.assert_allclose(rec[d].pos[~lost], truth[d][~lost], atol=1e-5)
+
+
+def test_a_camera_is_read_as_a_headset_looking_where_it_looks():
+    """A camera looks along its -Z with +Y up; mapped to a device it is read in a device's axes
+    (-Y forward, +Z up), so a camera keyed where a headset empty is gives the same samples (read
+    as they stood, a camera as the head turned the solved body round and swapped its hands)."""
+    fresh_scene()
+    sc = bpy.context.scene
+    hmd = _keyed_empty("HMD", 'QUATERNION', seed=4)
+    hmd.scale = (1.0, 1.0, 1.0)
+    cam = bpy.data.objects.new("Camera", bpy.data.cameras.new("Camera"))
+    sc.collection.objects.link(cam)
+    cam.parent = hmd                                             # its -Z along the headset's -Y
+    basis = np.eye(4)
+    basis[:3, :3] = [[-1, 0, 0], [0, 0, 1], [0, 1, 0]]
+    cam.matrix_basis = Matrix(basis.tolist())
+    sc.frame_set(3)
+    M = np.array(cam.matrix_world)[:3, :3]
+    H = np.array(hmd.matrix_world)[:3, :3]
+    np.testing.assert_allclose(-M[:, 2], -H[:, 1], atol=1e-6)    # the camera looks where the headset does
+    np.testing.assert_allclose(M[:, 1], H[:, 2], atol=1e-6)      # with the same up
+    a = scene_trackers.sample_sources(sc, {"head": (hmd, "")}, 1, N)["head"]
+    b = scene_trackers.sample_sources(sc, {"head": (cam, "")}, 1, N)["head"]
+    np.testing.assert_allclose(b.pos, a.pos, atol=1e-6)
+    np.testing.assert_allclose(rot.quat_to_matrix(b.quat), rot.quat_to_matrix(a.quat), atol=1e-5)
+
+
+def test_time_stretching_reads_parented_and_keyed_sources_alike():
+    """With Time Stretching (frame_map_old / frame_map_new) a scene frame shows the animation of
+    another frame; a source stepped through the scene is read at the animation's frames, as the
+    F-curves of a keyed one are (and as the solve's keys are shown): a parented object read at
+    the scene frames was stretched twice, 1.3 m off its own keys in the solve."""
+    fresh_scene()
+    sc = bpy.context.scene
+    sc.render.frame_map_old, sc.render.frame_map_new = 100, 200
+    obj = _keyed_empty("src", 'XYZ', seed=9)
+    fast = scene_trackers.sample_sources(sc, {"head": (obj, "")}, 1, N)
+    slow = scene_trackers.sample_sources(sc, {"head": (obj, "")}, 1, N, force_frame_set=True)
+    assert fast.metadata["method"]["head"] == "fcurves" and slow.metadata["method"]["head"] == "frame_set"
+    np.testing.assert_allclose(slow["head"].pos, fast["head"].pos, atol=1e-5)
+    np.testing.assert_allclose(rot.quat_to_matrix(slow["head"].quat), rot.quat_to_matrix(fast["head"].quat), atol=1e-5)
+    assert sc.frame_current == 1

@@ -17,10 +17,19 @@ Sampling, per source:
   (``obj.matrix_world`` or ``obj.matrix_world @ pose_bone.matrix``).  All
   such sources share one frame loop.  The current frame is restored afterwards.
 
+A sample is lost (``valid`` False) where the object's keyed visibility hides it (``hide_viewport``
+keyed on: an importer's or a plugin's "tracking lost"), and, stepping the scene, where the view
+layer does not evaluate it (disabled in viewports, its collection disabled or excluded: its world
+matrix there is a stale one); a source with no sample left is an error that says so.
+
 Time of scene frame ``f`` is ``f / fps`` seconds (``fps = render.fps /
-fps_base``).  Orientations are the source's world rotation (scale removed,
-as a unit quaternion w, x, y, z): the *device* orientation in Blender axes,
-so device offsets apply as for a recording.
+fps_base``).  Both ways read the animation at its own frame ``f``: with *Time Stretching*
+(``render.frame_map_old`` / ``frame_map_new``) the scene is stepped to the scene frame that shows
+it, as the F-curves are read and as the solve's keys are shown.  Orientations are the source's
+world rotation (scale removed, as a unit quaternion w, x, y, z): the *device* orientation in
+Blender axes, so device offsets apply as for a recording.  A camera object looks along its local
+-Z with +Y up; it is read in a device's axes (-Y forward, +Z up: a headset looking where the
+camera looks, :data:`CAMERA_TO_DEVICE`).
 """
 from __future__ import annotations
 
@@ -30,6 +39,11 @@ from ..core import rotations as rot
 from ..core.recording import Recording, TrackerStream
 from . import keying
 from .units import metres_per_unit
+
+
+#: a camera's axes (-Z forward, +Y up, +X right) → a device's (-Y forward, +Z up, -X right,
+#: :mod:`..core.device_offsets`): the device's rotation is the camera's times this
+CAMERA_TO_DEVICE = np.array([[-1.0, 0.0, 0.0], [0.0, 0.0, 1.0], [0.0, 1.0, 0.0]])
 
 
 class SceneSourceError(ValueError):
@@ -57,8 +71,20 @@ def _is_plain_keyed(obj):
 _ROT_PATHS = {"QUATERNION": ("rotation_quaternion", 4), "AXIS_ANGLE": ("rotation_axis_angle", 4)}
 
 
+def _visibility_fcurve(obj):
+    """The F-curve keying ``obj``'s ``hide_viewport`` in its action (None when not keyed)."""
+    ad = obj.animation_data
+    if ad is None or ad.action is None:
+        return None
+    for fc in keying.action_fcurves(ad.action, obj if keying.is_slotted(ad.action) else None):
+        if fc.data_path == "hide_viewport" and not fc.mute:
+            return fc
+    return None
+
+
 def _eval_plain(obj, frames):
-    """World ``(pos (N,3), rotm (N,3,3))`` of a plain keyed object from its F-curves."""
+    """World ``(pos (N,3), rotm (N,3,3))`` of a plain keyed object from its F-curves, and
+    ``valid (N,)``: False where its keyed visibility hides it."""
     action = obj.animation_data.action
     fcs = {}
     for fc in keying.action_fcurves(action, obj if keying.is_slotted(action) else None):
@@ -87,7 +113,9 @@ def _eval_plain(obj, frames):
     else:
         e = channel("rotation_euler", 3, tuple(obj.rotation_euler))
         R = rot.fixed_axes_euler_to_matrix(e, mode)
-    return pos, R
+    vis = _visibility_fcurve(obj)
+    valid = np.ones(len(frames), dtype=bool) if vis is None else np.array([vis.evaluate(f) < 0.5 for f in frames])
+    return pos, R, valid
 
 
 def _matrix_parts(m):
@@ -99,29 +127,38 @@ def _sample(scene, resolved, frames, depsgraph=None, progress=None, force_frame_
     """World ``pos`` ``{key: (N, 3)}`` (scene units) and ``rotm`` ``{key: (N, 3, 3)}`` of each
     ``resolved`` ``{key: (object, bone or "")}`` on scene ``frames`` ``(N,)``, and the ``method``
     per key (``"fcurves"``: a plain keyed object's F-curves evaluated; ``"frame_set"``: the scene
-    stepped, the evaluated world matrix read; one loop for all).  The current frame is restored."""
+    stepped, the evaluated world matrix read; one loop for all), and ``valid`` ``{key: (N,)}``
+    (False where the source is hidden by its keyed visibility or, stepping the scene, not
+    evaluated: see the module's docstring).  The current frame is restored."""
     import bpy
     N = frames.shape[0]
     pos = {d: np.empty((N, 3)) for d in resolved}
     rotm = {d: np.empty((N, 3, 3)) for d in resolved}
+    valid = {d: np.ones(N, dtype=bool) for d in resolved}
     method = {}
     loop = []
     for dev, (obj, bone) in resolved.items():
         if not bone and not force_frame_set and _is_plain_keyed(obj):
-            pos[dev], rotm[dev] = _eval_plain(obj, frames)
+            pos[dev], rotm[dev], valid[dev] = _eval_plain(obj, frames)
             method[dev] = "fcurves"
         else:
             loop.append(dev)
             method[dev] = "frame_set"
     if loop:
+        keyed_vis = {dev: _visibility_fcurve(resolved[dev][0]) is not None for dev in loop}
         old = (scene.frame_current, scene.frame_subframe)
+        stretch = float(scene.render.frame_map_new) / float(scene.render.frame_map_old)
         try:
             for k, f in enumerate(frames):
-                scene.frame_set(int(f))
+                x = float(f) * stretch           # the scene frame showing the animation's frame f
+                whole = int(np.floor(x + 1e-9))
+                scene.frame_set(whole, subframe=max(0.0, x - whole))
                 dg = depsgraph or bpy.context.evaluated_depsgraph_get()
                 for dev in loop:
                     obj, bone = resolved[dev]
                     ev = obj.evaluated_get(dg)
+                    # not evaluated (or hidden by its keys): the matrix is a stale one
+                    valid[dev][k] = ev.is_evaluated and not (keyed_vis[dev] and obj.hide_viewport)
                     m = np.array(ev.matrix_world, dtype=np.float64)
                     if bone:
                         m = m @ np.array(ev.pose.bones[bone].matrix, dtype=np.float64)
@@ -132,8 +169,13 @@ def _sample(scene, resolved, frames, depsgraph=None, progress=None, force_frame_
             scene.frame_set(old[0], subframe=old[1])
     elif progress is not None:
         progress(1.0)
-
-    return pos, rotm, method
+    for dev, (obj, bone) in resolved.items():
+        if not valid[dev].any():
+            raise SceneSourceError(
+                f"{dev}: object {obj.name!r} cannot be read on any frame of {int(frames[0])}..{int(frames[-1])}: "
+                f"it is disabled in the viewports (or its collection is, or is excluded from the view layer), "
+                f"or its keyed visibility hides it; enable it")
+    return pos, rotm, method, valid
 
 
 def sample_sources(scene, sources, frame_start, frame_end, depsgraph=None, progress=None,
@@ -154,7 +196,6 @@ def sample_sources(scene, sources, frame_start, frame_end, depsgraph=None, progr
         raise SceneSourceError(f"frame range {frame_start}..{frame_end} is empty")
     fps = float(scene.render.fps) / float(scene.render.fps_base)
     frames = np.arange(frame_start, frame_end + 1, dtype=np.float64)
-    N = frames.shape[0]
     resolved = {}
     for dev, (obj, bone) in sources.items():
         if isinstance(obj, str):
@@ -172,15 +213,17 @@ def sample_sources(scene, sources, frame_start, frame_end, depsgraph=None, progr
     if not resolved:
         raise SceneSourceError("no scene objects are mapped to devices")
 
-    pos, rotm, method = _sample(scene, resolved, frames, depsgraph, progress, force_frame_set)
+    pos, rotm, method, valid = _sample(scene, resolved, frames, depsgraph, progress, force_frame_set)
     times = frames / fps
     metres = metres_per_unit(scene)          # scene units → the core's metres
     streams = {}
-    for dev in resolved:
+    for dev, (obj, bone) in resolved.items():
         pos[dev] *= metres
         R = rot.orthonormalize(rotm[dev])
+        if not bone and obj.type == 'CAMERA':
+            R = R @ CAMERA_TO_DEVICE
         q = rot.quat_continuous(rot.matrix_to_quat(R), axis=0)
-        streams[dev] = TrackerStream(dev, times.copy(), pos[dev], q, np.ones(N, dtype=bool))
+        streams[dev] = TrackerStream(dev, times.copy(), pos[dev], q, valid[dev])
     meta = {"frames": (frame_start, frame_end), "fps": fps, "method": method,
             "objects": {d: (o.name, b) for d, (o, b) in resolved.items()},
             "device_labels": {d: b or o.name for d, (o, b) in resolved.items()},     # "HMD": a headset
@@ -212,7 +255,9 @@ def sample_keypoint_empties(scene, objects, frame_start, frame_end, progress=Non
         raise SceneSourceError(f"frame range {frame_start}..{frame_end} holds fewer than 2 frames")
     frames = np.arange(frame_start, frame_end + 1, dtype=np.float64)
     resolved = {p: (by_name[n], "") for p, n in names.items()}
-    pos, _, _ = _sample(scene, resolved, frames, progress=progress)
+    pos, _, _, valid = _sample(scene, resolved, frames, progress=progress)
+    for p in pos:
+        pos[p][~valid[p]] = np.nan                  # lost there
     points = np.stack([pos[p] for p in kl.LAYOUTS[layout].points], axis=1) * metres_per_unit(scene)
     fps = float(scene.render.fps) / float(scene.render.fps_base)
     return keypoints_from_points(frames / fps, points, layout, source,
