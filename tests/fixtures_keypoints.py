@@ -93,3 +93,34 @@ def write_layout_csv(path, layout, body, pos, world, fps=30.0, sigma=0.0, seed=0
             cells = [f"{t / fps:.6f}"] + ["" if not np.isfinite(v) else f"{v:.6f}" for v in x[t].ravel()]
             f.write(",".join(cells) + "\n")
     return clean
+
+
+#: Pose2Sim's markers for Halpe 26 (its skeleton tree: the eyes and ears left out), as its TRC files name them
+POSE2SIM_HALPE26 = ("Hip", "RHip", "RKnee", "RAnkle", "RBigToe", "RSmallToe", "RHeel", "LHip", "LKnee", "LAnkle",
+                    "LBigToe", "LSmallToe", "LHeel", "Neck", "Head", "Nose", "RShoulder", "RElbow", "RWrist",
+                    "LShoulder", "LElbow", "LWrist")
+
+
+def write_trc(path, body, pos, world, fps=30.0, markers=POSE2SIM_HALPE26, units="mm"):
+    """An OpenSim ``.trc`` of the Halpe 26 points of the motion ``pos`` / ``world`` named ``markers``
+    (each a Pose2Sim name: ``RBigToe`` is Halpe's right big toe), +Y up, in ``units``, as Pose2Sim
+    writes it (tab separated; ``Frame#``, ``Time``; a blank line after the header).  Returns the
+    ``(T, len(markers), 3)`` points written, metres, Blender axes."""
+    from blender_manikin.core.io_keypoints import trc_point
+    lay = kl.LAYOUTS["halpe26"]
+    kp = kl.keypoints_from_body22(pos, world, "halpe26", body.stature)
+    pts = kp[:, [lay.index(trc_point(m)) for m in markers]]
+    scale = {"m": 1.0, "mm": 1000.0}[units]
+    Y = to_y_up(pts, scale)
+    T = len(pts)
+    lines = [f"PathFileType\t4\t(X/Y/Z)\t{os.path.basename(path)}",
+             "DataRate\tCameraRate\tNumFrames\tNumMarkers\tUnits\tOrigDataRate\tOrigDataStartFrame\tOrigNumFrames",
+             f"{fps:.2f}\t{fps:.2f}\t{T}\t{len(markers)}\t{units}\t{fps:.2f}\t1\t{T}",
+             "Frame#\tTime\t" + "\t\t\t".join(markers) + "\t\t",
+             "\t\t" + "\t".join(f"X{k + 1}\tY{k + 1}\tZ{k + 1}" for k in range(len(markers))),
+             ""]
+    for t in range(T):
+        lines.append(f"{t + 1}\t{t / fps:.6f}\t" + "\t".join(f"{v:.5f}" for v in Y[t].ravel()))
+    with open(path, "w", encoding="utf-8") as f:
+        f.write("\n".join(lines) + "\n")
+    return pts

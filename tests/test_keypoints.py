@@ -18,7 +18,7 @@ from blender_manikin.core.io_keypoints import is_keypoint_input, read_keypoints
 from blender_manikin.core.recording import RecordingError
 from blender_manikin.core.solve import SolveError, SolveSettings, solve_recording
 
-from fixtures_keypoints import (hinge_motion, to_y_up, write_freemocap, write_layout_csv,
+from fixtures_keypoints import (POSE2SIM_HALPE26, hinge_motion, to_y_up, write_freemocap, write_layout_csv, write_trc,
                                 write_layout_npy)
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
@@ -65,15 +65,31 @@ def test_layout_joints_and_orientations_round_trip(layout, motion):
             np.testing.assert_allclose(R, world[:, j], atol=1e-6 if layout != "h36m17" else 0.7)
     shows = {"mediapipe33": {"head", "left_wrist", "right_wrist", "left_ankle", "right_ankle"},
              "coco17": {"head"}, "h36m17": {"head"}, "body25": {"head", "left_ankle", "right_ankle"},
-             "smpl22": set(), "smpl24": set()}[layout]
+             "halpe26": {"head", "left_ankle", "right_ankle"}, "smpl22": set(), "smpl24": set()}[layout]
     assert {sk.JOINT_NAMES[j] for j in b.end_rot} == shows
     assert "left_wrist" in b.no_twist or "left_wrist" in shows
+
+
+def test_a_head_without_its_ears_is_placed_from_the_head_top(motion):
+    """Halpe 26 has the ears and the head top: where the ears are missing (Pose2Sim's markers leave
+    them out; a detector loses them), the head joint comes from the head top and the neck, as for
+    Human3.6M, instead of going missing."""
+    body, pos, world = motion
+    kp = kl.keypoints_from_body22(pos, world, "halpe26", body.stature)
+    lay = kl.LAYOUTS["halpe26"]
+    kp[::2, [lay.index(p) for p in ("left_eye", "right_eye", "left_ear", "right_ear")]] = np.nan
+    b = kl.body22_from_keypoints(kp, "halpe26")
+    head = sk.J["head"]
+    assert np.isfinite(b.positions).all() and np.isfinite(b.end_rot[head]).all()
+    np.testing.assert_allclose(b.positions[1::2, head], pos[1::2, head], atol=1e-9)       # from the ears
+    np.testing.assert_allclose(b.positions[::2, head], pos[::2, head], atol=1e-6)         # from the head top
 
 
 def test_layout_names_and_aliases():
     assert kl.canonical_layout("COCO") == "coco17"
     assert kl.canonical_layout("MediaPipe-33") == "mediapipe33"
     assert kl.canonical_layout("openpose") == "body25"
+    assert kl.canonical_layout("Halpe") == "halpe26" and kl.canonical_layout("AlphaPose") == "halpe26"
     with pytest.raises(ValueError, match="unknown keypoint layout 'coco18'.*coco17"):
         kl.canonical_layout("coco18")
 
@@ -187,6 +203,38 @@ def test_freemocap_csv_exports_are_read_as_keypoints(tmp_path, motion):
         rec = read_keypoints(p)
         assert rec.layout == "mediapipe33" and "30 Hz (assumed: set the rate)" in rec.metadata["detected"]
         np.testing.assert_allclose(rec.points - rec.points[:1, :1], clean - clean[:1, :1], atol=2e-6)
+
+
+def test_pose2sim_trc_markers_are_read_as_halpe26_and_solved(tmp_path, motion):
+    """An OpenSim .trc as Pose2Sim writes it (Halpe 26 without the eyes and ears, in mm, +Y up,
+    tab separated): the markers named as points (RBigToe, Hip, Head), the layout the one they cover
+    most, the missing points NaN, the rate and units from the header; solved, the limbs land on
+    the markers and the head is placed from the head top."""
+    body, pos, world = motion
+    path = tmp_path / "Balancing_for_IK.trc"
+    pts = write_trc(path, body, pos, world)
+    assert is_keypoint_input(path)
+    rec = read_keypoints(path)
+    assert rec.layout == "halpe26" and "30 Hz (from the times)" in rec.metadata["detected"]
+    assert rec.metadata["units"] == "mm" and rec.metadata["up"] == "+Y"
+    lay = kl.LAYOUTS["halpe26"]
+    assert np.isnan(rec.points[:, lay.index("left_ear")]).all()
+    got = rec.points[:, [lay.index(p) for p in ("left_wrist", "right_ankle", "head_top")]]
+    want = pts[:, [POSE2SIM_HALPE26.index(m) for m in ("LWrist", "RAnkle", "Head")]]
+    np.testing.assert_allclose(got - got[:1, :1], want - want[:1, :1], atol=2e-5)
+    out = solve_recording(str(path), SolveSettings(fps=30.0))
+    P = out.result.positions
+    for j in ("left_wrist", "right_knee", "head"):
+        err = np.linalg.norm((P[:, sk.J[j]] - P[:, :1]) - (pos[:, sk.J[j]] - pos[:, :1]), axis=-1)
+        assert np.median(err) < 0.01, (j, np.median(err))
+    # markers that do not name a limb's joints: an error naming what they lack, and where
+    bad = tmp_path / "markers.trc"
+    write_trc(bad, body, pos, world, markers=tuple(m for m in POSE2SIM_HALPE26 if m != "LKnee"))
+    with pytest.raises(RecordingError, match=r"markers.trc, line 4: the TRC's markers .* lack left_knee"):
+        read_keypoints(bad)
+    (tmp_path / "not.trc").write_text("Frame#\tTime\n")
+    with pytest.raises(RecordingError, match="not a TRC file"):
+        read_keypoints(tmp_path / "not.trc")
 
 
 def test_a_tilted_floor_is_levelled_from_the_planted_feet(tmp_path):

@@ -122,12 +122,13 @@ class MANIKIN_Settings(PropertyGroup):
                             for f in formats.READERS.values() if f.kind == "trackers")),
                ('SCENE', "Scene", "Animated objects or bones in this scene, mapped to devices"),
                ('KEYPOINTS', "Keypoints", "3D keypoints from markerless or marker capture: a FreeMoCap "
-                "folder's mediapipe_body_3d_xyz.npy, an .npy / .npz array, or a keypoint CSV; solved by "
-                "HybrIK twist-and-swing IK")])
+                "folder's mediapipe_body_3d_xyz.npy, an .npy / .npz array, a keypoint CSV or an OpenSim .trc "
+                "(Pose2Sim); solved by HybrIK twist-and-swing IK")])
     keypoint_path: StringProperty(
         name="Keypoints", subtype='FILE_PATH', default="",
         description="Keypoint file: FreeMoCap output_data/mediapipe_body_3d_xyz.npy (or the recording "
-                    "folder), .npy / .npz array (frames x points x 3), or CSV with time and <point>_x/_y/_z")
+                    "folder), .npy / .npz array (frames x points x 3), CSV with time and <point>_x/_y/_z, or "
+                    "an OpenSim .trc of markers named as points (Pose2Sim, Sports2D)")
     keypoint_from: EnumProperty(name="From", default='FILE',
                                 items=[('FILE', "File", "A keypoint file or FreeMoCap folder"),
                                        ('OBJECTS', "Scene Objects", "Animated objects (empties) named after "

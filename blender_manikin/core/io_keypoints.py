@@ -15,7 +15,12 @@ Inputs:
   ``<point>_x``, ``<point>_y``, ``<point>_z`` columns named after the layout's points (also with
   FreeMoCap's ``body_`` prefix, :func:`.keypoint_layouts.point_key`; empty cells for missing
   points), or other names through a mapping file
-  (``{"layout": "coco17", "columns": {"nose": "Nose", ...}}``: layout point → column prefix).
+  (``{"layout": "coco17", "columns": {"nose": "Nose", ...}}``: layout point → column prefix);
+* ``.trc`` (OpenSim's marker trajectories, as Pose2Sim and Sports2D write them): its
+  markers named as a layout's points (``RHip``, ``LBigToe``, ``Hip`` for the hips' midpoint,
+  ``Head`` for the head top: :func:`trc_point`), the layout the one whose points they cover most
+  (Pose2Sim's 22 markers of Halpe 26 make ``halpe26`` without the eyes and ears), its other
+  points missing; ``Time``, ``DataRate`` and ``Units`` from the file.
 
 The layout (:mod:`.keypoint_layouts`) is given (``layout=``, ``--layout``), stored in the file,
 or told from the point count (17 points: COCO-17 or Human3.6M-17, told apart by their first
@@ -89,13 +94,13 @@ def freemocap_body_file(path):
 
 
 def is_keypoint_input(path) -> bool:
-    """True for what :func:`read_keypoints` reads: a FreeMoCap folder, a ``.npy`` / ``.npz``,
+    """True for what :func:`read_keypoints` reads: a FreeMoCap folder, a ``.npy`` / ``.npz`` / ``.trc``,
     or a CSV whose columns are ``<point>_x/_y/_z`` of a keypoint layout (no tracker devices)."""
     p = os.fspath(path)
     if freemocap_body_file(p):
         return True
     ext = os.path.splitext(p)[1].lower()
-    if ext in (".npy", ".npz"):
+    if ext in (".npy", ".npz", ".trc"):
         return os.path.isfile(p)
     if ext == ".csv" and os.path.isfile(p):
         try:
@@ -144,9 +149,12 @@ def read_keypoints(path, layout=None, units=None, up=None, rate=None, mapping=No
             rate = rate or npz_rate
         elif ext == ".csv":
             X, time, file_layout, rate = _load_csv(p, mapping, rate)
+        elif ext == ".trc":
+            X, time, file_layout, rate, trc_units = _load_trc(p, rate)
+            units = units or trc_units
         else:
-            raise RecordingError(f"not a keypoint file: expected a FreeMoCap folder, .npy, .npz or .csv, "
-                                 f"got {ext or '(no extension)'!r}", path=p)
+            raise RecordingError(f"not a keypoint file: expected a FreeMoCap folder, .npy, .npz, .csv or "
+                                 f".trc, got {ext or '(no extension)'!r}", path=p)
     X, conf = _shape_points(X, conf, src)
     T, K = X.shape[:2]
     if T < 2:
@@ -470,6 +478,87 @@ def _load_csv(path, mapping, rate):
     return X.reshape(len(data), -1, 3), time, name, rate
 
 
+#: points a layout chosen from a TRC's markers must have (the limbs' joints)
+TRC_NEEDED = tuple(f"{s}_{j}" for s in ("left", "right")
+                   for j in ("hip", "knee", "ankle", "shoulder", "elbow", "wrist"))
+#: marker names that are not a side's joint, as Pose2Sim and OpenPose-style tools write them
+_TRC_NAMES = {"hip": "mid_hip", "midhip": "mid_hip", "head": "head_top", "headtop": "head_top"}
+
+
+def trc_point(marker) -> str:
+    """A TRC marker's name as a layout point's: CamelCase split, a leading ``R`` / ``L`` side
+    spelt out (``RBigToe`` → ``right_big_toe``), then :func:`.keypoint_layouts.point_key`;
+    ``Hip`` is the hips' midpoint and ``Head`` the head top (Halpe's points)."""
+    import re
+    name = re.sub(r"(?<=[a-z0-9])(?=[A-Z])|(?<=[A-Z])(?=[A-Z][a-z])", "_", str(marker).strip())
+    key = kl.point_key(name)
+    key = re.sub(r"^r_", "right_", re.sub(r"^l_", "left_", key))
+    return _TRC_NAMES.get(key.replace("_", ""), key)
+
+
+def _load_trc(path, rate):
+    """``(X (T, K, 3), time (T,) s or None, layout, rate, units)`` of an OpenSim ``.trc`` file."""
+    try:
+        with open(path, "r", encoding="utf-8-sig") as f:
+            lines = f.read().splitlines()
+    except UnicodeDecodeError as exc:
+        raise RecordingError(f"not UTF-8 text ({exc.reason})", path=path) from None
+    except OSError as exc:
+        raise RecordingError(f"cannot read file ({exc.strerror or exc})", path=path) from None
+
+    def cells(line):
+        return line.split("\t") if "\t" in line else line.split()
+    if not lines or not lines[0].startswith("PathFileType"):
+        raise RecordingError("not a TRC file: its first line does not start with 'PathFileType'", path=path,
+                             line=1)
+    if len(lines) < 5:
+        raise RecordingError("the TRC header is cut short (5 lines expected before the data)", path=path)
+    keys, vals = [c.strip() for c in cells(lines[1])], [c.strip() for c in cells(lines[2])]
+    header = dict(zip(keys, vals))
+    names = [c.strip() for c in cells(lines[3])[2:] if c.strip()]
+    if not names:
+        raise RecordingError("no marker names on the TRC's fourth line", path=path, line=4)
+    units = {"m": "m", "cm": "cm", "mm": "mm"}.get(header.get("Units", "").strip().lower())
+    try:
+        file_rate = float(header.get("DataRate", "nan"))
+    except ValueError:
+        raise RecordingError(f"DataRate {shown(header.get('DataRate'))} is not a number", path=path, line=3) from None
+    points = [trc_point(n) for n in names]
+    missing = [p for p in TRC_NEEDED if p not in points]
+    if missing:
+        raise RecordingError(f"the TRC's markers ({', '.join(names)}) lack {', '.join(missing)}: name them "
+                             "as a layout's points (RHip, LKnee, ...)", path=path, line=4)
+    # the layout whose points the markers cover most; of equals, the one with the fewest points
+    best = max(kl.LAYOUTS, key=lambda n: (sum(p in points for p in kl.LAYOUTS[n].points), -len(kl.LAYOUTS[n].points)))
+    lay = kl.LAYOUTS[best]
+    rows, lines_no = [], []
+    for i, line in enumerate(lines[5:], start=6):
+        if not line.strip():
+            continue
+        c = [v.strip() for v in cells(line)]
+        vals = np.full(2 + 3 * len(names), np.nan)
+        for k, v in enumerate(c[:len(vals)]):
+            if v and v.lower() != "nan":
+                try:
+                    vals[k] = float(v)
+                except ValueError:
+                    raise RecordingError(f"{shown(v)} is not a number", path=path, line=i) from None
+        rows.append(vals)
+        lines_no.append(i)
+    if not rows:
+        raise RecordingError("no data rows after the TRC header", path=path)
+    data = np.array(rows)
+    M = data[:, 2:].reshape(len(rows), len(names), 3)
+    X = np.full((len(rows), len(lay.points), 3), np.nan)
+    for k, p in enumerate(lay.points):
+        if p in points:
+            X[:, k] = M[:, points.index(p)]
+    time = data[:, 1] if np.isfinite(data[:, 1]).all() else None
+    if time is None and not rate and np.isfinite(file_rate) and file_rate > 0:
+        rate = file_rate
+    return X, time, best, rate, units
+
+
 def _hand_knuckles(X, lay, hands):
     """Use FreeMoCap's hand points for the hand orientation: index / pinky knuckles (hand points
     5 and 17) replace the pose's, where both are finite."""
@@ -610,18 +699,20 @@ def _handedness(X, lay, handed, path):
             if toe in lay and back in lay:
                 cues.append(("toes ahead of the heels", X[:, lay.index(toe)] - X[:, lay.index(back)]))
                 break
-    if "nose" in lay and "head_top" in lay:
-        mid = 0.5 * (X[:, lay.index("head_top")] + X[:, lay.index("thorax")])
+    base = "thorax" if "thorax" in lay else "neck"          # the head's base: Human3.6M's, Halpe's
+    if "nose" in lay and "head_top" in lay and base in lay:
+        mid = 0.5 * (X[:, lay.index("head_top")] + X[:, lay.index(base)])
         cues.append(("nose ahead of the head", X[:, lay.index("nose")] - mid))
     if not cues:
         return False, "assumed"
-    votes = []
-    for _, v in cues:
+    votes, said = [], []
+    for name, v in cues:
         d = np.sum(rot.normalize(fwd) * rot.normalize(v), -1)
         d = d[np.isfinite(d)]
-        if d.size:
+        if d.size:                      # a cue whose points are all missing (a TRC without ears) says nothing
             votes.append(float(np.median(d)))
+            said.append(name)
     score = float(np.sum(votes))
     if not np.isfinite(score) or abs(score) < 0.1:
         return False, "assumed: no clear facing"
-    return score < 0, cues[0][0]
+    return score < 0, said[0]

@@ -1,4 +1,4 @@
-"""3D keypoint layouts (MediaPipe-33, COCO-17, Human3.6M-17, SMPL-22/24, OpenPose BODY_25) and
+"""3D keypoint layouts (MediaPipe-33, COCO-17, Human3.6M-17, SMPL-22/24, OpenPose BODY_25, Halpe 26) and
 how each becomes the 22 joints of :mod:`.skeleton`.
 
 A keypoint array is ``(T, K, 3)`` float64, metres, Blender axes (+Z up, right-handed; see
@@ -57,6 +57,14 @@ _SMPL22 = (
     "right_ankle", "spine3", "left_foot", "right_foot", "neck", "left_collar", "right_collar", "head",
     "left_shoulder", "right_shoulder", "left_elbow", "right_elbow", "left_wrist", "right_wrist",
 )
+#: Halpe 26 (AlphaPose, RTMPose / MMPose's Halpe models; Pose2Sim's default): COCO's 17, then the
+#: head top, neck, hips' midpoint and the feet's big toes, small toes and heels
+_HALPE26 = (
+    "nose", "left_eye", "right_eye", "left_ear", "right_ear", "left_shoulder", "right_shoulder",
+    "left_elbow", "right_elbow", "left_wrist", "right_wrist", "left_hip", "right_hip", "left_knee",
+    "right_knee", "left_ankle", "right_ankle", "head_top", "neck", "mid_hip", "left_big_toe",
+    "right_big_toe", "left_small_toe", "right_small_toe", "left_heel", "right_heel",
+)
 _BODY25 = (
     "nose", "neck", "right_shoulder", "right_elbow", "right_wrist", "left_shoulder", "left_elbow",
     "left_wrist", "mid_hip", "right_hip", "right_knee", "right_ankle", "left_hip", "left_knee",
@@ -97,11 +105,12 @@ LAYOUTS = {f.name: f for f in (
     KeypointLayout("smpl22", "SMPL 22 body joints", _SMPL22),
     KeypointLayout("smpl24", "SMPL 24 (22 + hands; 4D-Humans, SMPL fits)", _SMPL22 + ("left_hand", "right_hand")),
     KeypointLayout("body25", "OpenPose BODY_25", _BODY25),
+    KeypointLayout("halpe26", "Halpe 26 (AlphaPose, RTMPose; Pose2Sim)", _HALPE26),
 )}
 
 _ALIASES = {"mediapipe": "mediapipe33", "blazepose": "mediapipe33", "freemocap": "mediapipe33",
             "coco": "coco17", "h36m": "h36m17", "human36m": "h36m17", "smpl": "smpl24",
-            "openpose": "body25"}
+            "openpose": "body25", "halpe": "halpe26", "alphapose": "halpe26"}
 
 
 def canonical_layout(name) -> str:
@@ -247,18 +256,24 @@ def body22_from_keypoints(points, layout) -> Body22:
         P[:, J[f"{side}_collar"]] = above_sh + a * (P[:, J[f"{side}_shoulder"]] - above_sh) + b * up_sh
 
     no_twist = []
-    # head: below the skull base between the ears, oriented by the face
+    # head: below the skull base between the ears, oriented by the face; from the head top where
+    # the ears are missing (a layout with both: Halpe 26, whose ears Pose2Sim's markers leave out)
+    if "head_top" in lay:
+        top = pt("head_top")
+        P[:, J["head"]] = neck + _HEAD_ALONG_NECK * (top - neck)
+        end_rot[J["head"]] = rot.frame_from_axes(top - P[:, J["head"]], -(pt("nose") - P[:, J["head"]]), "zy")
     if "left_ear" in lay:
         ears = 0.5 * (pt("left_ear") + pt("right_ear"))
         left = pt("left_ear") - pt("right_ear")
         fwd = pt("nose") - ears
-        end_rot[J["head"]] = rot.frame_from_axes(left, -fwd, "xy")     # +X the head's left, +Y its back
-        P[:, J["head"]] = ears - _EARS_ABOVE_HEAD * H * end_rot[J["head"]][..., 2]
-    elif "head_top" in lay:
-        top = pt("head_top")
-        P[:, J["head"]] = neck + _HEAD_ALONG_NECK * (top - neck)
-        end_rot[J["head"]] = rot.frame_from_axes(top - P[:, J["head"]], -(pt("nose") - P[:, J["head"]]), "zy")
-    else:
+        R = rot.frame_from_axes(left, -fwd, "xy")                       # +X the head's left, +Y its back
+        head = ears - _EARS_ABOVE_HEAD * H * R[..., 2]
+        if "head_top" in lay:
+            seen = np.isfinite(head).all(-1) & np.isfinite(R).all((-1, -2))
+            head = np.where(seen[:, None], head, P[:, J["head"]])
+            R = np.where(seen[:, None, None], R, end_rot[J["head"]])
+        end_rot[J["head"]], P[:, J["head"]] = R, head
+    if "left_ear" not in lay and "head_top" not in lay:
         P[:, J["head"]] = neck + (PROPORTIONS["head_height"] - PROPORTIONS["neck_height"]) * H * up
         no_twist.append("head")
     # hands: the palm's plane from the index and pinky knuckles (T-pose: palms down, thumbs forward)
