@@ -365,6 +365,30 @@ def test_select_on_keeps_the_best_checkpoint_on_another_source(cache, bvh_dir, a
     assert best["step"] == min(hist, key=lambda h: h["select_mpjpe_cm"])["step"]
 
 
+def test_resume_keeps_the_select_on_source_and_the_validation(cache, bvh_dir, asf_dir, tmp_path):
+    """An interrupted run chosen on --select-on, resumed as the README says (``--out DIR
+    --resume``): the rest of the run is still evaluated on that source, on the same windows and
+    at the same checkpoints, and best.pt stays the best of them all (before, a plain --resume
+    dropped --select-on, --val-windows and --ckpt-steps: best.pt stayed an early checkpoint)."""
+    from blender_manikin.training import train
+    root, _ = cache
+    out = tmp_path / "sel"
+    first = ["--bvh", bvh_dir, "--cache-dir", root, "--window", "12", "--steps", "8", "--ckpt-steps", "2",
+             "--select-on", asf_dir, "--out", str(out)] + TINY
+    straight = tmp_path / "straight"
+    train.main(first[:-len(TINY) - 2] + ["--out", str(straight)] + TINY)
+    train.main(first + ["--stop-at", "4"])
+    train.main(["--out", str(out), "--resume", "--quiet", "--threads", "1"])
+    ck = torch.load(out / "checkpoint.pt", weights_only=False)
+    assert ck["args"]["select_on"] == asf_dir and ck["args"]["val_windows"] == 16 and ck["step"] == 8
+    ref = torch.load(straight / "checkpoint.pt", weights_only=False)
+    hist = [(h["step"], h["select_mpjpe_cm"]) for h in ck["history"] if "select_mpjpe_cm" in h]
+    assert hist == [(h["step"], h["select_mpjpe_cm"]) for h in ref["history"] if "select_mpjpe_cm" in h]
+    assert [s for s, _ in hist] == [2, 4, 6, 8]
+    best = torch.load(out / "best.pt", weights_only=False)
+    assert best["step"] == min(hist, key=lambda h: h[1])[0]
+
+
 def test_sources_file_with_options_and_licences(cache, bvh_dir, asf_dir, tmp_path):
     """--sources: several sources, each with its reading options and licence; the model's licence is
     the most restrictive; a bad file is named with the entry at fault."""

@@ -74,7 +74,7 @@ def kabsch(rest_vecs, target_vecs, weights=None, directions=True):
 
 
 def ik_from_positions(positions, body: Body, end_rot=None, twists=None, adaptive=True,
-                      base_rot=None, swivel=None, aim_chain=False, within_limits=False):
+                      base_rot=None, swivel=None, aim_chain=False, within_limits=False, straight=None):
     """Local rotations reproducing ``positions`` with the bone lengths of ``body``.
 
     positions: ``(T, 22, 3)`` target joint positions, metres, Blender axes.
@@ -94,6 +94,9 @@ def ik_from_positions(positions, body: Body, end_rot=None, twists=None, adaptive
     end lands exactly on its position and the mid joint on its swivel circle.
     within_limits: the swivel of a limb that would turn the shoulder / hip about its own axis
     beyond its range is moved to the limit (:func:`.limb_solver.solve_limbs_within_limits`).
+    straight: noisy positions' nearly straight limbs take the reference swivel
+    (:func:`.limb_solver.swivel_from_positions`, :data:`.limb_solver.STRAIGHT_NOISY` for
+    keypoints); None: the swivel follows the mid joint however little the limb bends.
     """
     P = np.asarray(positions, np.float64)
     if P.ndim != 3 or P.shape[1:] != (NUM_JOINTS, 3):
@@ -143,7 +146,8 @@ def ik_from_positions(positions, body: Body, end_rot=None, twists=None, adaptive
                 end_t = mid_t + l2 * rot.normalize(P[:, e] - (mid_t if adaptive else P[:, m]))
             phi = ls.swivel_from_positions(base_p[:, None], mid_t[:, None], end_t[:, None],
                                            Rp[:, None], [li],
-                                           base_rot=None if b not in base_rot else base_rot[b][:, None])[:, 0]
+                                           base_rot=None if b not in base_rot else base_rot[b][:, None],
+                                           straight=straight)[:, 0]
             if swivel is not None:
                 phi = np.asarray(swivel, np.float64)[:, li]
             er = end_rot.get(e)

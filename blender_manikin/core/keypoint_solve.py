@@ -38,6 +38,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from . import hybrik
+from . import limb_solver as ls
 from .keypoint_sides import fix_side_swaps
 from .keypoint_spikes import remove_spikes, spike_threshold
 from . import keypoint_layouts as kl
@@ -303,7 +304,7 @@ def fit_keypoints(P, end_rot, body: sk.Body, fps, adaptive=True, lock_feet=True,
         end_rot = dict(end_rot)
         end_rot.setdefault(sk.J["pelvis"], pelvis_rot)
     ik = hybrik.ik_from_positions(P, body, end_rot=end_rot, adaptive=adaptive, aim_chain=True,
-                                  within_limits=True)
+                                  within_limits=True, straight=ls.STRAIGHT_NOISY)
     ank = [sk.J["left_ankle"], sk.J["right_ankle"]]
     contacts = foot_contacts(ik.positions[:, ank], body, fps)
     targets = ik.positions[:, ank]
@@ -325,7 +326,8 @@ def fit_keypoints(P, end_rot, body: sk.Body, fps, adaptive=True, lock_feet=True,
         er = dict(end_rot)
         for j in ank + [sk.J["left_wrist"], sk.J["right_wrist"]]:
             er[j] = ik.world_rot[:, j]
-        ik = hybrik.ik_from_positions(Q, body, end_rot=er, adaptive=True, within_limits=True)
+        ik = hybrik.ik_from_positions(Q, body, end_rot=er, adaptive=True, within_limits=True,
+                                      straight=ls.STRAIGHT_NOISY)
     return PoseResult(fps=float(fps), body=body, local_rot=ik.local_rot, root_pos=ik.root_pos,
                       swivel=ik.swivel, contacts=contacts > 0.5, reach_error=reach)
 

@@ -62,8 +62,8 @@ def build_parser():
                         "model's window, its positional embedding lined up at the centre frame)")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--resume", action="store_true",
-                   help="continue OUT/checkpoint.pt with its model, data, seed, batch and optimizer settings "
-                        "(--steps / --minutes may extend the plan)")
+                   help="continue OUT/checkpoint.pt with its model, data, seed, batch and optimizer settings, "
+                        "its --select-on source and validation windows (--steps / --minutes may extend the plan)")
     p.add_argument("--init", default=None, metavar="PATH",
                    help="start a new run from these weights (a checkpoint .pt or an exported .onnx; its "
                         "architecture and devices replace --arch, --d-model, --devices...): fine-tuning")
@@ -104,7 +104,7 @@ def build_parser():
     p.add_argument("--warmup", type=int, default=300, help="warm-up steps (at most 5 %% of a step plan)")
     p.add_argument("--ckpt-minutes", type=float, default=5.0, help="checkpoint + validation interval")
     p.add_argument("--ckpt-steps", type=int, default=None, help="also checkpoint every N steps")
-    p.add_argument("--val-windows", type=int, default=384)
+    p.add_argument("--val-windows", type=int, default=None, help="validation windows (default 384)")
     p.add_argument("--select-on", default=None, metavar="SOURCE",
                    help="a motion source never trained on (e.g. ../shared/data/validation/hdm05-subset.tar.xz): "
                         "evaluated at every checkpoint, and OUT/best.pt keeps the checkpoint with the lowest "
@@ -273,7 +273,8 @@ def main(argv=None):
     if ckpt is not None:
         # a resumed run keeps its identity: data, seed, batch and optimizer settings
         prev = ckpt["args"]
-        for k in ("bvh", "sources", "cache_dir"):
+        # and how it is validated and chosen: the --select-on source, its windows, the checkpoints
+        for k in ("bvh", "sources", "cache_dir", "select_on", "val_windows", "ckpt_steps"):
             if getattr(args, k) is None:
                 setattr(args, k, prev.get(k))
         if isinstance(args.bvh, str):            # runs from before several sources
@@ -295,6 +296,8 @@ def main(argv=None):
         args.kind, args.window = cfg.kind, cfg.window
     if args.steps is None and args.minutes is None:
         args.minutes = 60.0
+    if args.val_windows is None:
+        args.val_windows = 384
     if not args.bvh and not args.sources:
         raise SystemExit("--bvh SOURCE or --sources FILE.json is required")
     lam = parse_lam(args.lam)
