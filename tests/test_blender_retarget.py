@@ -411,6 +411,15 @@ def test_each_retargeted_take_is_exported_as_its_own_fbx(addon, tmp_path):
     assert len(paths) == 2 and all(os.path.exists(p) and os.path.basename(p).startswith(char.name + "_")
                                    for p in paths)
     assert char.animation_data.action == current and (sc.frame_start, sc.frame_end) == (5, 7)
+    # exported again: its own unchanged files are replaced; a file of the user's of one's name is not
+    assert fbx_presets.export_fbx_takes(str(tmp_path / "takes"), char, "unity") == paths
+    with open(paths[0], "ab") as f:
+        f.write(b"the animator's edit")
+    before = open(paths[0], "rb").read()
+    with pytest.raises(ValueError, match="already exists and is not this tool's"):
+        fbx_presets.export_fbx_takes(str(tmp_path / "takes"), char, "unity")
+    assert open(paths[0], "rb").read() == before
+    assert fbx_presets.export_fbx_takes(str(tmp_path / "takes"), char, "unity", overwrite=True) == paths
     from test_blender_fbx_presets import _import
     lengths = []
     for p in paths:

@@ -288,13 +288,18 @@ def take_actions(obj):
     return sorted(out, key=lambda a: a.name)
 
 
-def export_fbx_takes(directory, armature, preset: str = DEFAULT, context=None, actions=None) -> list:
+def export_fbx_takes(directory, armature, preset: str = DEFAULT, context=None, actions=None,
+                     overwrite: bool = False) -> list:
     """One FBX per take (:func:`take_actions`, or ``actions``) of the character ``armature`` in ``directory``:
     ``<armature>_<take>.fbx``, each with its action assigned and the scene's frame range set to
     the action's keys while it is written (:func:`export_fbx`).  The armature's action and the
-    frame range are as before afterwards.  Returns the paths written."""
+    frame range are as before afterwards.  Returns the paths written.  A file already there is
+    replaced only when it is an unchanged export of an earlier run (:mod:`..core.output_guard`),
+    else nothing is written and :class:`..core.output_guard.OutputInTheWay` (a ``ValueError``)
+    names it, unless ``overwrite``."""
     import os
     import bpy
+    from ..core import output_guard
     from . import keying
     from . import character_swivel
     context = context or bpy.context
@@ -307,20 +312,24 @@ def export_fbx_takes(directory, armature, preset: str = DEFAULT, context=None, a
     actions = list(actions) if actions is not None else take_actions(armature)
     if not actions:
         raise ValueError(f"{armature.name!r} has no retargeted takes (MANIKIN_retarget_* actions) to export")
+    paths = [os.path.join(directory, bpy.path.clean_name(
+        f"{armature.name}_{act.name.replace('MANIKIN_retarget_', '').replace('MANIKIN_', '')}") + ".fbx")
+        for act in actions]
+    output_guard.check_free(paths, overwrite)          # no file of the user's replaced
     os.makedirs(directory, exist_ok=True)
+    output_guard.claim(paths)
     ad = armature.animation_data
     before = ad.action if ad is not None else None
     frames = (scene.frame_start, scene.frame_end)
     written = []
     try:
-        for act in actions:
+        for act, path in zip(actions, paths):
             keying.assign_action(armature, act)
             a, b = act.frame_range
             scene.frame_start, scene.frame_end = int(round(a)), max(int(round(b)), int(round(a)))
-            take = act.name.replace("MANIKIN_retarget_", "").replace("MANIKIN_", "")
-            path = os.path.join(directory, bpy.path.clean_name(f"{armature.name}_{take}") + ".fbx")
             export_fbx(path, armature, preset, context=context)
             written.append(path)
+            output_guard.record([path])
     finally:
         if before is not None:
             keying.assign_action(armature, before)

@@ -70,6 +70,10 @@ class MANIKIN_OT_export_fbx_takes(Operator):
     filter_folder: bpy.props.BoolProperty(default=True, options={'HIDDEN'})
     preset: EnumProperty(name="Preset", items=fbx_preset_items(), default='BLENDER',
                          description="Axes, units and bones of the files, for the application that reads them")
+    overwrite: bpy.props.BoolProperty(
+        name="Replace Files", default=False,
+        description="Replace files of these names in the folder even when they are not this add-on's unchanged "
+                    "exports (yours, or exports edited since); off: such a folder is refused, nothing written")
 
     @classmethod
     def poll(cls, context):
@@ -85,7 +89,8 @@ class MANIKIN_OT_export_fbx_takes(Operator):
         from ..blender import fbx_presets
         char = context.scene.manikin.retarget_target
         try:
-            paths = fbx_presets.export_fbx_takes(self.directory, char, self.preset.lower(), context=context)
+            paths = fbx_presets.export_fbx_takes(self.directory, char, self.preset.lower(), context=context,
+                                                 overwrite=self.overwrite)
         except (ValueError, RuntimeError, OSError) as exc:
             self.report({'ERROR'}, f"export takes: {exc}")
             return {'CANCELLED'}
