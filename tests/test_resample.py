@@ -196,7 +196,7 @@ def test_units_check_message_for_millimetres(tmp_path):
     msg = str(ei.value)
     assert msg.startswith("take_mm.csv: ")
     assert re.search(r"head is 16\d\d m above the floor \(read as units=m\)", msg)
-    assert "positions look like millimetres; pass units=mm" in msg
+    assert "positions look like millimetres; set Units to Millimetres (--units mm)" in msg
     good = load_recording(path, units="mm")
     times, pos, *_ = resample(good, 30)
     assert 1.55 < np.median(pos["head"][:, 2]) < 1.7
@@ -220,9 +220,10 @@ def test_a_take_spent_mostly_on_the_floor_passes_the_units_check():
 
 
 def test_units_check_other_cases():
-    with pytest.raises(RecordingError, match="positions look like centimetres; pass units=cm"):
+    with pytest.raises(RecordingError,
+                       match=r"positions look like centimetres; set Units to Centimetres \(--units cm\)"):
         check_head_height(165.0)
-    with pytest.raises(RecordingError, match="they look like metres already, pass units=m"):
+    with pytest.raises(RecordingError, match=r"they look like metres already: set Units to Metres \(--units m\)"):
         check_head_height(0.0165, units="cm")
     with pytest.raises(RecordingError, match="check the axes"):
         check_head_height(0.05)
@@ -233,7 +234,8 @@ def test_units_check_other_cases():
     check_head_height(0.05, floor=-1.6)
     with pytest.raises(RecordingError, match=r"head is only 0\.05 m above the floor at -1\.60 m"):
         check_head_height(-1.55, floor=-1.6)
-    with pytest.raises(RecordingError, match=r"set the Floor \(--floor\) to its height, or to 'height'"):
+    with pytest.raises(RecordingError, match=r"set the Floor \(--floor\) to its height \(At Height\), "
+                                             r"or to Under Performer \(--floor height\)"):
         check_head_height(0.05)
 
 

@@ -250,7 +250,8 @@ def test_metres_read_in_a_smaller_unit_are_an_error_not_an_eye_level_origin(tmp_
     rec = load_recording(EXAMPLE)
     path = str(tmp_path / "take.csv")
     write_csv(path, rec, axes="openxr", units="m", metadata={"offsets": "openxr_generic"})
-    with pytest.raises(Exception, match=f"scaled down {int(factor)}x; they look like metres already, pass units=m"):
+    with pytest.raises(Exception, match=f"scaled down {int(factor)}x; they look like metres already: "
+                                        "set Units to Metres \\(--units m\\)"):
         cs.solve_recording(path, cs.SolveSettings(fps=30.0, units=units))
     low = _raised(rec, -1.6)          # a true eye-level origin is still found
     assert cs.eye_level_origin(low, cs.SolveSettings()) and cs.hands_from_head(low) > 0.3

@@ -271,10 +271,12 @@ class MANIKIN_Settings(PropertyGroup):
         description="Text block with offsets JSON (made by Load Preset) used instead of the preset")
 
     use_scene_range: BoolProperty(name="Scene Frame Range", default=True,
-                                  description="Scene objects: sample the scene's frame range")
+                                  description="Scene objects: sample the scene's frame range; recordings: "
+                                              "start on the scene's first frame (off: from Start)")
     frame_start: IntProperty(name="Start", default=1, description="First frame of the solve")
     frame_end: IntProperty(name="End", default=250,
-                           description="Last frame (scene objects; recordings when Limit is on)")
+                           description="Last frame (scene objects and keypoint objects; recordings when "
+                                       "Limit is on)")
     limit_frames: BoolProperty(name="Limit", default=False,
                                description="Recordings: stop at the End frame")
     use_trim_start: BoolProperty(name="Trim Start", default=False,

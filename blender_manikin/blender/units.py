@@ -48,7 +48,8 @@ def length_property(metres_attr, name, description, lo=None, hi=None):
             v = min(v, hi)
         setattr(self, metres_attr, v)
 
-    return FloatProperty(name=name, unit='LENGTH', get=get, set=set, description=description)
+    # precision 3: Blender counts a length's digits from its first one, so 2 showed 1.75 m as "1.8 m"
+    return FloatProperty(name=name, unit='LENGTH', get=get, set=set, description=description, precision=3)
 
 
 #: the length settings kept in metres behind :func:`length_property` (``<name>_m``)

@@ -132,7 +132,7 @@ def check_head_height(height, path=None, units=None, floor=0.0):
                 break
         if hint:
             msg = (f"head is {h:.0f} m above {where}{loaded}: positions look like {hint[0]}; "
-                   f"pass units={hint[1]}")
+                   f"set Units to {hint[0].capitalize()} (--units {hint[1]})")
         else:
             msg = (f"head is {h:.1f} m above {where}{loaded}: the units, the axes or the floor are "
                    f"wrong (positions should be metres; set the Floor, --floor, if it is not at 0)")
@@ -144,12 +144,12 @@ def check_head_height(height, path=None, units=None, floor=0.0):
                 break
         if hint and units and units != "m":
             msg = (f"head is {h:.3f} m above {where}{loaded}: positions {hint}; they look like metres "
-                   f"already, pass units=m")
+                   f"already: set Units to Metres (--units m)")
         else:
             msg = (f"head is only {h:.2f} m above {where}{loaded}: check the axes (height is the file's "
                    f"up axis) and the floor (an OpenXR LOCAL space puts the origin at the starting head "
-                   f"pose, not on the floor): set the Floor (--floor) to its height, or to 'height' "
-                   f"to put it under a performer of the typed height")
+                   f"pose, not on the floor): set the Floor (--floor) to its height (At Height), or to "
+                   f"Under Performer (--floor height) to put it under a performer of the typed height")
     raise RecordingError(msg, path=path)
 
 

@@ -664,7 +664,7 @@ def head_height_note(settings: SolveSettings, outcome: SolveOutcome, tolerance=H
     side = "lower" if head < expected else "higher"
     return (f"head stands {head:.2f} m above the floor, {abs(head - expected):.2f} m {side} than a "
             f"standing {outcome.body.stature:.2f} m performer's ({expected:.2f} m): check the floor "
-            f"(Floor 'height', --floor height, puts it under the performer), the height, or whether the "
+            f"(Floor 'Under Performer', --floor height, puts it under the performer), the height, or whether the "
             f"performer sits")
 
 

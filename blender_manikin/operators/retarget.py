@@ -30,7 +30,15 @@ class MANIKIN_OT_retarget(Operator):
     @classmethod
     def poll(cls, context):
         s = getattr(context.scene, "manikin", None)
-        return s is not None and s.retarget_target is not None and _source(context) is not None
+        if s is None:
+            return False
+        if s.retarget_target is None:
+            cls.poll_message_set("choose the Character (its armature) first")
+            return False
+        if _source(context) is None:
+            cls.poll_message_set("solve first, or select a solved MANIKIN armature")
+            return False
+        return True
 
     def execute(self, context):
         import bpy
@@ -91,7 +99,7 @@ class MANIKIN_OT_load_bone_map(Operator):
     """Fill the bone map list from the chosen map (Guess, a preset or a saved file) for the
     chosen character; the list's edits are replaced"""
     bl_idname = "manikin.load_bone_map"
-    bl_label = "Load Bone Map"
+    bl_label = "Load Map"
     bl_options = {'REGISTER', 'UNDO'}
 
     @classmethod
@@ -123,7 +131,7 @@ class MANIKIN_OT_save_bone_map(Operator):
     """Save the bone map list as it is (or, while it is empty, the chosen map) as JSON, to reuse
     with From File or on the command line (--bone-map FILE.json)"""
     bl_idname = "manikin.save_bone_map"
-    bl_label = "Save Bone Map"
+    bl_label = "Save Map"
     bl_options = {'REGISTER'}                  # writes a file; the scene is not changed
     filepath: StringProperty(subtype='FILE_PATH', default="",
                              description="Where to write the map (default: the user's bone map folder)")

@@ -24,6 +24,9 @@ from bpy.types import Operator
 from ..blender import solve_job as sj
 from ..core import formats
 
+#: how the panel's box starts after a solve that failed (it shows it with an error icon)
+FAILED = "Solve failed: "
+
 #: the solve queue of the modal operator in progress (one at a time)
 _ACTIVE = {"job": None}
 
@@ -59,6 +62,7 @@ class _ModalSolves:
         try:
             configs = self._configs(context)
         except Exception as exc:
+            context.scene.manikin.last_report = f"{FAILED}{sj.error_message(exc)}"
             self.report({'ERROR'}, f"MANIKIN: {sj.error_message(exc)}")
             return {'CANCELLED'}
         return self._run_modal(context, configs) if modal else self._run_now(context, configs)
@@ -159,6 +163,7 @@ class MANIKIN_OT_solve_full_body(_ModalSolves, Operator):
     def _queue_failed(self, context, job, exc):
         if isinstance(exc, sj.SolveCancelled):
             return                                   # said once, by _queue_finish
+        context.scene.manikin.last_report = f"{FAILED}{sj.error_message(exc)}"
         self.report({'ERROR'}, f"MANIKIN: {sj.error_message(exc)}")
 
     def _queue_finish(self, context):

@@ -155,6 +155,13 @@ class MANIKIN_OT_reset_swivel(_SwivelPoll, Operator):
         ('RANGE', "Scene Range", "Keys in the scene's (preview) frame range"),
         ('CURRENT', "Current Frame", "Only the key at the current frame")], default='ALL')
 
+    @classmethod
+    def description(cls, context, properties):
+        """The panel's Reset and Reset All share this operator: each tooltip says which frames."""
+        frames = {'ALL': "on every frame", 'RANGE': "in the scene's (preview) frame range",
+                  'CURRENT': "at the current frame only"}[properties.scope]
+        return f"Restore the solver's swivel (stored at solve time) {frames}"
+
     def execute(self, context):
         from ..blender import live_rig
         obj = _swivel_object(context)

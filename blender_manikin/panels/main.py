@@ -83,8 +83,24 @@ class MANIKIN_PT_solve(_Base, Panel):
             layout.operator("manikin.solve_files", icon='FILE_FOLDER')
         if s.last_report:
             box = layout.box().column(align=True)
-            for i, line in enumerate(wrapped(s.last_report, context)):
-                box.label(text=line, icon='INFO' if i == 0 else 'BLANK1')
+            failed = s.last_report.startswith("Solve failed: ")
+            # one paragraph per item of the summary ("a; b; c"), not one run-on block
+            for part in report_items(s.last_report):
+                for i, line in enumerate(wrapped(part, context)):
+                    icon = ('ERROR' if failed or "check" in part else 'DOT') if i == 0 else 'BLANK1'
+                    box.label(text=line, icon=icon)
+
+
+def report_items(text):
+    """The summary's items: ``text`` split at the "; " outside parentheses."""
+    items, depth, start = [], 0, 0
+    for i, ch in enumerate(text):
+        depth += {"(": 1, ")": -1}.get(ch, 0)
+        if ch == ";" and depth <= 0 and text[i + 1:i + 2] == " ":
+            items.append(text[start:i].strip())
+            start = i + 2
+    items.append(text[start:].strip())
+    return [item for item in items if item]
 
 
 def toggled_row(layout, s, flag, value, heading, text=""):
@@ -187,16 +203,19 @@ class MANIKIN_PT_output(_Base, Panel):
         s = context.scene.manikin
         layout.use_property_split = True
         layout.use_property_decorate = False
+        # scene objects (trackers or keypoints) are sampled from Start to End; files are read whole
+        sampled = s.source == 'SCENE' or (s.source == 'KEYPOINTS' and s.keypoint_from == 'OBJECTS')
         if s.source in ('FILE', 'KEYPOINTS'):
-            layout.prop(s, "use_scene_fps")
+            # headed rows: "Scene Frame Rate" and "Scene Frame Range" were both cut to "Scene Frame ..."
+            layout.column(heading="Frame Rate").prop(s, "use_scene_fps", text="From Scene")
             sub = layout.column()
             sub.active = not s.use_scene_fps
             sub.prop(s, "fps")
-        layout.prop(s, "use_scene_range")
+        layout.column(heading="Frame Range").prop(s, "use_scene_range", text="From Scene")
         col = layout.column(align=True)
         col.active = not s.use_scene_range
         col.prop(s, "frame_start")
-        if s.source in ('FILE', 'KEYPOINTS'):
+        if not sampled:
             toggled_row(layout, s, "limit_frames", "frame_end", "Limit", "End")
             toggled_row(layout, s, "use_trim_start", "trim_start", "Trim Start", "From")
             toggled_row(layout, s, "use_trim_end", "trim_end", "Trim End", "To")
@@ -258,12 +277,21 @@ class MANIKIN_PT_retarget(_Base, Panel):
                               rows=6)
             rows = s.retarget_bone_map
             if 0 <= s.retarget_bone_map_index < len(rows):
-                col.prop(rows[s.retarget_bone_map_index], "twist")
+                item = rows[s.retarget_bone_map_index]
+                if s.retarget_target.type == 'ARMATURE':       # the list's narrow column shows "mixamorig:..."
+                    col.prop_search(item, "bone", s.retarget_target.data, "bones", text="Bone")
+                col.prop(item, "twist", text="Twist")
             if s.retarget_bone_map_source:
                 col.label(text=s.retarget_bone_map_source + (", edited" if s.retarget_bone_map_edited else ""),
                           icon='INFO')
         layout.prop(s, "retarget_root")
-        layout.prop(s, "retarget_keep_ends")
+        col = layout.column()
+        col.use_property_split = False          # long labels: the whole width
+        col.prop(s, "retarget_keep_ends")
+        row = col.row()
+        row.separator(factor=2.0)
+        row.active = s.retarget_keep_ends
+        row.prop(s, "retarget_live_swivel")
         layout.operator("manikin.retarget", icon='ARMATURE_DATA')
         layout.separator()
         layout.prop(s, "export_fbx_preset")

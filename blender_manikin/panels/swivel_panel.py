@@ -39,6 +39,7 @@ class MANIKIN_PT_swivel(Panel):
 
     def draw(self, context):
         from ..blender import character_swivel, live_rig, writer
+        from .main import wrapped
         layout = self.layout
         obj = context.active_object
         character = character_swivel.is_character_rig(obj)
@@ -49,6 +50,12 @@ class MANIKIN_PT_swivel(Panel):
             col.label(text="elbows and knees by their swivel.")
             col.operator("manikin.make_live_rig", icon='CON_KINEMATIC')
         col = layout.column(align=True)
+        if any(live_rig.SOLVED_PROPS[limb] in obj.keys() for limb in sk.LIMB_NAMES):
+            head = col.row()
+            head.label(text="Swivel")
+            sub = head.row()
+            sub.alignment = 'RIGHT'
+            sub.label(text="Solved")
         for limb in sk.LIMB_NAMES:
             prop = writer.SWIVEL_PROPS[limb]
             if prop not in obj.keys():
@@ -60,7 +67,7 @@ class MANIKIN_PT_swivel(Panel):
             if solved in obj.keys():
                 sub = row.row(align=True)
                 sub.alignment = 'RIGHT'
-                sub.label(text=f"{math.degrees(float(obj[solved])):.0f}°")
+                sub.label(text=f"{round(math.degrees(float(obj[solved]))):d}°")     # an int: no "-0°"
         if not live:
             return
         row = layout.row(align=True)
@@ -71,14 +78,13 @@ class MANIKIN_PT_swivel(Panel):
         row.operator("manikin.reset_swivel", text="Reset All", icon='FILE_REFRESH').scope = 'ALL'
         if character:
             layout.operator("manikin.bake_character_swivel", icon='ACTION')
-            box = layout.box()
-            box.label(text="Pose mode: grab MANIKIN_ctrl_hand.L/.R", icon='BONE_DATA')
-            box.label(text="and MANIKIN_ctrl_foot.L/.R.")
-            return
-        layout.operator("manikin.bake_live_rig", icon='ACTION')
-        box = layout.box()
-        box.label(text="Pose mode: grab ctrl_hand.L/.R and", icon='BONE_DATA')
-        box.label(text="ctrl_foot.L/.R; torso and head are FK.")
+            hint = "Pose mode: grab MANIKIN_ctrl_hand.L/.R and MANIKIN_ctrl_foot.L/.R."
+        else:
+            layout.operator("manikin.bake_live_rig", icon='ACTION')
+            hint = "Pose mode: grab ctrl_hand.L/.R and ctrl_foot.L/.R; torso and head are FK."
+        box = layout.box().column(align=True)
+        for i, line in enumerate(wrapped(hint, context)):       # cut to the sidebar's width
+            box.label(text=line, icon='BONE_DATA' if i == 0 else 'BLANK1')
 
 
 CLASSES = (MANIKIN_PT_swivel,)
