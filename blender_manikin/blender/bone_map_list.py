@@ -20,7 +20,7 @@ from ..core import bone_maps
 
 #: between the names of a row's twist bones
 TWIST_SEPARATOR = ", "
-#: under the user's script folder: where Save Bone Map proposes to write
+#: under the user's script folder: where Save Map proposes to write
 USER_FOLDER = os.path.join("presets", "blender_manikin", "bone_maps")
 
 _FILLING = [False]        # rows being written by the add-on, not edited by the user
