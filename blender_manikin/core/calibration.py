@@ -275,40 +275,55 @@ def find_tpose(targets: TrackerTargets, window=0.25, t0=0.0) -> TPoseCandidate:
     half-width in seconds over which the pose must hold.  t0: time of frame
     0 (seconds).  Vectorised over frames.
     """
+    head, wl, wr, H, usable = _pose_frames(targets, "find_tpose")
+    shoulder_z = head[:, 2] - (HEAD_HEIGHT - SHOULDER_HEIGHT) * H
+    span_ratio = np.linalg.norm(wl - wr, axis=-1) / (TPOSE_WRIST_DISTANCE * H)
+    height_err = 0.5 * (np.abs(wl[:, 2] - shoulder_z) + np.abs(wr[:, 2] - shoulder_z))
+    return _still_pose(targets, span_ratio, height_err, H, usable, window, t0, max_height_error=0.12)
+
+
+def _pose_frames(targets: TrackerTargets, who):
+    """``(head, left hand, right hand (T, 3), H (T,), usable (T,) bool)`` for :func:`find_tpose` /
+    :func:`find_apose`: the targets, the stature the head's height gives (at least 0.3 m) and the
+    frames every device is tracked on with the head as high as a standing performer's
+    (:data:`TPOSE_STATURE_RANGE`)."""
     for d in REQUIRED_DEVICES:
         if d not in targets.pos:
-            raise ValueError(f"find_tpose needs {d} targets")
-    fps = float(targets.fps)
-    n = targets.num_frames
-    w = max(1, int(round(window * fps)))
-    ok = np.ones(n, dtype=bool)
+            raise ValueError(f"{who} needs {d} targets")
+    ok = np.ones(targets.num_frames, dtype=bool)
     for d in REQUIRED_DEVICES:
         v = targets.valid.get(d)
         if v is not None:
             ok &= np.asarray(v, dtype=bool)
-    head = targets.pos["head"]
-    wl = targets.pos["left_hand"]
-    wr = targets.pos["right_hand"]
+    head, wl, wr = (np.asarray(targets.pos[d], np.float64) for d in REQUIRED_DEVICES)
     H_head = (head[:, 2] - SOLE) / HEAD_HEIGHT
     standing = (H_head >= TPOSE_STATURE_RANGE[0]) & (H_head <= TPOSE_STATURE_RANGE[1])
-    H = np.maximum(H_head, 0.3)
-    shoulder_z = head[:, 2] - (HEAD_HEIGHT - SHOULDER_HEIGHT) * H
-    span_ratio = np.linalg.norm(wl - wr, axis=-1) / (TPOSE_WRIST_DISTANCE * H)
-    height_err = 0.5 * (np.abs(wl[:, 2] - shoulder_z) + np.abs(wr[:, 2] - shoulder_z))
+    return head, wl, wr, np.maximum(H_head, 0.3), ok & standing
+
+
+def _still_pose(targets, span_ratio, height_err, H, usable, window, t0, max_height_error) -> TPoseCandidate:
+    """The candidate of the least cost (the span ratio off 1, the height error, the hands' speed)
+    held over ``window`` seconds either side, among ``usable`` frames; plausible when the span
+    ratio is in :data:`TPOSE_SPAN_RATIO`, the height error under ``max_height_error`` metres and the
+    hands slower than 0.3 m/s."""
+    fps = float(targets.fps)
+    n = targets.num_frames
+    w = max(1, int(round(window * fps)))
+    wl, wr = (np.asarray(targets.pos[d], np.float64) for d in ("left_hand", "right_hand"))
     speed = np.zeros(n)
     if n > 1:
         speed[1:] = (np.linalg.norm(np.diff(wl, axis=0), axis=-1)
                      + np.linalg.norm(np.diff(wr, axis=0), axis=-1)) * fps / 2
         speed[0] = speed[1]
     cost = np.abs(1.0 - span_ratio) + 3.0 * height_err / H + 0.5 * speed
-    cost = np.where(ok & standing & np.isfinite(cost), cost, 1e3)
+    cost = np.where(usable & np.isfinite(cost), cost, 1e3)
     mc = _window_mean(cost, w)
     k = int(np.argmin(mc))
     sr = float(_window_mean(span_ratio, w)[k])
     he = float(_window_mean(height_err, w)[k])
     sp = float(_window_mean(speed, w)[k])
     lo, hi = TPOSE_SPAN_RATIO
-    plausible = bool(mc[k] < 1e2 and lo < sr < hi and he < 0.12 and sp < 0.3)
+    plausible = bool(mc[k] < 1e2 and lo < sr < hi and he < max_height_error and sp < 0.3)
     return TPoseCandidate(time=float(t0 + k / fps), frame=k, cost=float(mc[k]), plausible=plausible,
                           span_ratio=sr, height_error=he, speed=sp)
 
@@ -330,23 +345,7 @@ def find_apose(targets: TrackerTargets, window=0.25, t0=0.0) -> TPoseCandidate:
     :data:`APOSE_ELEVATION` and its swing within :data:`APOSE_SWING`; ``height_error`` is how far
     (m) the hands are outside those bounds.  The head must stand as a standing performer's, the
     hands still.  Same fields as :func:`find_tpose`."""
-    for d in REQUIRED_DEVICES:
-        if d not in targets.pos:
-            raise ValueError(f"find_apose needs {d} targets")
-    fps = float(targets.fps)
-    n = targets.num_frames
-    w = max(1, int(round(window * fps)))
-    ok = np.ones(n, dtype=bool)
-    for d in REQUIRED_DEVICES:
-        v = targets.valid.get(d)
-        if v is not None:
-            ok &= np.asarray(v, dtype=bool)
-    head = np.asarray(targets.pos["head"], np.float64)
-    wl = np.asarray(targets.pos["left_hand"], np.float64)
-    wr = np.asarray(targets.pos["right_hand"], np.float64)
-    H_head = (head[:, 2] - SOLE) / HEAD_HEIGHT
-    standing = (H_head >= TPOSE_STATURE_RANGE[0]) & (H_head <= TPOSE_STATURE_RANGE[1])
-    H = np.maximum(H_head, 0.3)
+    head, wl, wr, H, usable = _pose_frames(targets, "find_apose")
     lat = (wl - wr) * [1.0, 1.0, 0.0]
     u = lat / np.maximum(np.linalg.norm(lat, axis=-1, keepdims=True), 1e-9)
     fwd = np.cross(_Z, u)
@@ -366,22 +365,7 @@ def find_apose(targets: TrackerTargets, window=0.25, t0=0.0) -> TPoseCandidate:
         reach.append(L)
     span_ratio = (SHOULDER_WIDTH * H + reach[0] + reach[1]) / (TPOSE_WRIST_DISTANCE * H)
     height_err = 0.5 * (err[0] + err[1])
-    speed = np.zeros(n)
-    if n > 1:
-        speed[1:] = (np.linalg.norm(np.diff(wl, axis=0), axis=-1)
-                     + np.linalg.norm(np.diff(wr, axis=0), axis=-1)) * fps / 2
-        speed[0] = speed[1]
-    cost = np.abs(1.0 - span_ratio) + 3.0 * height_err / H + 0.5 * speed
-    cost = np.where(ok & standing & np.isfinite(cost), cost, 1e3)
-    mc = _window_mean(cost, w)
-    k = int(np.argmin(mc))
-    sr = float(_window_mean(span_ratio, w)[k])
-    he = float(_window_mean(height_err, w)[k])
-    sp = float(_window_mean(speed, w)[k])
-    lo, hi = TPOSE_SPAN_RATIO
-    plausible = bool(mc[k] < 1e2 and lo < sr < hi and he < 0.03 and sp < 0.3)
-    return TPoseCandidate(time=float(t0 + k / fps), frame=k, cost=float(mc[k]), plausible=plausible,
-                          span_ratio=sr, height_error=he, speed=sp)
+    return _still_pose(targets, span_ratio, height_err, H, usable, window, t0, max_height_error=0.03)
 
 
 def _heading_matrix(x_axis):
