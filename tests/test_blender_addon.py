@@ -162,6 +162,17 @@ def test_errors_are_reported(addon, tmp_path):
     with pytest.raises(RuntimeError, match="no recording file"):
         bpy.ops.manikin.solve_full_body()
     assert len(bpy.data.objects) == n
+    # the panel's box says the solve failed, and why (not the summary of the solve before)
+    assert s.last_report.startswith("Solve failed: ") and "no recording file" in s.last_report
+
+
+def test_the_summary_box_shows_one_item_a_line():
+    from blender_manikin.panels.main import report_items
+    assert report_items("210 frames at 30 fps; model head and hands (manikin_s.onnx); offsets openxr_generic "
+                        "(auto: from the file; checked); stature 1.75 m") == [
+        "210 frames at 30 fps", "model head and hands (manikin_s.onnx)",
+        "offsets openxr_generic (auto: from the file; checked)", "stature 1.75 m"]
+    assert report_items("Solve failed: no such file") == ["Solve failed: no such file"]
 
 
 def test_undo_restores_scene(addon, recording):
