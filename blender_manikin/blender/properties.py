@@ -268,7 +268,7 @@ class MANIKIN_Settings(PropertyGroup):
                                  description="Device-to-joint offsets preset")
     offsets_text: PointerProperty(
         name="Edited Offsets", type=bpy.types.Text,
-        description="Text block with offsets JSON (made by Load Preset) used instead of the preset")
+        description="Text block with offsets JSON (made by Edit Offsets) used instead of the preset")
 
     use_scene_range: BoolProperty(name="Scene Frame Range", default=True,
                                   description="Scene objects: sample the scene's frame range; recordings: "
