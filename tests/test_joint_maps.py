@@ -64,6 +64,48 @@ def test_detect_joint_map(motion):
     assert len(BANDAI.table().splitlines()) == 22
 
 
+MIXAMO_BVH = """HIERARCHY
+ROOT mixamorig:Hips
+{ OFFSET 0 100 0 CHANNELS 6 Xposition Yposition Zposition Zrotation Xrotation Yrotation
+ JOINT mixamorig:Spine { OFFSET 0 10 0 CHANNELS 3 Zrotation Xrotation Yrotation
+  JOINT mixamorig:Spine1 { OFFSET 0 12 0 CHANNELS 3 Zrotation Xrotation Yrotation
+   JOINT mixamorig:Spine2 { OFFSET 0 13 0 CHANNELS 3 Zrotation Xrotation Yrotation
+    JOINT mixamorig:Neck { OFFSET 0 15 0 CHANNELS 3 Zrotation Xrotation Yrotation
+     JOINT mixamorig:Head { OFFSET 0 10 0 CHANNELS 3 Zrotation Xrotation Yrotation End Site { OFFSET 0 18 0 } } }
+""" + "".join("""    JOINT mixamorig:{S}Shoulder {{ OFFSET {x6} 11 0 CHANNELS 3 Zrotation Xrotation Yrotation
+     JOINT mixamorig:{S}Arm {{ OFFSET {x12} 0 0 CHANNELS 3 Zrotation Xrotation Yrotation
+      JOINT mixamorig:{S}ForeArm {{ OFFSET {x28} 0 0 CHANNELS 3 Zrotation Xrotation Yrotation
+       JOINT mixamorig:{S}Hand {{ OFFSET {x25} 0 0 CHANNELS 3 Zrotation Xrotation Yrotation
+        End Site {{ OFFSET {x10} 0 0 }} }} }} }} }}
+""".format(S=S, x6=6 * x, x12=12 * x, x28=28 * x, x25=25 * x, x10=10 * x) for S, x in (("Left", 1), ("Right", -1))) + """
+   } } }
+""" + "".join("""  JOINT mixamorig:{S}UpLeg {{ OFFSET {x9} -6 0 CHANNELS 3 Zrotation Xrotation Yrotation
+   JOINT mixamorig:{S}Leg {{ OFFSET 0 -43 0 CHANNELS 3 Zrotation Xrotation Yrotation
+    JOINT mixamorig:{S}Foot {{ OFFSET 0 -42 0 CHANNELS 3 Zrotation Xrotation Yrotation
+     JOINT mixamorig:{S}ToeBase {{ OFFSET 0 -6 13 CHANNELS 3 Zrotation Xrotation Yrotation
+      End Site {{ OFFSET 0 0 8 }} }} }} }} }}
+""".format(S=S, x9=9 * x) for S, x in (("Left", 1), ("Right", -1))) + """}
+MOTION
+Frames: 2
+Frame Time: 0.0166667
+""" + ("0 96 0" + " 0" * 66 + "\n") * 2
+
+
+def test_a_mixamo_rig_is_not_taken_for_the_cmu_map(motion):
+    """A Mixamo BVH has every cgspeed CMU joint name, but its Spine1 is mid-back and its Neck sits
+    on Spine2: mapped as cgspeed, spine1-3 were bunched into the lowest 17 cm of the back and
+    spine3 -> neck was 34 cm, with no warning.  Detection checks the hierarchy too."""
+    import io
+    clip = read_bvh(io.BytesIO(MIXAMO_BVH.encode()), "Walking_01.bvh")
+    assert not CMU.missing(clip.joint_names)
+    with pytest.raises(ValueError, match="cmu: another rig with its joint names .*'mixamorig:Neck' is a child "
+                                         "of 'mixamorig:Spine2', not of 'Spine1'"):
+        clip_to_body_motion(clip)
+    body, _, _, pos, rot = motion
+    c = cmu_clip(body, pos[:2], rot[:2])
+    assert detect_joint_map(c.joint_names, c.parents) is CMU
+
+
 def test_bandai_layout_roundtrip(motion, tmp_path):
     """Body posed by FK -> Bandai-layout BVH (cm, Y-up, ZXY, non-T-pose frames) -> map."""
     body, _, _, pos, rot = motion

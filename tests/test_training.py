@@ -410,8 +410,59 @@ def test_sources_file_with_options_and_licences(cache, bvh_dir, asf_dir, tmp_pat
     assert ds.combined_licence(["CC BY 4.0", "CC BY-SA 3.0", "CC BY-NC-ND 4.0", "CC BY-NC 4.0"]) == "CC BY-NC-ND 4.0"
     bad = tmp_path / "bad.json"
     bad.write_text(json.dumps([{"path": bvh_dir, "licence": "x", "unit": "cm"}]))
-    with pytest.raises(SystemExit, match="bad.json: source 1: unknown field"):
+    with pytest.raises(SystemExit, match="bad.json line 1: source 1: unknown field"):
         train.main(["--sources", str(bad), "--cache-dir", root, "--steps", "1", "--out", str(tmp_path / "b")] + TINY)
+
+
+def test_combined_licence_never_takes_unrecognised_terms_as_permissive():
+    """The weights' licence is the most restrictive source's: a non-commercial licence spelt
+    without the hyphen, or terms the code does not know, must win over CMU's "free for all uses",
+    whichever order the sources file lists them in."""
+    cmu = "CMU Graphics Lab: free for all uses"
+    for other in ("Studio licence: non commercial research use only", "CC BY NC 4.0",
+                  "research use only, no redistribution"):
+        assert ds.combined_licence([cmu, other]) == other
+        assert ds.combined_licence([other, cmu]) == other
+    assert ds.combined_licence([cmu, "CC BY 4.0"]) == cmu
+    assert ds.combined_licence(["CC0 1.0", "CC BY-SA 3.0"]) == "CC BY-SA 3.0"
+    assert ds.combined_licence(["Bandai Namco Research Inc.: CC BY 4.0", cmu]) != "unknown"
+    assert ds.licence_rank("Copyright Bandai Namco Research Inc.; CC BY-NC-ND 4.0") == 4
+
+
+def test_sources_file_fps_of_a_bvh_source(bvh_dir, tmp_path):
+    """A BVH source with "fps" in the sources file builds (it set a read-only property, so every
+    take was skipped: "no usable BVH clips"); the stated rate replaces the files' Frame Time."""
+    src = ds.MotionSource(path=bvh_dir, fps=60.0)
+    files = ds.build_cache(src, str(tmp_path), workers=1, verbose=False)
+    index, _ = ds.load_index(files)
+    assert not index["skipped"] and len(files) == 7
+    # six 90-frame takes read as 60 fps -> 45 frames at 30 fps; the 240-frame take -> 120
+    assert index["frames"] == 6 * 45 + 120
+
+
+@pytest.mark.parametrize("field, value, problem", [
+    ("joint_map", "cmu-asf", "unknown joint_map 'cmu-asf' (expected one of bandai, cmu, cmu_asf)"),
+    ("unit_scale", "centimetres", "unit_scale must be metres per unit"),
+    ("unit_scale", -0.01, "unit_scale must be metres per unit"),
+    ("up", "Y-up", "up must be an axis"),
+    ("forward", "y", "must be different axes"),
+    ("fps", 0, "fps must be a positive number, got 0"),
+    ("licence", ["CC BY 4.0"], "licence must be a non-empty string"),
+])
+def test_sources_file_bad_values_name_file_line_and_problem(tmp_path, field, value, problem):
+    """A bad value in the sources file is reported when the file is read, with the file, the
+    line of the entry and the problem; before, it passed, and every take of the source was then
+    skipped ("no usable BVH clips ... KeyError: 'centimetres'"), fps 0 was read as 120, and a
+    licence that is not a string failed only after every cache was built."""
+    spec = tmp_path / "sources.json"
+    entry = {"path": "cmu", "name": "CMU", "licence": "CMU: free for all uses", "up": "y", field: value}
+    spec.write_text('[\n  {"path": "bandai.tar.xz"},\n\n  ' + json.dumps(entry) + "\n]\n")
+    with pytest.raises(ValueError) as exc:
+        ds.load_sources(str(spec))
+    assert str(exc.value).startswith(f"{spec} line 4: source 2: ") and problem in str(exc.value)
+    spec.write_text(json.dumps([{"path": "cmu", "joint_map": "cmu_asf", "unit_scale": "auto", "up": "-Y",
+                                 "forward": "z", "fps": 120, "licence": "CMU"}]))
+    assert ds.load_sources(str(spec))[0].fps == 120
 
 
 def test_aug_overrides_and_their_checks():

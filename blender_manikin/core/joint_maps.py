@@ -323,7 +323,8 @@ class JointMap:
     pose is a T-pose with world-aligned frames (required by ``rest()`` axes).
     ``foot_pitch``: degrees the ankle->ball line dips below the floor plane
     when the foot stands flat, ``"auto"`` (measure it on each clip) or
-    ``None`` (the body model's 20.3 degrees).
+    ``None`` (the body model's 20.3 degrees).  ``parents``: ``(child, parent)`` source joints
+    the rig must have so, which tells it from another rig with the same joint names (detection).
     """
     name: str
     positions: Mapping[str, Point]
@@ -334,6 +335,7 @@ class JointMap:
     rest_is_tpose: bool = False
     foot_pitch: Union[float, str, None] = "auto"
     description: str = ""
+    parents: Tuple[Tuple[str, str], ...] = ()
 
     def source_joints(self) -> Tuple[str, ...]:
         names = []
@@ -348,6 +350,16 @@ class JointMap:
     def missing(self, joint_names: Sequence[str]) -> Tuple[str, ...]:
         res = _Resolver(joint_names)
         return tuple(n for n in self.source_joints() if res.find(n) is None)
+
+    def wrong_parents(self, joint_names: Sequence[str], parents: Sequence[int]) -> Tuple[str, ...]:
+        """How the hierarchy differs from :attr:`parents` (empty when it fits)."""
+        res, out = _Resolver(joint_names), []
+        for child, parent in self.parents:
+            c, p = res.find(child), res.find(parent)
+            if c is not None and p is not None and int(parents[c]) != p:
+                actual = joint_names[int(parents[c])] if int(parents[c]) >= 0 else "nothing"
+                out.append(f"{joint_names[c]!r} is a child of {actual!r}, not of {parent!r}")
+        return tuple(out)
 
     def table(self) -> str:
         """The position map as text (one ``body: source`` line per joint)."""
@@ -408,7 +420,7 @@ def _cmu() -> JointMap:
         "right_ankle": OrientationSpec("RightFoot", bone("RightFoot", "RightToeBase"), rest()),
     }
     return JointMap("cmu", pos, ori, unit_scale="auto", up="y", forward="z", rest_is_tpose=True,
-                    foot_pitch="auto",
+                    foot_pitch="auto", parents=(("Neck", "Spine1"),),
                     description="CMU mocap, cgspeed BVH conversion (1/0.45 inch units, Y-up, faces +Z)")
 
 
@@ -444,17 +456,21 @@ class _Resolver:
         return i
 
 
-def detect_joint_map(joint_names: Sequence[str]) -> JointMap:
-    """The registered map whose source joints are all present (best coverage wins).
+def detect_joint_map(joint_names: Sequence[str], parents: Optional[Sequence[int]] = None) -> JointMap:
+    """The registered map whose source joints are all present (best coverage wins) and, when
+    ``parents`` is given, whose :attr:`JointMap.parents` the hierarchy has (a Mixamo rig has the
+    cgspeed names, but its ``Neck`` sits on ``Spine2``, two joints above the cgspeed neck base).
 
     Raises ``ValueError`` listing what each map misses when none fits.
     """
     best, report = None, []
     for jm in JOINT_MAPS.values():
         miss = jm.missing(joint_names)
+        wrong = jm.wrong_parents(joint_names, parents) if parents is not None and not miss else ()
         need = len(jm.source_joints())
-        report.append(f"{jm.name}: missing {', '.join(miss) if miss else 'nothing'}")
-        if not miss and (best is None or need > len(best.source_joints())):
+        report.append(f"{jm.name}: " + (f"another rig with its joint names ({'; '.join(wrong)})" if wrong
+                                        else f"missing {', '.join(miss) if miss else 'nothing'}"))
+        if not miss and not wrong and (best is None or need > len(best.source_joints())):
             best = jm
     if best is None:
         raise ValueError("no joint map fits this skeleton (" + "; ".join(report) + ")")
@@ -467,7 +483,7 @@ def get_joint_map(joint_map: Union[None, str, JointMap], clip: Optional[BvhClip]
     if joint_map is None or joint_map == "auto":
         if clip is None:
             raise ValueError("auto-detecting a joint map needs a clip")
-        return detect_joint_map(clip.joint_names)
+        return detect_joint_map(clip.joint_names, clip.parents)
     try:
         return JOINT_MAPS[str(joint_map).lower()]
     except KeyError:

@@ -108,8 +108,8 @@ class MotionSource:
     calls it (default: the file name).  joint_map: ``"bandai"``, ``"cmu"`` (cgspeed BVH),
     ``"cmu_asf"`` (CMU/HDM05 ASF) or ``None`` (detected from the joint names).  unit_scale:
     metres per source unit, ``"auto"``, or ``None`` (the map's).  up / forward: the source's
-    up and facing axes (``"y"``, ``"z"``, ...; ``None``: the map's).  fps: the take's frame rate
-    when the files do not state it (AMC; default 120).  licence: the data's licence, as the
+    up and facing axes (``"y"``, ``"z"``, ...; ``None``: the map's).  fps: the takes' frame rate
+    (AMC, which does not state it: default 120; BVH: replaces the files' Frame Time).  licence: the data's licence, as the
     model card must quote it.
     """
     path: str
@@ -150,38 +150,106 @@ def source_licence(src):
     return "unknown: state it in the sources file"
 
 
+#: licences that allow any use, commercial included (what :func:`combined_licence` may rank lowest)
+_PERMISSIVE_LICENCE = re.compile(r"\bCC0\b|PUBLIC DOMAIN|\bCC[ -]BY(?![ -]?(NC|ND|SA)\b)\b|FREE FOR (ALL|ANY) USES?\b")
+
+
+def licence_rank(text):
+    """How restrictive a data licence is: 5 unknown, 4 NoDerivatives, 3 NonCommercial, 2 terms
+    not recognised (may forbid commercial use), 1 ShareAlike, 0 known to allow any use
+    (CC0, public domain, CC BY, "free for all uses")."""
+    t = " ".join(str(text).upper().replace("_", " ").split())
+    flat = re.sub(r"[^A-Z0-9]", "", t)
+    if t.startswith("UNKNOWN"):
+        return 5
+    if re.search(r"-ND\b", t) or "NODERIV" in flat:
+        return 4
+    if re.search(r"(^|[^A-Z])NC([^A-Z]|$)", t) or "NONCOMMERCIAL" in flat:
+        return 3
+    if re.search(r"-SA\b", t) or "SHAREALIKE" in flat:
+        return 1
+    return 0 if _PERMISSIVE_LICENCE.search(t) else 2
+
+
 def combined_licence(licences):
-    """The most restrictive of several data licences (the weights follow it): NoDerivatives,
-    then NonCommercial, then ShareAlike, then anything else."""
-    def rank(text):
-        t = text.upper()
-        return (3 if "-ND" in t or "NO DERIV" in t or "NODERIV" in t else
-                2 if "-NC" in t or "NON-COMMERCIAL" in t or "NONCOMMERCIAL" in t else
-                1 if "-SA" in t or "SHARE-ALIKE" in t or "SHAREALIKE" in t else
-                4 if t.startswith("UNKNOWN") else 0)
-    return max(licences, key=rank) if licences else "unknown"
+    """The most restrictive of several data licences (the weights follow it):
+    :func:`licence_rank`; terms it does not recognise count as possibly non-commercial, never as
+    permissive; of equally restrictive ones, the first."""
+    return max(licences, key=licence_rank) if licences else "unknown"
+
+
+def _entry_lines(text):
+    """Line of each element of the JSON list ``text`` (already known to be valid JSON)."""
+    dec, lines = json.JSONDecoder(), []
+    i = text.index("[") + 1
+    while True:
+        i = re.compile(r"[\s,]*").match(text, i).end()
+        if i >= len(text) or text[i] == "]":
+            return lines
+        lines.append(text.count("\n", 0, i) + 1)
+        i = dec.raw_decode(text, i)[1]
+
+
+def _check_source(src):
+    """The problem with a :class:`MotionSource`'s reading options, or ``None``."""
+    from ..core import joint_maps
+
+    def number(v):
+        return isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
+
+    for k in ("path", "name", "licence"):
+        v = getattr(src, k)
+        if not (v is None and k != "path") and not (isinstance(v, str) and v.strip()):
+            return f"{k} must be a non-empty string, got {v!r}"
+    maps = sorted(set(joint_maps.JOINT_MAPS) | {"cmu_asf"})
+    if src.joint_map is not None and src.joint_map not in maps:
+        return f"unknown joint_map {src.joint_map!r} (expected one of {', '.join(maps)})"
+    u = src.unit_scale
+    if u is not None and not (number(u) and u > 0) and not (isinstance(u, str) and (
+            u == "auto" or u in joint_maps.UNIT_CANDIDATES)):
+        return (f"unit_scale must be metres per unit (a positive number), 'auto' or one of "
+                f"{', '.join(joint_maps.UNIT_CANDIDATES)}; got {u!r}")
+    for k in ("up", "forward"):
+        v = getattr(src, k)
+        if v is not None and not (isinstance(v, str) and re.fullmatch(r"[+-]?[xyzXYZ]", v.strip())):
+            return f"{k} must be an axis such as 'y', '-z'; got {v!r}"
+    if src.up is not None and src.forward is not None:
+        try:
+            joint_maps.axis_conversion(src.up, src.forward)
+        except ValueError as exc:
+            return str(exc)
+    if src.fps is not None and not (number(src.fps) and src.fps > 0):
+        return f"fps must be a positive number, got {src.fps!r}"
+    return None
 
 
 def load_sources(path):
     """:class:`MotionSource` list from a JSON file (a list of objects with the fields above;
-    relative paths are relative to the file).  Errors name the file and the entry."""
+    relative paths are relative to the file).  Errors name the file, the line and the entry:
+    ``sources.json line 3: source 2: unknown joint_map 'cmu-asf' (...)``."""
     with open(path, encoding="utf-8") as f:
-        try:
-            data = json.load(f)
-        except json.JSONDecodeError as exc:
-            raise ValueError(f"{path}: not valid JSON (line {exc.lineno}: {exc.msg})") from None
+        text = f.read()
+    try:
+        data = json.loads(text)
+    except json.JSONDecodeError as exc:
+        raise ValueError(f"{path}: not valid JSON (line {exc.lineno}: {exc.msg})") from None
     if not isinstance(data, list) or not data:
         raise ValueError(f"{path}: expected a non-empty JSON list of sources")
+    lines = _entry_lines(text)
     fields = set(MotionSource.__dataclass_fields__)
     out = []
     for i, entry in enumerate(data):
+        where = f"{path} line {lines[i]}: source {i + 1}"
         if not isinstance(entry, dict) or "path" not in entry:
-            raise ValueError(f"{path}: source {i + 1} must be an object with a 'path'")
+            raise ValueError(f"{where} must be an object with a 'path'")
         unknown = sorted(set(entry) - fields)
         if unknown:
-            raise ValueError(f"{path}: source {i + 1}: unknown field(s) {', '.join(unknown)} "
+            raise ValueError(f"{where}: unknown field(s) {', '.join(unknown)} "
                              f"(expected {', '.join(sorted(fields))})")
         src = MotionSource(**entry)
+        problem = _check_source(src)
+        if problem:
+            raise ValueError(f"{where}: {problem}")
         src.path = os.path.expanduser(src.path)
         if not os.path.isabs(src.path):
             src.path = os.path.join(os.path.dirname(os.path.abspath(path)), src.path)
@@ -396,8 +464,8 @@ def _process(job):
                 unit_scale=opts.get("unit_scale"), up=opts.get("up"), forward=opts.get("forward"))
         else:
             clip = bvh.read_bvh(io.BytesIO(data), name)
-            if opts.get("fps"):
-                clip.fps = float(opts["fps"])
+            if opts.get("fps"):          # the sources file's rate replaces the Frame Time
+                clip.frame_time = 1.0 / float(opts["fps"])
             mc = joint_maps.clip_to_body_motion(clip, opts.get("joint_map"), unit_scale=opts.get("unit_scale"),
                                                 up=opts.get("up"), forward=opts.get("forward"))
         if mc is None or np.asarray(mc.positions).shape[0] < 2:
