@@ -330,3 +330,23 @@ def test_a_hand_tracking_recording_solves_with_its_preset(tmp_path, offsets, exa
             assert miss.max() < 0.002 and np.median(turn) < 1.0, (side, miss.max(), np.median(turn))
         else:
             assert np.median(miss) > 0.03, (side, np.median(miss))
+
+
+@pytest.mark.parametrize("device,lost_until", [("pelvis", 0.7), ("left_foot", 0.7)])
+def test_the_tpose_is_taken_where_the_extra_trackers_are_tracked(device, lost_until):
+    """A tracker that starts streaming late (a SteamVR tracker waking up after the recording began)
+    misses the first part of the T-pose: the calibration takes the rest of the T-pose, where it is
+    tracked, and measures its offset, rather than the moment it is lost and its raw pose taken as the
+    joint's (the pelvis: hips 16 cm and knees up to 28 cm off for the whole take)."""
+    body = body_with_legs(1.75, 1.0)
+    mounts = random_mounts(3)
+    truth = true_offsets(mounts)
+    targets, times = six_tracker_targets(body, mounts, duration=6.0, fps=30.0, seed=3,
+                                         invalid=(device, 0.0, lost_until))
+    res = calibrate(targets, offsets="openxr_generic")
+    for d in EXTRA:
+        dp, dr = offset_error(res.offsets["devices"][d], truth[d])
+        assert dp < TOL_M and dr < TOL_DEG, (d, dp, dr, res.time, res.problems)
+    assert res.time - 0.25 >= lost_until - 1e-6 and res.plausible, (res.time, res.problems)
+    assert res.measured["legs"]["source"] == "pelvis tracker"
+    assert hip_height(make_body(res.measurements)) == pytest.approx(hip_height(body), abs=TOL_HIP)

@@ -305,7 +305,21 @@ def _still_pose(targets, span_ratio, height_err, H, usable, window, t0, max_heig
     """The candidate of the least cost (the span ratio off 1, the height error, the hands' speed)
     held over ``window`` seconds either side, among ``usable`` frames; plausible when the span
     ratio is in :data:`TPOSE_SPAN_RATIO`, the height error under ``max_height_error`` metres and the
-    hands slower than 0.3 m/s."""
+    hands slower than 0.3 m/s.  A plausible moment where the recording's pelvis and foot trackers
+    are tracked too is preferred (their offsets are measured there; where one is lost it is not),
+    else the best of all ``usable`` frames."""
+    extra = [d for d in EXTRA_DEVICES if d in targets.pos and targets.valid.get(d) is not None]
+    if extra:
+        tracked = np.logical_and.reduce([np.asarray(targets.valid[d], dtype=bool) for d in extra])
+        if (usable & ~tracked).any() and (usable & tracked).any():
+            cand = _still_pose_among(targets, span_ratio, height_err, H, usable & tracked, window, t0,
+                                     max_height_error)
+            if cand.plausible:
+                return cand
+    return _still_pose_among(targets, span_ratio, height_err, H, usable, window, t0, max_height_error)
+
+
+def _still_pose_among(targets, span_ratio, height_err, H, usable, window, t0, max_height_error) -> TPoseCandidate:
     fps = float(targets.fps)
     n = targets.num_frames
     w = max(1, int(round(window * fps)))
