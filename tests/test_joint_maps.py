@@ -77,7 +77,8 @@ ROOT mixamorig:Hips
       JOINT mixamorig:{S}ForeArm {{ OFFSET {x28} 0 0 CHANNELS 3 Zrotation Xrotation Yrotation
        JOINT mixamorig:{S}Hand {{ OFFSET {x25} 0 0 CHANNELS 3 Zrotation Xrotation Yrotation
         End Site {{ OFFSET {x10} 0 0 }} }} }} }} }}
-""".format(S=S, x6=6 * x, x12=12 * x, x28=28 * x, x25=25 * x, x10=10 * x) for S, x in (("Left", 1), ("Right", -1))) + """
+""".format(S=S, x6=6 * x, x12=12 * x, x28=28 * x, x25=25 * x, x10=10 * x)
+              for S, x in (("Left", 1), ("Right", -1))) + """
    } } }
 """ + "".join("""  JOINT mixamorig:{S}UpLeg {{ OFFSET {x9} -6 0 CHANNELS 3 Zrotation Xrotation Yrotation
    JOINT mixamorig:{S}Leg {{ OFFSET 0 -43 0 CHANNELS 3 Zrotation Xrotation Yrotation

@@ -109,8 +109,8 @@ class MotionSource:
     ``"cmu_asf"`` (CMU/HDM05 ASF) or ``None`` (detected from the joint names).  unit_scale:
     metres per source unit, ``"auto"``, or ``None`` (the map's).  up / forward: the source's
     up and facing axes (``"y"``, ``"z"``, ...; ``None``: the map's).  fps: the takes' frame rate
-    (AMC, which does not state it: default 120; BVH: replaces the files' Frame Time).  licence: the data's licence, as the
-    model card must quote it.
+    (AMC, which does not state it: default 120; BVH: replaces the files' Frame Time).  licence:
+    the data's licence, as the model card must quote it.
     """
     path: str
     name: str | None = None
