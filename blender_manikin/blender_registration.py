@@ -27,10 +27,7 @@ def register():
 
 def unregister():
     from .operators import solve
-    job = solve._ACTIVE.get("job")
-    if job is not None:
-        job.cancel()
-        solve._ACTIVE["job"] = None
+    solve.abort_active(bpy.context)      # a modal solve in progress: its timer and status text
     units.unregister_migration()
     if hasattr(bpy.types.Scene, "manikin"):
         del bpy.types.Scene.manikin

@@ -147,6 +147,7 @@ def modal_operator(cls, **props):
         def start_modal(self):
             import bpy
             self._queue = self._make_queue(bpy.context, self._configs(bpy.context))
+            self._scene = bpy.context.scene
             assert self._queue.start(bpy.context)
             solve_op._ACTIVE["job"] = self._queue
             return self._queue

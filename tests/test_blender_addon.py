@@ -1,6 +1,7 @@
 """Add-on registration, the solve operator (with a stand-in solver), errors, cancel and undo."""
 import os
 import threading
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -57,6 +58,36 @@ def test_register_unregister_register():
         blender_manikin.unregister()
         assert not hasattr(bpy.types.Scene, "manikin")
         assert not hasattr(bpy.types, "MANIKIN_OT_solve_full_body")
+
+
+def test_unregister_stops_a_modal_solve_and_its_timer(recording, monkeypatch):
+    """The add-on disabled while a modal solve runs: Blender frees the operator without its
+    cancel(), so unregister stops the worker and removes the window's timer and status text."""
+    from blender_manikin.operators import solve as solve_op
+    fresh_scene()
+    blender_manikin.register()
+    monkeypatch.setattr(solve_job, "run_solver", stub_solver)
+    _settings(recording)
+    op = modal_operator(solve_op.MANIKIN_OT_solve_full_body)
+    queue = op.start_modal()
+    removed = []
+    solve_op._ACTIVE["leftovers"] = {"timer": removed}         # stands in for the window's timer
+    monkeypatch.setattr(solve_op, "abort_active", lambda context, f=solve_op.abort_active: (
+        removed.append("aborted"), f(SimpleNamespace(window_manager=_WM(removed), temp_override=None))))
+    blender_manikin.unregister()
+    assert removed == ["aborted", "timer removed", "progress ended"] and queue.cancelled
+    assert solve_op._ACTIVE == {"job": None, "leftovers": None}
+
+
+class _WM:
+    def __init__(self, log):
+        self.log, self.windows = log, []
+
+    def event_timer_remove(self, timer):
+        self.log.append("timer removed")
+
+    def progress_end(self):
+        self.log.append("progress ended")
 
 
 def test_addon_utils_enable_disable():
@@ -478,6 +509,35 @@ def test_modal_progress_cancel_and_finish(addon, recording, monkeypatch):
     queue.job.join(5)
     assert op.modal(bpy.context, timer) == {'CANCELLED'}
     assert op.reports[-1] == ({'ERROR'}, "MANIKIN: boom") and len(bpy.data.objects) == n
+
+
+def test_a_modal_solve_is_written_in_the_scene_it_was_started_in(addon, recording):
+    """The user shows another scene while the solve runs: the solve waits for its own scene (its
+    settings, frame rate and armature are that scene's) instead of being written into the other."""
+    from types import SimpleNamespace
+    from blender_manikin.operators import solve as solve_op
+    cls = solve_op.MANIKIN_OT_solve_full_body
+    timer = SimpleNamespace(type='TIMER', value='NOTHING')
+    _settings(recording)
+    start, other = bpy.context.scene, bpy.data.scenes.new("Other")
+    op = modal_operator(cls)
+    queue = op.start_modal()
+    queue.job.join(10)
+    with bpy.context.temp_override(scene=other):
+        assert op.modal(bpy.context, timer) == {'RUNNING_MODAL'}        # not written into Other
+        assert len(other.objects) == 0 and queue.job is not None
+    assert op.modal(bpy.context, timer) == {'FINISHED'}                 # back in its scene
+    assert start.manikin.armature is not None and start.manikin.armature.name in start.objects
+    assert len(other.objects) == 0 and other.manikin.last_report == ""
+
+    # its scene deleted while it runs: nothing written anywhere, the solve ends
+    op = modal_operator(cls)
+    queue = op.start_modal()
+    queue.job.join(10)
+    with bpy.context.temp_override(scene=other):
+        bpy.data.scenes.remove(start)
+        assert op.modal(bpy.context, timer) == {'CANCELLED'}
+    assert solve_op._ACTIVE["job"] is None and len(other.objects) == 0
 
 
 def test_panel_teleports_keep_the_body_where_the_recording_jumps(addon, tmp_path, monkeypatch):

@@ -103,6 +103,19 @@ def test_a_take_undone_while_the_next_is_solved(addon, tmp_path):
     assert report.startswith("2 of 2 files solved: MANIKIN_first / MANIKIN_live_first, MANIKIN_second")
 
 
+def test_files_confirmed_while_a_solve_runs_are_not_solved_beside_it(addon, tmp_path):
+    """The file browser's execute skips poll(): files confirmed in a browser opened before
+    another solve started must not start a second modal solve beside the running one."""
+    running = modal_operator(CLS, **_takes(tmp_path, ["first.csv"]))
+    queue = running.start_modal()
+    second = modal_operator(CLS, interactive=True, **_takes(tmp_path, ["second.csv"]))
+    assert CLS._start(second, bpy.context, modal=True) == {'CANCELLED'}
+    assert second.reports[-1][0] == {'ERROR'} and "already running" in second.reports[-1][1]
+    assert solve_op._ACTIVE["job"] is queue
+    assert _tick(running, lambda res: res != {'RUNNING_MODAL'}) == {'FINISHED'}
+    assert _armatures() == ["MANIKIN_first"]
+
+
 def test_esc_before_any_file_is_solved_cancels(addon, tmp_path):
     op = modal_operator(CLS, **_takes(tmp_path, ["first.csv", "second.csv"]))
     queue = op.start_modal()

@@ -27,8 +27,30 @@ from ..core import formats
 #: how the panel's box starts after a solve that failed (it shows it with an error icon)
 FAILED = "Solve failed: "
 
-#: the solve queue of the modal operator in progress (one at a time)
-_ACTIVE = {"job": None}
+#: the solve queue of the modal operator in progress (one at a time) and what its window holds
+#: (``leftovers``: timer, workspaces), for :func:`abort_active`
+_ACTIVE = {"job": None, "leftovers": None}
+
+
+def abort_active(context):
+    """Stop the modal solve in progress when the add-on is unregistered under it (disabled in the
+    Preferences, updated): Blender then frees the operator without calling its ``cancel()``, which
+    would leave its timer ticking and the status bar saying "Esc to cancel" for good."""
+    job, left = _ACTIVE["job"], _ACTIVE["leftovers"]
+    _ACTIVE.update(job=None, leftovers=None)
+    if job is not None:
+        job.cancel()
+    if left is None:
+        return
+    wm = context.window_manager
+    try:
+        wm.event_timer_remove(left["timer"])
+    except (ReferenceError, RuntimeError, TypeError):
+        pass
+    wm.progress_end()
+    for win in wm.windows:
+        with context.temp_override(window=win):
+            win.workspace.status_text_set(None)
 
 
 def _finish_report(op, context, job):
@@ -59,6 +81,9 @@ class _ModalSolves:
 
     def _start(self, context, modal):
         """Make the solves' configurations (``_configs``) and run them, modally or not."""
+        if _ACTIVE["job"] is not None:     # a file browser's execute is not checked by poll()
+            self.report({'ERROR'}, "MANIKIN: a solve is already running (Esc cancels it)")
+            return {'CANCELLED'}
         try:
             configs = self._configs(context)
         except Exception as exc:
@@ -80,11 +105,13 @@ class _ModalSolves:
         wm = context.window_manager
         self._queue = self._make_queue(context, configs)
         self._timer = None
+        self._scene = context.scene                 # written there, whichever scene is shown then
         if not self._queue.start(context):          # every source failed to gather: nothing to wait for
             return self._queue_finish(context)
         _ACTIVE["job"] = self._queue
         wm.progress_begin(0, 100)
         self._timer = wm.event_timer_add(0.1, window=context.window)
+        _ACTIVE["leftovers"] = {"timer": self._timer}
         wm.modal_handler_add(self)
         self._status(context)
         return {'RUNNING_MODAL'}
@@ -107,7 +134,7 @@ class _ModalSolves:
         ws = getattr(context, "workspace", None)
         if ws is not None:
             ws.status_text_set(None)
-        _ACTIVE["job"] = None
+        _ACTIVE.update(job=None, leftovers=None)
 
     def modal(self, context, event):
         q = self._queue
@@ -117,6 +144,16 @@ class _ModalSolves:
             return self._queue_finish(context)
         if event.type != 'TIMER':
             return {'PASS_THROUGH'}
+        try:
+            other = None if context.scene == self._scene else self._scene.name
+        except ReferenceError:                       # its scene was deleted: nowhere to write it
+            q.cancel()
+            self._cleanup(context)
+            return self._queue_finish(context)
+        if other is not None:                        # another scene is shown: wait for the user
+            self._status(context, f"MANIKIN: {q.stage} {100 * q.progress:.0f}%: show scene {other!r} "
+                                  "to write it (Esc to cancel)")
+            return {'RUNNING_MODAL'}
         running = q.poll(context)
         context.window_manager.progress_update(int(100 * q.progress))
         if running:
