@@ -129,3 +129,27 @@ def test_a_seated_take_at_eye_level_finds_its_floor(take):
     assert "the recording's origin is at eye level: under the typed 1.75 m, seated" in out.summary()
     assert out.floor == pytest.approx(-1.13, abs=0.015)
     assert np.abs(out.result.positions - ref.result.positions).max() < 0.02
+
+
+def test_a_take_that_stands_longer_than_it_sits_finds_its_seated_head():
+    """Standing most of the take (its median head a standing one), then sitting: the seated head
+    is the one of the frames it sits, so the eye-level floor lands under the performer (it was
+    put 0.42 m too high, under the standing head taken for a seated one) and the stature from the
+    seated head is not 1.37 times the performer's."""
+    import copy
+    body = make_body(1.75)
+    rec, pos, _ = seated_recording(body, duration=3.3, stand_first=True)     # stands 1.5 s, sits from 2.5 s
+    low = copy.deepcopy(rec)
+    for st in low.streams.values():
+        st.pos[:, 2] -= 1.45
+    out = cs.solve_recording(low, cs.SolveSettings(fps=30.0, posture="seated", height=1.75, calibration="MEASURE"))
+    assert out.floor == pytest.approx(-1.45, abs=0.02), out.floor
+    late = out.result.positions[-8:]
+    np.testing.assert_allclose(late[:, J["pelvis"], 2], pos[-1, J["pelvis"], 2], atol=0.03)
+    from blender_manikin.core.seated import stood_and_sat
+    head = pos[:, J["head"], 2]
+    drop = head.max() - SEATED_HEAD_HEIGHT * 1.75
+    stood, seated_head = stood_and_sat(head, drop)
+    assert stood and seated_head == pytest.approx(SEATED_HEAD_HEIGHT * 1.75, abs=0.02)
+    sitting = head[pos[:, J["pelvis"], 2] < pos[0, J["pelvis"], 2] - 0.3]
+    assert stood_and_sat(sitting, drop) == (False, pytest.approx(np.median(sitting)))   # seated all along

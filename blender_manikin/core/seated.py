@@ -112,6 +112,30 @@ def seat_legs(result, floor=0.0, legs=(0, 1)):
                                contacts=contacts, with_body=None, _fk=None)
 
 
+#: a take whose head stands near its standing height (the 90th percentile) for a tenth of it and
+#: sits (more than half the standing-to-seated drop below that, within a quarter of the drop of
+#: the seated height) for another tenth was partly made standing (:func:`stood_and_sat`)
+STOOD_FRACTION = 0.10
+
+
+def stood_and_sat(head_z, drop):
+    """``(stood, seated_head)``: whether head heights ``head_z`` (metres) show a performer who
+    stood for a part of the take and sat for another (:data:`STOOD_FRACTION` of it each), the
+    seated head ``drop`` metres below the standing one; and the median head height of the frames
+    it sat (all frames' when it did not stand).  A take that stands and sits: its median head
+    may be a standing one, which is no seated head height."""
+    z = np.asarray(head_z, np.float64)
+    z = z[np.isfinite(z)]
+    if not z.size:
+        return False, float("nan")
+    hi = float(np.percentile(z, 90))
+    low = z < hi - 0.5 * float(drop)
+    if (STOOD_FRACTION <= low.mean() <= 1.0 - STOOD_FRACTION
+            and abs(float(np.median(z[low])) - (hi - float(drop))) < 0.25 * float(drop)):
+        return True, float(np.median(z[low]))
+    return False, float(np.median(z))
+
+
 def stature_from_seated_head(head_height):
     """Stature (metres) of a performer whose head joint stands ``head_height`` metres above the
     floor while seated (:data:`SEATED_HEAD_HEIGHT`)."""

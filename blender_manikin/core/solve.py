@@ -505,9 +505,15 @@ def eye_level_floor(settings: SolveSettings, targets: TrackerTargets):
             stature = EYE_LEVEL_STATURE
             why = f"under a {stature:.2f} m performer: no T-pose to measure, type the height"
     if str(settings.posture or "").lower() == "seated":
+        from .seated import stood_and_sat
         z = np.asarray(targets.pos["head"], np.float64)[:, 2]
-        floor = float(np.nanmedian(z)) - SEATED_HEAD_HEIGHT * stature
-        why += ", seated"
+        stood, seated_head = stood_and_sat(z, head_height_for(stature, settings.sole) - SEATED_HEAD_HEIGHT * stature)
+        if stood:           # the standing frames put the floor under the standing head
+            floor = head - head_height_for(stature, settings.sole)
+            why += ", seated and standing"
+        else:
+            floor = seated_head - SEATED_HEAD_HEIGHT * stature
+            why += ", seated"
     else:
         floor = head - head_height_for(stature, settings.sole)
     return floor, f"the recording's origin is at eye level: {why}"
@@ -568,7 +574,7 @@ def calibrate(settings: SolveSettings, targets: TrackerTargets, times, offsets):
         if not cand.plausible:
             cand = cal.find_apose(targets, t0=t0)
         if str(settings.posture or "").lower() == "seated" and not settings.height:
-            seated = _seated_stature(targets, times, cand)
+            seated = _seated_stature(targets, times, cand, settings.sole)
             if seated is not None:          # no standing T-pose: the seated head sizes the body
                 info.append(f"stature {seated:.2f} m from the seated head height (its "
                             f"{SEATED_HEAD_HEIGHT:.3f}; type the height to be sure)")
@@ -618,10 +624,12 @@ def calibrate(settings: SolveSettings, targets: TrackerTargets, times, offsets):
 STANDING_TPOSE_RISE = 0.15
 
 
-def _seated_stature(targets, times, cand):
+def _seated_stature(targets, times, cand, sole=None):
     """The stature (metres) a seated take's head implies (:func:`.seated.stature_from_seated_head`
     of its median height), or None when ``cand`` is a T-pose made standing (its head
-    :data:`STANDING_TPOSE_RISE` above the median): that one sizes the body as usual."""
+    :data:`STANDING_TPOSE_RISE` above the median): that one sizes the body as usual.  A take
+    that also stands (:func:`.seated.stood_and_sat`) has its seated head from the frames it sits."""
+    from .seated import stood_and_sat
     z = targets.pos["head"][:, 2]
     ok = np.asarray(targets.valid.get("head", np.ones(len(z), bool)), bool) & np.isfinite(z)
     median = float(np.median(z[ok] if ok.any() else z))
@@ -629,7 +637,10 @@ def _seated_stature(targets, times, cand):
         k = int(np.clip(np.searchsorted(times, cand.time), 0, len(z) - 1))
         if z[k] - median > STANDING_TPOSE_RISE:
             return None
-    return stature_from_seated_head(median)
+    hi = float(np.percentile(z[ok] if ok.any() else z, 90))
+    standing = (hi - sk.sole_or_default(sole)) / sk.PROPORTIONS["head_height"]
+    stood, seated_head = stood_and_sat(z[ok] if ok.any() else z, hi - SEATED_HEAD_HEIGHT * standing)
+    return stature_from_seated_head(seated_head if stood else median)
 
 
 #: metres the standing head may stand above or below where a typed height puts it before the
