@@ -162,3 +162,49 @@ def test_smooth_locomotion_is_walked(example):
         strides.append((min(fwd), min(lift)))
     assert strides[0][0] < 0.15 and strides[1][0] > 0.4           # each foot swings 40 cm or more
     assert strides[1][1] > 0.08                                   # and lifts
+
+
+@pytest.mark.parametrize("second", ["next head sample", 0.08])
+def test_a_jump_right_after_another_is_measured_from_after_it(example, second):
+    """A teleport, then a snap turn on the very next head sample (an app that sets the position
+    and the facing in two updates), or a second teleport 0.08 s on: the head's motion before the
+    second is measured after the first (across it, the first jump looked like 8 m/s of motion and
+    the second was taken 9 cm and 4-5 degrees short, left in the take)."""
+    rec, base = example
+    head_t = rec.streams["head"].time
+    if second == "next head sample":
+        jumps = [(3.0, 0.0, (0.8, 0.0, 0.0)), (head_t[np.searchsorted(head_t, 3.0) + 1], 45.0, (0, 0, 0))]
+    else:
+        jumps = [(3.0, 0.0, (0.6, 0.0, 0.0)), (3.0 + second, 30.0, (0.0, 0.6, 0.0))]
+    jumped, composite = moved(rec, jumps)
+    found = find_rig_jumps(jumped)
+    assert len(found) == 2
+    for j, (time, turn, _) in zip(found, jumps):
+        assert j.time == pytest.approx(time, abs=0.015) and j.turn_deg == pytest.approx(turn, abs=1.0)
+    back = remove_rig_jumps(jumped, found)
+    for d, s in back.streams.items():
+        assert np.abs(s.pos - rec.streams[d].pos).max() < 0.02, d
+    keep = cs.solve_recording(jumped, cs.SolveSettings(fps=30.0))
+    err = np.linalg.norm(keep.result.positions - expected_positions(base, composite, [j.time for j in found]),
+                         axis=-1)
+    assert np.median(err) < 0.005 and np.percentile(err.max(1), 98) < 0.03
+
+
+@pytest.mark.parametrize("turn,shift", [
+    (0.0, (0.2, 0.0, 0.0)),         # a short teleport
+    (0.0, (0.0, 0.0, -0.25)),       # the app's floor height reset (seated / standing)
+    (5.0, (0.12, -0.10, 0.0)),      # a recentre or guardian reset: 16 cm and 5 degrees
+])
+def test_a_jump_of_the_space_under_30_cm_is_found(example, turn, shift):
+    """The space moved 15-30 cm in one sample (13-23 m/s at 90 Hz, no head moves so): found and
+    put back like a long teleport.  Solved as recorded, the joints were 5-33 cm off on 25-127
+    frames (the 25 cm drop: 127 frames, over 4 s)."""
+    rec, base = example
+    jumped, composite = moved(rec, [(3.0, turn, shift)])
+    found = find_rig_jumps(jumped)
+    assert [j.kind for j in found] == ["teleport"] and found[0].time == pytest.approx(3.0, abs=0.015)
+    assert np.abs(found[0].trans - composite[0][2]).max() < 0.02
+    keep = cs.solve_recording(jumped, cs.SolveSettings(fps=30.0))
+    assert "1 teleport (first at 3.01 s) solved as one motion and put back" in keep.summary()
+    err = np.linalg.norm(keep.result.positions - expected_positions(base, composite, [found[0].time]), axis=-1)
+    assert np.median(err) < 0.005 and np.percentile(err.max(1), 98) < 0.03

@@ -18,8 +18,9 @@ they stay out (the character's path continuous), as the user chooses.
 A jump between two consecutive valid head samples ``a`` and ``b`` (times ``ta < tb``) is:
 
 * a *teleport*: the head moves more than :data:`TELEPORT_MIN_M` and faster than
-  :data:`TELEPORT_MIN_SPEED` (no head moves 0.3 m in one sample at 30-120 Hz: a sprint is
-  about 8 m/s, 0.07 m a sample at 120 Hz, 0.27 m at 30 Hz);
+  :data:`TELEPORT_MIN_SPEED` (no head moves so in one sample at 30-120 Hz: a sprint is
+  about 8 m/s, 0.07 m a sample at 120 Hz, 0.27 m at 30 Hz; a recentre, a guardian reset or a
+  floor-height change moves the space 10-30 cm as well as metres);
 * a *snap turn*: the head turns about the vertical more than :data:`TURN_MIN_DEG` and faster than
   :data:`TURN_MIN_RATE` (the fastest head turns reach about 800°/s; snap turns are 15-90° in
   one sample, so a 45° turn is found at 30 Hz and above, a 15° one at 80 Hz and above);
@@ -48,7 +49,7 @@ from .rotations import matrix_to_quat, quat_to_matrix, twist_angle
 _Z = np.array([0.0, 0.0, 1.0])
 
 #: a teleport moves the head at least this far in one step (metres) ...
-TELEPORT_MIN_M = 0.3
+TELEPORT_MIN_M = 0.15
 #: ... and faster than this (m/s), so that a step across a gap of lost tracking is not one
 TELEPORT_MIN_SPEED = 8.0
 #: a snap turn turns the head at least this much about the vertical (degrees) ...
@@ -101,11 +102,13 @@ def _valid_samples(stream):
     return np.nonzero(ok)[0]
 
 
-def _head_motion_before(t, p, R, k):
-    """Head velocity (m/s) and turn rate about +Z (rad/s) over the samples before index ``k``."""
+def _head_motion_before(t, p, R, k, first=0):
+    """Head velocity (m/s) and turn rate about +Z (rad/s) over the samples before index ``k``,
+    from index ``first`` on (the first sample after the jump before: a span across it would take
+    that jump for motion)."""
     j = k - 1
     i = j
-    while i > 0 and t[j] - t[i - 1] <= VELOCITY_SPAN_S:
+    while i > first and t[j] - t[i - 1] <= VELOCITY_SPAN_S:
         i -= 1
     if i == j:
         return np.zeros(3), 0.0
@@ -148,6 +151,7 @@ def find_rig_jumps(recording: Recording) -> list:
     R = quat_to_matrix(head.quat[idx])
     hands = [recording.streams[d] for d in ("left_hand", "right_hand") if d in recording.streams]
     jumps = []
+    after = 0                      # the first head sample after the last jump found
     dt = np.diff(t)
     step = np.linalg.norm(p[1:] - p[:-1], axis=-1)
     turn = np.abs(_wrap(_yaw(R[1:] @ np.swapaxes(R[:-1], -1, -2))))
@@ -156,7 +160,7 @@ def find_rig_jumps(recording: Recording) -> list:
         | ((turn > np.radians(TURN_MIN_DEG)) & (turn > np.radians(TURN_MIN_RATE) * dt)))
     for c in np.nonzero(candidate)[0]:
         a, b = c, c + 1
-        v, w = _head_motion_before(t, p, R, b)
+        v, w = _head_motion_before(t, p, R, b, after)
         h = t[b] - t[a]
         yaw = _wrap(_yaw(R[b] @ R[a].T) - w * h)
         rot = rot_z(yaw)
@@ -176,6 +180,7 @@ def find_rig_jumps(recording: Recording) -> list:
             continue
         kind = "teleport and turn" if teleport and turned else ("teleport" if teleport else "snap turn")
         jumps.append(RigJump(float(t[b]), float(t[a]), rot, trans, kind))
+        after = b
     return jumps
 
 
