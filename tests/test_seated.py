@@ -153,3 +153,35 @@ def test_a_take_that_stands_longer_than_it_sits_finds_its_seated_head():
     assert stood and seated_head == pytest.approx(SEATED_HEAD_HEIGHT * 1.75, abs=0.02)
     sitting = head[pos[:, J["pelvis"], 2] < pos[0, J["pelvis"], 2] - 0.3]
     assert stood_and_sat(sitting, drop) == (False, pytest.approx(np.median(sitting)))   # seated all along
+
+
+def test_seated_feet_stay_planted_while_the_hips_sway(take):
+    """Seated at a desk, the head turning and a hand reaching: the solved hips sway with the torso,
+    and the seated feet under them slid with them (5-9 cm back and forth, 24-29 cm of travel over
+    8 s) though marked planted; they are held where they stand."""
+    body, rec, pos = take
+    out = cs.solve_recording(rec, cs.SolveSettings(fps=30.0, posture="seated", height=1.75, calibration="MEASURE"))
+    P = out.result.positions
+    assert out.result.contacts.all()
+    for a in ("left_ankle", "right_ankle"):
+        xy = P[:, J[a], :2]
+        assert np.linalg.norm(np.diff(xy, axis=0), axis=-1).sum() < 0.01, a
+
+
+def test_seated_feet_go_round_with_a_turning_chair():
+    """hold_seated_feet: held while the pelvis keeps its heading, carried round while the chair
+    turns (90 degrees in a second), held again after, no jump."""
+    from blender_manikin.core.features import rot_z
+    from blender_manikin.core.seated import hold_seated_feet
+    fps, T = 30.0, 120
+    yaw = np.radians(np.clip((np.arange(T) - 45) / fps, 0.0, 1.0) * 90.0)          # turns from 1.5 to 2.5 s
+    pelvis = rot_z(yaw)
+    sway = 0.04 * np.sin(np.arange(T) / 5.0)
+    ankles = np.stack([np.stack([0.1 * np.cos(yaw) + sway, 0.1 * np.sin(yaw) - 0.4, np.full(T, 0.08)], -1)] * 2, 1)
+    held = hold_seated_feet(ankles, pelvis, fps)
+    still_before, still_after = slice(0, 40), slice(85, T)
+    for part in (still_before, still_after):
+        assert np.ptp(held[part, 0, :2], axis=0).max() < 1e-9                        # planted
+    assert np.linalg.norm(held[80, 0, :2] - held[40, 0, :2]) > 0.1                   # went round
+    assert np.abs(held[..., 2] - ankles[..., 2]).max() == 0.0                        # on the floor as set
+    assert np.linalg.norm(np.diff(held[:, 0], axis=0), axis=-1).max() < 0.03         # eased, no jump

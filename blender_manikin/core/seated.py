@@ -11,7 +11,9 @@ pelvis's heading, :data:`KNEE_SPREAD_DEG` out) to a knee whose shin stands uprig
 on the floor, so the knee is as high above the floor as the shank is long over the standing
 ankle.  The hips stay where the torso put them: a lower seat bends the knees more, a higher
 one less (a hip more than a thigh above the knee's height hangs the thigh straight down).  Both
-feet are planted.  The legs are solved by the same analytic limb solver (their swivel from the
+feet are planted: held where they stand while the pelvis keeps its heading (:func:`hold_seated_feet`:
+the hips sway as the performer leans and looks round, the feet do not), moved on when the chair
+turns.  The legs are solved by the same analytic limb solver (their swivel from the
 knee placed so), so the swivel sliders still turn the knees afterwards.
 
 A seated take's head says little about the performer's standing height, so the stature is the
@@ -71,6 +73,32 @@ def seated_leg_targets(hips, pelvis_rot, body, floor=0.0):
     return knees, ankles, ankle_rot
 
 
+#: degrees per second the pelvis may turn while the seated feet stay planted; a turn of the chair
+#: (faster) lets them go round with it
+SEATED_TURN_RATE = 30.0
+#: metres a seated foot is held away from where the seat puts it before it is set down anew
+#: (:func:`.pipeline.lock_planted_feet`'s ``max_drift``): the hips sway with the torso as the
+#: performer leans and turns the head, the feet do not
+SEATED_FOOT_DRIFT = 0.15
+
+
+def hold_seated_feet(ankles, pelvis_rot, fps):
+    """Seated ankles ``(T, L, 3)`` (metres) held where they stand, on the floor plane (x, y), while
+    the pelvis's heading ``pelvis_rot`` ``(T, 3, 3)`` turns slower than :data:`SEATED_TURN_RATE`
+    (the feet are planted: the seat puts them under knees that sway with the hips); a swivel
+    chair's turn, or a drift past :data:`SEATED_FOOT_DRIFT`, moves them on, eased
+    (:func:`.pipeline.lock_planted_feet`).  Returns a new array."""
+    from .pipeline import lock_planted_feet
+    ankles = np.asarray(ankles, np.float64)
+    T = ankles.shape[0]
+    if T < 2:
+        return ankles.copy()
+    yaw = np.unwrap(heading_yaw(np.asarray(pelvis_rot, np.float64)))
+    rate = np.degrees(np.abs(np.gradient(yaw))) * float(fps)
+    still = np.repeat((rate < SEATED_TURN_RATE)[:, None], ankles.shape[1], axis=1).astype(np.float64)
+    return lock_planted_feet(ankles, still, threshold=0.5, axes=(0, 1), max_drift=SEATED_FOOT_DRIFT, fps=fps)
+
+
 def seat_legs(result, floor=0.0, legs=(0, 1)):
     """A :class:`.pose_result.PoseResult` with its legs seated (see the module docstring): the
     torso, arms and root as in ``result``, the legs ``legs`` (0 left, 1 right; a leg whose foot
@@ -91,6 +119,7 @@ def seat_legs(result, floor=0.0, legs=(0, 1)):
     hips = all_hips[:, list(legs)]
     parent = np.repeat(pelvis[:, None], len(legs), axis=1)
     knees, ankles, ankle_rot = (a[:, list(legs)] for a in seated_leg_targets(all_hips, pelvis, body, floor))
+    ankles = hold_seated_feet(ankles, pelvis, result.fps)
     swivel_legs = ls.swivel_from_positions(hips, knees, ankles, parent, limb_ids=ids)
     sol = ls.solve_limbs(hips, ankles, swivel_legs, body.limb_lengths()[ids], parent, end_rot=ankle_rot,
                          limb_ids=ids)
