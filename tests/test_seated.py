@@ -185,3 +185,20 @@ def test_seated_feet_go_round_with_a_turning_chair():
     assert np.linalg.norm(held[80, 0, :2] - held[40, 0, :2]) > 0.1                   # went round
     assert np.abs(held[..., 2] - ankles[..., 2]).max() == 0.0                        # on the floor as set
     assert np.linalg.norm(np.diff(held[:, 0], axis=0), axis=-1).max() < 0.03         # eased, no jump
+
+
+def test_a_tall_seated_performer_solved_standing_is_told_to_set_seated():
+    """A 2.0 m performer on a seat at knee height, solved standing: the standing head height gives a
+    1.44 m body, a stature in the plausible range (so no stature note), but the hands reach 1.58 m
+    apart, 1.1 times it: the summary says to check whether the performer sits.  Solved seated, or
+    with a standing T-pose's body, nothing is said."""
+    body = make_body(2.0)
+    rec, pos, _ = seated_recording(body)
+    out = cs.solve_recording(rec, cs.SolveSettings(fps=30.0))
+    assert 1.40 <= out.body.stature < 1.5
+    assert "check whether the performer sits: the hands reach" in out.summary(), out.summary()
+    assert "set the Posture to Seated (--posture seated)" in out.summary()
+    seated = cs.solve_recording(rec, cs.SolveSettings(fps=30.0, posture="seated"))
+    assert "check whether the performer sits" not in seated.summary()
+    typed = cs.solve_recording(rec, cs.SolveSettings(fps=30.0, height=2.0))
+    assert "check whether the performer sits" not in typed.summary()

@@ -155,7 +155,7 @@ class SolveOutcome:
             parts.append(f"stature {self.body.stature:.2f} m")
         for note in self.info:
             if note.startswith(("offsets ", "trimmed to", "calibrated", "calibration: ", "no T-pose found",
-                                "arm span", "estimated stature", "stature ",
+                                "arm span", "estimated stature", "stature ", "check whether the performer sits",
                                 "head stands", "floor at",
                                 "left/right labels swapped back", "left and right controllers swapped back",
                                 "left and right foot trackers swapped back", "pelvis and left foot trackers",
@@ -691,6 +691,12 @@ def default_solver(targets, body, progress=None, model=None, overlap=None):
     return pipeline.solve(targets, body, runner=path, progress=progress, overlap=overlap)
 
 
+#: an arm span from the reach more than this times the stature the standing head height gave: a
+#: performer seated, solved standing (adults' arm spans are 0.95-1.06 of their stature; a 2.0 m
+#: performer on a seat at knee height, solved standing: a 1.44 m body reaching 1.58 m, 1.10)
+ARM_SPAN_SITS_RATIO = 1.08
+
+
 def adapt_arms(settings: SolveSettings, outcome: SolveOutcome, result, solver, progress=None):
     """Lengthen arms built from proportions when the hands cannot reach their trackers.
 
@@ -717,6 +723,14 @@ def adapt_arms(settings: SolveSettings, outcome: SolveOutcome, result, solver, p
     after = int((again.reach_error[:, :2] > 0.005).any(1).sum())
     outcome.info.append(f"arm span {new_span:.2f} m from the recording's reach (no T-pose; hands off their "
                         f"trackers on {before} frame(s) with proportional arms, {after} now)")
+    stature = float(body.stature)
+    if (not settings.height and str(settings.posture or "standing").lower() == "standing"
+            and new_span > ARM_SPAN_SITS_RATIO * stature and stature >= cal.PLAUSIBLE_STATURE[0]):
+        # arms this long for the body the head sized: the head is lower than a standing one's
+        outcome.info.append(f"check whether the performer sits: the hands reach {new_span:.2f} m apart, "
+                            f"{new_span / stature:.2f} times the {stature:.2f} m the standing head height gives "
+                            "(an arm span is about the stature); set the Posture to Seated (--posture seated), "
+                            "or type the height")
     outcome.body = body
     return again
 
