@@ -415,6 +415,42 @@ def test_swivel_tools_keep_the_animators_other_keys(live):
         swivel_tools.unregister()
 
 
+def test_swivel_tools_in_nla_tweak_mode_key_the_strips_frame(live):
+    """The take pushed into an NLA strip moved to start at frame 101, edited in tweak mode (Tab):
+    Key Swivel keys the action frame the strip shows at the current frame (as Blender's own
+    keying does), so the edit shows there; Reset on the current frame restores that key."""
+    from blender_manikin.operators import swivel_tools
+    res, obj, _, action, frames = live
+    swivel_tools.register()
+    try:
+        scene = bpy.context.scene
+        bpy.context.view_layer.objects.active = obj
+        ad = obj.animation_data
+        ad.action = None
+        strip = ad.nla_tracks.new().strips.new("take", 101, action)
+        ad.use_tweak_mode = True
+        assert ad.use_tweak_mode and ad.action == action
+        k = 7
+        shown = int(round(strip.frame_start + frames[k] - action.frame_range[0]))
+        prop = writer.SWIVEL_PROPS["left_arm"]
+        scene.frame_set(shown)
+        solved = float(obj[prop])
+        assert abs(solved - writer.unwrap_swivel(res.swivel)[k, 0]) < 1e-5
+        obj[prop] = solved + 1.0
+        assert bpy.ops.manikin.key_swivel(limb='left_arm') == {'FINISHED'}
+        f, v = lr.read_keys(lr.swivel_fcurve(obj, "left_arm"))
+        assert len(f) == T and f.max() == frames[-1]          # no key past the take
+        assert abs(v[k] - (solved + 1.0)) < 1e-6
+        scene.frame_set(shown)
+        assert abs(float(obj[prop]) - (solved + 1.0)) < 1e-5
+        assert bpy.ops.manikin.reset_swivel(limb='left_arm', scope='CURRENT') == {'FINISHED'}
+        scene.frame_set(shown)
+        assert abs(float(obj[prop]) - solved) < 1e-5
+    finally:
+        ad.use_tweak_mode = False
+        swivel_tools.unregister()
+
+
 def test_make_live_from_fk_solve_operator():
     """The 'Make Live Rig' button reads a plain solve action back and converts it exactly."""
     from blender_manikin.operators import swivel_tools

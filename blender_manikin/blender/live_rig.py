@@ -971,8 +971,27 @@ def reset_swivel(obj, limbs, frame_start=None, frame_end=None):
     return done
 
 
+def action_frame(obj, frame: float) -> float:
+    """The frame of ``obj``'s action shown at scene ``frame``: the same frame, except in NLA tweak
+    mode, where the edited strip's action is mapped (the strip's start, scale and repeat) as
+    Blender's own keying maps it."""
+    ad = obj.animation_data
+    if ad is not None and ad.use_tweak_mode and hasattr(ad, "nla_tweak_strip_time_to_scene"):
+        return float(ad.nla_tweak_strip_time_to_scene(float(frame), invert=True))
+    return frame
+
+
+def action_frame_range(obj, frame_start, frame_end):
+    """:func:`action_frame` of a scene frame range (None ends kept), in increasing order."""
+    if frame_start is None or frame_end is None:
+        return frame_start, frame_end
+    a, b = action_frame(obj, frame_start), action_frame(obj, frame_end)
+    return min(a, b), max(a, b)
+
+
 def key_swivel(obj, limbs, frame: float, values=None):
-    """Key the swivel of ``limbs`` at scene ``frame`` (the curve's other keys are not touched).
+    """Key the swivel of ``limbs`` at ``frame`` of the action (the scene's frame, except in NLA tweak
+    mode: :func:`action_frame`; the curve's other keys are not touched).
 
     values: limb -> radians; default each property's current value (what the
     slider shows, including unkeyed edits).  An existing key at ``frame`` takes the
