@@ -68,6 +68,19 @@ def expected_positions(base, composite, starts):
     return P
 
 
+def _found_where_made(rec, jumped, jumps):
+    """The jumps :func:`find_rig_jumps` finds in ``jumped`` (``rec`` moved by ``jumps``, as
+    :func:`moved` takes them): each at its time and turn, and taken out, the take is ``rec``'s
+    motion again (within the head's motion in one sample)."""
+    found = find_rig_jumps(jumped)
+    for j, (time, turn, _) in zip(found, jumps):
+        assert j.time == pytest.approx(time, abs=0.015) and j.turn_deg == pytest.approx(turn, abs=1.0)
+    back = remove_rig_jumps(jumped, found)
+    for d, s in back.streams.items():
+        assert np.abs(s.pos - rec.streams[d].pos).max() < 0.02, d
+    return found
+
+
 @pytest.mark.parametrize("jumps,kinds", [
     ([(3.5, 0.0, (2.0, -1.0, 0.0))], ["teleport"]),
     ([(2.5, 45.0, (0, 0, 0)), (4.6, -30.0, (0, 0, 0))], ["snap turn", "snap turn"]),
@@ -76,14 +89,8 @@ def expected_positions(base, composite, starts):
 def test_jumps_are_found_solved_as_one_motion_and_put_back(example, jumps, kinds):
     rec, base = example
     jumped, composite = moved(rec, jumps)
-    found = find_rig_jumps(jumped)
+    found = _found_where_made(rec, jumped, jumps)
     assert [j.kind for j in found] == kinds
-    for j, (time, turn, _) in zip(found, jumps):
-        assert j.time == pytest.approx(time, abs=0.015) and j.turn_deg == pytest.approx(turn, abs=1.0)
-    # taken out, the take is the original motion again (within the head's motion in one sample)
-    back = remove_rig_jumps(jumped, found)
-    for d, s in back.streams.items():
-        assert np.abs(s.pos - rec.streams[d].pos).max() < 0.02, d
 
     keep = cs.solve_recording(jumped, cs.SolveSettings(fps=30.0))
     assert f"(first at {found[0].time:.2f} s) solved as one motion and put back" in keep.summary()
@@ -177,13 +184,8 @@ def test_a_jump_right_after_another_is_measured_from_after_it(example, second):
     else:
         jumps = [(3.0, 0.0, (0.6, 0.0, 0.0)), (3.0 + second, 30.0, (0.0, 0.6, 0.0))]
     jumped, composite = moved(rec, jumps)
-    found = find_rig_jumps(jumped)
+    found = _found_where_made(rec, jumped, jumps)
     assert len(found) == 2
-    for j, (time, turn, _) in zip(found, jumps):
-        assert j.time == pytest.approx(time, abs=0.015) and j.turn_deg == pytest.approx(turn, abs=1.0)
-    back = remove_rig_jumps(jumped, found)
-    for d, s in back.streams.items():
-        assert np.abs(s.pos - rec.streams[d].pos).max() < 0.02, d
     keep = cs.solve_recording(jumped, cs.SolveSettings(fps=30.0))
     err = np.linalg.norm(keep.result.positions - expected_positions(base, composite, [j.time for j in found]),
                          axis=-1)
