@@ -232,6 +232,11 @@ def test_pose2sim_trc_markers_are_read_as_halpe26_and_solved(tmp_path, motion):
     write_trc(bad, body, pos, world, markers=tuple(m for m in POSE2SIM_HALPE26 if m != "LKnee"))
     with pytest.raises(RecordingError, match=r"markers.trc, line 4: the TRC's markers .* lack left_knee"):
         read_keypoints(bad)
+    lines = path.read_text().splitlines()
+    lines[8] = lines[8].replace("\t", "\tabc\t", 1)
+    (tmp_path / "cell.trc").write_text("\n".join(lines) + "\n")
+    with pytest.raises(RecordingError, match=r"cell.trc, line 9: 'abc' is not a number"):
+        read_keypoints(tmp_path / "cell.trc")
     (tmp_path / "not.trc").write_text("Frame#\tTime\n")
     with pytest.raises(RecordingError, match="not a TRC file"):
         read_keypoints(tmp_path / "not.trc")

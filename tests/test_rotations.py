@@ -205,3 +205,6 @@ def test_axis_angle_continuous_keeps_the_rotation_and_its_axis():
     np.testing.assert_allclose(rot.axis_angle_to_matrix(out[:, 1:] * out[:, :1]),
                                rot.axis_angle_to_matrix(axis * ang[:, None]), atol=1e-12)
     assert np.all(np.isfinite(out)) and np.abs(out[3, 1:] - out[2, 1:]).max() < 1e-12     # no axis at 0
+    # no rotation before any axis was seen: Blender's default axis, +Y
+    lead = rot.quat_to_axis_angle_continuous(np.concatenate([[[1.0, 0, 0, 0]] * 2, qs[:2]]))
+    np.testing.assert_allclose(lead[:2], [[0.0, 0, 1, 0]] * 2, atol=1e-12)

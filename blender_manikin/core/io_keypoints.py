@@ -531,23 +531,25 @@ def _load_trc(path, rate):
     # the layout whose points the markers cover most; of equals, the one with the fewest points
     best = max(kl.LAYOUTS, key=lambda n: (sum(p in points for p in kl.LAYOUTS[n].points), -len(kl.LAYOUTS[n].points)))
     lay = kl.LAYOUTS[best]
+    width = 2 + 3 * len(names)
     rows, lines_no = [], []
     for i, line in enumerate(lines[5:], start=6):
-        if not line.strip():
-            continue
-        c = [v.strip() for v in cells(line)]
-        vals = np.full(2 + 3 * len(names), np.nan)
-        for k, v in enumerate(c[:len(vals)]):
-            if v and v.lower() != "nan":
-                try:
-                    vals[k] = float(v)
-                except ValueError:
-                    raise RecordingError(f"{shown(v)} is not a number", path=path, line=i) from None
-        rows.append(vals)
-        lines_no.append(i)
+        if line.strip():              # missing trailing cells (markers lost) and empty ones are NaN
+            c = [v.strip() or "nan" for v in cells(line)][:width]
+            rows.append(c + ["nan"] * (width - len(c)))
+            lines_no.append(i)
     if not rows:
         raise RecordingError("no data rows after the TRC header", path=path)
-    data = np.array(rows)
+    try:
+        data = np.array(rows, dtype=np.float64)         # one conversion of the whole table
+    except ValueError:
+        for row, i in zip(rows, lines_no):              # the first cell that is not a number, and its line
+            for v in row:
+                try:
+                    float(v)
+                except ValueError:
+                    raise RecordingError(f"{shown(v)} is not a number", path=path, line=i) from None
+        raise
     M = data[:, 2:].reshape(len(rows), len(names), 3)
     X = np.full((len(rows), len(lay.points), 3), np.nan)
     for k, p in enumerate(lay.points):

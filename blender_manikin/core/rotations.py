@@ -520,10 +520,12 @@ def quat_to_axis_angle_continuous(q):
     v = q[..., 1:]
     s = vector_norm(v)
     angle = 2.0 * np.arctan2(s, q[..., 0])
-    axis = np.where((s > 1e-9)[..., None], v / np.maximum(s, 1e-12)[..., None], np.nan)
-    last = np.broadcast_to(np.array([0.0, 1.0, 0.0]), axis.shape[1:]).copy()
-    for t in range(axis.shape[0]):                        # carry the last axis over axis-less frames
-        bad = np.isnan(axis[t, ..., 0])
-        axis[t][bad] = last[bad]
-        last = axis[t]
+    seen = s > 1e-9
+    axis = v / np.maximum(s, 1e-12)[..., None]
+    # carry the last axis over axis-less frames: each frame's latest seen frame (-1: none yet, +Y)
+    T = seen.shape[0]
+    frame = np.arange(T).reshape((T,) + (1,) * (seen.ndim - 1))
+    last = np.maximum.accumulate(np.where(seen, frame, -1), axis=0)
+    carried = np.take_along_axis(axis, np.maximum(last, 0)[..., None], axis=0)
+    axis = np.where((last >= 0)[..., None], carried, np.array([0.0, 1.0, 0.0]))
     return np.concatenate([angle[..., None], axis], -1)
