@@ -268,6 +268,48 @@ def cmu_clip(body, pos, rot, name="synthetic_cmu", fps=120.0, scale=CMU_UNIT,
     return _build(js, pos, rot, scale, chans, {"Hips": pos[:, J["pelvis"]]}, name, 1.0 / fps)
 
 
+def mixamo_joints(body: skeleton.Body, prefix: str = "mixamorig:"):
+    """Mixamo's rig (``prefix`` + names): Hips, Spine, Spine1, Spine2 at the body's pelvis and
+    spine1-3, Neck on Spine2, a T-pose zero pose with world-aligned frames (a BVH as Blender
+    writes from Mixamo's FBX)."""
+    p = body.rest_positions()
+    M, f, n = M_YUP, 0.4, prefix
+    js = [SrcJoint(n + "Hips", None, "pelvis", M, p[J["pelvis"]])]
+    for side, S in (("left", "Left"), ("right", "Right")):
+        js += [
+            SrcJoint(f"{n}{S}UpLeg", n + "Hips", f"{side}_hip", M, p[J[f"{side}_hip"]]),
+            SrcJoint(f"{n}{S}Leg", f"{n}{S}UpLeg", f"{side}_knee", M, p[J[f"{side}_knee"]]),
+            SrcJoint(f"{n}{S}Foot", f"{n}{S}Leg", f"{side}_ankle", M, p[J[f"{side}_ankle"]]),
+            SrcJoint(f"{n}{S}ToeBase", f"{n}{S}Foot", f"{side}_foot", M, p[J[f"{side}_foot"]],
+                     end=0.06 * REST_FOOT_DIRECTION * np.array([1, 1, 0])),
+        ]
+    js += [
+        SrcJoint(n + "Spine", n + "Hips", "spine1", M, p[J["spine1"]]),
+        SrcJoint(n + "Spine1", n + "Spine", "spine2", M, p[J["spine2"]]),
+        SrcJoint(n + "Spine2", n + "Spine1", "spine3", M, p[J["spine3"]]),
+        SrcJoint(n + "Neck", n + "Spine2", "neck", M, p[J["neck"]]),
+        SrcJoint(n + "Head", n + "Neck", "head", M, p[J["head"]], end=np.array([0.0, 0.0, 0.18])),
+    ]
+    for side, S in (("left", "Left"), ("right", "Right")):
+        collar, shoulder, wrist = (p[J[f"{side}_{k}"]] for k in ("collar", "shoulder", "wrist"))
+        js += [
+            SrcJoint(f"{n}{S}Shoulder", n + "Spine2", f"{side}_collar", M, (collar - f * shoulder) / (1.0 - f)),
+            SrcJoint(f"{n}{S}Arm", f"{n}{S}Shoulder", f"{side}_shoulder", M, shoulder),
+            SrcJoint(f"{n}{S}ForeArm", f"{n}{S}Arm", f"{side}_elbow", M, p[J[f"{side}_elbow"]]),
+            SrcJoint(f"{n}{S}Hand", f"{n}{S}ForeArm", f"{side}_wrist", M, wrist,
+                     end=np.array([0.1 if side == "left" else -0.1, 0.0, 0.0])),
+        ]
+    return js
+
+
+def mixamo_clip(body, pos, rot, name="synthetic_mixamo", fps=30.0, scale=0.01, prefix="mixamorig:") -> BvhClip:
+    """Body motion as a Mixamo-rig BVH (centimetres by default, Y-up, faces +Z)."""
+    js = mixamo_joints(body, prefix)
+    chans = {j.name: CMU_CHANNELS for j in js}
+    chans[prefix + "Hips"] = CMU_ROOT_CHANNELS
+    return _build(js, pos, rot, scale, chans, {prefix + "Hips": pos[:, J["pelvis"]]}, name, 1.0 / fps)
+
+
 def relayout(clip: BvhClip, channels: Dict[str, Sequence[str]], default=None) -> BvhClip:
     """The same motion with other CHANNELS per joint (missing names keep theirs / ``default``)."""
     trans, rot = clip.local_transforms()

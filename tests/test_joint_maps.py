@@ -7,11 +7,11 @@ import pytest
 
 from blender_manikin.core import skeleton
 from blender_manikin.core.bvh import iter_bvh_sources, read_bvh, write_bvh
-from blender_manikin.core.joint_maps import (BANDAI, CMU, ORIENTED_JOINTS, REST_FOOT_PITCH, UNIT_CANDIDATES,
+from blender_manikin.core.joint_maps import (BANDAI, CMU, MIXAMO, ORIENTED_JOINTS, REST_FOOT_PITCH, UNIT_CANDIDATES,
                                              axis_conversion, clip_to_body_motion, detect_joint_map,
                                              estimate_floor, rest_pose_report, take_id_from_name)
 
-from fixtures_bvh import CMU_UNIT, bandai_clip, cmu_clip, synthetic_motion
+from fixtures_bvh import CMU_UNIT, bandai_clip, cmu_clip, mixamo_clip, synthetic_motion
 
 J = skeleton.J
 SHARED_ARCHIVE = os.path.join(os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__)))),
@@ -95,16 +95,35 @@ Frame Time: 0.0166667
 def test_a_mixamo_rig_is_not_taken_for_the_cmu_map(motion):
     """A Mixamo BVH has every cgspeed CMU joint name, but its Spine1 is mid-back and its Neck sits
     on Spine2: mapped as cgspeed, spine1-3 were bunched into the lowest 17 cm of the back and
-    spine3 -> neck was 34 cm, with no warning.  Detection checks the hierarchy too."""
+    spine3 -> neck was 34 cm, with no warning.  Detection checks the hierarchy, and the Mixamo map
+    (spine1-3 spread over Hips-Neck) takes it."""
     import io
     clip = read_bvh(io.BytesIO(MIXAMO_BVH.encode()), "Walking_01.bvh")
     assert not CMU.missing(clip.joint_names)
-    with pytest.raises(ValueError, match="cmu: another rig with its joint names .*'mixamorig:Neck' is a child "
-                                         "of 'mixamorig:Spine2', not of 'Spine1'"):
-        clip_to_body_motion(clip)
+    assert CMU.wrong_parents(clip.joint_names, clip.parents) == (
+        "'mixamorig:Neck' is a child of 'mixamorig:Spine2', not of 'Spine1'",)
+    assert detect_joint_map(clip.joint_names, clip.parents) is MIXAMO
+    m = clip_to_body_motion(clip)
+    assert m.joint_map == "mixamo" and m.unit_scale == 0.01
+    spine = m.positions[0, [J[n] for n in ("pelvis", "spine1", "spine2", "spine3", "neck")]]
+    steps = np.linalg.norm(np.diff(spine, axis=0), axis=1)
+    assert np.allclose(steps, 0.125, atol=1e-6)                   # 50 cm Hips-Neck, in quarters
     body, _, _, pos, rot = motion
     c = cmu_clip(body, pos[:2], rot[:2])
     assert detect_joint_map(c.joint_names, c.parents) is CMU
+
+
+@pytest.mark.parametrize("prefix", ["mixamorig:", ""])
+def test_mixamo_layout_roundtrip(motion, tmp_path, prefix):
+    """Body -> Mixamo-rig BVH (cm, Y-up, T-pose rest; with and without the namespace) -> map."""
+    body, _, _, pos, rot = motion
+    clip = _through_file(mixamo_clip(body, pos, rot, prefix=prefix), tmp_path, "Walking.bvh")
+    assert max(rest_pose_report(clip).values()) < 1e-6
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        m = clip_to_body_motion(clip)
+    assert m.joint_map == "mixamo" and m.unit_scale == 0.01 and m.fps == 30.0
+    _check_roundtrip(m, pos, rot, body)
 
 
 def test_bandai_layout_roundtrip(motion, tmp_path):

@@ -152,6 +152,23 @@ def test_cache_contents_and_split(cache):
     assert ds.make_split(index["clips"]) == split
 
 
+def test_cache_reads_a_mixamo_take(tmp_path):
+    """A Mixamo-rig BVH (as Blender writes it from Mixamo's FBX) is a training source: mapped by
+    the hierarchy (it has every cgspeed name), its body measured, the IK reproducing it."""
+    import sys
+    sys.path.insert(0, os.path.dirname(__file__))
+    from fixtures_bvh import mixamo_clip, synthetic_motion, write_fixture
+    src = tmp_path / "mixamo"
+    src.mkdir()
+    body, _, _, pos, R = synthetic_motion(sk.make_body(1.83), frames=60, fps=30.0, seed=11)
+    write_fixture(str(src / "Jumping.bvh"), mixamo_clip(body, pos, R, name="Jumping"))
+    files = ds.build_cache(str(src), str(tmp_path / "cache"), workers=1, verbose=False)
+    assert len(files) == 1
+    with np.load(files[0]) as z:
+        assert float(z["ik_error_max"]) < 0.02
+        assert float(z["stature"]) == pytest.approx(1.83, abs=0.02)
+
+
 def test_second_build_does_not_parse(cache, bvh_dir, monkeypatch):
     root, files = cache
 

@@ -67,6 +67,12 @@ not mapped; it moves everything through FK.  CMU's ``LeftShoulder`` joint
 sits at the neck base, so the SMPL-like collar is put 0.4 of the way along
 the clavicle (the body model puts its collar 0.04 H out of 0.105 H).
 
+Mixamo (``mixamorig:`` names, a BVH written from its FBX rig, e.g. by Blender's
+BVH export) has every cgspeed name, so it maps like CMU but for the spine:
+spine1-3 at the quarters of ``chain(Hips, Spine, Spine1, Spine2, Neck)``, and
+its ``Neck`` (on ``Spine2``, where cgspeed's is on ``Spine1``) is the neck base.
+The hierarchy tells the two rigs apart (:func:`detect_joint_map`).
+
 Orientations
 ------------
 
@@ -176,7 +182,7 @@ from .rotations import normalize
 
 __all__ = [
     "Point", "joint", "lerp", "chain", "Axis", "local", "bone", "rest", "OrientationSpec",
-    "JointMap", "BANDAI", "CMU", "JOINT_MAPS", "ORIENTED_JOINTS", "MotionClip",
+    "JointMap", "BANDAI", "CMU", "MIXAMO", "JOINT_MAPS", "ORIENTED_JOINTS", "MotionClip",
     "detect_joint_map", "get_joint_map", "axis_conversion", "detect_unit_scale",
     "estimate_floor", "clip_to_body_motion", "take_id_from_name", "rest_pose_report",
     "UNIT_CANDIDATES", "REST_FOOT_DIRECTION", "REST_FOOT_PITCH", "BANDAI_FOOT_PITCH",
@@ -424,9 +430,45 @@ def _cmu() -> JointMap:
                     description="CMU mocap, cgspeed BVH conversion (1/0.45 inch units, Y-up, faces +Z)")
 
 
+def _mixamo() -> JointMap:
+    """Mixamo's skeleton (``mixamorig:`` names), as a BVH written from its FBX rig (Blender's BVH
+    export: zero channels are the rig's T-pose with world-aligned frames).  Its three spine joints
+    are spaced over Hips-Neck like the body's (quarters of the arc); its ``Neck`` sits on
+    ``Spine2`` (the cgspeed rig's on ``Spine1``), which tells the two apart, since Mixamo has
+    every cgspeed name."""
+    spine = ("Hips", "Spine", "Spine1", "Spine2", "Neck")
+    pos = {
+        "pelvis": joint("Hips"),
+        "spine1": chain(spine, 0.25), "spine2": chain(spine, 0.5), "spine3": chain(spine, 0.75),
+        "neck": joint("Neck"), "head": joint("Head"),
+    }
+    for side, S in (("left", "Left"), ("right", "Right")):
+        pos[f"{side}_hip"] = joint(f"{S}UpLeg")
+        pos[f"{side}_knee"] = joint(f"{S}Leg")
+        pos[f"{side}_ankle"] = joint(f"{S}Foot")
+        pos[f"{side}_foot"] = joint(f"{S}ToeBase")
+        pos[f"{side}_collar"] = lerp(f"{S}Shoulder", f"{S}Arm", 0.4)
+        pos[f"{side}_shoulder"] = joint(f"{S}Arm")
+        pos[f"{side}_elbow"] = joint(f"{S}ForeArm")
+        pos[f"{side}_wrist"] = joint(f"{S}Hand")
+    ori = {
+        "pelvis": OrientationSpec("Hips", rest(), rest()),
+        "head": OrientationSpec("Head", rest(), rest()),
+        "left_wrist": OrientationSpec("LeftHand", rest(), rest()),
+        "right_wrist": OrientationSpec("RightHand", rest(), rest()),
+        "left_ankle": OrientationSpec("LeftFoot", bone("LeftFoot", "LeftToeBase"), rest()),
+        "right_ankle": OrientationSpec("RightFoot", bone("RightFoot", "RightToeBase"), rest()),
+    }
+    return JointMap("mixamo", pos, ori, unit_scale="auto", up="y", forward="z", rest_is_tpose=True,
+                    foot_pitch="auto", parents=(("Neck", "Spine2"),),
+                    description="Mixamo rig as BVH (mixamorig: names, T-pose rest, Y-up, faces +Z, "
+                                "units detected)")
+
+
 BANDAI = _bandai()
 CMU = _cmu()
-JOINT_MAPS: Dict[str, JointMap] = {"bandai": BANDAI, "cmu": CMU}
+MIXAMO = _mixamo()
+JOINT_MAPS: Dict[str, JointMap] = {"bandai": BANDAI, "cmu": CMU, "mixamo": MIXAMO}
 
 
 # --------------------------------------------------------------------------
@@ -779,7 +821,7 @@ def clip_to_body_motion(clip: BvhClip, joint_map: Union[None, str, JointMap] = N
     """Map a BVH clip onto the 22-joint body (metres, Blender axes, floor z = 0).
 
     ``joint_map``: a :class:`JointMap`, a registered name (``"bandai"``,
-    ``"cmu"``) or ``None``/``"auto"`` to detect it from the joint names.
+    ``"cmu"``, ``"mixamo"``) or ``None``/``"auto"`` to detect it from the joint names.
     ``unit_scale``: metres per source unit, ``"auto"``, or ``None`` for the
     map's default.  ``floor``: ``"auto"`` or the floor height in metres in
     converted axes.  ``up``/``forward`` override the map's source axes.
