@@ -189,3 +189,84 @@ def test_a_first_row_without_a_time_does_not_lose_every_time(tmp_path):
     from blender_manikin.core.resample import resample
     times = resample(rec, 30.0, floor=None, check_units=False)[0]
     assert times[-1] - times[0] == pytest.approx(t[-1] - t[1], abs=0.04)
+
+
+def raw_webxr_json(path, typed_arrays=False, lost=()):
+    """The take as a page logs raw WebXR: ``frame.getViewerPose(ref)`` and, per input source,
+    ``frame.getPose(source.gripSpace, ref)`` and ``frame.getPose(source.targetRaySpace, ref)``
+    under the spec's own names (``gripSpace``, ``targetRaySpace``), a gaze source with
+    ``handedness: "none"``, the left controller lost on the frames ``lost``; with
+    ``typed_arrays`` the matrices are ``Float32Array``s as ``JSON.stringify`` writes them
+    (``{"0": .., "15": ..}``)."""
+    t, pos, quat = _take()
+    ray = np.eye(4)                                   # the pointing ray: tilted and ahead of the grip
+    ray[:3, :3] = rot.quat_to_matrix(rot.axis_angle_to_quat(np.radians(-30.0) * np.array([1.0, 0.0, 0.0])))
+    ray[:3, 3] = [0.0, 0.05, -0.08]
+
+    def matrix(d, k, off=np.eye(4)):
+        p, q = from_blender(pos[d][k], quat[d][k], "openxr")
+        m = np.eye(4)
+        m[:3, :3], m[:3, 3] = rot.quat_to_matrix(q), p
+        flat = [float(v) for v in (m @ off).T.reshape(-1)]
+        return {"matrix": {str(i): v for i, v in enumerate(flat)} if typed_arrays else flat}
+    frames = []
+    for k in range(len(t)):
+        sources = [{"handedness": "none", "targetRayMode": "gaze", "targetRaySpace": {"transform": matrix("head", k)}}]
+        for h in ("left", "right"):
+            if h == "left" and k in lost:
+                continue
+            sources.append({"handedness": h, "targetRayMode": "tracked-pointer",
+                            "targetRaySpace": {"transform": matrix(f"{h}_hand", k, ray)},
+                            "gripSpace": {"transform": matrix(f"{h}_hand", k)}})
+        frames.append({"timestamp": 1000.0 * float(t[k]) + 81234.5,
+                       "viewerPose": {"transform": matrix("head", k), "emulatedPosition": False},
+                       "inputSources": sources})
+    with open(path, "w") as fh:
+        json.dump(frames, fh)
+    return path
+
+
+@pytest.mark.parametrize("typed_arrays", [False, True])
+def test_raw_webxr_grip_space_and_typed_arrays(tmp_path, typed_arrays):
+    """The spec's names: the hands are the ``gripSpace`` poses (not the ``targetRaySpace`` rays,
+    not the gaze source); a ``Float32Array`` matrix stringified as an object of indices is the
+    same matrix.  Before: "no columns for left_hand, right_hand" (``gripSpace`` was not a hand's
+    name) and, with typed arrays, "no columns for head, left_hand, right_hand"."""
+    rec = formats.load_recording(raw_webxr_json(tmp_path / "webxr.json", typed_arrays))
+    line = rec.metadata["detected"]
+    assert "hands=left_hand_gripSpace_transform_*/right_hand_gripSpace_transform_*" in line, line
+    assert "time=timestamp in ms" in line and "axes openxr" in line, line
+    _check_same_take(rec)
+
+
+def test_raw_webxr_a_lost_controller_is_missing_on_its_frames(tmp_path):
+    lost = set(range(40, 60)) | set(range(5))
+    rec = formats.load_recording(raw_webxr_json(tmp_path / "webxr.json", lost=lost))
+    t, pos, quat = _take()
+    s = rec.streams["left_hand"]
+    assert np.flatnonzero(~s.usable).tolist() == sorted(lost)
+    np.testing.assert_allclose(s.pos[s.usable], pos["left_hand"][s.usable], atol=1e-5)
+    np.testing.assert_allclose(s.time, t - t[0], atol=2e-6)
+    assert rec.streams["right_hand"].usable.all() and rec.streams["head"].usable.all()
+
+
+def test_nanosecond_timestamps(tmp_path):
+    """A Quest / OpenXR dump's ``timestampNs`` (``XrTime``, ns): read in ns, and the file is taken
+    for a recording in a folder.  Before: "no time column"."""
+    from blender_manikin.core.io_json import looks_like_recording
+    t, pos, quat = _take()
+    frames = []
+    for k in range(len(t)):
+        f = {"timestampNs": int(round(1e9 * t[k])) + 1234567890123456}
+        for d, n in (("head", "centerEyePose"), ("left_hand", "leftControllerPose"),
+                     ("right_hand", "rightControllerPose")):
+            p, q = from_blender(pos[d][k], quat[d][k], "openxr")
+            f[n] = {"position": dict(zip("xyz", map(float, p))),
+                    "orientation": dict(zip("xyzw", map(float, q[[1, 2, 3, 0]])))}
+        frames.append(f)
+    path = tmp_path / "quest.json"
+    path.write_text(json.dumps(frames))
+    assert looks_like_recording(path.read_text()[:4096])
+    rec = formats.load_recording(path)
+    assert "time=timestampNs in ns" in rec.metadata["detected"], rec.metadata["detected"]
+    _check_same_take(rec)

@@ -61,7 +61,7 @@ ALIASES = {
 
 #: endings a device's name may carry and still name it (``head_pose``, ``LeftHandAnchor``,
 #: ``left_grip``)
-_SUFFIXES = ("_pose", "_anchor", "_transform", "_grip")
+_SUFFIXES = ("_pose", "_anchor", "_transform", "_grip", "_space")
 
 
 #: name parts that scene objects carry around a device's name (this add-on's own empties, tools)

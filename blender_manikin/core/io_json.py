@@ -18,8 +18,12 @@ Unreal write quaternions in that order); a position's ``w`` (WebXR positions car
 dropped; a list of 16 numbers under a key naming a ``matrix`` is a column-major 4×4 rigid
 transform (WebXR's ``XRRigidTransform.matrix``), read as its position and rotation; a list of
 objects that each name their side (``"handedness": "left"``, ``"hand"``, ``"side"``) is keyed by
-it (``left_hand_...``), as WebXR's input sources are.  Errors name the file and the line of the
-frame (JSON Lines, or a list whose frames start on lines of their own).
+it (``left_hand_...``), as WebXR's input sources are: a source's ``gripSpace`` pose is its hand
+(``targetRaySpace``, the pointing ray, is no device's; a ``"none"`` source, gaze, is left out);
+an object of numbers keyed ``"0"``, ``"1"``, ... is the typed array ``JSON.stringify`` made it
+from (a ``Float32Array`` matrix).  A frame without a source is a missing sample of it.  Time
+keys in ns or us (``timestampNs``: OpenXR's ``XrTime``) are read in their unit.  Errors name the
+file and the line of the frame (JSON Lines, or a list whose frames start on lines of their own).
 """
 from __future__ import annotations
 
@@ -50,8 +54,8 @@ _HEAD_KEY = re.compile(r'"(?:head|hmd|headset|viewer|camera|main[ _]?camera|cent
 
 
 #: a time key with a number or a date-time string (a layout file's "time" holds an object)
-_TIME_KEY = re.compile(r'"(?:time|t|timestamp|seconds|secs|time_?s|time_?ms|timestamp_?ms|ms|delta_?time(?:_?ms|_?s)?|'
-                       r'dt(?:_?ms)?|frame(?:_?index|_?number)?|datetime|date_?time|time_?utc|utc_?time)"\s*:\s*[-+\d."]',
+_TIME_KEY = re.compile(r'"(?:time|t|timestamp|seconds|secs|time_?s|time_?ms|timestamp_?ms|ms|time(?:stamp)?_?(?:ns|us)|'
+                       r'delta_?time(?:_?ms|_?s)?|dt(?:_?ms)?|frame(?:_?index|_?number)?|datetime|date_?time|time_?utc|utc_?time)"\s*:\s*[-+\d."]',
                        re.IGNORECASE)
 
 
@@ -85,6 +89,8 @@ def flatten(obj, prefix="", out=None):
     """``{column: value}`` of one frame object (see the module doc); values are numbers or
     strings (an ISO 8601 time), other leaves (booleans, nulls, names) are left out."""
     out = {} if out is None else out
+    if isinstance(obj, dict) and obj and all(k == str(n) for n, k in enumerate(obj)):
+        obj = list(obj.values())            # a typed array as JSON.stringify writes it: {"0": .., "1": ..}
     if isinstance(obj, dict):
         parts = _has_pose_parts(tuple(obj))
         for k, v in obj.items():

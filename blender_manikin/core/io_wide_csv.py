@@ -66,6 +66,8 @@ _TIME_MS = ("timestamp", "time_ms", "timestamp_ms", "ms")
 _NAMED_MS = ("time_ms", "timestamp_ms", "ms")
 _DELTA_MS = ("delta_time_ms", "dt_ms", "delta_ms", "frame_time_ms")
 _DELTA_S = ("delta_time", "dt", "delta_time_s")
+#: time columns in nanoseconds / microseconds (OpenXR's ``XrTime``, Quest SDK dumps' ``timestampNs``)
+_TIME_NS_US = {"time_ns": "time_ns", "timestamp_ns": "time_ns", "time_us": "time_us", "timestamp_us": "time_us"}
 #: field separators, in the order a tie goes: commas; semicolons (spreadsheets and loggers on a
 #: locale with decimal commas, Unity's float.ToString() on a German or French machine); tabs
 DELIMITERS = (",", ";", "\t")
@@ -196,6 +198,9 @@ def parse_columns(header):
             continue
         if name in _TIME_S + _TIME_MS + _DELTA_MS + _DELTA_S and time_col is None:
             time_col = (i, name)
+            continue
+        if name in _TIME_NS_US and time_col is None:
+            time_col = (i, _TIME_NS_US[name])
             continue
         if name in _FRAMES:                   # a frame counter: the time when nothing better is there
             frame_col = frame_col or (i, "frames")
