@@ -59,13 +59,14 @@ def test_layout_joints_and_orientations_round_trip(layout, motion):
     np.testing.assert_allclose(b.positions[:, have], pos[:, have], atol=1e-9)
     assert np.isfinite(b.positions).all()
     # the orientations a layout shows are the body's (twist included), except the flat-roll feet
-    flat = {sk.J[f"{s}_ankle"] for s in ("left", "right")} if layout == "mediapipe33" else set()
+    flat = {sk.J[f"{s}_ankle"] for s in ("left", "right")} if layout in ("mediapipe33", "plugingait") else set()
     for j, R in b.end_rot.items():
         if j not in flat:
             np.testing.assert_allclose(R, world[:, j], atol=1e-6 if layout != "h36m17" else 0.7)
     shows = {"mediapipe33": {"head", "left_wrist", "right_wrist", "left_ankle", "right_ankle"},
              "coco17": {"head"}, "h36m17": {"head"}, "body25": {"head", "left_ankle", "right_ankle"},
-             "halpe26": {"head", "left_ankle", "right_ankle"}, "smpl22": set(), "smpl24": set()}[layout]
+             "halpe26": {"head", "left_ankle", "right_ankle"}, "smpl22": set(), "smpl24": set(),
+             "opencap": {"left_ankle", "right_ankle"}, "plugingait": {"head", "left_ankle", "right_ankle"}}[layout]
     assert {sk.JOINT_NAMES[j] for j in b.end_rot} == shows
     assert "left_wrist" in b.no_twist or "left_wrist" in shows
 

@@ -47,6 +47,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from . import keypoint_layouts as kl
+from . import marker_sets
 from . import rotations as rot
 from .plain import shown
 from .recording import RecordingError, UNITS, canonical_units, time_unit_of_step
@@ -396,7 +397,8 @@ def _layout_from_columns(cols):
     have = _point_prefixes(cols)
     best = None
     for name, lay in kl.LAYOUTS.items():
-        if all(p in have for p in lay.points) and (best is None or len(lay.points) > len(kl.LAYOUTS[best].points)):
+        if name not in kl.MARKER_LAYOUTS and all(p in have for p in lay.points) and (
+                best is None or len(lay.points) > len(kl.LAYOUTS[best].points)):
             best = name
     return best
 
@@ -525,11 +527,23 @@ def _load_trc(path, rate):
         raise RecordingError(f"DataRate {shown(header.get('DataRate'))} is not a number", path=path, line=3) from None
     points = [trc_point(n) for n in names]
     missing = [p for p in TRC_NEEDED if p not in points]
-    if missing:
+    # anatomical markers (OpenCap's r.ASIS_study ..., Plug-in Gait's LASI ...): their joint centres
+    # (also where the file has video keypoints too, as OpenCap's have: the markers place the hips
+    # better than a detector's hip points)
+    marker_set, set_missing = marker_sets.detect_marker_set(names)
+    if marker_set is not None and set_missing and missing:
+        raise RecordingError(f"the TRC's markers look like {marker_set}'s but lack "
+                             f"{', '.join(set_missing)} (found: {', '.join(names)})", path=path, line=4)
+    if missing and marker_set is None:
         raise RecordingError(f"the TRC's markers ({', '.join(names)}) lack {', '.join(missing)}: name them "
-                             "as a layout's points (RHip, LKnee, ...)", path=path, line=4)
+                             "as a layout's points (RHip, LKnee, ...) or use OpenCap's or Plug-in Gait's "
+                             "anatomical markers (r.ASIS_study, LASI, ...)", path=path, line=4)
+    if marker_set is not None and set_missing:
+        marker_set = None                       # video keypoints with an incomplete marker set: the keypoints
     # the layout whose points the markers cover most; of equals, the one with the fewest points
-    best = max(kl.LAYOUTS, key=lambda n: (sum(p in points for p in kl.LAYOUTS[n].points), -len(kl.LAYOUTS[n].points)))
+    video = [n for n in kl.LAYOUTS if n not in kl.MARKER_LAYOUTS]
+    best = marker_set or max(video, key=lambda n: (sum(p in points for p in kl.LAYOUTS[n].points),
+                                                   -len(kl.LAYOUTS[n].points)))
     lay = kl.LAYOUTS[best]
     width = 2 + 3 * len(names)
     rows, lines_no = [], []
@@ -552,13 +566,31 @@ def _load_trc(path, rate):
         raise
     M = data[:, 2:].reshape(len(rows), len(names), 3)
     X = np.full((len(rows), len(lay.points), 3), np.nan)
+    if marker_set is not None:
+        if units is None:                       # the ASIS markers' distance (about 0.25 m) tells the unit
+            k = [marker_sets.marker_key(n) for n in names]
+            ends = [k.index(f"{s}_asis" if marker_set == "opencap" else f"{s}asi") for s in "lr"]
+            pw = float(np.nanmedian(np.linalg.norm(M[:, ends[0]] - M[:, ends[1]], axis=-1)))
+            units = "m" if pw < 1.0 else "cm" if pw < 100.0 else "mm"
+        _, centres = marker_sets.joint_centres(names, M, UNITS[units], marker_set)
+        for k, p in enumerate(lay.points):
+            X[:, k] = centres[p]
+        time, rate = _trc_time(data, rate, file_rate)
+        return X, time, best, rate, units
     for k, p in enumerate(lay.points):
         if p in points:
             X[:, k] = M[:, points.index(p)]
+    time, rate = _trc_time(data, rate, file_rate)
+    return X, time, best, rate, units
+
+
+def _trc_time(data, rate, file_rate):
+    """``(time or None, rate)`` of a TRC's table: its Time column where every row has one, else
+    the rate given, else the header's ``DataRate``."""
     time = data[:, 1] if np.isfinite(data[:, 1]).all() else None
     if time is None and not rate and np.isfinite(file_rate) and file_rate > 0:
         rate = file_rate
-    return X, time, best, rate, units
+    return time, rate
 
 
 def _hand_knuckles(X, lay, hands):

@@ -1,5 +1,6 @@
-"""3D keypoint layouts (MediaPipe-33, COCO-17, Human3.6M-17, SMPL-22/24, OpenPose BODY_25, Halpe 26) and
-how each becomes the 22 joints of :mod:`.skeleton`.
+"""3D keypoint layouts (MediaPipe-33, COCO-17, Human3.6M-17, SMPL-22/24, OpenPose BODY_25, Halpe 26, and
+the joint centres :mod:`.marker_sets` makes of OpenCap's and Plug-in Gait's markers) and how each
+becomes the 22 joints of :mod:`.skeleton`.
 
 A keypoint array is ``(T, K, 3)`` float64, metres, Blender axes (+Z up, right-handed; see
 :mod:`.io_keypoints` for the conversion from files), NaN where a point is missing.  Each layout
@@ -72,6 +73,12 @@ _BODY25 = (
     "left_heel", "right_big_toe", "right_small_toe", "right_heel",
 )
 
+_LIMBS = tuple(f"{s}_{j}" for s in ("left", "right") for j in ("hip", "knee", "ankle", "shoulder", "elbow", "wrist"))
+#: joint centres made from anatomical markers (:mod:`.marker_sets`): OpenCap's (no head markers)
+_OPENCAP = _LIMBS + ("left_heel", "right_heel", "left_big_toe", "right_big_toe", "left_small_toe", "right_small_toe")
+#: and Vicon Plug-in Gait's (the head band's markers as the ears and nose; one toe marker)
+_PLUGINGAIT = _LIMBS + ("left_heel", "right_heel", "left_foot_index", "right_foot_index", "left_ear", "right_ear",
+                        "nose")
 
 #: the head joint (top of the neck) lies this far from the neck base to the head top
 _HEAD_ALONG_NECK = (PROPORTIONS["head_height"] - PROPORTIONS["neck_height"]) / (1.0 - PROPORTIONS["neck_height"])
@@ -106,11 +113,18 @@ LAYOUTS = {f.name: f for f in (
     KeypointLayout("smpl24", "SMPL 24 (22 + hands; 4D-Humans, SMPL fits)", _SMPL22 + ("left_hand", "right_hand")),
     KeypointLayout("body25", "OpenPose BODY_25", _BODY25),
     KeypointLayout("halpe26", "Halpe 26 (AlphaPose, RTMPose; Pose2Sim)", _HALPE26),
+    KeypointLayout("opencap", "joint centres from OpenCap's anatomical markers", _OPENCAP),
+    KeypointLayout("plugingait", "joint centres from Vicon Plug-in Gait markers", _PLUGINGAIT),
 )}
+
+#: layouts of joint centres made from anatomical markers (:mod:`.marker_sets`), chosen by the
+#: markers' names only: never by a point count or a detector's point names
+MARKER_LAYOUTS = ("opencap", "plugingait")
 
 _ALIASES = {"mediapipe": "mediapipe33", "blazepose": "mediapipe33", "freemocap": "mediapipe33",
             "coco": "coco17", "h36m": "h36m17", "human36m": "h36m17", "smpl": "smpl24",
-            "openpose": "body25", "halpe": "halpe26", "alphapose": "halpe26"}
+            "openpose": "body25", "halpe": "halpe26", "alphapose": "halpe26", "pig": "plugingait",
+            "vicon": "plugingait"}
 
 
 def canonical_layout(name) -> str:
@@ -142,7 +156,8 @@ def layout_from_names(names):
         by_key.setdefault(point_key(n), n)
     best = None
     for lay_name, lay in LAYOUTS.items():
-        if all(p in by_key for p in lay.points) and (best is None or len(lay.points) > len(LAYOUTS[best].points)):
+        if lay_name not in MARKER_LAYOUTS and all(p in by_key for p in lay.points) and (
+                best is None or len(lay.points) > len(LAYOUTS[best].points)):
             best = lay_name
     if best is None:
         return None
@@ -151,7 +166,7 @@ def layout_from_names(names):
 
 def layouts_with(count: int) -> list:
     """Names of the layouts with ``count`` points (what an unnamed ``(T, count, 3)`` array may be)."""
-    return [n for n, f in LAYOUTS.items() if len(f.points) == count]
+    return [n for n, f in LAYOUTS.items() if len(f.points) == count and n not in MARKER_LAYOUTS]
 
 
 @dataclass
