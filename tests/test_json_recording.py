@@ -270,3 +270,17 @@ def test_nanosecond_timestamps(tmp_path):
     rec = formats.load_recording(path)
     assert "time=timestampNs in ns" in rec.metadata["detected"], rec.metadata["detected"]
     _check_same_take(rec)
+
+
+def test_raw_webxr_with_only_pointing_rays_says_to_log_the_grip(tmp_path):
+    """A page that logged only ``targetRaySpace`` (the pointing ray, ahead of and tilted from the
+    hand) has no hands: refused, and the message says which pose to log instead."""
+    path = raw_webxr_json(tmp_path / "webxr.json")
+    frames = json.loads(path.read_text())
+    for f in frames:
+        for src in f["inputSources"]:
+            src.pop("gripSpace", None)
+    path.write_text(json.dumps(frames))
+    with pytest.raises(RecordingError, match=r"no columns for left_hand, right_hand .*targetRaySpace is its "
+                                             r"pointing ray, not the hand: log frame.getPose\(source.gripSpace"):
+        formats.load_recording(path)

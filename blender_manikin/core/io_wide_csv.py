@@ -455,8 +455,12 @@ def read_wide_table(path, header, hline, table, axes=None, units=None, layout=No
     euler = kinds == {"euler"}
     missing = [d for d in ("head", "left_hand", "right_hand") if d not in groups]
     if missing:
+        rays = [c for c in skipped if "targetray" in c.lower().replace("_", "")]
+        hint = ("; a WebXR input source's targetRaySpace is its pointing ray, not the hand: log "
+                "frame.getPose(source.gripSpace, ref) too" if rays and {"left_hand", "right_hand"} & set(missing)
+                else "")
         raise RecordingError(f"no columns for {', '.join(missing)} (found devices: {', '.join(groups) or 'none'}; "
-                             f"unrecognised columns: {', '.join(skipped[:8])})", path=path, line=hline)
+                             f"unrecognised columns: {', '.join(skipped[:8])}){hint}", path=path, line=hline)
     text_cells, row_lines = table()
     text_cells[text_cells == ""] = "nan"                 # an empty cell is a lost sample
     iso = iso_seconds(text_cells[:, time_col[0]], path, row_lines) \
