@@ -183,6 +183,8 @@ def test_opencap_trc_gives_the_joint_centres(tmp_path, motion, units):
                             np.concatenate([vpts, pts], axis=1), units=units)
     rec = read_keypoints(path)
     assert rec.layout == "opencap" and rec.metadata["units"] == units, rec.metadata["detected"]
+    assert ("opencap markers: hips by Harrington 2007; no head markers: the head follows the trunk"
+            in rec.metadata["detected"]), rec.metadata["detected"]
     err = joint_errors(rec, pos, LIMBS)
     assert max(err.values()) < 1e-3, err
     markers_only = write_marker_trc(tmp_path / "markers.trc", names, pts, units=units, header_units=False)
@@ -202,6 +204,8 @@ def test_plugin_gait_trc(tmp_path, motion):
         for mirror in (False, True):
             rec = read_keypoints(write_marker_trc(tmp_path / "pig.trc", names, pts, mirror=mirror))
             assert rec.layout == "plugingait" and rec.metadata["handed"] == ("left" if mirror else "right")
+            guess = "knees, ankles, elbows a typical half width from the lateral marker (no medial marker)"
+            assert (guess in rec.metadata["detected"]) != medial, rec.metadata["detected"]
             err = joint_errors(rec, pos, LIMBS)
             assert max(err.values()) < tol, (medial, mirror, err)
     # the lateral markers as the centres would be off by the half widths

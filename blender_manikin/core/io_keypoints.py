@@ -151,8 +151,9 @@ def read_keypoints(path, layout=None, units=None, up=None, rate=None, mapping=No
         elif ext == ".csv":
             X, time, file_layout, rate = _load_csv(p, mapping, rate)
         elif ext == ".trc":
-            X, time, file_layout, rate, trc_units = _load_trc(p, rate)
+            X, time, file_layout, rate, trc_units, rules = _load_trc(p, rate)
             units = units or trc_units
+            decided += [rules] if rules else []
         else:
             raise RecordingError(f"not a keypoint file: expected a FreeMoCap folder, .npy, .npz, .csv or "
                                  f".trc, got {ext or '(no extension)'!r}", path=p)
@@ -499,7 +500,8 @@ def trc_point(marker) -> str:
 
 
 def _load_trc(path, rate):
-    """``(X (T, K, 3), time (T,) s or None, layout, rate, units)`` of an OpenSim ``.trc`` file."""
+    """``(X (T, K, 3), time (T,) s or None, layout, rate, units, rules)`` of an OpenSim ``.trc`` file
+    (``rules``: how anatomical markers became joint centres, :func:`.marker_sets.rules_used`, or None)."""
     try:
         with open(path, "r", encoding="utf-8-sig") as f:
             lines = f.read().splitlines()
@@ -576,12 +578,12 @@ def _load_trc(path, rate):
         for k, p in enumerate(lay.points):
             X[:, k] = centres[p]
         time, rate = _trc_time(data, rate, file_rate)
-        return X, time, best, rate, units
+        return X, time, best, rate, units, marker_sets.rules_used(names, marker_set)
     for k, p in enumerate(lay.points):
         if p in points:
             X[:, k] = M[:, points.index(p)]
     time, rate = _trc_time(data, rate, file_rate)
-    return X, time, best, rate, units
+    return X, time, best, rate, units, None
 
 
 def _trc_time(data, rate, file_rate):

@@ -141,6 +141,22 @@ def detect_marker_set(names):
     return best or (None, [])
 
 
+def rules_used(names, set_name) -> str:
+    """How :func:`joint_centres` places the joints of a file with these marker ``names``, in
+    words for the read's report, e.g. ``"plugingait markers: hips by Harrington 2007, knees,
+    ankles, elbows HALF_WIDTH from the lateral marker (no medial one)"``."""
+    found, _ = _roles([marker_key(n) for n in names], set_name)
+    both = all((s, "hjc") in found for s in _SIDES)
+    parts = ["hips from the file's hip centres" if both else "hips by Harrington 2007"]
+    guessed = [j for j in HALF_WIDTH if not all((s, f"{j}_med") in found for s in _SIDES)]
+    if guessed:
+        parts.append(", ".join(f"{j}s" for j in guessed) + " a typical half width from the lateral marker "
+                     "(no medial marker)")
+    if set_name == "opencap":
+        parts.append("no head markers: the head follows the trunk")
+    return f"{set_name} markers: " + "; ".join(parts)
+
+
 def _unit(v):
     n = np.linalg.norm(v, axis=-1, keepdims=True)
     with np.errstate(invalid="ignore", divide="ignore"):
