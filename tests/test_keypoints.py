@@ -452,8 +452,17 @@ def test_unknown_ik_and_never_seen_points(tmp_path, motion):
     kp = to_y_up(kl.keypoints_from_body22(pos, world, "coco17", body.stature))
     kp[:, kl.LAYOUTS["coco17"].index("left_ear")] = np.nan
     np.save(tmp_path / "noear.npy", kp)
-    with pytest.raises(SolveError, match="joint\\(s\\) head cannot be placed: point\\(s\\) left_ear never seen"):
-        solve_recording(tmp_path / "noear.npy", SolveSettings())
+    # an ear never seen: the head on the trunk's up axis, untwisted (it could not be placed before)
+    out = solve_recording(tmp_path / "noear.npy", SolveSettings())
+    assert "point(s) never seen: left_ear" in out.info
+    assert any(n.startswith("no twist information: head,") for n in out.info), out.info
+    head = out.result.positions[:, sk.J["head"]] - out.result.positions[:, sk.J["neck"]]
+    assert np.isfinite(head).all() and 0.05 < np.median(np.linalg.norm(head, axis=-1)) < 0.15
+    kp[:, kl.LAYOUTS["coco17"].index("left_hip")] = np.nan
+    np.save(tmp_path / "nohip.npy", kp)
+    with pytest.raises(SolveError, match="joint\\(s\\) .*left_hip.* cannot be placed: point\\(s\\) left_ear, "
+                                         "left_hip never seen"):
+        solve_recording(tmp_path / "nohip.npy", SolveSettings())
 
 
 def test_cli_solves_keypoints_without_blender(tmp_path, motion):

@@ -236,3 +236,22 @@ def test_an_incomplete_marker_set_is_named(tmp_path, motion):
                                              r"lack l_mwrist \(found: r.ASIS_study"):
         read_keypoints(path)
     assert ms.marker_key("Subject1:L.ASIS_study") == "l_asis" and ms.marker_key("RHJC_study") == "rhjc"
+
+
+def test_video_keypoints_without_a_face_are_solved(tmp_path, motion):
+    """OpenCap's video keypoints alone (OpenPose BODY_25 less the nose, eyes and ears), as its
+    TRC holds them beside an incomplete marker set: the head follows the trunk, untwisted.
+    Before: "joint(s) head cannot be placed"."""
+    from blender_manikin.core.io_keypoints import trc_point
+    from blender_manikin.core.solve import SolveSettings, solve_recording
+    body, pos, world = motion
+    video = kl.keypoints_from_body22(pos, world, "body25", body.stature)
+    lay25 = kl.LAYOUTS["body25"]
+    pts = video[:, [lay25.index(trc_point(n)) for n in OPENCAP_VIDEO]]
+    path = write_marker_trc(tmp_path / "video.trc", list(OPENCAP_VIDEO), pts, fps=30.0)
+    rec = read_keypoints(path)
+    assert rec.layout == "body25" and not np.isfinite(rec.points[:, lay25.index("nose")]).any()
+    P = solve_recording(str(path), SolveSettings(fps=30.0)).result.positions
+    for j, tol in (("left_wrist", 0.01), ("right_knee", 0.01), ("head", 0.05)):
+        err = np.linalg.norm((P[:, sk.J[j]] - P[:, :1]) - (pos[:, sk.J[j]] - pos[:, :1]), axis=-1)
+        assert np.median(err) < tol, (j, np.median(err))

@@ -14,7 +14,8 @@ names its K points in file order.  :func:`body22_from_keypoints` places the 22 b
   Human3.6M spine point where there is one), the collars sit where the rest body puts them
   relative to the neck and shoulders, and the head joint (the top of the neck) lies 0.04
   statures below the midpoint of the ears (along the head's up axis, the face giving the
-  head's frame), or 0.24 of the way from the neck to the head top;
+  head's frame), or 0.24 of the way from the neck to the head top; with no face points (none
+  in the layout, or none ever seen in the file) it stands on the trunk's up axis, untwisted;
 * the toes / ball of the foot (the ``foot`` joints) come from the layout's toe points, else
   flat ahead of the ankle, facing the way the hips face.
 
@@ -288,8 +289,11 @@ def body22_from_keypoints(points, layout) -> Body22:
             head = np.where(seen[:, None], head, P[:, J["head"]])
             R = np.where(seen[:, None, None], R, end_rot[J["head"]])
         end_rot[J["head"]], P[:, J["head"]] = R, head
-    if "left_ear" not in lay and "head_top" not in lay:
+    # no face points, or a file whose face points are never there (OpenCap's video keypoints are
+    # BODY_25 without the face): the head on the trunk's up axis, untwisted
+    if not np.isfinite(P[:, J["head"]]).all(-1).any():
         P[:, J["head"]] = neck + (PROPORTIONS["head_height"] - PROPORTIONS["neck_height"]) * H * up
+        end_rot.pop(J["head"], None)
         no_twist.append("head")
     # hands: the palm's plane from the index and pinky knuckles (T-pose: palms down, thumbs forward)
     for side, sign in (("left", 1.0), ("right", -1.0)):
