@@ -281,3 +281,74 @@ def test_cli_fbx_preset(tmp_path, monkeypatch):
                      "--no-mannequin"]) == 0
     _, meshes = _import(bare / "take.fbx")
     assert meshes == []
+
+
+def _two_bone_character():
+    """An armature ``char``: bone ``A`` (origin to +Z 1 m) and its child ``B`` (+Z 1 m to 2 m),
+    quaternion rotations; two takes ``MANIKIN_retarget_t1`` / ``_t2`` keying only ``A`` (0.3 /
+    -0.3 rad about X, frames 1-10) and an action ``idle`` keying only ``B`` (90° about X)."""
+    import math
+    sc = bpy.context.scene
+    arm = bpy.data.armatures.new("char")
+    ob = bpy.data.objects.new("char", arm)
+    sc.collection.objects.link(ob)
+    bpy.context.view_layer.objects.active = ob
+    bpy.ops.object.mode_set(mode='EDIT')
+    a = arm.edit_bones.new("A")
+    a.head, a.tail = (0, 0, 0), (0, 0, 1)
+    b = arm.edit_bones.new("B")
+    b.head, b.tail, b.parent = (0, 0, 1), (0, 0, 2), a
+    bpy.ops.object.mode_set(mode='OBJECT')
+    for pb in ob.pose.bones:
+        pb.rotation_mode = 'QUATERNION'
+
+    def take(name, bone, angle):
+        act = keying.new_action(name)
+        keying.assign_action(ob, act)
+        q = [math.cos(angle / 2), math.sin(angle / 2), 0.0, 0.0]
+        keying.key_channels(act, ob, [1, 10], [(f'pose.bones["{bone}"].rotation_quaternion', i, bone, [q[i]] * 2)
+                                               for i in range(4)])
+        return act
+    takes = [take("MANIKIN_retarget_t1", "A", 0.3), take("MANIKIN_retarget_t2", "A", -0.3)]
+    return ob, takes, take("idle", "B", math.pi / 2)
+
+
+def test_each_take_exported_alone_not_blended_with_the_nla(tmp_path):
+    """A character with an NLA track (its idle keys bone B, which the takes do not key): Export Each
+    Take writes each take alone, B straight on A as in the take (before, the idle's 90° bend was
+    baked into every take's file); the NLA evaluation is on again afterwards.  With a strip in
+    tweak mode the export is refused with a message, nothing written, tweak mode kept."""
+    fresh_scene()
+    bpy.context.scene.render.fps = 24
+    ob, takes, idle = _two_bone_character()
+    ad = ob.animation_data
+    ad.action = None
+    track = ad.nla_tracks.new()
+    track.strips.new("idle", 1, idle)
+    keying.assign_action(ob, takes[0])
+    sc = bpy.context.scene
+    sc.frame_set(5)                      # the scene shown, the idle blended in, before the export
+    bent = np.array(ob.matrix_world @ ob.pose.bones["B"].tail)
+    assert np.allclose(bent, [0.0, -np.sin(0.3) - np.cos(0.3), np.cos(0.3) - np.sin(0.3)], atol=1e-5)
+    paths = fbx_presets.export_fbx_takes(str(tmp_path / "takes"), ob, "blender")
+    sc.frame_set(5)                      # the NLA evaluated again afterwards
+    assert np.allclose(np.array(ob.matrix_world @ ob.pose.bones["B"].tail), bent, atol=1e-5)
+    assert ad.use_nla and ad.action == takes[0] and len(paths) == 2
+    for path, angle in zip(paths, (0.3, -0.3)):
+        imp, _ = _import(path)
+        bpy.context.scene.frame_set(5)
+        tail = np.array(imp.matrix_world @ imp.pose.bones["B"].tail)
+        # the take's truth: B straight on A, A turned `angle` about X: tail 2 m along A
+        assert np.allclose(tail, [0.0, -2 * np.sin(angle), 2 * np.cos(angle)], atol=1e-4), (path, tail)
+    fresh_scene()
+    ob, takes, idle = _two_bone_character()
+    ad = ob.animation_data
+    ad.action = None
+    track = ad.nla_tracks.new()
+    track.strips.new("idle", 1, idle)
+    ad.nla_tracks.active = track
+    ad.use_tweak_mode = True
+    with pytest.raises(ValueError, match="tweak mode"):
+        fbx_presets.export_fbx_takes(str(tmp_path / "tweak"), ob, "blender")
+    assert ad.use_tweak_mode and ad.action == idle and not (tmp_path / "tweak").exists()
+    ad.use_tweak_mode = False

@@ -451,6 +451,48 @@ def test_swivel_tools_in_nla_tweak_mode_key_the_strips_frame(live):
         swivel_tools.unregister()
 
 
+def test_swivel_tools_on_a_slotted_action_without_the_objects_slot_are_refused(live):
+    """Blender 4.4+ slotted actions.  A linked duplicate (Shift+D) shares the action and its slot:
+    a swivel keyed on one shows on both, as in any shared action.  An object whose action has
+    no slot of it assigned (here the original, its slot now only the duplicate's) is refused by
+    Key / Smooth / Reset with a message, and the duplicate's keys are left as they were (the
+    slot found by the object's name is the duplicate's)."""
+    from blender_manikin.operators import swivel_tools
+    res, obj, _, action, frames = live
+    if not keying.is_slotted(action):
+        pytest.skip("legacy actions (Blender < 4.4) have no slots")
+    scene = bpy.context.scene
+    prop = writer.SWIVEL_PROPS["left_arm"]
+    for o in bpy.context.view_layer.objects:
+        o.select_set(False)
+    obj.select_set(True)
+    bpy.context.view_layer.objects.active = obj
+    swivel_tools.register()
+    try:
+        assert bpy.ops.object.duplicate(linked=True) == {'FINISHED'}
+        dup = bpy.context.active_object
+        assert dup != obj and dup.animation_data.action_slot == obj.animation_data.action_slot
+        k = 6
+        scene.frame_set(int(frames[k]))
+        solved = float(obj[prop])
+        dup[prop] = solved + 1.0
+        assert bpy.ops.manikin.key_swivel(limb='left_arm') == {'FINISHED'}
+        scene.frame_set(int(frames[k]))
+        assert abs(float(obj[prop]) - (solved + 1.0)) < 1e-5          # shared slot: shared keys
+        obj.animation_data.action_slot = None
+        bpy.context.view_layer.objects.active = obj
+        keys = lr.read_keys(lr.swivel_fcurve(dup, "left_arm"))
+        obj[prop] = solved - 1.0
+        for op in (bpy.ops.manikin.key_swivel, bpy.ops.manikin.smooth_swivel, bpy.ops.manikin.reset_swivel):
+            with pytest.raises(RuntimeError, match="no slot of it assigned"):
+                op(limb='left_arm')
+        after = lr.read_keys(lr.swivel_fcurve(dup, "left_arm"))
+        assert np.array_equal(keys[0], after[0]) and np.array_equal(keys[1], after[1])
+        assert [s.identifier for s in action.slots] == [dup.animation_data.action_slot.identifier]
+    finally:
+        swivel_tools.unregister()
+
+
 def test_make_live_from_fk_solve_operator():
     """The 'Make Live Rig' button reads a plain solve action back and converts it exactly."""
     from blender_manikin.operators import swivel_tools
@@ -541,3 +583,61 @@ def test_never_writes_into_the_current_action(live):
     lr.set_rig_enabled(obj, True)
     lr.build_live_rig(obj, res, action=action)            # its own live action may be rewritten
     assert obj.animation_data.action == action
+
+
+@pytest.mark.parametrize("blend", ["ADD", "COMBINE", "REPLACE_HALF", "ACTIVE_OVER_TRACK"])
+def test_key_swivel_through_nla_blending_keys_what_the_slider_shows(live, blend):
+    """The take is an NLA strip edited in tweak mode over a base track keying the swivel at 0.5 rad
+    (blended Add, Combine, or Replace with influence 0.5), or the take is the active action
+    blended at influence 0.5 over that track: Key Swivel keys the strip value that makes Blender
+    *show* the slider's value (as Blender's own keying remaps it), the other limbs' unkeyed
+    edits are kept, and a strip that has no effect there is refused with a message."""
+    from blender_manikin.operators import swivel_tools
+    res, obj, _, action, frames = live
+    scene = bpy.context.scene
+    bpy.context.view_layer.objects.active = obj
+    ad = obj.animation_data
+    prop, other = writer.SWIVEL_PROPS["left_arm"], writer.SWIVEL_PROPS["right_leg"]
+    base = keying.new_action("base")
+    keying.assign_action(obj, base)
+    keying.set_keys(keying.ensure_fcurve(base, f'["{prop}"]', 0, "", obj), [0, 200], [0.5, 0.5])
+    ad.action = None
+    ad.nla_tracks.new().strips.new("base", 1, base)
+    if blend == "ACTIVE_OVER_TRACK":
+        keying.assign_action(obj, action)
+        ad.action_influence = 0.5
+    else:
+        track = ad.nla_tracks.new()
+        strip = track.strips.new("take", int(frames[0]), action)   # strip frame = action frame
+        strip.blend_type = 'ADD' if blend == "ADD" else 'COMBINE' if blend == "COMBINE" else 'REPLACE'
+        if blend == "REPLACE_HALF":
+            strip.use_animated_influence = True
+            strip.fcurves[0].keyframe_points.insert(int(frames[9]), 0.5)
+        ad.nla_tracks.active = track
+        ad.use_tweak_mode = True
+        assert ad.use_tweak_mode and ad.action == action
+    swivel_tools.register()
+    try:
+        k = 9
+        scene.frame_set(int(frames[k]))
+        before = float(obj[prop])
+        assert abs(before - writer.unwrap_swivel(res.swivel)[k, 0]) > 0.05     # the blend shows
+        obj[prop] = before + 1.0
+        obj[other] = float(obj[other]) + 0.25                                # an unkeyed edit
+        edit = float(obj[other])
+        assert bpy.ops.manikin.key_swivel(limb='left_arm') == {'FINISHED'}
+        assert abs(float(obj[other]) - edit) < 1e-6
+        for f in (int(frames[k]), int(frames[k + 3]), int(frames[k])):
+            scene.frame_set(f)
+        assert abs(float(obj[prop]) - (before + 1.0)) < 1e-5
+        fk, v = lr.read_keys(lr.swivel_fcurve(obj, "left_arm"))
+        assert len(fk) == T
+        if blend in ("ADD", "COMBINE"):
+            assert abs(v[k] - (before + 1.0 - 0.5)) < 1e-5
+        if blend == "ADD":
+            lr.swivel_fcurve(obj, "left_arm").mute = True    # the strip shows nothing: refused
+            with pytest.raises(RuntimeError, match="cannot be keyed"):
+                bpy.ops.manikin.key_swivel(limb='left_arm')
+    finally:
+        ad.use_tweak_mode = False
+        swivel_tools.unregister()

@@ -292,8 +292,13 @@ def export_fbx_takes(directory, armature, preset: str = DEFAULT, context=None, a
                      overwrite: bool = False) -> list:
     """One FBX per take (:func:`take_actions`, or ``actions``) of the character ``armature`` in ``directory``:
     ``<armature>_<take>.fbx``, each with its action assigned and the scene's frame range set to
-    the action's keys while it is written (:func:`export_fbx`).  The armature's action and the
-    frame range are as before afterwards.  Returns the paths written.  A file already there is
+    the action's keys while it is written (:func:`export_fbx`), the armature's NLA tracks not
+    evaluated meanwhile: each file holds its take alone, a bone channel the take does not key at
+    its rest value when the action shown, an NLA strip or another take animates it (it would
+    otherwise carry that animation's last value) and as posed otherwise.  The armature's action,
+    its NLA evaluation, its pose and the frame range are as before afterwards.  ``ValueError`` when an NLA
+    strip of the armature is in tweak mode (its action cannot be changed), nothing written.
+    Returns the paths written.  A file already there is
     replaced only when it is an unchanged export of an earlier run (:mod:`..core.output_guard`),
     else nothing is written and :class:`..core.output_guard.OutputInTheWay` (a ``ValueError``)
     names it, unless ``overwrite``."""
@@ -315,16 +320,26 @@ def export_fbx_takes(directory, armature, preset: str = DEFAULT, context=None, a
     paths = [os.path.join(directory, bpy.path.clean_name(
         f"{armature.name}_{act.name.replace('MANIKIN_retarget_', '').replace('MANIKIN_', '')}") + ".fbx")
         for act in actions]
+    ad = armature.animation_data
+    if ad is not None and ad.use_tweak_mode:
+        raise ValueError(f"{armature.name!r} has an NLA strip in tweak mode (Tab in the NLA editor), so its "
+                         f"action cannot be changed to each take: leave tweak mode to export its takes")
     output_guard.check_free(paths, overwrite)          # no file of the user's replaced
     os.makedirs(directory, exist_ok=True)
     output_guard.claim(paths)
-    ad = armature.animation_data
     before = ad.action if ad is not None else None
+    use_nla = ad.use_nla if ad is not None else True
     frames = (scene.frame_start, scene.frame_end)
+    # channels something else animates (the action shown, the NLA strips, the other takes): left
+    # unkeyed by a take they would hold that animation's last value in its file
+    others = [before] + [st.action for tr in (ad.nla_tracks if ad is not None else ()) for st in tr.strips]
+    animated = _bone_channels(armature, [a for a in others + actions if a is not None])
+    basis = [pb.matrix_basis.copy() for pb in armature.pose.bones]
     written = []
     try:
         for act, path in zip(actions, paths):
-            keying.assign_action(armature, act)
+            keying.assign_action(armature, act).use_nla = False     # the take alone
+            _rest_channels(armature, animated - _bone_channels(armature, [act]))
             a, b = act.frame_range
             scene.frame_start, scene.frame_end = int(round(a)), max(int(round(b)), int(round(a)))
             export_fbx(path, armature, preset, context=context)
@@ -335,5 +350,37 @@ def export_fbx_takes(directory, armature, preset: str = DEFAULT, context=None, a
             keying.assign_action(armature, before)
         elif armature.animation_data is not None:
             armature.animation_data.action = None
+        if armature.animation_data is not None:
+            armature.animation_data.use_nla = use_nla
+        for pb, m in zip(armature.pose.bones, basis):
+            pb.matrix_basis = m
         scene.frame_start, scene.frame_end = frames
+        scene.frame_set(scene.frame_current, subframe=scene.frame_subframe)
     return written
+
+
+def _bone_channels(armature, actions):
+    """``{(data_path, index)}`` of the pose-bone transform channels (location, rotation, scale)
+    that ``actions`` key on ``armature`` (its slot on slotted actions)."""
+    from . import keying
+    out = set()
+    for act in actions:
+        for fc in keying.action_fcurves(act, armature if keying.is_slotted(act) else None):
+            if fc.data_path.startswith("pose.bones[") and fc.data_path.rsplit(".", 1)[-1] in _REST_VALUE:
+                out.add((fc.data_path, fc.array_index))
+    return out
+
+
+#: a pose channel's rest value, by property (rotation_quaternion / axis_angle: component 0)
+_REST_VALUE = {"location": (0.0, 0.0, 0.0), "rotation_euler": (0.0, 0.0, 0.0), "scale": (1.0, 1.0, 1.0),
+               "rotation_quaternion": (1.0, 0.0, 0.0, 0.0), "rotation_axis_angle": (0.0, 0.0, 1.0, 0.0)}
+
+
+def _rest_channels(armature, channels):
+    """Set the pose-bone channels ``{(data_path, index)}`` of ``armature`` to their rest values."""
+    for path, index in channels:
+        try:
+            prop = armature.path_resolve(path)
+        except ValueError:              # a bone the armature does not have
+            continue
+        prop[index] = _REST_VALUE[path.rsplit(".", 1)[-1]][index]

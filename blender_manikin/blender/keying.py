@@ -340,3 +340,71 @@ def action_fcurves(action, id_owner=None):
                 if bag is not None:
                     out.extend(bag.fcurves)
     return out
+
+
+def nla_blends(id_owner) -> bool:
+    """True when Blender evaluates ``id_owner``'s action through the NLA (NLA tracks present and
+    NLA evaluation on, or a strip edited in tweak mode): a channel then shows the strip / action
+    value blended with the tracks below (blend type, influence, blend in / out), not the value
+    itself, so a key must be remapped (:func:`nla_blend_terms`) as Blender's own keying does."""
+    ad = getattr(id_owner, "animation_data", None)
+    if ad is None:
+        return False
+    return bool(ad.use_tweak_mode or (ad.use_nla and len(ad.nla_tracks)))
+
+
+def nla_blend_terms(id_owner, fcurves, context=None):
+    """``(a, b)``: ``(len(fcurves),)`` float64 arrays such that Blender's evaluation of
+    ``id_owner`` at the scene's current frame shows ``a[k] + b[k] * v`` in channel
+    ``(fcurves[k].data_path, fcurves[k].array_index)`` when ``fcurves[k]`` (a curve of the
+    action being keyed: the active action, or the strip's in tweak mode) evaluates to ``v``.
+
+    Every NLA blend of a scalar channel with the tracks below is affine in the strip's value
+    (Replace ``(1-i) L + i v``, Add / Combine ``L + i v``, Subtract ``L - i v``, Multiply
+    ``(1-i) L + i L v``; ``i`` the strip's influence there, blend in / out included; a strip
+    above that replaces the channel gives ``b = 0``).  ``a`` and ``b`` are measured from
+    Blender's own evaluation, not modelled: each curve is overridden by a constant (a
+    non-additive Generator F-modifier, removed afterwards) of 0, then 1, and the scene frame is
+    re-evaluated (``scene.frame_set`` on the current frame and subframe)."""
+    context = context or bpy.context
+    scene = context.scene
+    frame = scene.frame_current, scene.frame_subframe
+    mods = []
+    out = np.empty((2, len(fcurves)))
+    try:
+        for fc in fcurves:
+            m = fc.modifiers.new('GENERATOR')
+            m.mode, m.poly_order, m.use_additive = 'POLYNOMIAL', 1, False
+            mods.append((fc, m))
+        for c in (0, 1):
+            for _, m in mods:
+                m.coefficients = (float(c), 0.0)
+            scene.frame_set(frame[0], subframe=frame[1])
+            ev = id_owner.evaluated_get(context.evaluated_depsgraph_get())
+            for k, fc in enumerate(fcurves):
+                v = ev.path_resolve(fc.data_path)
+                out[c, k] = v[fc.array_index] if hasattr(v, "__len__") else v
+    finally:
+        for fc, m in mods:
+            fc.modifiers.remove(m)
+        scene.frame_set(frame[0], subframe=frame[1])
+    return out[0], out[1] - out[0]
+
+
+def nla_remap_values(id_owner, fcurves, values, context=None):
+    """The values to key in ``fcurves`` (``(n,)`` float64) so that Blender shows ``values`` (``(n,)``,
+    the property's units) at the scene's current frame through the NLA blending
+    (:func:`nla_blend_terms`); ``values`` unchanged when :func:`nla_blends` is False.  Raises
+    ``ValueError`` naming the channels whose strip cannot change what is shown (influence 0, a
+    muted curve, or a strip above replacing them)."""
+    values = np.asarray(values, np.float64).ravel()
+    if not nla_blends(id_owner):
+        return values
+    a, b = nla_blend_terms(id_owner, fcurves, context)
+    stuck = np.abs(b) < 1e-6
+    if stuck.any():
+        names = ", ".join(fcurves[k].data_path for k in np.nonzero(stuck)[0])
+        raise ValueError(f"{id_owner.name!r}: {names} cannot be keyed here: the NLA shows no effect of the "
+                         f"edited action at this frame (strip influence 0, a muted curve, or a strip above "
+                         f"replacing it)")
+    return (values - a) / b

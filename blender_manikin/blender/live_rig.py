@@ -865,10 +865,19 @@ def _plain_copy(src, names, name, context):
 # --------------------------------------------------------------------------
 # swivel curve tools (used by the operators)
 def swivel_fcurve(obj, limb: str, solved: bool = False, create: bool = False):
-    """The F-curve of ``["swivel_<limb>"]`` (or the solved copy) in ``obj``'s action, or None."""
+    """The F-curve of ``["swivel_<limb>"]`` (or the solved copy) in ``obj``'s action, or None.
+
+    Slotted actions (Blender 4.4+): the curve of the slot ``obj`` is animated by; ``ValueError``
+    when it has none assigned (an action assigned whose slots other objects use), as that
+    object's keys would animate nothing, and a slot found by ``obj``'s name may be another
+    object's (a linked duplicate's)."""
     ad = obj.animation_data
     if ad is None or ad.action is None:
         return None
+    if keying.is_slotted(ad.action) and getattr(ad, "action_slot", None) is None:
+        raise ValueError(f"{obj.name!r} has action {ad.action.name!r} but no slot of it assigned, so its swivel "
+                         f"keys would animate nothing (or another object using that action): choose its slot "
+                         f"under the action (Object properties > Animation, or the Action editor)")
     path = f'["{(SOLVED_PROPS if solved else writer.SWIVEL_PROPS)[limb]}"]'
     for fc in keying.action_fcurves(ad.action, obj):
         if fc.data_path == path and fc.array_index == 0:
@@ -989,24 +998,36 @@ def action_frame_range(obj, frame_start, frame_end):
     return min(a, b), max(a, b)
 
 
-def key_swivel(obj, limbs, frame: float, values=None):
+def key_swivel(obj, limbs, frame: float, values=None, context=None):
     """Key the swivel of ``limbs`` at ``frame`` of the action (the scene's frame, except in NLA tweak
     mode: :func:`action_frame`; the curve's other keys are not touched).
 
     values: limb -> radians; default each property's current value (what the
-    slider shows, including unkeyed edits).  An existing key at ``frame`` takes the
-    value (keeping its interpolation and handles).  Returns the number of keys written.
+    slider shows, including unkeyed edits).  The key makes Blender *show* that value at the
+    scene's current frame: when the action is blended through the NLA (a strip in tweak mode
+    over other tracks, Add / Combine / Multiply blending, influence below 1, blend in / out) the
+    keyed value is remapped through the blend as Blender's own keying does
+    (:func:`.keying.nla_remap_values`; ``ValueError`` where the strip has no effect).  An
+    existing key at ``frame`` takes the value (keeping its interpolation and handles).
+    Returns the number of keys written.
     """
     ad = obj.animation_data
     if ad is None or ad.action is None:
         ad = keying.assign_action(obj, keying.new_action("MANIKIN_live"))
-    n = 0
-    for limb in limbs:
-        prop = writer.SWIVEL_PROPS[limb]
-        if prop not in obj.keys():
-            continue
-        value = float(obj[prop] if values is None or limb not in values else values[limb])
-        fc = swivel_fcurve(obj, limb, create=True)
+    todo = [limb for limb in limbs if writer.SWIVEL_PROPS[limb] in obj.keys()]
+    shown = [float(obj[writer.SWIVEL_PROPS[limb]] if values is None or limb not in values else values[limb])
+             for limb in todo]
+    fcs = [swivel_fcurve(obj, limb, create=True) for limb in todo]
+    if not fcs:
+        return 0
+    # the remap re-evaluates the frame: other limbs' unkeyed slider edits are put back afterwards
+    others = {p: float(obj[p]) for limb, p in writer.SWIVEL_PROPS.items() if limb not in todo and p in obj.keys()}
+    keyed = keying.nla_remap_values(obj, fcs, shown, context)
+    for fc, value in zip(fcs, keyed):
         keying.update_keys(fc, [frame], [value])
-        n += 1
-    return n
+    if keying.nla_blends(obj):
+        scene = (context or bpy.context).scene
+        scene.frame_set(scene.frame_current, subframe=scene.frame_subframe)
+        for p, v in others.items():
+            obj[p] = v
+    return len(fcs)

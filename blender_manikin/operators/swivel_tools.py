@@ -112,7 +112,11 @@ class MANIKIN_OT_key_swivel(_SwivelPoll, Operator):
         from ..blender import live_rig
         obj = _swivel_object(context)
         frame = context.scene.frame_current + context.scene.frame_subframe
-        n = live_rig.key_swivel(obj, _limbs(self.limb), live_rig.action_frame(obj, frame))
+        try:
+            n = live_rig.key_swivel(obj, _limbs(self.limb), live_rig.action_frame(obj, frame), context=context)
+        except ValueError as exc:
+            self.report({'ERROR'}, f"MANIKIN: {exc}")
+            return {'CANCELLED'}
         self.report({'INFO'}, f"MANIKIN: keyed {n} swivel value(s) at frame {frame:g}")
         return {'FINISHED'}
 
@@ -138,7 +142,11 @@ class MANIKIN_OT_smooth_swivel(_SwivelPoll, Operator):
         from ..blender import live_rig
         obj = _swivel_object(context)
         f0, f1 = live_rig.action_frame_range(obj, *_frame_range(self, context))
-        n = live_rig.smooth_swivel(obj, _limbs(self.limb), f0, f1, self.sigma, self.method)
+        try:
+            n = live_rig.smooth_swivel(obj, _limbs(self.limb), f0, f1, self.sigma, self.method)
+        except ValueError as exc:
+            self.report({'ERROR'}, f"MANIKIN: {exc}")
+            return {'CANCELLED'}
         self.report({'INFO'}, f"MANIKIN: smoothed {n} swivel keys in frames {f0}-{f1}")
         return {'FINISHED'}
 
@@ -173,7 +181,11 @@ class MANIKIN_OT_reset_swivel(_SwivelPoll, Operator):
                       else (scene.frame_start, scene.frame_end))
         else:
             f0 = f1 = scene.frame_current
-        n = live_rig.reset_swivel(obj, _limbs(self.limb), *live_rig.action_frame_range(obj, f0, f1))
+        try:
+            n = live_rig.reset_swivel(obj, _limbs(self.limb), *live_rig.action_frame_range(obj, f0, f1))
+        except ValueError as exc:
+            self.report({'ERROR'}, f"MANIKIN: {exc}")
+            return {'CANCELLED'}
         if n == 0:
             self.report({'WARNING'}, "MANIKIN: no solved swivel stored on this armature")
             return {'CANCELLED'}
