@@ -246,6 +246,32 @@ def test_bsor_synthetic_placeholder_and_repeated_times(tmp_path):
     assert "playerName" not in md and "playerID" not in md
 
 
+def test_bsor_loading_frames_at_time_zero_keep_the_latest_pose():
+    """The game logs several frames with song time 0 while it loads (each 250-330 ms long, as in
+    the real replays under shared/data/vr): their poses are from before the song, the last one
+    from just before the next frame.  The take starts with that one, not with a pose half a
+    second stale one sample before the next (an 11 cm jump of every device at 10 m/s)."""
+    rate = 90.0
+    t = np.arange(180) / rate
+    t[1:4] = 0.0
+    t[4:] = (np.arange(176) + 1) / rate
+    t = t.astype(np.float32).astype(np.float64)
+    pose_time = t.copy()
+    pose_time[1:4] = [-0.6, -0.3, 0.0]           # when each loading frame's pose was taken
+    head, left, right = (unity_pose(d, pose_time * 8.0) for d in ("head", "left_hand", "right_hand"))
+    for a in (head, left, right):
+        a[0] = [0, 0, 0, -1, -1, -1, -1]
+    rec = parse_bsor(bsor_bytes(t, head, left, right), path="loading.bsor")
+    for d in rec.devices:
+        s = rec.streams[d]
+        assert len(s) == 180 - 1 - 2 and s.time[0] == 0.0
+        p, _ = truth(d, s.time[:3] * 8.0)
+        np.testing.assert_allclose(s.pos[:3], p, atol=1e-5)
+        step = np.linalg.norm(np.diff(s.pos[:3], axis=0), axis=-1)
+        assert step[0] < 1.5 * step[1] + 1e-3, (d, step)      # no jump into the take
+    assert any("did not increase" in w for w in rec.warnings)
+
+
 def test_bsor_time_jump_back_keeps_strictly_increasing():
     data, t = synthetic_bsor(n=300, backwards=(200, 0.5))      # rewind by 0.5 s at frame 200
     rec = parse_bsor(data, path="rewind.bsor")

@@ -210,3 +210,41 @@ def test_a_jump_of_the_space_under_30_cm_is_found(example, turn, shift):
     assert "1 teleport (first at 3.01 s) solved as one motion and put back" in keep.summary()
     err = np.linalg.norm(keep.result.positions - expected_positions(base, composite, [found[0].time]), axis=-1)
     assert np.median(err) < 0.005 and np.percentile(err.max(1), 98) < 0.03
+
+
+@pytest.mark.parametrize("shift", [
+    (0.05, 0.0, 0.0),               # a recentre of 5 cm
+    (0.0, -0.06, 0.05),             # 8 cm
+    (0.08, 0.0, -0.075),            # 11 cm, the floor reset with it
+])
+def test_a_shift_of_the_space_under_15_cm_is_found(example, shift):
+    """A recentre or floor reset of 5-11 cm (under TELEPORT_MIN_M, so not found before): the head's
+    step less what its velocity just before and after carries it is the shift, and both hands'
+    steps say the same; found, taken out and put back.  Solved as recorded, the feet drag and
+    the joints stay off after it."""
+    rec, base = example
+    jumped, composite = moved(rec, [(3.0, 0.0, shift)])
+    found = find_rig_jumps(jumped)
+    assert [j.kind for j in found] == ["teleport"] and found[0].time == pytest.approx(3.0, abs=0.015)
+    assert np.abs(found[0].trans - composite[0][2]).max() < 0.01
+    back = remove_rig_jumps(jumped, found)
+    for d, s in back.streams.items():
+        assert np.abs(s.pos - rec.streams[d].pos).max() < 0.01, d
+    keep = cs.solve_recording(jumped, cs.SolveSettings(fps=30.0))
+    assert "1 teleport (first at 3.01 s)" in keep.summary()
+    err = np.linalg.norm(keep.result.positions - expected_positions(base, composite, [found[0].time]), axis=-1)
+    assert np.median(err) < 0.005 and np.percentile(err.max(1), 98) < 0.03
+
+
+def test_what_is_not_a_small_shift_of_the_space(example):
+    """Under 15 cm the hands decide: the head alone shifted 8 cm (the headset's tracking, not the
+    space), or one head sample 8 cm off that comes back, or the hands alone, is no jump."""
+    rec, _ = example
+    for devices in (("head",), ("left_hand", "right_hand")):
+        alone, _ = moved(rec, [(3.0, 0.0, (0.08, 0.0, 0.0))], devices=devices)
+        assert find_rig_jumps(alone) == [], devices
+    s = rec.streams["head"]
+    pos = s.pos.copy()
+    pos[300] += [0.0, 0.08, 0.0]
+    glitch = Recording(streams={**rec.streams, "head": TrackerStream("head", s.time, pos, s.quat, s.valid)})
+    assert find_rig_jumps(glitch) == []

@@ -161,13 +161,35 @@ def _parse_header(r):
     return version, info
 
 
+def _last_of_equal_times(t, usable, first):
+    """``first`` (``(N,)`` bool, frames kept as each time's first, :func:`.recording.increasing_mask`)
+    moved to the last ``usable`` frame of the same time before the next kept one."""
+    group = np.cumsum(first) - 1                      # the kept frame each frame follows (-1: none)
+    heads = np.nonzero(first)[0]
+    if heads.size == 0:
+        return first
+    same = usable & (group >= 0) & (t == t[heads[np.maximum(group, 0)]])
+    idx = np.nonzero(same)[0]
+    g = group[idx]
+    last = idx[np.append(g[1:] != g[:-1], True)]      # each group's last frame of its head's time
+    keep = np.zeros_like(first)
+    keep[last] = True
+    return keep
+
+
 def pose_frame_masks(t, pose, warnings, devices=FRAME_DEVICES, time_name="song time"):
     """Which samples of pose frames are usable.
 
     t: ``(N,)`` seconds; pose: ``(N, D, 7)`` position x, y, z then quaternion x, y, z, w per
     device (Unity's order, as BSOR and XROR store them).  Returns ``(ok (N, D), keep (N,))``:
     ``ok`` marks finite, unit-quaternion, non-zero poses; ``keep`` the frames with any valid pose
-    whose time increases (placeholders, pauses, rewinds and repeated times are dropped).  What was
+    whose time increases (placeholders, pauses, rewinds and repeated times are dropped).  Of
+    several frames that share a time the *last* is kept: the game logs frames with song time 0
+    while it loads the song (frame times of 250-330 ms, its ``fps`` field 3-4), and the first of
+    them holds a pose from up to half a second before the song began.  Keeping it put that
+    stale pose one sample (11 ms) before the next, so the real replays began with an 8-11 cm
+    jump of head and hands at 10 m/s that no body made (``/work/shared/data/vr``'s two BSOR
+    files); the last frame of the run is the one the next time is counted from.  What was
     dropped is appended to ``warnings``."""
     quat = pose[..., 3:7]
     finite = np.all(np.isfinite(pose), -1)
@@ -175,7 +197,8 @@ def pose_frame_masks(t, pose, warnings, devices=FRAME_DEVICES, time_name="song t
     zero = np.all(pose == 0.0, -1)
     ok = finite & unit & ~zero
     any_ok = ok.any(-1)
-    keep = any_ok & increasing_mask(np.where(any_ok, t, np.nan))
+    earliest = any_ok & increasing_mask(np.where(any_ok, t, np.nan))
+    keep = _last_of_equal_times(t, any_ok, earliest)
     n_placeholder = int((~any_ok).sum())
     if n_placeholder:
         first = np.nonzero(~any_ok)[0][:3]

@@ -32,6 +32,7 @@ from .plain import shown
 from .seated import POSTURES, SEATED_HEAD_HEIGHT, seat_legs, stature_from_seated_head
 from .pose_result import PoseResult, TrackerTargets
 from .teleports import TELEPORT_CHOICES, find_rig_jumps, remove_rig_jumps, restore_rig_jumps, rig_jumps_note
+from .tracker_slips import FOOT_DEVICES, correct_tracker_slips, find_tracker_slips, tracker_slip_notes
 
 
 class SolveError(RuntimeError):
@@ -139,6 +140,7 @@ class SolveOutcome:
     floor_why: str | None = None        # how the floor was found when the settings did not say
     jumps: list = field(default_factory=list)   # the app's teleports and snap turns (teleports.RigJump)
     headset_off: tuple = (0, 0)         # frames at the start / end where the headset lay off (headset_off.py)
+    slips: list = field(default_factory=list)   # foot trackers that slipped mid-take (tracker_slips.TrackerSlip)
 
     def summary(self, extra_timings=None, timings=True) -> str:
         """One line: frames, fps, where the solve gave way, stature, calibration, gaps, and (with
@@ -930,6 +932,11 @@ def solve_recording(source, settings: SolveSettings | None = None, solver=None, 
         out.info.append(extra)
     if out.offsets is not offsets:     # calibration refined the device rotations
         out.targets = move_floor(make_targets(times, pos, quat, valid, settings.fps, out.offsets)[0], out.floor)
+    if any(d in out.targets.pos for d in FOOT_DEVICES):     # a foot tracker's strap slipped mid-take
+        rest = float(out.body.rest_positions()[sk.J["left_ankle"], 2])
+        out.slips = find_tracker_slips(out.targets, settings.fps, rest_ankle_z=rest)
+        out.targets = correct_tracker_slips(out.targets, out.slips)
+        out.info.extend(tracker_slip_notes(out.slips, settings.fps))
     out.targets, lost = relax_lost_hands(out.targets, out.body)     # long hand gaps: the arm hangs
     out.info.extend(lost)
     notes = (floor_note(settings, out.floor, out.floor_why),) if posture == "seated" else \

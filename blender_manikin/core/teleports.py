@@ -32,6 +32,16 @@ jump would take its last sample before it than where it was (within :data:`HAND_
 plus what a hand moves in that time).  A head that jumps alone is a tracking error, not the
 space moving; with no hand tracked around the jump the head decides alone.
 
+A *smaller shift* (a recentre or a floor reset of :data:`SMALL_JUMP_MIN_M` to
+:data:`TELEPORT_MIN_M`, slower than any head speed test can tell from motion) is found from what
+the head's motion does not explain: its step less what its velocity just before and just after
+carries it (:func:`_unexplained_steps`; exact for a constant acceleration, so real motion leaves
+millimetres: at most 0.5 cm in the real Beat Saber replays), confirmed by the hands: each
+tracked hand's own unexplained step over the same moment agrees with the head's within
+:data:`SMALL_JUMP_HAND_AGREE` of it, and at least one hand has a say.  It is taken as a
+translation (a turn of under :data:`TURN_MIN_DEG` with it is not measured).  A hand in the middle
+of a punch strays from that by centimetres, so such a shift can be missed then, never invented.
+
 The jump's transform (``x -> R x + t``, R a turn about +Z; Blender axes, metres) is taken from
 the head: its pose at ``tb`` against its pose at ``ta`` carried on by its velocity and turn rate
 before the jump.
@@ -64,6 +74,12 @@ HAND_TOLERANCE_M = 0.10
 HAND_SPEED = 5.0
 #: the samples on either side of a jump the head's velocity is taken from (s)
 VELOCITY_SPAN_S = 0.1
+#: a shift of the space under :data:`TELEPORT_MIN_M` is found down to this (metres): the head's
+#: step less what its velocity just before and just after carries it (:func:`_unexplained_steps`)
+SMALL_JUMP_MIN_M = 0.04
+#: ... when each tracked hand's own unexplained step agrees with the head's within this fraction
+#: of it (and better than no jump at all): hands moving fast stray from that by centimetres
+SMALL_JUMP_HAND_AGREE = 0.5
 #: what a solve does with them (:class:`.solve.SolveSettings` ``teleports``)
 TELEPORT_CHOICES = ("keep", "remove", "ignore")
 
@@ -137,6 +153,75 @@ def _hand_check(stream, ta, tb, rot, trans):
     return bool(jumped < reach and jumped < stayed)
 
 
+def _unexplained_steps(t, p):
+    """What motion does not explain of each step between consecutive samples.
+
+    t: ``(N,)`` s, increasing; p: ``(N, 3)`` m.  Returns ``(N - 1, 3)`` metres: for samples
+    ``a``, ``b = a + 1``, ``p[b] - p[a] - (t[b] - t[a]) (v_before + v_after) / 2``, the
+    velocities over :data:`VELOCITY_SPAN_S` before ``a`` and after ``b`` (exact for a constant
+    acceleration; a jump of the space between ``a`` and ``b`` leaves both velocities as they
+    were, so it is all of it).  NaN where a span runs off the take or across a gap of more
+    than twice the span, or where the step itself is longer than :data:`MAX_STEP_S`."""
+    n = len(t)
+    out = np.full((max(n - 1, 0), 3), np.nan)
+    if n < 4:
+        return out
+    a = np.arange(n - 1)
+    b = a + 1
+    ia = np.searchsorted(t, t[a] - VELOCITY_SPAN_S, side="right") - 1
+    ib = np.searchsorted(t, t[b] + VELOCITY_SPAN_S, side="left")
+    ok = (ia >= 0) & (ib < n) & (t[b] - t[a] <= MAX_STEP_S)
+    ia, ib = np.clip(ia, 0, n - 1), np.clip(ib, 0, n - 1)
+    ok &= (t[a] - t[ia] <= 2 * VELOCITY_SPAN_S) & (t[ib] - t[b] <= 2 * VELOCITY_SPAN_S)
+    a, b, ia, ib = a[ok], b[ok], ia[ok], ib[ok]
+    v_before = (p[a] - p[ia]) / (t[a] - t[ia])[:, None]
+    v_after = (p[ib] - p[b]) / (t[ib] - t[b])[:, None]
+    out[a] = p[b] - p[a] - (t[b] - t[a])[:, None] * (v_before + v_after) / 2
+    return out
+
+
+def _small_jumps(t, p, hands, big):
+    """Shifts of the space under :data:`TELEPORT_MIN_M` (see :func:`find_rig_jumps`): head
+    sample pairs ``(a, a + 1)`` (indices into ``t``, ``p``, the head's valid samples) whose
+    unexplained step (:func:`_unexplained_steps`) is at least :data:`SMALL_JUMP_MIN_M`, the
+    largest within :data:`VELOCITY_SPAN_S` either side, not within that of a jump in ``big``
+    (times), and matched by every tracked hand's own (at least one hand must have a say: the
+    head alone may be a tracking error).  Returns ``[(a, d (3,))]``."""
+    d = _unexplained_steps(t, p)
+    size = np.nan_to_num(np.linalg.norm(d, axis=-1), nan=0.0)
+    cand = np.nonzero(size >= SMALL_JUMP_MIN_M)[0]
+    if cand.size == 0:
+        return []
+    hand_steps = []
+    for s in hands:
+        idx = _valid_samples(s)
+        if idx.size >= 4:
+            hand_steps.append((s.time[idx], _unexplained_steps(s.time[idx], s.pos[idx])))
+    out = []
+    big = np.asarray(big, dtype=np.float64)
+    for a in cand:
+        near = np.abs(t[:-1] - t[a]) <= VELOCITY_SPAN_S
+        if size[a] < size[near].max() or (big.size and np.any(np.abs(big - t[a + 1]) <= 2 * VELOCITY_SPAN_S)):
+            continue
+        says = []
+        for ht, hd in hand_steps:
+            # the hand's steps over the jump: from its last sample by ta to its first from tb, one
+            # step, or two with a sample between (on either side of the jump: the better one)
+            k = np.arange(np.searchsorted(ht, t[a] + 1e-9, side="right") - 1,
+                          np.searchsorted(ht, t[a + 1] - 1e-9, side="left"))
+            k = k[(k >= 0) & (k < len(hd))]
+            k = k[np.all(np.isfinite(hd[k]), -1)] if k.size else k
+            if k.size == 0 or ht[k[0]] < t[a] - MAX_STEP_S:
+                continue                                                 # no say
+            miss = np.linalg.norm(hd[k] - d[a], axis=-1)
+            best = int(np.argmin(miss))
+            says.append(bool(miss[best] < SMALL_JUMP_HAND_AGREE * size[a]
+                             and miss[best] < np.linalg.norm(hd[k[best]])))
+        if says and all(says):
+            out.append((int(a), d[a].copy()))
+    return out
+
+
 def find_rig_jumps(recording: Recording) -> list:
     """The teleports and snap turns of ``recording`` (see the module docstring), in time order:
     a list of :class:`RigJump`.  Empty without a head stream."""
@@ -181,7 +266,9 @@ def find_rig_jumps(recording: Recording) -> list:
         kind = "teleport and turn" if teleport and turned else ("teleport" if teleport else "snap turn")
         jumps.append(RigJump(float(t[b]), float(t[a]), rot, trans, kind))
         after = b
-    return jumps
+    small = [RigJump(float(t[a + 1]), float(t[a]), np.eye(3), d, "teleport")
+             for a, d in _small_jumps(t, p, hands, [j.time for j in jumps])]
+    return sorted(jumps + small, key=lambda j: j.time)
 
 
 def _segment_transforms(jumps):

@@ -1,0 +1,103 @@
+"""Foot trackers slipping on the body mid-take (core/tracker_slips.py): found, named, put right.
+
+Six-tracker takes made by FK (tests/fixtures_slips.py: walking in place, squats, kicks) with a foot
+tracker's strap slid up the shin or turned round it at a known time; the truth is the body's.
+"""
+import numpy as np
+import pytest
+
+from blender_manikin.core import solve as cs
+from blender_manikin.core.rotations import geodesic_angle
+from blender_manikin.core.skeleton import J
+from blender_manikin.core.tracker_slips import correct_tracker_slips, find_tracker_slips, tracker_slip_notes
+from fixtures_six_trackers import body_with_legs, random_mounts
+from fixtures_slips import BODY_STEPS, KINDS, slip_recording, slip_take
+
+BODY = body_with_legs(1.75)
+REST = float(BODY.rest_positions()[J["left_ankle"], 2])
+AT = 4.3
+
+
+@pytest.mark.parametrize("kind", KINDS)
+def test_takes_without_a_slip_have_none(kind):
+    """Walking, squatting to 90° and kicking: the planted ankles keep their height and heading."""
+    for seed in range(4):
+        targets = slip_take(BODY, random_mounts(seed), kind, seed=seed)[0]
+        assert find_tracker_slips(targets, rest_ankle_z=REST) == [], (kind, seed)
+
+
+@pytest.mark.parametrize("kind", BODY_STEPS)
+def test_what_the_body_does_is_no_slip(kind):
+    """Both feet onto a 15 cm platform (both planted ankles higher) is no strap; a foot turned out
+    40° and held (a stance) is named but not corrected, the targets left as they are."""
+    targets = slip_take(BODY, random_mounts(3), kind, seed=3)[0]
+    slips = find_tracker_slips(targets, rest_ankle_z=REST)
+    assert all(not s.corrected for s in slips), slips
+    fixed = correct_tracker_slips(targets, slips)
+    for d in targets.pos:
+        np.testing.assert_array_equal(fixed.pos[d], targets.pos[d])
+    if kind == "platform":
+        assert slips == []
+
+
+def _ankle_errors(targets, P, R, device, frames):
+    j = J[device.replace("foot", "ankle")]
+    dist = np.linalg.norm(targets.pos[device][frames] - P[frames, j], axis=-1)
+    ang = np.degrees(geodesic_angle(targets.rot[device][frames], R[frames, j]))
+    return dist.mean(), ang.mean()
+
+
+@pytest.mark.parametrize("kind,device,slide,turn", [
+    ("walk", "left_foot", 0.07, 0.0),
+    ("walk", "right_foot", 0.0, 30.0),
+    ("squat", "left_foot", 0.05, 0.0),
+    ("squat", "right_foot", 0.0, 20.0),
+    ("kick", "left_foot", 0.10, 40.0),
+])
+@pytest.mark.parametrize("measured_after", [False, True])
+def test_a_slipped_foot_tracker_is_found_and_put_right(kind, device, slide, turn, measured_after):
+    """A strap slid 5-10 cm up the shin or turned 20-40° round it at 4.3 s: found on that foot,
+    between frames around that moment, by how much, and the ankle target put right on the side
+    the offsets do not fit (after the slip; before it when the T-pose that measured them came
+    after)."""
+    targets, P, R, t = slip_take(BODY, random_mounts(2), kind, slip=(device, AT, slide, turn), seed=2,
+                                 measured_after=measured_after)
+    slips = find_tracker_slips(targets, rest_ankle_z=REST)
+    assert [s.device for s in slips] == [device]
+    s = slips[0]
+    assert t[s.start] <= AT + 0.02 and t[s.end] >= AT - 0.02 and t[s.end] - t[s.start] < 2.0
+    assert s.slide == pytest.approx(slide, abs=0.01) and s.turn_deg == pytest.approx(turn, abs=3.0)
+    assert s.after == measured_after
+    wrong = t < AT - 1.0 if measured_after else t > AT + 1.0          # away from the easing
+    dist, ang = _ankle_errors(targets, P, R, device, wrong)
+    fixed = correct_tracker_slips(targets, slips)
+    assert s.corrected == bool(slide)
+    if not slide:                   # a turn alone may be a stance: named, not corrected
+        for d in targets.pos:
+            np.testing.assert_array_equal(fixed.pos[d], targets.pos[d])
+            np.testing.assert_array_equal(fixed.rot[d], targets.rot[d])
+        assert "not corrected" in tracker_slip_notes(slips, 60.0)[0]
+        return
+    dist2, ang2 = _ankle_errors(fixed, P, R, device, wrong)
+    assert dist2 < 0.01 and ang2 < 2.0, (dist, ang, dist2, ang2)
+    assert dist > 0.04 or ang > 15.0
+    right = t > AT + 1.0 if measured_after else t < AT - 1.0          # the other side is left alone
+    for d in targets.pos:
+        np.testing.assert_allclose(fixed.pos[d][right], targets.pos[d][right], atol=1e-12)
+
+
+def test_the_solve_names_the_slip_and_the_leg_follows_the_body():
+    """End to end: the summary names the tracker, the time and the slip, and the solved left leg
+    stays on the performer's after it (solved as recorded: the knee 11.6 cm and the ankle 7 cm
+    off on average for the rest of the take, and nothing said)."""
+    rec, P, _, t = slip_recording(BODY, random_mounts(1), "walk", slip=("left_foot", AT, 0.07, 0.0), seed=1)
+    out = cs.solve_recording(rec, cs.SolveSettings(fps=30.0))
+    assert [s.device for s in out.slips] == ["left_foot"]
+    assert any(n.startswith("left foot tracker offset changed at ") and "7.0 cm up the shin" in n
+               for n in out.summary().split("; ")), out.summary()
+    res = out.result
+    idx = np.round((res.t0 + np.arange(res.num_frames) / res.fps) * 60).astype(int)
+    late = t[idx] > AT + 1.0
+    for name, tol in (("left_knee", 0.03), ("left_ankle", 0.01)):
+        err = np.linalg.norm(res.positions[late, J[name]] - P[idx][late, J[name]], axis=-1)
+        assert err.mean() < tol, (name, err.mean())
