@@ -401,8 +401,11 @@ def _bandai() -> JointMap:
                     description="Bandai Namco Research Motiondataset 1/2 (cm, Y-up, faces +Z)")
 
 
-def _cmu() -> JointMap:
-    spine = ("Hips", "Spine", "Spine1")
+def _cgspeed_style(name, spine, neck_parent, description) -> JointMap:
+    """A map for the rigs with the cgspeed BVH names (``LeftUpLeg``, ``LeftArm``, ...; T-pose rest
+    with world-aligned frames): CMU's and Mixamo's, which differ in their spine (``spine``: the
+    joints from Hips to the neck base whose arc spine1-3 split in quarters) and in the joint the
+    ``Neck`` sits on (``neck_parent``, what tells the two apart)."""
     pos = {
         "pelvis": joint("Hips"),
         "spine1": chain(spine, 0.25), "spine2": chain(spine, 0.5), "spine3": chain(spine, 0.75),
@@ -425,9 +428,13 @@ def _cmu() -> JointMap:
         "left_ankle": OrientationSpec("LeftFoot", bone("LeftFoot", "LeftToeBase"), rest()),
         "right_ankle": OrientationSpec("RightFoot", bone("RightFoot", "RightToeBase"), rest()),
     }
-    return JointMap("cmu", pos, ori, unit_scale="auto", up="y", forward="z", rest_is_tpose=True,
-                    foot_pitch="auto", parents=(("Neck", "Spine1"),),
-                    description="CMU mocap, cgspeed BVH conversion (1/0.45 inch units, Y-up, faces +Z)")
+    return JointMap(name, pos, ori, unit_scale="auto", up="y", forward="z", rest_is_tpose=True,
+                    foot_pitch="auto", parents=(("Neck", neck_parent),), description=description)
+
+
+def _cmu() -> JointMap:
+    return _cgspeed_style("cmu", ("Hips", "Spine", "Spine1"), "Spine1",
+                          "CMU mocap, cgspeed BVH conversion (1/0.45 inch units, Y-up, faces +Z)")
 
 
 def _mixamo() -> JointMap:
@@ -436,33 +443,8 @@ def _mixamo() -> JointMap:
     are spaced over Hips-Neck like the body's (quarters of the arc); its ``Neck`` sits on
     ``Spine2`` (the cgspeed rig's on ``Spine1``), which tells the two apart, since Mixamo has
     every cgspeed name."""
-    spine = ("Hips", "Spine", "Spine1", "Spine2", "Neck")
-    pos = {
-        "pelvis": joint("Hips"),
-        "spine1": chain(spine, 0.25), "spine2": chain(spine, 0.5), "spine3": chain(spine, 0.75),
-        "neck": joint("Neck"), "head": joint("Head"),
-    }
-    for side, S in (("left", "Left"), ("right", "Right")):
-        pos[f"{side}_hip"] = joint(f"{S}UpLeg")
-        pos[f"{side}_knee"] = joint(f"{S}Leg")
-        pos[f"{side}_ankle"] = joint(f"{S}Foot")
-        pos[f"{side}_foot"] = joint(f"{S}ToeBase")
-        pos[f"{side}_collar"] = lerp(f"{S}Shoulder", f"{S}Arm", 0.4)
-        pos[f"{side}_shoulder"] = joint(f"{S}Arm")
-        pos[f"{side}_elbow"] = joint(f"{S}ForeArm")
-        pos[f"{side}_wrist"] = joint(f"{S}Hand")
-    ori = {
-        "pelvis": OrientationSpec("Hips", rest(), rest()),
-        "head": OrientationSpec("Head", rest(), rest()),
-        "left_wrist": OrientationSpec("LeftHand", rest(), rest()),
-        "right_wrist": OrientationSpec("RightHand", rest(), rest()),
-        "left_ankle": OrientationSpec("LeftFoot", bone("LeftFoot", "LeftToeBase"), rest()),
-        "right_ankle": OrientationSpec("RightFoot", bone("RightFoot", "RightToeBase"), rest()),
-    }
-    return JointMap("mixamo", pos, ori, unit_scale="auto", up="y", forward="z", rest_is_tpose=True,
-                    foot_pitch="auto", parents=(("Neck", "Spine2"),),
-                    description="Mixamo rig as BVH (mixamorig: names, T-pose rest, Y-up, faces +Z, "
-                                "units detected)")
+    return _cgspeed_style("mixamo", ("Hips", "Spine", "Spine1", "Spine2", "Neck"), "Spine2",
+                          "Mixamo rig as BVH (mixamorig: names, T-pose rest, Y-up, faces +Z, units detected)")
 
 
 BANDAI = _bandai()
