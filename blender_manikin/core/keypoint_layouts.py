@@ -235,7 +235,8 @@ def body22_from_keypoints(points, layout) -> Body22:
     up, mid_hip, mid_sh = _trunk_up(P)
     # a stature estimate per take, only for the small fixed offsets below (pelvis above the
     # hips, neck above the shoulders): the median shoulder-to-hip distance / its rest fraction
-    trunk = np.nanmedian(np.linalg.norm(mid_sh - mid_hip, axis=-1))
+    span = np.linalg.norm(mid_sh - mid_hip, axis=-1)
+    trunk = np.nanmedian(span) if np.isfinite(span).any() else np.nan      # a hip or shoulder never seen
     H = trunk / (PROPORTIONS["shoulder_height"] - PROPORTIONS["hip_height"]) if np.isfinite(trunk) else 1.7
     # the pelvis above the hips' midpoint and the neck above the shoulders' along the trunk's up
     # made square to the hip line / the shoulder line: the derived joint stays equidistant from
