@@ -4,7 +4,8 @@ Runs inside a windowed Blender (under Xvfb) in which the extension zip was insta
 
     blender --python tools/panel_screenshot.py -- --example examples/example_recording.csv \
             --ready /tmp/ready --done /tmp/done [--frame 60] [--keypoints examples/example_keypoints] \
-            [--open calibration,output] [--unit-scale 0.01]
+            [--open calibration,output] [--unit-scale 0.01] [--ui-scale 1.25]
+            [--source SCENE] [--character] [--report "Solve failed: ..."]
 
 It solves the example through the add-on's own operator (as a click on "Solve full body" does),
 opens the 3D Viewport sidebar, frames the solved body, and, once the window has redrawn, keeps
@@ -34,6 +35,14 @@ def parse_args():
                     help="comma-separated sub-panels to show open (e.g. calibration,output)")
     ap.add_argument("--unit-scale", type=float, default=None,
                     help="the scene's unit scale (0.01: a scene in centimetres)")
+    ap.add_argument("--ui-scale", type=float, default=None,
+                    help="Preferences > Interface > Resolution Scale (1.25: the labels 25%% wider)")
+    ap.add_argument("--source", default=None, choices=("FILE", "SCENE", "KEYPOINTS"),
+                    help="after the solve, show this source tab (SCENE: the tracker empties mapped)")
+    ap.add_argument("--character", action="store_true",
+                    help="choose a character (a copy of the solved armature) in Retarget to Character")
+    ap.add_argument("--report", default=None,
+                    help="show this summary instead of the solve's (e.g. a failed solve's message)")
     return ap.parse_args(argv)
 
 
@@ -55,6 +64,8 @@ def view3d():
 
 
 def prepare():
+    if ARGS.ui_scale:
+        bpy.context.preferences.view.ui_scale = ARGS.ui_scale
     if not hasattr(bpy.ops, "manikin") or not hasattr(bpy.context.scene, "manikin"):
         fail("the blender_manikin extension is not enabled")
     # The factory startup scene's cube would hide the body.
@@ -88,6 +99,21 @@ def prepare():
         obj.select_set(obj == arm)
     bpy.context.view_layer.objects.active = arm
     bpy.context.scene.frame_set(ARGS.frame)
+    if ARGS.character:
+        character = arm.copy()
+        character.data = arm.data.copy()
+        character.name = "Character"
+        for key in list(character.keys()):
+            if key.startswith("manikin"):
+                del character[key]
+        bpy.context.scene.collection.objects.link(character)
+        settings.retarget_target = character
+    if ARGS.source:
+        settings.source = ARGS.source
+        if ARGS.source == 'SCENE':
+            bpy.ops.manikin.map_devices()
+    if ARGS.report is not None:
+        settings.last_report = ARGS.report
 
     window, area, region = view3d()
     space = area.spaces.active
@@ -109,7 +135,8 @@ def prepare():
 
 
 def sidebar_info():
-    """Where the sidebar is (X screen coordinates, origin top left) and which tab it shows."""
+    """Where the sidebar is (X screen coordinates, origin top left), its left edge (``left``, the
+    border a user drags to resize it), its ``width`` in pixels, and which tab it shows."""
     window, area, _ = view3d()
     sidebar = next(r for r in area.regions if r.type == 'UI')
     # Over the tab strip at the sidebar's right edge, near its top: no button there could take
@@ -117,6 +144,7 @@ def sidebar_info():
     scale = bpy.context.preferences.system.ui_scale
     return {"x": sidebar.x + sidebar.width - int(10 * scale),
             "y": window.height - (sidebar.y + sidebar.height) + int(30 * scale),
+            "left": sidebar.x, "width": sidebar.width, "scale100": int(round(100 * scale)),
             "category": getattr(sidebar, "active_panel_category", "")}
 
 

@@ -54,7 +54,7 @@ class MANIKIN_PT_solve(_Base, Panel):
                 toggled_row(col, s, "use_keypoint_rate", "keypoint_rate", "Rate")
             col.separator()
             smoothing_rows(col, s)
-            col.prop(s, "fix_sides")
+            fix_sides_row(col, s)
             col.prop(s, "despike")
             col.prop(s, "ik")
             toggled_row(col, s, "use_height", "height", "Height")
@@ -70,7 +70,7 @@ class MANIKIN_PT_solve(_Base, Panel):
             col.separator()
             col.prop(s, "posture")
             smoothing_rows(col, s)
-            col.prop(s, "fix_sides")
+            fix_sides_row(col, s)
             col.prop(s, "model")
             if s.model == 'FILE':
                 col.prop(s, "model_file")
@@ -89,6 +89,12 @@ class MANIKIN_PT_solve(_Base, Panel):
                 for i, line in enumerate(wrapped(part, context)):
                     icon = ('ERROR' if failed or "check" in part else 'DOT') if i == 0 else 'BLANK1'
                     box.label(text=line, icon=icon)
+
+
+def fix_sides_row(col, s):
+    """Fix Left/Right Swaps under a "Fix" heading: the whole name, beside its checkbox, is cut in a
+    250 px sidebar ("Fix Left/Right ...")."""
+    col.column(heading="Fix").prop(s, "fix_sides", text="Side Swaps")
 
 
 def report_items(text):
@@ -113,11 +119,13 @@ def toggled_row(layout, s, flag, value, heading, text=""):
     sub.prop(s, value, text=text)
 
 
-def wrapped(text, context, min_chars=24):
+def wrapped(text, context, min_chars=12):
     """``text`` cut into lines that fit the sidebar's width (Blender labels do not wrap; one too
     long for its row is cut in the middle with "...").  The solve summary is a few sentences; a
     cut-off label would hide what the solve reports.  Lines are measured in the UI font
-    (:mod:`blf`) where Blender draws one, else estimated from a character width."""
+    (:mod:`blf`) where Blender draws one, else estimated from a character width.  ``min_chars``
+    (characters of 6.2 px) is only a floor for a region too narrow to hold a line at all: at 24,
+    lines of 149 px were drawn in the 135 px a 230 px sidebar leaves them, and cut."""
     region = getattr(context, "region", None)
     # Headless (background mode) Blender reports a UI scale of 0 and regions 1 pixel wide.
     scale = (context.preferences.system.ui_scale if context.preferences else 0.0) or 1.0
@@ -170,7 +178,7 @@ class MANIKIN_PT_calibration(_Base, Panel):
         layout.use_property_decorate = False
         layout.prop(s, "calibration")
         if s.calibration != 'MEASURE':
-            layout.prop(s, "calibration_take")
+            layout.prop(s, "calibration_take", text="Take")     # under Calibration; "Calibration ..." cut
         if s.calibration == 'TPOSE':
             row = layout.row(align=True)
             row.prop(s, "tpose_time")
@@ -190,7 +198,7 @@ class MANIKIN_PT_calibration(_Base, Panel):
         row = layout.row(align=True)
         row.prop(s, "offsets_preset")
         row.operator("manikin.load_offsets_preset", text="", icon='TEXT')
-        layout.prop(s, "offsets_text")
+        layout.prop(s, "offsets_text", text="Edited")       # under Offsets; "Edited Offs..." cut
 
 
 class MANIKIN_PT_output(_Base, Panel):
@@ -222,13 +230,51 @@ class MANIKIN_PT_output(_Base, Panel):
         else:
             col.prop(s, "frame_end")
         layout.separator()
-        layout.prop(s, "create_trackers")
-        layout.prop(s, "body_mesh")
-        layout.prop(s, "live_rig")
-        layout.prop(s, "set_scene_range")
-        layout.prop(s, "mark_problems")
+        col = layout.column(heading="Create")
+        col.prop(s, "create_trackers")
+        col.prop(s, "body_mesh")
+        col.prop(s, "live_rig")
+        col = layout.column(heading="Scene")        # "Set Scene Range" beside its checkbox: "Set Scene Ran..."
+        col.prop(s, "set_scene_range", text="Set Range")
+        col.prop(s, "mark_problems")
         layout.prop(s, "reuse_armature")
         layout.prop(s, "armature")
+
+
+_JOINT_LABELS = {}
+
+
+def _list_row_width(context, scale):
+    """Pixels of a row of the bone map list: the sidebar less its tab strip, the panel's margins
+    and the list's scroll bar (measured in Blender 4.3: 166 px rows in a 250 px sidebar)."""
+    region = getattr(context, "region", None)
+    width = region.width if region is not None and region.width > 100 else 300
+    return max(1.0, width - 84 * scale)
+
+
+def joint_column(context):
+    """The bone map list's split factor: the joint column as wide as the longest joint label
+    ("Right Shoulder") needs, measured in the UI font (:func:`_text_measure`), from 0.4 of the row
+    to at most 0.45 (the bone column, with its icon and clear button, keeps the rest)."""
+    from ..blender.bone_map_list import joint_label
+    from ..core.skeleton import JOINT_NAMES
+    scale = (context.preferences.system.ui_scale if context.preferences else 0.0) or 1.0
+    if scale not in _JOINT_LABELS:
+        measure = _text_measure(context, scale)
+        _JOINT_LABELS[scale] = max(measure(joint_label(j)) for j in JOINT_NAMES)
+    return min(0.45, max(0.4, (_JOINT_LABELS[scale] + 12 * scale) / _list_row_width(context, scale)))
+
+
+def list_joint_label(joint, context, factor):
+    """``joint``'s label in the bone map list: "Right Shoulder", or "R Shoulder" where the full one
+    does not fit the joint column (``factor`` of the row) and would be cut to "Right Sho..."."""
+    from ..blender.bone_map_list import joint_label
+    scale = (context.preferences.system.ui_scale if context.preferences else 0.0) or 1.0
+    label = joint_label(joint)
+    room = factor * _list_row_width(context, scale) - 12 * scale
+    if _text_measure(context, scale)(label) > room:
+        label = label.replace("Left ", "L ").replace("Right ", "R ")
+    return label
 
 
 class MANIKIN_UL_bone_map(UIList):
@@ -237,11 +283,11 @@ class MANIKIN_UL_bone_map(UIList):
     bl_idname = "MANIKIN_UL_bone_map"
 
     def draw_item(self, context, layout, data, item, icon, active_data, active_propname, index=0, flt_flag=0):
-        from ..blender.bone_map_list import joint_label
         target = data.retarget_target
         bones = target.data if target is not None and target.type == 'ARMATURE' else None
-        split = layout.split(factor=0.4)
-        split.label(text=joint_label(item.name))
+        factor = joint_column(context)
+        split = layout.split(factor=factor)
+        split.label(text=list_joint_label(item.name, context, factor))
         row = split.row(align=True)
         missing = bool(item.bone) and bones is not None and item.bone not in bones.bones
         row.alert = missing
@@ -287,7 +333,7 @@ class MANIKIN_PT_retarget(_Base, Panel):
         layout.prop(s, "retarget_root")
         col = layout.column()
         col.use_property_split = False          # long labels: the whole width
-        col.prop(s, "retarget_keep_ends")
+        col.prop(s, "retarget_keep_ends", text="Keep Hands/Feet on Targets")     # the name is cut at 250 px
         row = col.row()
         row.separator(factor=2.0)
         row.active = s.retarget_keep_ends

@@ -46,8 +46,9 @@ class MANIKIN_PT_swivel(Panel):
         live = live_rig.is_live_rig(obj) or character
         if not live:
             col = layout.column()
-            col.label(text="Plain FK solve: make it live to edit", icon='INFO')
-            col.label(text="elbows and knees by their swivel.")
+            for i, line in enumerate(wrapped("Plain FK solve: make it live to edit elbows and knees by their "
+                                             "swivel.", context)):
+                col.label(text=line, icon='INFO' if i == 0 else 'BLANK1')
             col.operator("manikin.make_live_rig", icon='CON_KINEMATIC')
         col = layout.column(align=True)
         if any(live_rig.SOLVED_PROPS[limb] in obj.keys() for limb in sk.LIMB_NAMES):
@@ -74,7 +75,7 @@ class MANIKIN_PT_swivel(Panel):
         row.operator("manikin.key_swivel", icon='KEY_HLT').limb = 'ALL'
         row.operator("manikin.reset_swivel", text="Reset", icon='LOOP_BACK').scope = 'CURRENT'
         row = layout.row(align=True)
-        row.operator("manikin.smooth_swivel", icon='SMOOTHCURVE')
+        row.operator("manikin.smooth_swivel", text="Smooth", icon='SMOOTHCURVE')   # "Smooth Sw..." at 250 px
         row.operator("manikin.reset_swivel", text="Reset All", icon='FILE_REFRESH').scope = 'ALL'
         if character:
             layout.operator("manikin.bake_character_swivel", icon='ACTION')
