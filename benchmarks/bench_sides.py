@@ -10,8 +10,10 @@ per detector: clips with enough frames to decide, the largest share of wrong-sid
 clip as labelled (the margin below :data:`SWAPPED_SHARE`), false swaps, swapped clips caught; and
 for the pelvis/foot roles (:func:`mixed_pelvis_role`): the smallest height of the pelvis above the
 higher ankle (medians over a clip), false swaps, and clips caught with the pelvis and left foot
-exchanged; and the clips in which a headset lying off is found (``core/headset_off.py``; none
-should be: every head is worn).
+exchanged; the clips in which a headset lying off is found (``core/headset_off.py``; none
+should be: every head is worn); and foot tracker slips (``core/tracker_slips.py``): found in the
+clips as recorded (none slipped: each found is false) and caught where the left foot tracker's
+strap slides 7 cm up the shin half way through the clip.
 
     .venv/bin/python benchmarks/bench_sides.py [--max-clips N]
 
@@ -33,7 +35,9 @@ from bench_pose import DATASETS, load_clip  # noqa: E402
 from blender_manikin.core import tracker_sides as ts  # noqa: E402
 from blender_manikin.core.headset_off import headset_off  # noqa: E402
 from blender_manikin.core.rotations import axis_angle_to_matrix, matrix_to_quat  # noqa: E402
+from blender_manikin.core.pose_result import TrackerTargets  # noqa: E402
 from blender_manikin.core.skeleton import J  # noqa: E402
+from blender_manikin.core.tracker_slips import find_tracker_slips  # noqa: E402
 
 FEET = {"left_foot": "left_ankle", "right_foot": "right_ankle"}
 
@@ -54,6 +58,21 @@ def detectors(pos, world, fps, rng):
     }
 
 
+def slips(body, pos, world, fps, slide=0.07):
+    """``(found as recorded, caught)``: foot tracker slips found in the clip (pelvis and feet
+    trackers on their joints), and whether a ``slide`` (m) of the left foot's strap up the shin
+    from half way is found on that foot."""
+    devs = {"pelvis": "pelvis", "left_foot": "left_ankle", "right_foot": "right_ankle"}
+    tg = TrackerTargets(fps=fps, pos={d: pos[:, J[j]] for d, j in devs.items()},
+                        rot={d: world[:, J[j]] for d, j in devs.items()})
+    rest = float(body.rest_positions()[J["left_ankle"], 2])
+    found = find_tracker_slips(tg, fps, rest_ankle_z=rest)
+    late = (np.arange(len(pos)) >= len(pos) // 2)[:, None]
+    moved = dict(tg.pos, left_foot=tg.pos["left_foot"] + late * slide * tg.rot["left_foot"][:, :, 2])
+    caught = find_tracker_slips(TrackerTargets(fps=fps, pos=moved, rot=tg.rot), fps, rest_ankle_z=rest)
+    return len(found), any(s.device == "left_foot" and s.slide > slide / 2 for s in caught)
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--max-clips", type=int, default=0, help="per dataset (0: all)")
@@ -67,8 +86,13 @@ def main(argv=None):
             continue
         files = dataset.build_cache(source, verbose=False)
         for f in files[:args.max_clips] if args.max_clips else files:
-            _, _, pos, world, fps = load_clip(f)
+            body, _, pos, world, fps = load_clip(f)
             clips += 1
+            found, caught = slips(body, pos, world, fps)
+            sl = roles.setdefault("slips", dict(found=0, clips=0, caught=0))
+            sl["found"] += found
+            sl["clips"] += bool(found)
+            sl["caught"] += caught
             zp, za = pos[:, J["pelvis"], 2], {d: pos[:, J[j], 2] for d, j in FEET.items()}
             r = roles.setdefault("n", dict(false=0, caught=0, margin=np.inf))
             r["false"] += ts.mixed_pelvis_role(zp, za) is not None
@@ -97,6 +121,11 @@ def main(argv=None):
               f"false swaps {r['false']}; the pelvis and left foot exchanged, caught in {r['caught']} of {clips}")
         print(f"headset lying off at a clip's start or end (core/headset_off.py; every head is worn): "
               f"found in {r['headset_off']} of {clips}")
+    sl = roles.get("slips")
+    if sl:
+        print(f"foot tracker slips (core/tracker_slips.py, pelvis and feet trackers): {sl['found']} found in "
+              f"{sl['clips']} of {clips} clips as recorded (each false); a 7 cm slide of the left foot's strap "
+              f"from half way caught in {sl['caught']} of {clips}")
     for det, f in worst.items():
         print(f"largest share, {det}: {f}")
 

@@ -101,3 +101,20 @@ def test_the_solve_names_the_slip_and_the_leg_follows_the_body():
     for name, tol in (("left_knee", 0.03), ("left_ankle", 0.01)):
         err = np.linalg.norm(res.positions[late, J[name]] - P[idx][late, J[name]], axis=-1)
         assert err.mean() < tol, (name, err.mean())
+
+
+def test_a_body_lying_down_is_no_slip():
+    """Lying on the floor (HDM05's lieDownFloor takes) holds a still foot on its side, its ankle
+    higher than standing and turned against a pelvis that lies too: no strap slipped.  Plants
+    count only with the foot flat and the pelvis upright (before: a 5 cm 'slide' put right, the
+    foot pushed into the floor)."""
+    from dataclasses import replace
+    from blender_manikin.core.rotations import axis_angle_rotation
+    targets, _, _, t = slip_take(BODY, random_mounts(4), "walk", seed=4)
+    late = t > AT
+    tip = axis_angle_rotation(np.array([1.0, 0.0, 0.0]), np.radians(80.0))
+    pos, rot = dict(targets.pos), dict(targets.rot)
+    pos["right_foot"] = pos["right_foot"] + late[:, None] * [0.0, 0.0, 0.05]
+    for d in ("right_foot", "pelvis"):
+        rot[d] = np.where(late[:, None, None], tip @ rot[d], rot[d])
+    assert find_tracker_slips(replace(targets, pos=pos, rot=rot), rest_ankle_z=REST) == []

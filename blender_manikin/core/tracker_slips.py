@@ -16,7 +16,8 @@ where it is, turned to ``joint_rot · Rz(θ)``.  So the correction from the slip
 ``pos - s · rot ẑ`` and ``rot · Rz(-θ)``, on the targets (:class:`.pose_result.TrackerTargets`).
 
 Both are measured where the truth is known: on the foot's *plants* (the implied ankle still,
-slower than :data:`PLANT_SPEED` for :data:`PLANT_MIN_S` or more), a flat foot's ankle stands
+slower than :data:`PLANT_SPEED` for :data:`PLANT_MIN_S` or more, the foot flat within
+:data:`FLAT_MAX_DEG` and the pelvis upright within :data:`UPRIGHT_MAX_DEG`), a flat foot's ankle stands
 at one height and points one way relative to the pelvis (or, without a pelvis tracker, the
 headset).  A slip is a *step* in those per plant: the plants before a moment agree with each
 other, the plants after it agree with each other, and the two differ by at least
@@ -58,9 +59,13 @@ MIN_PLANTS = 2
 #: metres the planted ankle height must step by for a slide along the shin
 SLIP_SLIDE_M = 0.03
 #: degrees the planted foot's heading (relative to the pelvis) must step by for a turn round it
-SLIP_TURN_DEG = 12.0
+SLIP_TURN_DEG = 16.0
 #: the plants on each side scatter (median absolute deviation) less than this share of the step
 SLIP_CONSISTENT = 0.25
+#: degrees a planted foot's up axis may lean from the vertical (a flat foot, not on its toes or side)
+FLAT_MAX_DEG = 20.0
+#: degrees the pelvis (or the headset) may lean for its feet's plants to count (not lying down)
+UPRIGHT_MAX_DEG = 45.0
 #: seconds within which both feet stepping alike is the body (a platform, a stance), not a strap
 BOTH_FEET_S = 1.0
 FOOT_DEVICES = ("left_foot", "right_foot")
@@ -153,6 +158,7 @@ def find_tracker_slips(targets, fps=None, rest_ankle_z=None) -> list:
     fps = float(fps or targets.fps)
     ref = "pelvis" if "pelvis" in targets.rot else "head"
     ref_heading = _heading(targets.rot[ref]) if ref in targets.rot else None
+    upright = targets.rot[ref][:, 2, 2] > np.cos(np.radians(UPRIGHT_MAX_DEG)) if ref in targets.rot else True
     out = []
     for d in FOOT_DEVICES:
         if d not in targets.pos:
@@ -160,7 +166,10 @@ def find_tracker_slips(targets, fps=None, rest_ankle_z=None) -> list:
         pos, rot = targets.pos[d], targets.rot[d]
         valid = targets.valid.get(d, np.ones(pos.shape[0], bool))
         if ref_heading is not None:
-            valid = valid & targets.valid.get(ref, np.ones(pos.shape[0], bool))
+            valid = valid & targets.valid.get(ref, np.ones(pos.shape[0], bool)) & upright
+        # a plant is a foot standing flat under a body standing up: a foot on its side or its
+        # toes, or a body lying on the floor, holds its ankle at other heights and headings
+        valid = valid & (rot[:, 2, 2] > np.cos(np.radians(FLAT_MAX_DEG)))
         segs = plants(pos, valid, fps)
         if len(segs) < 2 * MIN_PLANTS:
             continue
