@@ -278,8 +278,9 @@ def build_parser():
         description="Convert VR tracker recordings to full-body animation (MANIKIN).")
     sub = p.add_subparsers(dest="command", required=True)
     s = sub.add_parser("solve", help="solve recordings and write animation files")
-    s.add_argument("inputs", nargs="+", metavar="INPUT", help="recording files or folders")
-    s.add_argument("--out", required=True, metavar="DIR", help="output folder (created if missing)")
+    s.add_argument("inputs", nargs="+", metavar="INPUT", type=os.path.expanduser, help="recording files or folders")
+    s.add_argument("--out", required=True, metavar="DIR", type=os.path.expanduser,
+                   help="output folder (created if missing)")
     _add_solve_options(s)
     s.add_argument("--format", default=",".join(DEFAULT_FORMATS), metavar="LIST",
                    help="comma-separated: " + ",".join(FORMATS))
@@ -315,7 +316,8 @@ def build_parser():
     c = sub.add_parser("convert", help="convert many recordings in parallel on Dask, without Blender")
     c.add_argument("inputs", nargs="+", metavar="INPUT",
                    help="recording files, folders (recursive), globs, or manifest files (.txt/.lst/.jsonl)")
-    c.add_argument("--out", required=True, metavar="DIR", help="output folder; DIR/manifest.jsonl records each input")
+    c.add_argument("--out", required=True, metavar="DIR", type=os.path.expanduser,
+                   help="output folder; DIR/manifest.jsonl records each input")
     _add_solve_options(c)
     c.add_argument("--format", default="json", metavar="LIST",
                    help="comma-separated: " + ",".join(n for n in FORMATS if n not in BLENDER_FORMATS))
@@ -337,7 +339,8 @@ def parse_formats(text):
 
 def expand_inputs(inputs):
     """Files of ``inputs`` with folders expanded to their recordings (sorted), except FreeMoCap
-    recording folders, which are one input each.  Order kept."""
+    recording folders, which are one input each.  Order kept; a file given twice (again, in a
+    folder also given, or through a symbolic link) is solved once, under its first name."""
     from .core.io_keypoints import freemocap_body_file
     out = []
     for item in inputs:
@@ -352,7 +355,10 @@ def expand_inputs(inputs):
             out.extend(found)
         else:
             out.append(item)
-    return out
+    first = {}
+    for p in out:
+        first.setdefault(os.path.realpath(p), p)
+    return list(first.values())
 
 
 def solve_settings(args):
@@ -562,6 +568,17 @@ def quiet_stdout(to_stderr=False):
             os.close(saved)
 
 
+def _hint_dash_files(argv):
+    """After a usage error: name the arguments that are files whose names start with ``-``
+    (``-take.csv``), which argparse reads as options."""
+    if "--" in argv:
+        return
+    dashed = [a for a in argv if a.startswith("-") and a != "-" and os.path.exists(a)]
+    for a in dashed:
+        print(f"blender_manikin: {a!r} is a file, read as an option: put -- before it "
+              f"(solve --out DIR -- {a}) or write it as {os.path.join('.', a)}", file=sys.stderr)
+
+
 def main(argv=None):
     """Command-line entry; returns the exit status."""
     parser = build_parser()
@@ -570,6 +587,7 @@ def main(argv=None):
     try:
         args = parser.parse_args(argv)
     except SystemExit as exc:         # argparse: usage error (2) or --help (0)
+        _hint_dash_files(argv)
         return int(exc.code or 0)
     try:
         formats = parse_formats(args.format)

@@ -188,3 +188,38 @@ def test_a_rerun_writes_new_formats_and_never_reuses_an_earlier_inputs_name(tmp_
     code, recs = convert.run([str(a), str(b)], str(here / "out"), ["json"], SolveSettings(fps=30.0), workers=1,
                              progress=False, log=lambda m: None)
     assert code == 0 and recs == []
+
+
+def test_output_stems_unique_on_case_insensitive_disks():
+    """``Take.csv`` and ``take.csv`` (and ``Übung`` composed / decomposed) are one file name on
+    Windows and macOS: their outputs must not share a name there (they did: ``Take.bvh`` and
+    ``take.bvh``, one over the other)."""
+    import unicodedata
+    nfc, nfd = unicodedata.normalize("NFC", "Übung 1"), unicodedata.normalize("NFD", "Übung 1")
+    paths = ["/in/Take.csv", "/in/take.csv", f"/in/{nfc}.csv", f"/in/x/{nfd}.csv", "/in/walk.csv"]
+    stems = convert.output_stems(paths)
+    folded = [unicodedata.normalize("NFC", s).casefold() for s in stems.values()]
+    assert len(set(folded)) == len(paths)
+    assert stems["/in/walk.csv"] == "walk"
+    assert stems["/in/Take.csv"].startswith("Take-") and stems["/in/take.csv"].startswith("take-")
+
+
+def test_a_long_input_name_gives_outputs_the_disk_takes(tmp_path):
+    """An input whose name is 255 bytes (85 Japanese characters: the most ext4 / APFS allow)
+    failed with "[Errno 36] File name too long": its output plus ``.tmp`` was 256 bytes.  The
+    stem is cut at a character boundary and given the input's hash, so two such inputs that
+    share their first characters stay apart."""
+    from blender_manikin import cli
+    from blender_manikin.core.file_names import MAX_STEM_BYTES
+    from fixtures_recordings import write_recording_csv
+    names = ["テ" * 83 + "ab", "テ" * 83 + "cd"]
+    (tmp_path / "in").mkdir()
+    for n in names:
+        write_recording_csv(tmp_path / "in", n + ".csv", duration=2.0)
+        assert len((n + ".csv").encode()) == 255
+    assert cli.main(["solve", str(tmp_path / "in"), "--out", str(tmp_path / "out"), "--format", "json,bvh,npz"]) == 0
+    out = sorted(os.listdir(tmp_path / "out"))
+    stems = {os.path.splitext(f)[0] for f in out if not f.startswith(".")}
+    assert len(stems) == 2 and all(len(s.encode()) <= MAX_STEM_BYTES + 9 for s in stems)
+    assert all(s.startswith("テ" * 66) for s in stems)
+    assert sum(f.endswith((".json", ".bvh", ".npz")) for f in out) == 6

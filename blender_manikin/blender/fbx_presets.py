@@ -290,21 +290,22 @@ def take_actions(obj):
 
 def export_fbx_takes(directory, armature, preset: str = DEFAULT, context=None, actions=None,
                      overwrite: bool = False) -> list:
-    """One FBX per take (:func:`take_actions`, or ``actions``) of the character ``armature`` in ``directory``:
-    ``<armature>_<take>.fbx``, each with its action assigned and the scene's frame range set to
-    the action's keys while it is written (:func:`export_fbx`), the armature's NLA tracks not
-    evaluated meanwhile: each file holds its take alone, a bone channel the take does not key at
-    its rest value when the action shown, an NLA strip or another take animates it (it would
-    otherwise carry that animation's last value) and as posed otherwise.  The armature's action,
-    its NLA evaluation, its pose and the frame range are as before afterwards.  ``ValueError`` when an NLA
-    strip of the armature is in tweak mode (its action cannot be changed), nothing written.
-    Returns the paths written.  A file already there is
-    replaced only when it is an unchanged export of an earlier run (:mod:`..core.output_guard`),
-    else nothing is written and :class:`..core.output_guard.OutputInTheWay` (a ``ValueError``)
-    names it, unless ``overwrite``."""
+    """One FBX per take (:func:`take_actions`, or ``actions``) of the character ``armature`` in ``directory`` (``//``
+    relative to the .blend): ``<armature>_<take>.fbx`` (:func:`..core.file_names.file_stem`: letters of any script
+    kept; takes whose names would be one file on Windows or macOS, ``Walk`` and ``walk``, ``Walk.001`` and
+    ``Walk_001``, made unique with ``_2``...), each with its action assigned and the scene's frame range set to the
+    action's keys while it is written (:func:`export_fbx`), the armature's NLA tracks not evaluated meanwhile: each
+    file holds its take alone, a bone channel the take does not key at its rest value when the action shown, an NLA
+    strip or another take animates it (it would otherwise carry that animation's last value) and as posed otherwise.
+    The armature's action, its NLA evaluation, its pose and the frame range are as before afterwards.
+    ``ValueError`` when an NLA strip of the armature is in tweak mode (its action cannot be changed), nothing
+    written. Returns the paths written.  A file already there is replaced only when it is an unchanged export of an
+    earlier run (:mod:`..core.output_guard`), else nothing is written and
+    :class:`..core.output_guard.OutputInTheWay` (a ``ValueError``) names it, unless ``overwrite``."""
     import os
     import bpy
     from ..core import output_guard
+    from ..core.file_names import file_stem, unique_stems
     from . import keying
     from . import character_swivel
     context = context or bpy.context
@@ -317,9 +318,9 @@ def export_fbx_takes(directory, armature, preset: str = DEFAULT, context=None, a
     actions = list(actions) if actions is not None else take_actions(armature)
     if not actions:
         raise ValueError(f"{armature.name!r} has no retargeted takes (MANIKIN_retarget_* actions) to export")
-    paths = [os.path.join(directory, bpy.path.clean_name(
-        f"{armature.name}_{act.name.replace('MANIKIN_retarget_', '').replace('MANIKIN_', '')}") + ".fbx")
-        for act in actions]
+    takes = (act.name.replace('MANIKIN_retarget_', '').replace('MANIKIN_', '') for act in actions)
+    stems = unique_stems(file_stem(f"{armature.name}_{t}") for t in takes)   # never one file on Windows, macOS
+    paths = [os.path.join(bpy.path.abspath(directory), s + ".fbx") for s in stems]
     ad = armature.animation_data
     if ad is not None and ad.use_tweak_mode:
         raise ValueError(f"{armature.name!r} has an NLA strip in tweak mode (Tab in the NLA editor), so its "

@@ -202,11 +202,8 @@ def save_bone_map(path, bmap) -> None:
 
 def load_bone_map(path) -> BoneMap:
     """Read a bone map written by :func:`save_bone_map` (or any dict of the accepted forms)."""
-    try:
-        d = json.loads(Path(path).read_text(encoding="utf-8"))
-    except json.JSONDecodeError as e:
-        raise ValueError(f"bone map file {str(path)!r} is not valid JSON: {e}") from None
-    return validate_bone_map(d)
+    from .recording import load_json_file
+    return validate_bone_map(load_json_file(path))
 
 
 # --------------------------------------------------------------------------

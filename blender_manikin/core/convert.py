@@ -29,6 +29,7 @@ import sys
 import time
 
 from . import formats, output_guard
+from .file_names import fit_bytes, fold
 from .solve import SolveSettings, error_message, solve_recording
 
 MANIFEST = "manifest.jsonl"
@@ -77,31 +78,42 @@ def _walk_recordings(folder):
 def _read_manifest_file(path):
     base = os.path.dirname(os.path.abspath(path))
     paths = []
-    with open(path, encoding="utf-8") as f:
-        for n, line in enumerate(f, 1):
-            line = line.strip()
-            if not line or line.startswith("#"):
-                continue
-            if path.lower().endswith(".jsonl"):
-                try:
-                    line = json.loads(line)["path"]
-                except (json.JSONDecodeError, KeyError, TypeError):
-                    raise ValueError(f"{path}, line {n}: expected a JSON object with a 'path'") from None
-            p = os.path.expanduser(line)
-            paths.append(p if os.path.isabs(p) else os.path.join(base, p))
+    from .recording import read_text
+    for n, line in enumerate(read_text(path).splitlines(), 1):     # a BOM is not part of a path
+        line = line.strip()
+        if not line or line.startswith("#"):
+            continue
+        if path.lower().endswith(".jsonl"):
+            try:
+                line = json.loads(line)["path"]
+            except (json.JSONDecodeError, KeyError, TypeError):
+                raise ValueError(f"{path}, line {n}: expected a JSON object with a 'path'") from None
+        p = os.path.expanduser(line)
+        paths.append(p if os.path.isabs(p) else os.path.join(base, p))
     return paths
 
 
 def output_stems(paths):
     """``{input: output stem}``: the file (or FreeMoCap folder) name without extension, made unique
     with a short hash of the input's absolute path when two inputs share a name (in different
-    folders, or side by side with different extensions: ``take.csv`` and ``take.bsor``)."""
+    folders, or side by side with different extensions: ``take.csv`` and ``take.bsor``).  Names
+    are compared as Windows and macOS compare file names (:func:`.file_names.fold`: ``Take.csv``
+    and ``take.csv``; ``Übung`` composed and decomposed), so an output folder on such a disk (or
+    shared with one) never gets one output over another.  A name longer than
+    :data:`.file_names.MAX_STEM_BYTES` (UTF-8) is cut there and given the hash too: a file
+    system's 255-byte names must hold the stem, the extension and the temporary ``.part``
+    suffix the output is written under first."""
     stems = {p: os.path.splitext(os.path.basename(os.path.abspath(p)))[0] for p in paths}
     counts = {}
     for s in stems.values():
-        counts[s] = counts.get(s, 0) + 1
-    return {p: (s if counts[s] == 1 else f"{s}-{hashlib.sha1(os.path.abspath(p).encode()).hexdigest()[:8]}")
-            for p, s in stems.items()}
+        counts[fold(s)] = counts.get(fold(s), 0) + 1
+
+    def stem(p, s):
+        short = fit_bytes(s)
+        if counts[fold(s)] == 1 and short == s:
+            return s
+        return f"{short}-{hashlib.sha1(os.path.abspath(p).encode('utf-8', 'surrogateescape')).hexdigest()[:8]}"
+    return {p: stem(p, s) for p, s in stems.items()}
 
 
 def read_manifest(out_dir):

@@ -435,12 +435,9 @@ def save_offsets(path, offsets) -> None:
 
 def load_offsets(path) -> dict:
     """Read offsets saved by :func:`save_offsets`; ``ValueError`` names the file and problem."""
+    from .recording import load_json_file
     path = os.fspath(path)
-    try:
-        with open(path, encoding="utf-8") as fh:
-            data = json.load(fh)
-    except json.JSONDecodeError as exc:
-        raise ValueError(f"{os.path.basename(path)}, line {exc.lineno}: not valid JSON ({exc.msg})") from None
+    data = load_json_file(path)
     return validate_offsets(data, where=os.path.basename(path))
 
 

@@ -15,7 +15,7 @@ from typing import Callable, Optional
 
 import numpy as np
 
-from .recording import Recording, RecordingError
+from .recording import Recording, RecordingError, decode_head, not_data
 
 
 @dataclass(frozen=True)
@@ -112,6 +112,8 @@ def reader_for(path) -> ReaderFormat:
     for fmt in READERS.values():
         if fmt.sniff is not None and fmt.sniff(head):
             return fmt
+    if not_data(head, text=False):
+        raise RecordingError(not_data(head, text=False), path=path)
     raise RecordingError(f"unsupported file type {ext or '(none)'!r}: expected {describe_inputs()}", path=path)
 
 
@@ -154,7 +156,7 @@ def writer_names() -> tuple:
 # the built-in formats
 def _csv_header(path):
     with open(path, "rb") as f:
-        text = f.read(SNIFF_BYTES).decode("utf-8-sig", "replace")
+        text = decode_head(f.read(SNIFF_BYTES))
     lines = [ln for ln in text.splitlines() if ln.strip() and not ln.lstrip().startswith("#")]
     return (lines[0].lower() if lines else ""), text
 
@@ -187,7 +189,7 @@ def _sniff_bsor(head: bytes) -> bool:
 
 
 def _sniff_csv(head: bytes) -> bool:
-    text = head.decode("utf-8", "replace")
+    text = decode_head(head)
     lines = [ln for ln in text.lower().splitlines() if ln.strip() and not ln.lstrip().startswith("#")]
     if bool(lines) and all(c in lines[0] for c in ("time", "device")):
         return True
@@ -220,7 +222,7 @@ def _read_json(path, axes=None, units=None, layout=None, rate=None):
 
 def _sniff_json(head: bytes) -> bool:
     from .io_json import looks_like_recording
-    return looks_like_recording(head.decode("utf-8", "replace"))
+    return looks_like_recording(decode_head(head))
 
 
 # JSON / JSON Lines frames (WebXR, three.js, Unity's JsonUtility): flattened into a wide layout

@@ -50,7 +50,7 @@ from .plain import shown
 from .pose_result import DEVICES
 from .recording import (
     Recording, RecordingError, TrackerStream, UNITS, canonical_axes, canonical_device,
-    canonical_units, from_blender, to_blender,
+    canonical_units, decode_text, from_blender, not_data, text_codec, to_blender,
 )
 from .rotations import normalize, vector_norm
 
@@ -93,8 +93,9 @@ def _to_float(values, name, lines, path):
 def _text_blocks(path, block_bytes):
     """Successive blocks of whole lines of the file at ``path``, as text.
 
-    UTF-8 (a BOM is dropped); a byte that is not UTF-8 raises :class:`RecordingError` with its
-    line (counting ``\n``)."""
+    UTF-8 (a BOM is dropped), or UTF-16 / UTF-32 with a BOM (read whole: :func:`.recording.decode_text`);
+    a byte that is not UTF-8 raises :class:`RecordingError` with its line (counting ``\n``), as
+    does a stand-in for the data (a Git LFS pointer, an HTML page, a gzip file: :func:`.recording.not_data`)."""
     try:
         fh = open(path, "rb")
     except OSError as exc:
@@ -111,12 +112,16 @@ def _text_blocks(path, block_bytes):
             if cut == 0 and chunk:         # no line end yet: read on
                 rest = buf
                 continue
+            if first and text_codec(buf[:512])[0] != "utf-8" or first and not_data(buf[:512]):
+                yield decode_text(buf + fh.read(), path=path)      # UTF-16/32: whole; a stand-in: raises
+                return
             block, rest = buf[:cut], buf[cut:]
             if block:
                 try:
                     text = block.decode("utf-8-sig" if first else "utf-8")
                 except UnicodeDecodeError as exc:
-                    raise RecordingError(f"not UTF-8 text (byte 0x{block[exc.start]:02x})", path=path,
+                    raise RecordingError(f"not UTF-8 text (byte 0x{block[exc.start]:02x}): save it as UTF-8 "
+                                         f"(Excel: CSV UTF-8)", path=path,
                                          line=line + block[:exc.start].count(b"\n")) from None
                 yield text
                 line += block.count(b"\n")

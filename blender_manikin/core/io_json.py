@@ -36,7 +36,7 @@ import numpy as np
 
 from .io_wide_csv import read_wide_table
 from .plain import shown
-from .recording import Recording, RecordingError, read_file_bytes
+from .recording import Recording, RecordingError, decode_text, read_file_bytes
 from .rotations import matrix_to_quat
 
 #: keys that say which side a list's object is on, and the sides they name
@@ -204,7 +204,7 @@ def read_json(path, axes=None, units=None, layout=None, rate=None) -> Recording:
     (Blender axes, metres).  axes, units, layout, rate: as :func:`.io_wide_csv.read_wide_csv`."""
     from .io_wide_csv import load_layout
     path = os.fspath(path)
-    text = read_file_bytes(path).decode("utf-8-sig", "replace")
+    text = decode_text(read_file_bytes(path), path=path, errors="replace")
     if not text.strip():
         raise RecordingError("file is empty", path=path)
     frames, lines = frames_of(path, text)

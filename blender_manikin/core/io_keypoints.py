@@ -40,7 +40,7 @@ naming the file and the problem (and the line, for CSV).
 from __future__ import annotations
 
 import csv
-import json
+import io
 import os
 from dataclasses import dataclass, field
 
@@ -50,7 +50,7 @@ from . import keypoint_layouts as kl
 from . import marker_sets
 from . import rotations as rot
 from .plain import shown
-from .recording import RecordingError, UNITS, canonical_units, time_unit_of_step
+from .recording import RecordingError, UNITS, canonical_units, decode_head, load_json_file, read_text, time_unit_of_step
 
 #: points with a confidence below this are treated as missing
 MIN_CONFIDENCE = 0.3
@@ -105,8 +105,8 @@ def is_keypoint_input(path) -> bool:
         return os.path.isfile(p)
     if ext == ".csv" and os.path.isfile(p):
         try:
-            with open(p, "r", encoding="utf-8-sig", errors="replace") as f:
-                header = f.readline()
+            with open(p, "rb") as f:
+                header = (decode_head(f.read(4096)).splitlines() or [""])[0]
         except OSError:
             return False
         return _layout_from_columns([c.strip().lower() for c in header.split(",")]) is not None
@@ -285,11 +285,22 @@ def _time_in_seconds(time):
     return (time, "") if unit == "s" else (time * scale, f", in {unit}")
 
 
+def _stand_in(path):
+    """Why the file at ``path`` is a stand-in for the data (:func:`.recording.not_data`), or None."""
+    from .recording import not_data
+    try:
+        with open(path, "rb") as f:
+            head = f.read(512)
+    except OSError:
+        return None
+    return "file is empty" if not head else not_data(head, text=False)
+
+
 def _load_npy(path):
     try:
         return np.load(path, allow_pickle=False)
     except (OSError, ValueError, EOFError) as exc:
-        raise RecordingError(f"not a readable .npy array ({exc})", path=path) from None
+        raise RecordingError(_stand_in(path) or f"not a readable .npy array ({exc})", path=path) from None
 
 
 def _optional_npy(path):
@@ -308,7 +319,7 @@ def _load_npz(path):
         keys = list(z.files)
         arrays = {k: z[k] for k in keys}
     except (OSError, ValueError, EOFError) as exc:
-        raise RecordingError(f"not a readable .npz archive ({exc})", path=path) from None
+        raise RecordingError(_stand_in(path) or f"not a readable .npz archive ({exc})", path=path) from None
     key = next((k for k in _NPZ_KEYS if k in arrays), None)
     if key is None:
         cands = [k for k, a in arrays.items() if a.ndim in (2, 3) and a.dtype.kind == "f"]
@@ -405,13 +416,7 @@ def _layout_from_columns(cols):
 
 
 def _load_csv(path, mapping, rate):
-    try:
-        with open(path, "r", encoding="utf-8-sig", newline="") as f:
-            rows = list(csv.reader(f))
-    except UnicodeDecodeError as exc:
-        raise RecordingError(f"not UTF-8 text ({exc.reason})", path=path) from None
-    except OSError as exc:
-        raise RecordingError(f"cannot read file ({exc.strerror or exc})", path=path) from None
+    rows = list(csv.reader(io.StringIO(read_text(path), newline="")))
     rows = [(i + 1, r) for i, r in enumerate(rows) if r and any(c.strip() for c in r)
             and not r[0].lstrip().startswith("#")]
     if not rows:
@@ -420,11 +425,7 @@ def _load_csv(path, mapping, rate):
     cols = [c.strip().lower() for c in header]
     if mapping is not None:
         if not isinstance(mapping, dict):
-            try:
-                with open(os.fspath(mapping), "r", encoding="utf-8") as f:
-                    mapping = json.load(f)
-            except (OSError, ValueError) as exc:
-                raise RecordingError(f"cannot read the mapping file ({exc})", path=os.fspath(mapping)) from None
+            mapping = load_json_file(os.fspath(mapping))
         try:
             name = kl.canonical_layout(mapping.get("layout", ""))
         except ValueError as exc:
@@ -502,13 +503,7 @@ def trc_point(marker) -> str:
 def _load_trc(path, rate):
     """``(X (T, K, 3), time (T,) s or None, layout, rate, units, rules)`` of an OpenSim ``.trc`` file
     (``rules``: how anatomical markers became joint centres, :func:`.marker_sets.rules_used`, or None)."""
-    try:
-        with open(path, "r", encoding="utf-8-sig") as f:
-            lines = f.read().splitlines()
-    except UnicodeDecodeError as exc:
-        raise RecordingError(f"not UTF-8 text ({exc.reason})", path=path) from None
-    except OSError as exc:
-        raise RecordingError(f"cannot read file ({exc.strerror or exc})", path=path) from None
+    lines = read_text(path).splitlines()
 
     def cells(line):
         return line.split("\t") if "\t" in line else line.split()

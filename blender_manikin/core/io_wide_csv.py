@@ -50,7 +50,7 @@ import numpy as np
 from .devices import DEVICES, canonical_device, snake_name
 from .plain import shown
 from .recording import (Recording, RecordingError, TrackerStream, UNITS, canonical_axes, canonical_units,
-                        read_file_bytes, time_unit_of_step, to_blender)
+                        decode_text, load_json_file, read_file_bytes, time_unit_of_step, to_blender)
 from . import rotations as rot
 from .rotations import normalize
 from .axes_detect import choose_axes, heading_from_positions, heading_quats, length_units, up_axis, yaw_of
@@ -282,14 +282,7 @@ _ORDERS = ("XYZ", "XZY", "YXZ", "YZX", "ZXY", "ZYX")
 
 def load_layout(path):
     """A layout file (JSON, as :func:`save_layout` writes it) as a dict; errors name the file."""
-    import json
-    try:
-        with open(path, encoding="utf-8") as f:
-            layout = json.load(f)
-    except OSError as exc:
-        raise RecordingError(f"cannot read the layout file ({exc.strerror or exc})", path=path) from None
-    except json.JSONDecodeError as exc:
-        raise RecordingError(f"not valid JSON ({exc.msg})", path=path, line=exc.lineno) from None
+    layout = load_json_file(path)
     problems = []
     if not isinstance(layout, dict) or layout.get("format") != "wide_csv":
         problems.append('expected an object with "format": "wide_csv"')
@@ -377,7 +370,7 @@ def read_wide_csv(path, axes=None, units=None, layout=None, rate=None) -> Record
     counter (else the layout's ``"rate"``).  The layout that was used, detected or given, is
     ``metadata["layout"]`` (:func:`save_layout`)."""
     path = os.fspath(path)
-    text = read_file_bytes(path).decode("utf-8-sig", "replace")
+    text = decode_text(read_file_bytes(path), path=path, errors="replace")
     lines = text.splitlines()
     rows = [(n, ln) for n, ln in enumerate(lines, 1) if ln.strip() and not ln.lstrip().startswith("#")]
     if not rows:

@@ -99,12 +99,99 @@ class RecordingError(ValueError):
 
 
 def read_file_bytes(path) -> bytes:
-    """The whole file, or :class:`RecordingError` naming it and why it cannot be read."""
+    """The whole file, or :class:`RecordingError` naming it and why it cannot be read (also
+    when it is a stand-in for the data: see :func:`not_data`)."""
     try:
         with open(path, "rb") as fh:
-            return fh.read()
+            data = fh.read()
     except OSError as exc:
         raise RecordingError(f"cannot read file ({exc.strerror or exc})", path=path) from None
+    problem = not_data(data[:512], text=False)
+    if problem:
+        raise RecordingError(problem, path=path)
+    return data
+
+
+#: byte-order marks → codec, longest first (UTF-32 LE's BOM starts with UTF-16 LE's)
+_BOMS = ((b"\xff\xfe\x00\x00", "utf-32-le"), (b"\x00\x00\xfe\xff", "utf-32-be"), (b"\xef\xbb\xbf", "utf-8"),
+         (b"\xff\xfe", "utf-16-le"), (b"\xfe\xff", "utf-16-be"))
+
+
+def not_data(head: bytes, text=True):
+    """Why a file whose first bytes are ``head`` is a stand-in for data, not data, or None: a
+    Git LFS pointer (the repository was cloned without ``git lfs pull``), an HTML page (a
+    download link that answered with a login or error page), a gzip or ZIP archive (a
+    compressed take; a ZIP only for a ``text`` format: an Excel workbook renamed ``.csv``)."""
+    if head.startswith(b"version https://git-lfs.github.com/spec/"):
+        return "a Git LFS pointer, not the data: fetch the file (git lfs pull)"
+    if head.startswith(b"\x1f\x8b"):
+        return "gzip-compressed: decompress it first (gunzip, 7-Zip)"
+    if text and head.startswith(b"PK\x03\x04"):
+        return "a ZIP archive (an Excel workbook?), not the data: extract it, or save the sheet as CSV"
+    text = head.lstrip(b"\xef\xbb\xbf \t\r\n")[:64].lower()
+    if text.startswith((b"<!doctype html", b"<html", b"<head", b"<body")):
+        return "an HTML page (a failed download or a login page?), not the data"
+    return None
+
+
+def text_codec(head: bytes):
+    """``(codec, bom_bytes)`` of a text file from its first bytes: UTF-8 unless a byte-order
+    mark says UTF-16 / UTF-32 (Excel's "Unicode Text", Windows PowerShell's ``Out-File`` and
+    ``>`` write UTF-16 LE with a BOM), or, without one, the NUL bytes of ASCII in UTF-16 do."""
+    for bom, codec in _BOMS:
+        if head.startswith(bom):
+            return codec, len(bom)
+    if len(head) >= 4 and b"\x00" in head:
+        even, odd = head[0::2].count(0), head[1::2].count(0)
+        if odd > 0.4 * len(head) / 2 and even == 0:
+            return "utf-16-le", 0
+        if even > 0.4 * len(head) / 2 and odd == 0:
+            return "utf-16-be", 0
+    return "utf-8", 0
+
+
+def decode_text(data: bytes, path=None, errors="strict") -> str:
+    """The text of a file's bytes (``data``): UTF-8, UTF-16 or UTF-32 (:func:`text_codec`),
+    a BOM dropped.  Line ends are left as they are (``\\n``, ``\\r\\n`` or ``\\r``: ``splitlines``
+    takes them all).  Raises :class:`RecordingError` naming ``path``, the line and the byte when
+    ``errors="strict"`` and a byte does not decode, and for a stand-in (:func:`not_data`)."""
+    problem = not_data(data[:512])
+    if problem:
+        raise RecordingError(problem, path=path)
+    codec, skip = text_codec(data[:512])
+    try:
+        return data[skip:].decode(codec, errors)
+    except UnicodeDecodeError as exc:
+        at = skip + exc.start
+        line = data[skip:at].decode(codec, "replace").count("\n") + 1
+        excel = str(path or "").lower().endswith((".csv", ".tsv", ".txt"))
+        hint = (": save it as UTF-8" + (" (Excel: CSV UTF-8)" if excel else "")) if codec == "utf-8" else ""
+        raise RecordingError(f"not {codec.upper()} text (byte 0x{data[at]:02x}){hint}", path=path, line=line) from None
+
+
+def decode_head(head: bytes) -> str:
+    """The first bytes of a file as text, for recognising its format (undecodable bytes replaced)."""
+    codec, skip = text_codec(head)
+    return head[skip:].decode(codec, "replace")
+
+
+def read_text(path, errors="strict") -> str:
+    """The whole text file at ``path``: :func:`read_file_bytes` then :func:`decode_text`."""
+    return decode_text(read_file_bytes(path), path=path, errors=errors)
+
+
+def load_json_file(path):
+    """The JSON document in the file at ``path`` (layout, offsets, bone map, mapping files): its
+    text read by :func:`read_text` (a BOM, as Windows Notepad and PowerShell's
+    ``Set-Content -Encoding UTF8`` write, or UTF-16, as PowerShell's ``Out-File`` writes, is
+    read), parsed; :class:`RecordingError` (a ``ValueError``) names the file, the line and
+    the problem."""
+    import json
+    text = read_text(path)
+    try:
+        return json.loads(text)
+    except json.JSONDecodeError as exc:
+        raise RecordingError(f"not valid JSON ({exc.msg})", path=path, line=exc.lineno) from None
 
 
 def canonical_axes(axes) -> str:

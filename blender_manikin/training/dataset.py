@@ -227,8 +227,8 @@ def load_sources(path):
     """:class:`MotionSource` list from a JSON file (a list of objects with the fields above;
     relative paths are relative to the file).  Errors name the file, the line and the entry:
     ``sources.json line 3: source 2: unknown joint_map 'cmu-asf' (...)``."""
-    with open(path, encoding="utf-8") as f:
-        text = f.read()
+    from ..core.recording import read_text
+    text = read_text(path)          # a BOM or UTF-16 read; a bad byte named with its line
     try:
         data = json.loads(text)
     except json.JSONDecodeError as exc:
