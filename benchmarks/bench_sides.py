@@ -13,7 +13,8 @@ higher ankle (medians over a clip), false swaps, and clips caught with the pelvi
 exchanged; the clips in which a headset lying off is found (``core/headset_off.py``; none
 should be: every head is worn); and foot tracker slips (``core/tracker_slips.py``): found in the
 clips as recorded (none slipped: each found is false) and caught where the left foot tracker's
-strap slides 7 cm up the shin half way through the clip.
+strap slides 7 cm up the shin half way through the clip; and the teleports, snap turns and
+smaller shifts of the tracking space found in the head and hands (none happened: each is false).
 
     .venv/bin/python benchmarks/bench_sides.py [--max-clips N]
 
@@ -36,6 +37,8 @@ from blender_manikin.core import tracker_sides as ts  # noqa: E402
 from blender_manikin.core.headset_off import headset_off  # noqa: E402
 from blender_manikin.core.rotations import axis_angle_to_matrix, matrix_to_quat  # noqa: E402
 from blender_manikin.core.pose_result import TrackerTargets  # noqa: E402
+from blender_manikin.core.recording import Recording, TrackerStream  # noqa: E402
+from blender_manikin.core.teleports import find_rig_jumps  # noqa: E402
 from blender_manikin.core.skeleton import J  # noqa: E402
 from blender_manikin.core.tracker_slips import find_tracker_slips  # noqa: E402
 
@@ -73,6 +76,15 @@ def slips(body, pos, world, fps, slide=0.07):
     return len(found), any(s.device == "left_foot" and s.slide > slide / 2 for s in caught)
 
 
+def rig_jumps(pos, world, fps):
+    """Teleports and snap turns (``core/teleports.py``) found in the clip's head and hands (none
+    happened: each is false)."""
+    t = np.arange(len(pos)) / fps
+    streams = {d: TrackerStream(d, t, pos[:, J[j]], matrix_to_quat(world[:, J[j]]))
+               for d, j in (("head", "head"), ("left_hand", "left_wrist"), ("right_hand", "right_wrist"))}
+    return len(find_rig_jumps(Recording(streams=streams, source="mocap")))
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--max-clips", type=int, default=0, help="per dataset (0: all)")
@@ -93,6 +105,7 @@ def main(argv=None):
             sl["found"] += found
             sl["clips"] += bool(found)
             sl["caught"] += caught
+            sl["jumps"] = sl.get("jumps", 0) + rig_jumps(pos, world, fps)
             zp, za = pos[:, J["pelvis"], 2], {d: pos[:, J[j], 2] for d, j in FEET.items()}
             r = roles.setdefault("n", dict(false=0, caught=0, margin=np.inf))
             r["false"] += ts.mixed_pelvis_role(zp, za) is not None
@@ -126,6 +139,7 @@ def main(argv=None):
         print(f"foot tracker slips (core/tracker_slips.py, pelvis and feet trackers): {sl['found']} found in "
               f"{sl['clips']} of {clips} clips as recorded (each false); a 7 cm slide of the left foot's strap "
               f"from half way caught in {sl['caught']} of {clips}")
+        print(f"jumps of the tracking space (core/teleports.py; none happened): {sl['jumps']} found in {clips} clips")
     for det, f in worst.items():
         print(f"largest share, {det}: {f}")
 
