@@ -102,15 +102,52 @@ def ensure_channelbag(action, slot):
     return strip.channelbag(slot, ensure=True)
 
 
-def assign_action(id_owner, action):
-    """Make ``action`` the active action of ``id_owner`` (and, slotted, assign its slot)."""
+def assign_action(id_owner, action, slot=None):
+    """Make ``action`` the active action of ``id_owner`` (and, slotted, assign its slot: ``slot``
+    when given, e.g. the one it had before, else :func:`ensure_slot`'s)."""
     ad = id_owner.animation_data or id_owner.animation_data_create()
     ad.action = action
     if is_slotted(action):
-        slot = ensure_slot(action, id_owner)
+        if slot is None or all(s != slot for s in action.slots):
+            slot = ensure_slot(action, id_owner)
         if ad.action_slot != slot:
             ad.action_slot = slot
     return ad
+
+
+def active_assignment(id_owner):
+    """``(action, slot, use_fake_user)`` of ``id_owner``'s active action as it is now (``slot``
+    None before Blender 4.4 or with no slot assigned; all None without an action): what
+    :func:`keep_active_action` protects and :func:`restore_assignment` puts back."""
+    ad = getattr(id_owner, "animation_data", None)
+    action = ad.action if ad is not None else None
+    if action is None:
+        return (None, None, None)
+    return (action, getattr(ad, "action_slot", None), bool(action.use_fake_user))
+
+
+def keep_active_action(id_owner):
+    """Before a new action replaces ``id_owner``'s active one: give the active action a fake user
+    so that, no longer assigned, it is still in the file after saving (an animator's own action,
+    made in the Action editor, has none: it would be dropped on save).  Returns
+    :func:`active_assignment` as it was, for :func:`restore_assignment`."""
+    before = active_assignment(id_owner)
+    if before[0] is not None:
+        before[0].use_fake_user = True
+    return before
+
+
+def restore_assignment(id_owner, before):
+    """Undo :func:`keep_active_action` and any action assigned since: ``id_owner``'s active action,
+    its slot and the action's fake user as in ``before`` (:func:`active_assignment`)."""
+    action, slot, fake = before
+    ad = getattr(id_owner, "animation_data", None)
+    if action is None:
+        if ad is not None:
+            ad.action = None
+        return
+    assign_action(id_owner, action, slot)
+    action.use_fake_user = fake
 
 
 def _group(groups, name):

@@ -598,9 +598,9 @@ def build_live_rig(armature_obj, result: PoseResult, action=None, frames=None, c
     22 joint bones; the one :func:`.writer.write_result` made, keyed or not).
     result: the :class:`PoseResult` to key.  action: the action to write
     into; None (default) creates a NEW action ``action_name[.NNN]`` -- the
-    armature's current action, if any, is never modified (it stays in the
-    file with a fake user; assign it back, with :func:`set_rig_enabled` off, to
-    return to its FK keys).  frames: scene
+    armature's current action, if any, is never modified (it is given a fake user so it stays
+    in the file; assign it back, with :func:`set_rig_enabled` off, to
+    return to its FK keys; on an error it is assigned again, with its slot).  frames: scene
     frame of each result frame; None: the frames of the current action's
     swivel keys when it has one key per result frame, else
     ``1 + k * scene_fps / result.fps``.
@@ -628,10 +628,12 @@ def build_live_rig(armature_obj, result: PoseResult, action=None, frames=None, c
     if created:
         action = keying.new_action(action_name)
         action[PROP_LIVE] = 1
+    before = keying.keep_active_action(obj)
     try:
         keying.assign_action(obj, action)
         fcs = keying.key_channels(action, obj, frames, live_channels(obj, result), interpolation)
     except BaseException:
+        keying.restore_assignment(obj, before)
         if created:
             bpy.data.actions.remove(action)
         raise

@@ -281,7 +281,8 @@ def key_retarget(target_obj, res: rt.RetargetResult, target: rt.TargetRig, frame
     Auto-Rig Pro rig keyed on its FK controls, :func:`_ik_fk_switches`), so the rig itself is not
     changed."""
     keyed = [k for k in range(target.num_bones) if res.keyed[k]]
-    prev = target_obj.animation_data.action if target_obj.animation_data else None
+    before = keying.active_assignment(target_obj)
+    prev = before[0]
     action = keying.new_action(name)
     try:
         modes = {}
@@ -289,8 +290,7 @@ def key_retarget(target_obj, res: rt.RetargetResult, target: rt.TargetRig, frame
             pb = target_obj.pose.bones[target.names[k]]
             modes[pb.name] = pb.rotation_mode
         action[PROP_MODES] = modes
-        if prev is not None:
-            prev.use_fake_user = True
+        keying.keep_active_action(target_obj)
         keying.assign_action(target_obj, action)
         _rest_bones_no_longer_keyed(target_obj, prev, set(modes))
         # the switches first: the bases below are taken with the rig in FK
@@ -312,10 +312,7 @@ def key_retarget(target_obj, res: rt.RetargetResult, target: rt.TargetRig, frame
                 ch.append((f'pose.bones["{rb}"].location', i, rb, root_loc[:, i]))
         keying.key_channels(action, target_obj, frames, ch, interpolation)
     except BaseException:
-        if prev is not None:
-            keying.assign_action(target_obj, prev)
-        elif target_obj.animation_data is not None:
-            target_obj.animation_data.action = None
+        keying.restore_assignment(target_obj, before)
         bpy.data.actions.remove(action)
         raise
     return action
@@ -431,7 +428,7 @@ def retarget_onto(source_obj, target_obj, bone_map="auto", map_path=None, root_m
         notes.append(f"{len(held)} of the bones this map keys follow constraints that set their rotation: "
                      f"{shown}; their new keys do not show while those constraints are on: map the rig's "
                      f"controls instead, or mute the constraints")
-    prev = target_obj.animation_data.action if target_obj.animation_data else None
+    before = keying.active_assignment(target_obj)
     action = key_retarget(target_obj, res, target, frames, f"MANIKIN_retarget_{src_action.name}",
                           switches=_ik_fk_switches(target_obj, bmap))
     copy_contacts(source_obj, src_action, target_obj, action, frames)
@@ -439,10 +436,7 @@ def retarget_onto(source_obj, target_obj, bone_map="auto", map_path=None, root_m
         try:
             notes += character_swivel.build_character_rig(target_obj, res, frames, wr, swivel, action, context)
         except BaseException:
-            if prev is not None:
-                keying.assign_action(target_obj, prev)
-            else:
-                target_obj.animation_data.action = None
+            keying.restore_assignment(target_obj, before)
             bpy.data.actions.remove(action)
             raise
     if progress is not None:

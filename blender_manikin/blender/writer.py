@@ -5,7 +5,8 @@ all-or-nothing: if anything fails, every ID created so far is removed again
 and the exception propagates (no half-written data).  Nothing that existed
 before is modified except, optionally, the scene frame range and -- when an
 existing MANIKIN armature of the same body is reused -- that armature's
-assigned action (the previous action is kept, with a fake user).
+assigned action (the previous action, the animator's own included, is given a fake user so it
+stays in the file; undone, with its slot, when the write fails).
 
 Timing: result frame ``k`` is keyed at scene frame
 ``frame_start + k * frame_step``; by default ``frame_step`` is
@@ -88,6 +89,9 @@ class WriteOutput:
     live_action: object = None                            # set when the live swivel rig was built
     body_mesh: object = None                              # the mannequin, when this write made it
     notes: list = field(default_factory=list)             # for the solve's summary
+    #: the reused armature's active action, slot and fake user before the write
+    #: (:func:`.keying.active_assignment`), put back by :func:`remove_output`
+    previous: tuple = (None, None, None)
 
 
 def scene_fps(scene) -> float:
@@ -220,7 +224,7 @@ def write_result(result, options: WriteOptions | None = None, context=None) -> W
     step = options.frame_step if options.frame_step else scene_fps(scene) / float(result.fps)
     frames = options.frame_start + np.arange(T, dtype=np.float64) * step
     created = []
-    prev_action = None
+    prev = None
     obj = options.armature
     try:
         try:
@@ -232,7 +236,8 @@ def write_result(result, options: WriteOptions | None = None, context=None) -> W
             obj = arm_mod.create_armature(result.body, options.armature_name, context=context)
             created += [obj.data, obj]
         else:
-            prev_action = obj.animation_data.action if obj.animation_data else None
+            # the action it shows now (maybe the animator's own, without a fake user) stays in the file
+            prev = keying.keep_active_action(obj)
         ensure_swivel_properties(obj)
         ensure_contact_properties(obj)
         action = None
@@ -242,6 +247,8 @@ def write_result(result, options: WriteOptions | None = None, context=None) -> W
             keying.assign_action(obj, action)
             keying.key_channels(action, obj, frames, _pose_channels(obj, result), options.interpolation)
         out = WriteOutput(obj, action, not reuse, frames)
+        if prev is not None:
+            out.previous = prev
         if options.body_mesh:
             from . import body_mesh
             if body_mesh.find_body_mesh(obj) is None:
@@ -257,9 +264,9 @@ def write_result(result, options: WriteOptions | None = None, context=None) -> W
             scene.frame_start = int(math.floor(frames[0]))
             scene.frame_end = max(int(math.ceil(frames[-1])), scene.frame_start)
     except BaseException:
-        if prev_action is not None and obj is not None and obj.animation_data is not None:
+        if prev is not None:
             try:
-                keying.assign_action(obj, prev_action)
+                keying.restore_assignment(obj, prev)
             except Exception:
                 pass
         _remove_ids(created)
@@ -319,10 +326,16 @@ def mark_timeline(scene, marks, frames, take=None):
 
 
 def remove_output(out: WriteOutput):
-    """Delete everything :func:`write_result` created (armature only if it created it)."""
+    """Delete everything :func:`write_result` created (armature only if it created it); a reused
+    armature gets its action, slot and that action's fake user back."""
     ids = []
     if out.created_armature:
         ids += [out.armature.data, out.armature]
+    elif out.armature is not None:
+        try:
+            keying.restore_assignment(out.armature, out.previous)
+        except ReferenceError:
+            pass
     ids += [a for a in (out.action, out.live_action) if a is not None]
     if out.body_mesh is not None:
         ids += [out.body_mesh.data, out.body_mesh]
