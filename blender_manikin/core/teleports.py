@@ -36,7 +36,10 @@ A *smaller shift* (a recentre or a floor reset of :data:`SMALL_JUMP_MIN_M` to
 :data:`TELEPORT_MIN_M`, slower than any head speed test can tell from motion) is found from what
 the head's motion does not explain: its step less what its velocity just before and just after
 carries it (:func:`_unexplained_steps`; exact for a constant acceleration, so real motion leaves
-millimetres: at most 0.5 cm in the real Beat Saber replays), confirmed by the hands: each
+millimetres: at most 0.5 cm in the real Beat Saber replays), by more than a change of that
+velocity within the step could leave (a hop's landing stops head and hands together: 4 cm in
+one 30 fps step of HDM05's hops; the jump of the space leaves the velocity as it was), confirmed
+by the hands: each
 tracked hand's own unexplained step over the same moment agrees with the head's within
 :data:`SMALL_JUMP_HAND_AGREE` of it, and at least one hand has a say.  It is taken as a
 translation (a turn of under :data:`TURN_MIN_DEG` with it is not measured).  A hand in the middle
@@ -76,7 +79,7 @@ HAND_SPEED = 5.0
 VELOCITY_SPAN_S = 0.1
 #: a shift of the space under :data:`TELEPORT_MIN_M` is found down to this (metres): the head's
 #: step less what its velocity just before and just after carries it (:func:`_unexplained_steps`)
-SMALL_JUMP_MIN_M = 0.04
+SMALL_JUMP_MIN_M = 0.045
 #: ... when each tracked hand's own unexplained step agrees with the head's within this fraction
 #: of it (and better than no jump at all): hands moving fast stray from that by centimetres
 SMALL_JUMP_HAND_AGREE = 0.5
@@ -156,16 +159,20 @@ def _hand_check(stream, ta, tb, rot, trans):
 def _unexplained_steps(t, p):
     """What motion does not explain of each step between consecutive samples.
 
-    t: ``(N,)`` s, increasing; p: ``(N, 3)`` m.  Returns ``(N - 1, 3)`` metres: for samples
-    ``a``, ``b = a + 1``, ``p[b] - p[a] - (t[b] - t[a]) (v_before + v_after) / 2``, the
-    velocities over :data:`VELOCITY_SPAN_S` before ``a`` and after ``b`` (exact for a constant
-    acceleration; a jump of the space between ``a`` and ``b`` leaves both velocities as they
-    were, so it is all of it).  NaN where a span runs off the take or across a gap of more
-    than twice the span, or where the step itself is longer than :data:`MAX_STEP_S`."""
+    t: ``(N,)`` s, increasing; p: ``(N, 3)`` m.  Returns ``(steps (N - 1, 3), slack (N - 1,))``
+    metres: for samples ``a``, ``b = a + 1``, ``p[b] - p[a] - (t[b] - t[a]) (v_before +
+    v_after) / 2``, the velocities over :data:`VELOCITY_SPAN_S` before ``a`` and after ``b``
+    (exact for a constant acceleration; a jump of the space between ``a`` and ``b`` leaves both
+    velocities as they were, so it is all of it), and what a change of velocity within the step
+    can leave unexplained, ``(t[b] - t[a]) |v_after - v_before| / 2`` (a hop's landing stops
+    head and hands together within one 30 fps step: up to 4 cm).  NaN where a span runs off the
+    take or across a gap of more than twice the span, or where the step itself is longer than
+    :data:`MAX_STEP_S`."""
     n = len(t)
     out = np.full((max(n - 1, 0), 3), np.nan)
+    slack = np.full(max(n - 1, 0), np.nan)
     if n < 4:
-        return out
+        return out, slack
     a = np.arange(n - 1)
     b = a + 1
     ia = np.searchsorted(t, t[a] - VELOCITY_SPAN_S, side="right") - 1
@@ -177,26 +184,28 @@ def _unexplained_steps(t, p):
     v_before = (p[a] - p[ia]) / (t[a] - t[ia])[:, None]
     v_after = (p[ib] - p[b]) / (t[ib] - t[b])[:, None]
     out[a] = p[b] - p[a] - (t[b] - t[a])[:, None] * (v_before + v_after) / 2
-    return out
+    slack[a] = (t[b] - t[a]) * np.linalg.norm(v_after - v_before, axis=-1) / 2
+    return out, slack
 
 
 def _small_jumps(t, p, hands, big):
     """Shifts of the space under :data:`TELEPORT_MIN_M` (see :func:`find_rig_jumps`): head
     sample pairs ``(a, a + 1)`` (indices into ``t``, ``p``, the head's valid samples) whose
-    unexplained step (:func:`_unexplained_steps`) is at least :data:`SMALL_JUMP_MIN_M`, the
+    unexplained step (:func:`_unexplained_steps`), less what a change of velocity within it can
+    leave, is at least :data:`SMALL_JUMP_MIN_M`, the
     largest within :data:`VELOCITY_SPAN_S` either side, not within that of a jump in ``big``
     (times), and matched by every tracked hand's own (at least one hand must have a say: the
     head alone may be a tracking error).  Returns ``[(a, d (3,))]``."""
-    d = _unexplained_steps(t, p)
+    d, slack = _unexplained_steps(t, p)
     size = np.nan_to_num(np.linalg.norm(d, axis=-1), nan=0.0)
-    cand = np.nonzero(size >= SMALL_JUMP_MIN_M)[0]
+    cand = np.nonzero(size - np.nan_to_num(slack, nan=np.inf) >= SMALL_JUMP_MIN_M)[0]
     if cand.size == 0:
         return []
     hand_steps = []
     for s in hands:
         idx = _valid_samples(s)
         if idx.size >= 4:
-            hand_steps.append((s.time[idx], _unexplained_steps(s.time[idx], s.pos[idx])))
+            hand_steps.append((s.time[idx], _unexplained_steps(s.time[idx], s.pos[idx])[0]))
     out = []
     big = np.asarray(big, dtype=np.float64)
     for a in cand:
