@@ -678,7 +678,7 @@ def convert_main(args, fmts):
               "(or dask[distributed])", file=sys.stderr)
         return 2
     try:
-        inputs = convert.collect_inputs(args.inputs)
+        inputs = convert.collect_inputs(args.inputs, exclude=[args.out])   # outputs are not inputs
         settings = solve_settings(args)
         if args.save_layout:
             from .core.formats import load_recording
@@ -693,15 +693,19 @@ def convert_main(args, fmts):
     if not inputs:
         print("blender_manikin: error: no recordings found in the inputs", file=sys.stderr)
         return 1
+    def report(rec):                  # each input's OK line as it finishes, before the summary
+        if rec["status"] == "ok":
+            print(f"OK {rec['input']} -> {', '.join(rec['outputs'])} ({rec['frames']} frames, {rec['seconds']:.2f} s)",
+                  flush=True)
+
     try:
         code, records = convert.run(inputs, args.out, fmts, settings, scheduler=args.scheduler,
-                                    workers=args.workers, options=args, progress=args.progress)
-    except ValueError as exc:
+                                    workers=args.workers, options=args, progress=args.progress, report=report)
+    except ValueError as exc:         # a format it cannot write, a scheduler that does not answer
         print(f"blender_manikin: error: {exc}", file=sys.stderr)
         return 2
-    for rec in records:
-        if rec["status"] == "ok":
-            print(f"OK {rec['input']} -> {', '.join(rec['outputs'])} ({rec['frames']} frames, {rec['seconds']:.2f} s)")
+    except KeyboardInterrupt:         # Ctrl-C: run() said how far it got; the manifest holds it
+        return 130
     return code
 
 

@@ -223,3 +223,119 @@ def test_a_long_input_name_gives_outputs_the_disk_takes(tmp_path):
     assert len(stems) == 2 and all(len(s.encode()) <= MAX_STEM_BYTES + 9 for s in stems)
     assert all(s.startswith("テ" * 66) for s in stems)
     assert sum(f.endswith((".json", ".bvh", ".npz")) for f in out) == 6
+
+
+def test_a_rerun_converts_a_replaced_input_again_and_survives_a_cut_manifest_line(tmp_path):
+    """An input replaced since it was converted (same name, new content) is converted again,
+    not skipped; a last manifest line a crash cut off (no newline) neither breaks the rerun nor
+    swallows the record written after it."""
+    d = tmp_path / "in"
+    d.mkdir()
+    for n in ("a", "b"):
+        shutil.copy(EXAMPLE, d / f"{n}.csv")
+    out = tmp_path / "out"
+
+    def run():
+        return convert.run(convert.collect_inputs([str(d)]), str(out), ["npz"], SolveSettings(fps=30.0),
+                           workers=1, progress=False, log=lambda m: None)
+
+    assert run()[0] == 0
+    with np.load(out / "a.npz") as z:
+        assert z["positions"].shape[0] == 210
+    lines = (d / "a.csv").read_text().splitlines(True)
+    (d / "a.csv").write_text("".join(lines[:700]))                 # a shorter take under the same name
+    code, recs = run()
+    assert code == 0 and [os.path.basename(r["input"]) for r in recs] == ["a.csv"]
+    with np.load(out / "a.npz") as z:
+        frames = z["positions"].shape[0]
+    assert frames < 210 and recs[0]["frames"] == frames
+    assert run()[1] == []                                            # and then it is done
+    # a crash cut b.csv's record mid-write (the last line, no newline): b.csv is redone once, then done
+    man = out / convert.MANIFEST
+    kept = [ln for ln in man.read_text().splitlines(True) if not ln.startswith('{"input": "' + str(d / "b.csv"))]
+    man.write_text("".join(kept) + '{"input": "' + str(d / "b.csv") + '", "sta')
+    code, recs = run()
+    assert code == 0 and [os.path.basename(r["input"]) for r in recs] == ["b.csv"]
+    assert run()[1] == []
+    assert sum(r["input"].endswith("b.csv") and r["status"] == "ok" for r in convert.read_manifest(out).values()) == 1
+
+
+def test_an_output_folder_inside_the_input_folder_is_not_read_as_inputs(tmp_path):
+    """``convert in --out in/out``: the rerun finds nothing to do (its .npz outputs are not
+    taken for keypoint inputs), and the exit code stays 0."""
+    d = tmp_path / "in"
+    d.mkdir()
+    shutil.copy(EXAMPLE, d / "take.csv")
+    cmd = [sys.executable, "-m", "blender_manikin", "convert", str(d), "--out", str(d / "out"), "--format",
+           "json,npz", "--workers", "1", "--no-progress"]
+    env = dict(os.environ, PYTHONPATH=ROOT)
+    for _ in range(2):
+        p = subprocess.run(cmd, cwd=ROOT, env=env, capture_output=True, text=True, timeout=300)
+        assert p.returncode == 0, p.stderr
+    assert [r["input"] for r in _manifest_lines(d / "out")] == [str(d / "take.csv")]
+    assert convert.collect_inputs([str(d), str(d / "**" / "*.npz")], exclude=[str(d / "out")]) == [str(d / "take.csv")]
+
+
+_REAL_TASK = convert.convert_task
+
+
+def _task_whose_worker_dies(path, *args, **kwargs):
+    """convert_task, except that an input named ``die*`` kills its worker (as the OOM killer would)."""
+    if os.path.basename(path).startswith("die"):
+        os.kill(os.getpid(), signal.SIGKILL)
+    return _REAL_TASK(path, *args, **kwargs)
+
+
+def test_a_worker_that_dies_makes_its_input_an_error_not_a_crash(tmp_path, monkeypatch):
+    d = tmp_path / "in"
+    d.mkdir()
+    for n in ("a", "die", "z"):
+        shutil.copy(EXAMPLE, d / f"{n}.csv")
+    monkeypatch.setattr(convert, "convert_task", _task_whose_worker_dies)
+    logged = []
+    t = time.perf_counter()
+    code, records = convert.run(convert.collect_inputs([str(d)]), str(tmp_path / "out"), ["json"],
+                                SolveSettings(fps=30.0), workers=1, progress=False, log=logged.append)
+    assert time.perf_counter() - t < 120
+    by = {os.path.basename(r["input"]): r for r in records}
+    assert code == 1 and by["a.csv"]["status"] == by["z.csv"]["status"] == "ok"     # only its own input
+    assert by["die.csv"]["status"] == "error" and "worker" in by["die.csv"]["error"]
+    assert [r["status"] for r in _manifest_lines(tmp_path / "out")].count("error") == 1
+    assert logged[-1] == ("2 converted, 1 error(s), 0 skipped (converted before); manifest: "
+                          + str(tmp_path / "out" / convert.MANIFEST))
+
+
+def test_an_unreachable_scheduler_is_a_clear_error_in_bounded_time(tmp_path):
+    env = dict(os.environ, PYTHONPATH=ROOT, DASK_DISTRIBUTED__COMM__TIMEOUTS__CONNECT="2s")
+    t = time.perf_counter()
+    p = subprocess.run([sys.executable, "-m", "blender_manikin", "convert", EXAMPLE, "--out", str(tmp_path / "out"),
+                        "--scheduler", "tcp://127.0.0.1:9", "--no-progress"], cwd=ROOT, env=env,
+                       capture_output=True, text=True, timeout=120)
+    assert time.perf_counter() - t < 60
+    assert p.returncode == 2 and "Traceback" not in p.stderr
+    assert "cannot reach the Dask scheduler at tcp://127.0.0.1:9 within 2 s" in p.stderr
+
+
+def test_ctrl_c_stops_the_run_with_a_summary_and_exit_code_130(tmp_path):
+    d = tmp_path / "in"
+    d.mkdir()
+    for i in range(40):
+        shutil.copy(EXAMPLE, d / f"t{i:02d}.csv")
+    out = tmp_path / "out"
+    proc = subprocess.Popen([sys.executable, "-m", "blender_manikin", "convert", str(d), "--out", str(out),
+                             "--workers", "2", "--no-progress"], cwd=ROOT, env=dict(os.environ, PYTHONPATH=ROOT),
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True)
+    man = out / convert.MANIFEST
+    deadline = time.time() + 120
+    while time.time() < deadline and proc.poll() is None:
+        if man.exists() and len(man.read_text().splitlines()) >= 2:
+            break
+        time.sleep(0.05)
+    os.killpg(proc.pid, signal.SIGINT)                       # Ctrl-C in a terminal: the whole group
+    so, err = proc.communicate(timeout=60)
+    assert proc.returncode == 130, err
+    assert "Traceback" not in err, err
+    last = [ln for ln in err.splitlines() if ln.startswith("interrupted (Ctrl-C): ")][-1]
+    assert last.endswith(f"manifest: {man}") and "not converted (interrupted)" in last
+    ok = sorted(r["input"] for r in _manifest_lines(out) if r["status"] == "ok")
+    assert ok and sorted(ln.split()[1] for ln in so.splitlines() if ln.startswith("OK ")) == ok   # as they finished

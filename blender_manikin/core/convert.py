@@ -6,15 +6,23 @@ dask-kubernetes: any ``distributed`` scheduler address).
         [--workers N] [solve options: --fps, --height, --offsets, --axes, --units, ...]
 
 * Inputs: files, folders (their recordings, recursively), globs, or manifest files (``.txt`` /
-  ``.lst``: one path a line, ``#`` comments; ``.jsonl``: objects with a ``path``).
+  ``.lst``: one path a line, ``#`` comments, relative paths from the manifest's folder;
+  ``.jsonl``: objects with a ``path``).  The output folder is never searched for inputs (it may
+  sit inside an input folder).
 * Each worker loads the model once; each input is one task that reads one recording, solves it
   (:func:`.solve.solve_recording`) and writes ``DIR/STEM.<ext>`` per format under a temporary
   name, renamed when complete, so memory per worker is bounded by one recording.
 * ``DIR/manifest.jsonl`` gets one line per finished input: status (``ok``/``error``), frames,
-  seconds, stature, quality notes, outputs, and the error.  A rerun skips the inputs already
-  converted (every output present, one in each format asked for), so a crashed or killed job
-  resumes where it stopped, and a rerun with more formats writes them; a bad
-  file never stops the others.  The exit code is 0 only when every input converted.
+  seconds, stature, quality notes, outputs, the error, and the input's size and modification
+  time when it was read (``source``).  A rerun skips the inputs already converted (every output
+  present, one in each format asked for, the input unchanged since: same size and modification
+  time), so a crashed or killed job resumes where it stopped, a rerun with more formats writes
+  them, and an input replaced since (same name, new content) is converted again; a line cut off
+  by a crash is ignored (and never swallows the next run's first line); a bad
+  file never stops the others, and neither does a worker that dies on one (killed for memory:
+  that input is an error).  The last line says how many converted, failed and were skipped, and
+  where the manifest is.  The exit code is 0 only when every input converted (130 after Ctrl-C;
+  2 when the scheduler cannot be reached).
 
 Needs the ``[dask]`` extra (``dask[distributed]``); no bpy.
 """
@@ -26,6 +34,7 @@ import json
 import os
 import re
 import sys
+import threading
 import time
 
 from . import formats, output_guard
@@ -42,14 +51,22 @@ def _is_recording(path):
     return formats.is_recording_file(path)
 
 
-def collect_inputs(items):
+def collect_inputs(items, exclude=()):
     """Absolute paths of the recordings named by ``items`` (files, folders, globs, manifests),
-    in order, without duplicates.  Raises ``ValueError`` naming an item that gives nothing."""
+    in order, without duplicates.  Folders searched and globs skip what lies under a folder of
+    ``exclude`` (the output folder: its ``.npz`` outputs are not inputs when it sits inside an
+    input folder).  Raises ``ValueError`` naming an item that gives nothing."""
+    skip = [os.path.realpath(os.path.expanduser(str(e))) for e in exclude]
+
+    def kept(p):
+        real = os.path.realpath(p)
+        return not any(real == e or real.startswith(e + os.sep) for e in skip)
+
     out = []
     for item in items:
         item = os.path.expanduser(str(item))
         if os.path.isdir(item):
-            found = sorted(_walk_recordings(item))
+            found = sorted(_walk_recordings(item, kept))
         elif os.path.isfile(item) and item.lower().endswith(_MANIFEST_SUFFIXES) and not _is_recording(item):
             found = _read_manifest_file(item)
         elif os.path.isfile(item):
@@ -58,15 +75,20 @@ def collect_inputs(items):
             found = sorted(glob.glob(item, recursive=True))
             if not found:
                 raise ValueError(f"{item}: no such file, folder or matching files")
+            found = [p for p in found if kept(p)]
         out.extend(os.path.abspath(p) for p in found)
     return list(dict.fromkeys(out))
 
 
-def _walk_recordings(folder):
+def _walk_recordings(folder, kept=lambda p: True):
     """Recordings under ``folder``: files with a reader's extension, and FreeMoCap recording
-    folders (one input each; their own arrays are not inputs)."""
+    folders (one input each; their own arrays are not inputs); folders for which ``kept(path)``
+    is false are not searched."""
     from .io_keypoints import freemocap_body_file
     for d, dirs, fs in os.walk(folder):
+        if not kept(d):
+            dirs[:] = []
+            continue
         if freemocap_body_file(d):
             dirs[:] = []
             yield d
@@ -133,11 +155,45 @@ def read_manifest(out_dir):
     return records
 
 
+def input_signature(path):
+    """``{"size": bytes, "mtime_ns": ns}`` of the input ``path`` as it is now (a FreeMoCap folder:
+    its files' total size and latest modification time); ``None`` when it cannot be read.
+    A rerun compares it with the manifest's ``source`` to find inputs replaced since."""
+    try:
+        if os.path.isdir(path):
+            size = mtime = 0
+            for d, _, fs in os.walk(path):
+                for f in fs:
+                    st = os.stat(os.path.join(d, f))
+                    size, mtime = size + st.st_size, max(mtime, st.st_mtime_ns)
+            return {"size": int(size), "mtime_ns": int(mtime)}
+        st = os.stat(path)
+        return {"size": int(st.st_size), "mtime_ns": int(st.st_mtime_ns)}
+    except OSError:
+        return None
+
+
 def is_done(record, fmts=()):
-    """Whether ``record`` converted its input, every output is present, and one is in each of ``fmts``."""
+    """Whether ``record`` converted its input, every output is present, one is in each of ``fmts``,
+    and the input is the one converted (its size and modification time as recorded in ``source``;
+    a record without ``source``, from an older manifest, is taken as it is)."""
     outputs = record.get("outputs", []) if record else []
     return (bool(record) and record.get("status") == "ok" and all(os.path.isfile(p) for p in outputs)
-            and all(any(p.endswith(formats.WRITERS[f].extension) for p in outputs) for f in fmts))
+            and all(any(p.endswith(formats.WRITERS[f].extension) for p in outputs) for f in fmts)
+            and ("source" not in record or record["source"] == input_signature(record["input"])))
+
+
+def _open_manifest(out_dir):
+    """``DIR/manifest.jsonl`` opened to append; a last line a crash cut off (no newline) is ended
+    first, so the next record starts a line of its own instead of being lost with it."""
+    path = os.path.join(out_dir, MANIFEST)
+    man = open(path, "a+b")
+    if man.tell():
+        man.seek(-1, os.SEEK_END)
+        if man.read(1) != b"\n":
+            man.write(b"\n")
+    man.close()
+    return open(path, "a", encoding="utf-8")
 
 
 # --------------------------------------------------------------------------
@@ -147,7 +203,7 @@ def convert_task(path, out_dir, stem, fmts, settings, model=None, options=None):
     from . import model_choice, pipeline
     t0 = time.perf_counter()
     rec = {"input": path, "status": "error", "outputs": [], "frames": 0, "seconds": 0.0, "stature": None,
-           "notes": [], "error": None}
+           "notes": [], "error": None, "source": input_signature(path)}   # before reading: a change after shows
     try:
         st = SolveSettings(**settings)
         spec = model if model is not None else st.model
@@ -175,13 +231,62 @@ def convert_task(path, out_dir, stem, fmts, settings, model=None, options=None):
 
 
 # --------------------------------------------------------------------------
-def _client(scheduler, workers):
+class SchedulerUnreachable(ValueError):
+    """The Dask scheduler named by ``--scheduler`` did not answer in time."""
+
+
+def _client(scheduler, workers, timeout=None):
+    """``(Client, LocalCluster or None)``.  A local cluster's workers ignore Ctrl-C (the job
+    stops them), get one task at a time each (a worker that dies takes only its own input with
+    it) and a task that killed two workers is given up (an error, not four more tries); a
+    scheduler ``ADDRESS`` that does not answer within ``timeout`` seconds (default: Dask's
+    ``distributed.comm.timeouts.connect``, 30 s) raises :class:`SchedulerUnreachable`."""
+    import signal
+
+    import dask
     from distributed import Client, LocalCluster
     if scheduler in (None, "", "local"):
         n = int(workers or os.cpu_count() or 1)
-        cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=":0")
+        main = threading.current_thread() is threading.main_thread()   # signal() works there only
+        old = signal.signal(signal.SIGINT, signal.SIG_IGN) if main else None   # inherited by the workers
+        try:
+            with dask.config.set({"distributed.scheduler.worker-saturation": 1.0,
+                                  "distributed.scheduler.allowed-failures": 1}):
+                cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=":0")
+        finally:
+            if main:
+                signal.signal(signal.SIGINT, old)
         return Client(cluster), cluster
-    return Client(scheduler), None
+    if timeout is None:
+        timeout = dask.utils.parse_timedelta(dask.config.get("distributed.comm.timeouts.connect"), "s")
+    try:
+        return Client(scheduler, timeout=timeout), None
+    except (OSError, TimeoutError) as exc:
+        raise SchedulerUnreachable(f"cannot reach the Dask scheduler at {scheduler} within {timeout:g} s ({exc}); "
+                                   "is it running, and is the address right (tcp://HOST:PORT)?") from None
+
+
+def _error_record(path, message):
+    return {"input": path, "status": "error", "outputs": [], "frames": 0, "seconds": 0.0, "stature": None,
+            "notes": [], "error": message, "source": input_signature(path)}
+
+
+def _lost_task_message(exc):
+    """What a task that returned no record (its worker died, it was cancelled) tells the user."""
+    from distributed import KilledWorker
+    if isinstance(exc, KilledWorker):
+        return ("the Dask worker converting it died (killed: out of memory, or a crash in a native library); "
+                "the input is not converted (see the worker's log)")
+    return f"the Dask task failed: {type(exc).__name__}: {exc}"
+
+
+def summary(out_dir, ok, errors, skipped, left=0):
+    """The last line of a run: how many inputs converted, failed, were skipped (converted before)
+    and were left (interrupted), and where the manifest is."""
+    text = f"{ok} converted, {errors} error(s), {skipped} skipped (converted before)"
+    if left:
+        text += f", {left} not converted (interrupted)"
+    return text + f"; manifest: {os.path.join(out_dir, MANIFEST)}"
 
 
 #: the temporary names :func:`convert_task` writes under (then renames): ``.<stem>.part<pid><ext>``,
@@ -204,8 +309,14 @@ def remove_partial_outputs(out_dir) -> int:
 
 
 def run(inputs, out_dir, fmts, settings: SolveSettings, scheduler=None, workers=None, model=None, options=None,
-        progress=True, log=None):
-    """Convert ``inputs`` (paths) into ``out_dir``; returns ``(exit code, records of this run)``."""
+        progress=True, log=None, connect_timeout=None, report=None):
+    """Convert ``inputs`` (paths) into ``out_dir``; returns ``(exit code, records of this run)``
+    and logs :func:`summary` last; ``report(record)``, when given, is called as each input finishes
+    (the command line prints its ``OK`` lines so, before the summary).  An input whose worker died
+    is an error in the manifest; Ctrl-C logs the summary so far and raises ``KeyboardInterrupt``
+    (the manifest holds every input finished).  Raises :class:`SchedulerUnreachable` when
+    ``scheduler`` (an address) does not answer within ``connect_timeout`` seconds (default:
+    Dask's connect timeout, 30 s)."""
     import dataclasses
     from distributed import as_completed
     log = log or (lambda msg: print(msg, file=sys.stderr, flush=True))
@@ -225,6 +336,10 @@ def run(inputs, out_dir, fmts, settings: SolveSettings, scheduler=None, workers=
     skipped = len(inputs) - len(todo)
     if skipped:
         log(f"{skipped} of {len(inputs)} input(s) already converted (manifest): skipped")
+    changed = [p for p in todo if p in done and "source" in done[p]
+               and is_done({**done[p], "source": input_signature(p)}, fmts)]
+    if changed:
+        log(f"{len(changed)} input(s) changed since converted (size or modification time): converted again")
     # an output that would replace a file the user made or changed stops its input (output_guard)
     blocked = []
     for p in todo:
@@ -237,25 +352,30 @@ def run(inputs, out_dir, fmts, settings: SolveSettings, scheduler=None, workers=
     if blocked:
         gone = {r["input"] for r in blocked}
         todo = [p for p in todo if p not in gone]
-        with open(os.path.join(out_dir, MANIFEST), "a", encoding="utf-8") as man:
+        with _open_manifest(out_dir) as man:
             for rec in blocked:
                 man.write(json.dumps(rec) + "\n")
                 log(f"ERROR {rec['input']}: {rec['error']}")
     if not todo:
+        log(summary(out_dir, 0, len(blocked), skipped))
         return 0 if all(is_done(done.get(p), fmts) for p in inputs) else 1, blocked
+    client, cluster = _client(scheduler, workers, timeout=connect_timeout)
     # claimed before they are written: what a killed run leaves under these names is replaceable
     output_guard.claim([os.path.join(out_dir, stems[p] + formats.WRITERS[f].extension) for p in todo for f in fmts])
-    client, cluster = _client(scheduler, workers)
+    records, failed = list(blocked), len(blocked)
     try:
         log(f"dask dashboard: {client.dashboard_link}")
         st = dataclasses.asdict(settings)
         futures = client.map(convert_task, todo, [out_dir] * len(todo), [stems[p] for p in todo],
                              [list(fmts)] * len(todo), [st] * len(todo), [model] * len(todo),
                              [options] * len(todo), pure=False)
-        records, failed = list(blocked), len(blocked)
-        with open(os.path.join(out_dir, MANIFEST), "a", encoding="utf-8") as man:
+        which = {fut.key: p for fut, p in zip(futures, todo)}
+        with _open_manifest(out_dir) as man:
             for i, fut in enumerate(as_completed(futures), 1):
-                rec = fut.result()
+                try:
+                    rec = fut.result()
+                except Exception as exc:      # its worker died (KilledWorker): an error, the others go on
+                    rec = _error_record(which[fut.key], _lost_task_message(exc))
                 if rec["status"] == "ok":
                     output_guard.record(rec["outputs"])
                 man.write(json.dumps(rec) + "\n")
@@ -263,6 +383,8 @@ def run(inputs, out_dir, fmts, settings: SolveSettings, scheduler=None, workers=
                 os.fsync(man.fileno())
                 records.append(rec)
                 failed += rec["status"] != "ok"
+                if report is not None:
+                    report(rec)
                 if progress:
                     bar = "#" * int(30 * i / len(todo))
                     sys.stderr.write(f"\r[{bar:<30}] {i}/{len(todo)} converted, {failed} failed")
@@ -271,8 +393,15 @@ def run(inputs, out_dir, fmts, settings: SolveSettings, scheduler=None, workers=
                     log(("\n" if progress else "") + f"ERROR {rec['input']}: {rec['error']}")
         if progress:
             sys.stderr.write("\n")
+    except KeyboardInterrupt:
+        if progress:
+            sys.stderr.write("\n")
+        log("interrupted (Ctrl-C): " + summary(out_dir, len(records) - failed, failed, skipped,
+                                               len(inputs) - skipped - len(records)))
+        raise
     finally:
         client.close()
         if cluster is not None:
             cluster.close()
+    log(summary(out_dir, len(records) - failed, failed, skipped))
     return (0 if failed == 0 else 1), records
