@@ -7,19 +7,10 @@ import pytest
 
 bpy = pytest.importorskip("bpy")
 
-import blender_manikin  # noqa: E402
-from blender_manikin.blender import keying, live_rig, solve_job, writer  # noqa: E402
+from blender_manikin.blender import keying, live_rig, writer  # noqa: E402
 
-from blender_util import fresh_scene, stub_solver, synthetic_result, write_recording_csv  # noqa: E402
-
-
-@pytest.fixture
-def addon(monkeypatch):
-    fresh_scene()
-    blender_manikin.register()
-    monkeypatch.setattr(solve_job, "run_solver", stub_solver)
-    yield
-    blender_manikin.unregister()
+from blender_util import synthetic_result, write_recording_csv  # noqa: E402
+from test_blender_addon import addon  # noqa: E402,F401  (the add-on registered, the solver stubbed)
 
 
 @pytest.fixture

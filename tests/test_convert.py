@@ -67,23 +67,35 @@ def test_local_cluster_converts_a_folder_with_broken_files(tmp_path):
     assert code2 == 1 and sorted(os.path.basename(r["input"]) for r in again) == ["broken.csv", "empty.bsor"]
 
 
-def test_a_killed_run_resumes_without_missing_or_duplicated_outputs(tmp_path):
-    d = tmp_path / "in"
+def _wait_for_records(proc, out, n):
+    """Wait (at most 120 s) until the running ``proc`` has ``n`` lines in ``out``'s manifest;
+    returns the manifest's path."""
+    man = out / convert.MANIFEST
+    deadline = time.time() + 120
+    while time.time() < deadline and proc.poll() is None:
+        if man.exists() and len(man.read_text().splitlines()) >= n:
+            break
+        time.sleep(0.05)
+    return man
+
+
+def _copies_of_the_example(d, n):
+    """Folder ``d`` with ``n`` copies of the bundled example, ``t00.csv``...: a batch to stop."""
     d.mkdir()
-    for i in range(10):
+    for i in range(n):
         shutil.copy(EXAMPLE, d / f"t{i:02d}.csv")
+    return d
+
+
+def test_a_killed_run_resumes_without_missing_or_duplicated_outputs(tmp_path):
+    d = _copies_of_the_example(tmp_path / "in", 10)
     out = tmp_path / "out"
     cmd = [sys.executable, "-m", "blender_manikin", "convert", str(d), "--out", str(out), "--format", "json",
            "--workers", "2", "--no-progress"]
     env = dict(os.environ, PYTHONPATH=ROOT)
     proc = subprocess.Popen(cmd, cwd=ROOT, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
                             start_new_session=True)
-    man = out / convert.MANIFEST
-    deadline = time.time() + 120
-    while time.time() < deadline and proc.poll() is None:
-        if man.exists() and len(man.read_text().splitlines()) >= 2:
-            break
-        time.sleep(0.05)
+    _wait_for_records(proc, out, 2)
     os.killpg(proc.pid, signal.SIGKILL)                                     # the job and its workers
     proc.wait()
     first = [r["input"] for r in _manifest_lines(out)]
@@ -317,20 +329,12 @@ def test_an_unreachable_scheduler_is_a_clear_error_in_bounded_time(tmp_path):
 
 
 def test_ctrl_c_stops_the_run_with_a_summary_and_exit_code_130(tmp_path):
-    d = tmp_path / "in"
-    d.mkdir()
-    for i in range(40):
-        shutil.copy(EXAMPLE, d / f"t{i:02d}.csv")
+    d = _copies_of_the_example(tmp_path / "in", 40)
     out = tmp_path / "out"
     proc = subprocess.Popen([sys.executable, "-m", "blender_manikin", "convert", str(d), "--out", str(out),
                              "--workers", "2", "--no-progress"], cwd=ROOT, env=dict(os.environ, PYTHONPATH=ROOT),
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True)
-    man = out / convert.MANIFEST
-    deadline = time.time() + 120
-    while time.time() < deadline and proc.poll() is None:
-        if man.exists() and len(man.read_text().splitlines()) >= 2:
-            break
-        time.sleep(0.05)
+    man = _wait_for_records(proc, out, 2)
     os.killpg(proc.pid, signal.SIGINT)                       # Ctrl-C in a terminal: the whole group
     so, err = proc.communicate(timeout=60)
     assert proc.returncode == 130, err
