@@ -118,3 +118,18 @@ def test_a_body_lying_down_is_no_slip():
     for d in ("right_foot", "pelvis"):
         rot[d] = np.where(late[:, None, None], tip @ rot[d], rot[d])
     assert find_tracker_slips(replace(targets, pos=pos, rot=rot), rest_ankle_z=REST) == []
+
+
+def test_a_pelvis_tracker_turning_round_the_belt_is_named():
+    """The pelvis tracker's belt turned 25° round the waist at 4.3 s: both planted feet turn alike
+    against it and stay so; named as the pelvis tracker's (or a stance), not corrected."""
+    targets, _, _, t = slip_take(BODY, random_mounts(2), "walk", slip=("pelvis", AT, 0.0, 25.0), seed=2)
+    slips = find_tracker_slips(targets, rest_ankle_z=REST)
+    assert [s.device for s in slips] == ["pelvis"] and not slips[0].corrected
+    assert slips[0].turn_deg == pytest.approx(25.0, abs=3.0)
+    assert t[slips[0].start] <= AT + 0.02 and t[slips[0].end] >= AT - 0.02
+    note = tracker_slip_notes(slips, 60.0)[0]
+    assert note.startswith("pelvis tracker: both planted feet turned 2") and "not corrected" in note
+    fixed = correct_tracker_slips(targets, slips)
+    for d in targets.pos:
+        np.testing.assert_array_equal(fixed.rot[d], targets.rot[d])

@@ -32,7 +32,8 @@ reported:
 
 * both feet stepping alike within :data:`BOTH_FEET_S` (both planted ankles higher: a step onto
   a platform; both headings turned against the pelvis: a stance, or the pelvis tracker turning
-  round the belt) is no strap of one foot: nothing is found;
+  round the belt) is no strap of one foot; the turn is named as the pelvis tracker's
+  (``device="pelvis"``, its turn round the waist), not corrected;
 * a turn alone (no slide at the same moment) is what a held stance does too (a fighter's back
   foot turned out 40° for the rest of the take): it is named in the summary, not corrected.  A
   turn that comes with a slide at the same moment is the strap's, and is put right with it.
@@ -74,9 +75,10 @@ _Z = np.array([0.0, 0.0, 1.0])
 
 @dataclass(frozen=True)
 class TrackerSlip:
-    """One slip of a foot tracker.
+    """One slip of a foot tracker (or of the pelvis tracker, both feet turning alike against it).
 
-    device: ``"left_foot"`` / ``"right_foot"``; start, end: frames between which it happened
+    device: ``"left_foot"`` / ``"right_foot"`` (or ``"pelvis"``: ``turn_deg`` its turn round the
+    waist, found from the feet, never corrected); start, end: frames between which it happened
     (the last planted frame before it, the first after); slide: metres the tracker slid up the
     shin (negative: down); turn_deg: degrees it turned round the shin (about the ankle's +Z);
     either is 0 when it did not step; after: the offsets fit the take *after* it (they were
@@ -215,7 +217,11 @@ def _one_foot_only(slips, fps):
     slide = not (near and alike(a.slide, b.slide))
     turn = not (near and alike(a.turn_deg, b.turn_deg))
     kept = [replace(s, slide=s.slide if slide else 0.0, turn_deg=s.turn_deg if turn else 0.0) for s in slips]
-    return [s for s in kept if s.slide or s.turn_deg]
+    out = [s for s in kept if s.slide or s.turn_deg]
+    if not turn:            # both feet turned alike against the pelvis: its tracker, or a stance
+        out.append(TrackerSlip("pelvis", min(a.start, b.start), max(a.end, b.end), 0.0,
+                               -0.5 * (a.turn_deg + b.turn_deg), a.after and b.after))
+    return out
 
 
 def _moment(value, before, after, step, angle=False):
@@ -271,6 +277,11 @@ def tracker_slip_notes(slips, fps, t0=0.0) -> list:
     notes = []
     for s in slips:
         foot, span = s.device.replace('_', ' '), f"{t0 + s.start / fps:.2f}-{t0 + s.end / fps:.2f} s"
+        if s.device == "pelvis":
+            notes.append(f"pelvis tracker: both planted feet turned {abs(s.turn_deg):.0f}° against it at {span} "
+                         f"and stayed so (its belt turned round the waist, or the stance changed): not corrected; "
+                         f"check the hips {'before' if s.after else 'after'} it")
+            continue
         if not s.corrected:
             notes.append(f"{foot}: planted, it turned {abs(s.turn_deg):.0f}° against the hips at {span} and stayed "
                          f"so (its tracker's strap turned round the shin, or the stance changed): not corrected; "
