@@ -6,12 +6,13 @@ on a smooth path, the hands on their own smooth paths around it) and *boxing* (t
 guard, punching 0.45 m out and back in 0.2 s, over a second each on average).  Per kind and rate:
 the jumps found in the takes as made (each false) and, for shifts of 3, 5, 8 and 11 cm in random
 directions at random times (5 per take), how many are found at their time.  Then the jumps found
-in each real recording under ``../shared/data/vr`` (none is known).
+in each real recording under ``../shared/data/vr`` (none is known), or in the recordings given.
 
-    .venv/bin/python benchmarks/bench_teleports.py
+    .venv/bin/python benchmarks/bench_teleports.py [--seeds N] [RECORDING ...]
 """
 from __future__ import annotations
 
+import argparse
 import glob
 import os
 import sys
@@ -76,14 +77,23 @@ def as_recording(t, streams, at=None, shift=None):
                      source="synthetic")
 
 
-def main():
+VR_DATA = os.path.join(os.path.dirname(ROOT), "shared", "data", "vr")
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("recordings", nargs="*", metavar="RECORDING",
+                    help=f"real recordings to look for jumps in (default: the .bsor and .xror files in {VR_DATA})")
+    ap.add_argument("--seeds", type=int, default=10, help="synthetic takes per kind and rate (default 10)")
+    args = ap.parse_args(argv)
     print(f"teleports.py: TELEPORT_MIN_M {tp.TELEPORT_MIN_M} m, SMALL_JUMP_MIN_M {tp.SMALL_JUMP_MIN_M} m")
-    print("| take | false jumps (10 x 20 s) | " + " | ".join(f"{100 * s:.0f} cm found" for s in SIZES) + " |")
+    print(f"| take | false jumps ({args.seeds} x 20 s) | "
+          + " | ".join(f"{100 * s:.0f} cm found" for s in SIZES) + " |")
     print("|---|---:|" + "---:|" * len(SIZES))
     for kind in ("dance", "boxing"):
         for rate in (60.0, 90.0, 120.0):
             false, found, trials = 0, dict.fromkeys(SIZES, 0), 0
-            for seed in range(10):
+            for seed in range(args.seeds):
                 t, st = synthetic_take(kind, rate, seed)
                 false += len(tp.find_rig_jumps(as_recording(t, st)))
                 rng = np.random.default_rng(100 + seed)
@@ -95,9 +105,12 @@ def main():
                         found[size] += any(abs(j.time - t[at]) < 1e-6 for j in jumps)
                 trials += 5
             print(f"| {kind} {rate:.0f} Hz | {false} | " + " | ".join(f"{found[s]}/{trials}" for s in SIZES) + " |")
-    for f in sorted(glob.glob(os.path.join(os.path.dirname(ROOT), "shared", "data", "vr", "*"))):
-        if f.endswith((".bsor", ".xror")):
-            print(f"{os.path.basename(f)}: {len(tp.find_rig_jumps(load_recording(f)))} jumps found")
+    recordings = args.recordings or sorted(f for f in glob.glob(os.path.join(VR_DATA, "*"))
+                                           if f.endswith((".bsor", ".xror")))
+    if not recordings:
+        print(f"no real recordings: none under {VR_DATA}; give their paths as arguments")
+    for f in recordings:
+        print(f"{os.path.basename(f)}: {len(tp.find_rig_jumps(load_recording(f)))} jumps found")
 
 
 if __name__ == "__main__":

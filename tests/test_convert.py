@@ -343,3 +343,19 @@ def test_ctrl_c_stops_the_run_with_a_summary_and_exit_code_130(tmp_path):
     assert last.endswith(f"manifest: {man}") and "not converted (interrupted)" in last
     ok = sorted(r["input"] for r in _manifest_lines(out) if r["status"] == "ok")
     assert ok and sorted(ln.split()[1] for ln in so.splitlines() if ln.startswith("OK ")) == ok   # as they finished
+
+
+def test_the_progress_line_counts_converted_and_failed_apart(tmp_path, capsys):
+    """The progress bar's figures agree with the summary: one good and one broken input end at
+    "2/2 done: 1 converted, 1 failed" (it said "2/2 converted, 1 failed", two converted where one
+    was, the last line then "1 converted, 1 error(s)")."""
+    d = tmp_path / "in"
+    d.mkdir()
+    shutil.copy(EXAMPLE, d / "take.csv")
+    (d / "broken.csv").write_text("time,device,px,py,pz,qw,qx,qy,qz\n0.0,head,1,2\n")
+    inputs = convert.collect_inputs([str(d)])
+    code, records = convert.run(inputs, str(tmp_path / "out"), ["json"], SolveSettings(fps=30.0), workers=1,
+                                progress=True, log=lambda m: None)
+    assert code == 1 and sorted(r["status"] for r in records) == ["error", "ok"]
+    bars = [part for part in capsys.readouterr().err.replace("\n", "\r").split("\r") if part.startswith("[")]
+    assert bars[-1].endswith("] 2/2 done: 1 converted, 1 failed"), bars

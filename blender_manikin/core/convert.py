@@ -387,7 +387,7 @@ def run(inputs, out_dir, fmts, settings: SolveSettings, scheduler=None, workers=
                     report(rec)
                 if progress:
                     bar = "#" * int(30 * i / len(todo))
-                    sys.stderr.write(f"\r[{bar:<30}] {i}/{len(todo)} converted, {failed} failed")
+                    sys.stderr.write(f"\r[{bar:<30}] {i}/{len(todo)} done: {i - failed} converted, {failed} failed")
                     sys.stderr.flush()
                 if rec["status"] != "ok":
                     log(("\n" if progress else "") + f"ERROR {rec['input']}: {rec['error']}")
