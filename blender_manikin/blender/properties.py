@@ -56,13 +56,13 @@ def _character_poll(self, obj):
     return obj.type == 'ARMATURE' and PROP_BODY not in obj.keys()
 
 
-def _bone_map_items():
+def _bone_map_items(edited=True):
     from ..core.bone_maps import PRESETS
     return [('AUTO', "Guess", "From the character's bone names and hierarchy (presets first)")] + \
         [(p.upper(), p.replace("_", " ").title().replace("Ue", "Unreal UE").replace("Vrm", "VRM"),
-          f"The {p} preset") for p in PRESETS] + [('FILE', "From File", "A saved bone map (JSON)"),
-                                                   ('EDITED', "Edited List", "The bone map list below as "
-                                                    "edited (changing a row chooses this)")]
+          f"The {p} preset") for p in PRESETS] + [('FILE', "From File", "A saved bone map (JSON)")] + \
+        ([('EDITED', "Edited List", "The bone map list below as edited (changing a row chooses this)")]
+         if edited else [])
 
 
 def fbx_preset_items():
@@ -133,8 +133,19 @@ class MANIKIN_Settings(PropertyGroup):
                                 items=[('FILE', "File", "A keypoint file or FreeMoCap folder"),
                                        ('OBJECTS', "Scene Objects", "Animated objects (empties) named after "
                                         "a layout's points, e.g. FreeMoCap's or a markerless add-on's "
-                                        "left_wrist, left_hip, ...: the objects of a collection")],
+                                        "left_wrist, left_hip, ...: the objects of a collection"),
+                                       ('ARMATURE', "Armature", "An animated armature (a markerless capture's "
+                                        "FBX, an imported BVH, another rig's animation): each joint is the "
+                                        "world position of its mapped bone's head")],
                                 description="Where the keypoints come from")
+    keypoint_armature: PointerProperty(type=bpy.types.Object, name="Armature", poll=_character_poll,
+                                       description="The animated armature whose bones give the keypoints "
+                                                   "(not a MANIKIN solve's own)")
+    keypoint_bone_map: EnumProperty(name="Bone Map", items=_bone_map_items(edited=False), default='AUTO',
+                                    description="Which of the armature's bones stands on each joint (the "
+                                                "retarget's maps)")
+    keypoint_map_file: StringProperty(name="Map File", subtype='FILE_PATH', default="",
+                                      description="A saved bone map (JSON: joint -> bone)")
     keypoint_collection: PointerProperty(type=bpy.types.Collection, name="Collection",
                                          description="The collection of the keypoint objects (its children's too), "
                                                      "named after the points of a layout")
@@ -369,6 +380,14 @@ def config_from_settings(context):
                 raise SolveError("choose the collection of the keypoint objects")
             cfg.filepath = ""
             cfg.keypoint_collection = s.keypoint_collection.name
+            cfg.scene_frames = None if s.use_scene_range else (s.frame_start, s.frame_end)
+        elif s.keypoint_from == 'ARMATURE':
+            if s.keypoint_armature is None:
+                raise SolveError("choose the animated armature whose bones give the keypoints")
+            cfg.filepath = ""
+            cfg.keypoint_armature = s.keypoint_armature.name
+            cfg.keypoint_bone_map = s.keypoint_bone_map.lower()
+            cfg.keypoint_map_file = bpy.path.abspath(s.keypoint_map_file) if s.keypoint_map_file else None
             cfg.scene_frames = None if s.use_scene_range else (s.frame_start, s.frame_end)
         cfg.keypoint_layout = None if s.keypoint_layout == 'AUTO' else s.keypoint_layout.lower()
         cfg.up = None if s.keypoint_up == 'AUTO' else s.keypoint_up.lower()

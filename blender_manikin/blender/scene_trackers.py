@@ -33,6 +33,8 @@ camera looks, :data:`CAMERA_TO_DEVICE`).
 """
 from __future__ import annotations
 
+import os
+
 import numpy as np
 
 from ..core import rotations as rot
@@ -262,3 +264,90 @@ def sample_keypoint_empties(scene, objects, frame_start, frame_end, progress=Non
     fps = float(scene.render.fps) / float(scene.render.fps_base)
     return keypoints_from_points(frames / fps, points, layout, source,
                                  how=f"from the names of {len(names)} scene objects")
+
+
+def armature_bone_map(obj, choice="auto", path=None):
+    """``(BoneMap, label)``: the bone map of an animated armature read as keypoints.
+
+    choice: ``"auto"`` (guessed from the bone names and hierarchy, the retarget's guess,
+    :func:`..core.bone_maps.guess_bone_map`: its presets first), a preset of
+    :data:`..core.bone_maps.PRESETS` (fitted to the rig, :func:`..core.bone_maps.fit_preset`) or
+    ``"file"`` with ``path`` (a saved map, JSON).  The deforming bones are read as they are
+    evaluated (a generated Rigify or a live Auto-Rig Pro rig's DEF bones follow their controls
+    through constraints: their heads are where the body is, unlike the retarget, which keys the
+    controls).  label: the map's name for the summary (``"mixamo map"``)."""
+    from ..core import bone_maps
+    from .retarget_apply import bone_list
+    key = str(choice or "auto").lower()
+    if key == "auto":
+        bmap, _ = bone_maps.guess_bone_map(bone_list(obj))
+        label = "bone map guessed from the names" if bmap.name == "guessed" else f"{bmap.name} map, guessed"
+    elif key == "file":
+        if not path:
+            raise SceneSourceError(f"armature {obj.name!r}: the bone map is From File, but no file is chosen")
+        try:
+            bmap = bone_maps.load_bone_map(path)
+        except (OSError, ValueError) as exc:
+            raise SceneSourceError(f"bone map file {path!r}: {exc}") from None
+        label = f"map {bmap.name!r} from {os.path.basename(path)}"
+    else:
+        try:
+            bmap = bone_maps.preset(key)
+        except ValueError as exc:
+            raise SceneSourceError(str(exc)) from None
+        try:
+            bmap, _ = bone_maps.fit_preset(bmap, bone_list(obj))
+        except ValueError:
+            pass                        # not a rig of that kind: the required joints' check names what lacks
+        label = f"{key} map"
+    return bmap, label
+
+
+def sample_armature_keypoints(scene, obj, frame_start, frame_end, choice="auto", path=None, progress=None):
+    """3D keypoints from an animated armature (a markerless capture's FBX, an imported BVH,
+    another rig's animation): each of the 22 body joints is the world position of the head of
+    the bone the map (:func:`armature_bone_map`) gives it, sampled on scene frames
+    ``frame_start..frame_end`` with the scene evaluated (action, NLA, constraints, drivers),
+    scene units taken into metres; joints without a bone are placed as
+    :mod:`..core.rig_keypoints` says.  Returns a :class:`..core.io_keypoints.KeypointRecording`
+    in the ``smpl22`` layout whose report names the armature and the map.  Nothing of the
+    armature changes (its action, pose, selection); the current frame is restored.
+
+    Raises :class:`SceneSourceError`: no armature, an armature that is the solve's own output, a
+    map leaving the limbs or the head without a bone (naming them), bones that do not move on
+    the range (no animation there)."""
+    from ..core import rig_keypoints
+    from ..core.io_keypoints import keypoints_from_points
+    from .armature import PROP_BODY
+    if obj is None:
+        raise SceneSourceError("choose the armature whose animation gives the keypoints")
+    if obj.type != 'ARMATURE':
+        raise SceneSourceError(f"object {obj.name!r} is not an armature")
+    if PROP_BODY in obj.keys():
+        raise SceneSourceError(f"armature {obj.name!r} is a MANIKIN solve's output: choose the animated "
+                               f"character it should follow")
+    frame_start, frame_end = int(frame_start), int(frame_end)
+    if frame_end <= frame_start:
+        raise SceneSourceError(f"frame range {frame_start}..{frame_end} holds fewer than 2 frames")
+    bmap, label = armature_bone_map(obj, choice, path)
+    try:
+        bmap = rig_keypoints.checked_map(bmap, obj.pose.bones.keys(), f"armature {obj.name!r}")
+    except ValueError as exc:
+        raise SceneSourceError(str(exc)) from None
+    frames = np.arange(frame_start, frame_end + 1, dtype=np.float64)
+    resolved = {j: (obj, b) for j, b in bmap.bones.items()}
+    pos, _, _, valid = _sample(scene, resolved, frames, progress=progress)
+    metres = metres_per_unit(scene)
+    heads = {j: pos[j] * metres for j in pos}
+    moved = max(float(np.ptp(h, axis=0).max()) for h in heads.values())
+    if moved < 1e-6:
+        raise SceneSourceError(f"armature {obj.name!r}: its bones do not move on frames {frame_start}..{frame_end}: "
+                               f"it has no animation there (no action, NLA strip, driver or constraint moves "
+                               f"them); choose the frames of its animation or another armature")
+    for j in heads:
+        heads[j][~valid[j]] = np.nan                # not evaluated there
+    P, derived = rig_keypoints.joints_from_heads(heads)
+    fps = float(scene.render.fps) / float(scene.render.fps_base)
+    without = f"; without a bone: {rig_keypoints.derived_note(derived)}" if derived else ""
+    said = f"keypoints: {P.shape[1]} joints from armature {obj.name!r} ({label}{without})"
+    return keypoints_from_points(frames / fps, P, "smpl22", f"armature {obj.name!r}", said=said)

@@ -75,11 +75,16 @@ class SolveConfig(SolveSettings):
     scene_sources: dict = field(default_factory=dict)
     scene_frames: tuple | None = None
     keypoint_collection: str | None = None
+    keypoint_armature: str | None = None      # an animated armature's bones as keypoints
+    keypoint_bone_map: str = "auto"           # its bone map: auto, a preset, file (keypoint_map_file)
+    keypoint_map_file: str | None = None
     marker_take: str | None = None     # timeline markers named "MANIKIN <take>: ..." (several takes)
 
     def take_name(self) -> str:
         """The take's name for the actions a solve makes (``MANIKIN_live_<take>``): the recording
         file's (or keypoint folder's) name without its extension, ``scene`` for scene objects."""
+        if self.source.upper() == "KEYPOINTS" and self.keypoint_armature:
+            return self.keypoint_armature
         if self.source.upper() == "KEYPOINTS" and self.keypoint_collection:
             return self.keypoint_collection
         if self.source.upper() == "SCENE" or not self.filepath:
@@ -89,6 +94,8 @@ class SolveConfig(SolveSettings):
 
     def source_description(self) -> str:
         """What was solved: the recording's path, or the scene objects of each device."""
+        if self.source.upper() == "KEYPOINTS" and self.keypoint_armature:
+            return f"bones of armature {self.keypoint_armature} ({self.keypoint_bone_map} map)"
         if self.source.upper() == "KEYPOINTS" and self.keypoint_collection:
             return f"keypoint objects of collection {self.keypoint_collection}"
         if self.source.upper() == "SCENE":
@@ -164,9 +171,11 @@ class SolveJob:
 
     # -- stage 1 (main thread)
     def gather(self, context):
-        """Sample scene sources (main thread): tracker objects, or keypoint objects of a
-        collection.  No-op for file sources."""
+        """Sample scene sources (main thread): tracker objects, keypoint objects of a collection,
+        or an animated armature's bones.  No-op for file sources."""
         cfg = self.config
+        if cfg.source.upper() == "KEYPOINTS" and cfg.keypoint_armature:
+            return self._gather_armature(context)
         if cfg.source.upper() == "KEYPOINTS" and cfg.keypoint_collection:
             return self._gather_keypoints(context)
         if cfg.source.upper() != "SCENE":
@@ -203,6 +212,29 @@ class SolveJob:
             self.recording = sample_keypoint_empties(scene, list(coll.all_objects), start, end,
                                                      progress=lambda f: self._set(_P_LOAD * f),
                                                      source=f"collection {coll.name!r}")
+        except (SceneSourceError, RecordingError) as exc:
+            raise SolveError(str(exc)) from exc
+        if cfg.fps is None:
+            cfg.fps = float(scene.render.fps) / float(scene.render.fps_base)
+        cfg.frame_start = int(start)
+        self.timings["read"] = _time.perf_counter() - t
+
+    def _gather_armature(self, context):
+        import bpy
+        from ..core.recording import RecordingError
+        from .scene_trackers import sample_armature_keypoints, SceneSourceError
+        cfg = self.config
+        scene = context.scene
+        obj = bpy.data.objects.get(cfg.keypoint_armature)
+        if obj is None:
+            raise SolveError(f"no object named {cfg.keypoint_armature!r}")
+        start, end = cfg.scene_frames or (scene.frame_start, scene.frame_end)
+        t = _time.perf_counter()
+        self._set(0.0, "sampling the armature's bones")
+        try:
+            self.recording = sample_armature_keypoints(scene, obj, start, end, cfg.keypoint_bone_map,
+                                                       cfg.keypoint_map_file,
+                                                       progress=lambda f: self._set(_P_LOAD * f))
         except (SceneSourceError, RecordingError) as exc:
             raise SolveError(str(exc)) from exc
         if cfg.fps is None:

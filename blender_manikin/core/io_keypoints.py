@@ -181,12 +181,13 @@ def read_keypoints(path, layout=None, units=None, up=None, rate=None, mapping=No
     return _finish(X, conf, name, src, decided, hands, units, up, handed, rate, time)
 
 
-def keypoints_from_points(time, points, layout, source, units="m", up="+z", how="as given"):
+def keypoints_from_points(time, points, layout, source, units="m", up="+z", how="as given", said=None):
     """A :class:`KeypointRecording` from points already in hand (e.g. empties sampled in a Blender
     scene): ``time`` ``(T,)`` seconds, ``points`` ``(T, K, 3)`` in ``units`` with ``up`` (default
     metres, +Z up), NaN where missing; ``layout`` a layout name whose points they are, in its
-    order; ``how`` says where the layout came from in the one-line report.  The handedness is
-    still told from the body (a mirrored source is put right), as for files."""
+    order; ``how`` says where the layout came from in the one-line report (``said``, when given,
+    is that report's first item instead: what was read, e.g. an armature's bones).  The handedness
+    is still told from the body (a mirrored source is put right), as for files."""
     X = np.array(points, dtype=np.float64, copy=True)
     name = kl.canonical_layout(layout)
     if X.ndim != 3 or X.shape[1:] != (len(kl.LAYOUTS[name].points), 3):
@@ -194,7 +195,7 @@ def keypoints_from_points(time, points, layout, source, units="m", up="+z", how=
                              f"for layout {name}", path=source)
     if X.shape[0] < 2:
         raise RecordingError(f"{X.shape[0]} frame(s): at least 2 are needed", path=source)
-    decided = [f"keypoints: {name} ({X.shape[1]} points, {how})"]
+    decided = [said or f"keypoints: {name} ({X.shape[1]} points, {how})"]
     return _finish(X, None, name, source, decided, None, units, up, None, None, np.asarray(time, np.float64))
 
 

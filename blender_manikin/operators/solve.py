@@ -254,7 +254,8 @@ class MANIKIN_OT_solve_files(_ModalSolves, Operator):
         for path in paths:
             take = os.path.splitext(os.path.basename(path))[0]
             configs.append(dataclasses.replace(
-                base, source=source, filepath=path, keypoint_collection=None, reuse_armature=None,
+                base, source=source, filepath=path, keypoint_collection=None, keypoint_armature=None,
+                reuse_armature=None,
                 armature_name=f"MANIKIN_{take}", set_scene_range=False, create_trackers=False, marker_take=take))
         return configs
 

@@ -46,6 +46,11 @@ class MANIKIN_PT_solve(_Base, Panel):
             col.prop(s, "keypoint_from")
             if s.keypoint_from == 'OBJECTS':
                 col.prop(s, "keypoint_collection")
+            elif s.keypoint_from == 'ARMATURE':
+                col.prop(s, "keypoint_armature")
+                col.prop(s, "keypoint_bone_map")
+                if s.keypoint_bone_map == 'FILE':
+                    col.prop(s, "keypoint_map_file")
             else:
                 col.prop(s, "keypoint_path")
                 col.prop(s, "keypoint_layout")
@@ -212,7 +217,7 @@ class MANIKIN_PT_output(_Base, Panel):
         layout.use_property_split = True
         layout.use_property_decorate = False
         # scene objects (trackers or keypoints) are sampled from Start to End; files are read whole
-        sampled = s.source == 'SCENE' or (s.source == 'KEYPOINTS' and s.keypoint_from == 'OBJECTS')
+        sampled = s.source == 'SCENE' or (s.source == 'KEYPOINTS' and s.keypoint_from in ('OBJECTS', 'ARMATURE'))
         if s.source in ('FILE', 'KEYPOINTS'):
             # headed rows: "Scene Frame Rate" and "Scene Frame Range" were both cut to "Scene Frame ..."
             layout.column(heading="Frame Rate").prop(s, "use_scene_fps", text="From Scene")
