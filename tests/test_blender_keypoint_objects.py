@@ -107,6 +107,8 @@ def test_the_panel_shows_the_collection_for_scene_objects(addon):
     assert {"keypoint_from", "keypoint_path", "keypoint_layout"} <= drawn['FILE']
     assert "keypoint_collection" not in drawn['FILE']
     assert "keypoint_collection" in drawn['OBJECTS'] and "keypoint_path" not in drawn['OBJECTS']
+    # the feet stand on the soles: the setting is shown here (the Calibration panel is not, for keypoints)
+    assert "sole" in drawn['FILE'] and "sole" in drawn['OBJECTS']
     from blender_manikin.blender.properties import config_from_settings
     from blender_manikin.blender.solve_job import SolveError
     with pytest.raises(SolveError, match="choose the collection of the keypoint objects"):

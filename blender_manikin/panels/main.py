@@ -63,6 +63,7 @@ class MANIKIN_PT_solve(_Base, Panel):
             col.prop(s, "despike")
             col.prop(s, "ik")
             toggled_row(col, s, "use_height", "height", "Height")
+            col.prop(s, "sole")                 # the feet stand on it (Calibration is not shown here)
         else:
             col.operator("manikin.map_devices", icon='LINKED')
             for d in DEVICES:
