@@ -174,9 +174,7 @@ class SolveJob:
         """Sample scene sources (main thread): tracker objects, keypoint objects of a collection,
         or an animated armature's bones.  No-op for file sources."""
         cfg = self.config
-        if cfg.source.upper() == "KEYPOINTS" and cfg.keypoint_armature:
-            return self._gather_armature(context)
-        if cfg.source.upper() == "KEYPOINTS" and cfg.keypoint_collection:
+        if cfg.source.upper() == "KEYPOINTS" and (cfg.keypoint_armature or cfg.keypoint_collection):
             return self._gather_keypoints(context)
         if cfg.source.upper() != "SCENE":
             return
@@ -197,44 +195,31 @@ class SolveJob:
         self.timings["read"] = _time.perf_counter() - t
 
     def _gather_keypoints(self, context):
+        """Keypoints sampled in the scene: the objects of a collection named after a layout's
+        points, or an animated armature's mapped bones."""
         import bpy
         from ..core.recording import RecordingError
-        from .scene_trackers import sample_keypoint_empties, SceneSourceError
+        from .scene_trackers import SceneSourceError, sample_armature_keypoints, sample_keypoint_empties
         cfg = self.config
         scene = context.scene
-        coll = bpy.data.collections.get(cfg.keypoint_collection)
-        if coll is None:
-            raise SolveError(f"no collection named {cfg.keypoint_collection!r}")
         start, end = cfg.scene_frames or (scene.frame_start, scene.frame_end)
+        progress = lambda f: self._set(_P_LOAD * f)          # noqa: E731
+        if cfg.keypoint_armature:
+            obj = bpy.data.objects.get(cfg.keypoint_armature)
+            if obj is None:
+                raise SolveError(f"no object named {cfg.keypoint_armature!r}")
+            what, sample = "the armature's bones", lambda: sample_armature_keypoints(
+                scene, obj, start, end, cfg.keypoint_bone_map, cfg.keypoint_map_file, progress=progress)
+        else:
+            coll = bpy.data.collections.get(cfg.keypoint_collection)
+            if coll is None:
+                raise SolveError(f"no collection named {cfg.keypoint_collection!r}")
+            what, sample = "keypoint objects", lambda: sample_keypoint_empties(
+                scene, list(coll.all_objects), start, end, progress=progress, source=f"collection {coll.name!r}")
         t = _time.perf_counter()
-        self._set(0.0, "sampling keypoint objects")
+        self._set(0.0, f"sampling {what}")
         try:
-            self.recording = sample_keypoint_empties(scene, list(coll.all_objects), start, end,
-                                                     progress=lambda f: self._set(_P_LOAD * f),
-                                                     source=f"collection {coll.name!r}")
-        except (SceneSourceError, RecordingError) as exc:
-            raise SolveError(str(exc)) from exc
-        if cfg.fps is None:
-            cfg.fps = float(scene.render.fps) / float(scene.render.fps_base)
-        cfg.frame_start = int(start)
-        self.timings["read"] = _time.perf_counter() - t
-
-    def _gather_armature(self, context):
-        import bpy
-        from ..core.recording import RecordingError
-        from .scene_trackers import sample_armature_keypoints, SceneSourceError
-        cfg = self.config
-        scene = context.scene
-        obj = bpy.data.objects.get(cfg.keypoint_armature)
-        if obj is None:
-            raise SolveError(f"no object named {cfg.keypoint_armature!r}")
-        start, end = cfg.scene_frames or (scene.frame_start, scene.frame_end)
-        t = _time.perf_counter()
-        self._set(0.0, "sampling the armature's bones")
-        try:
-            self.recording = sample_armature_keypoints(scene, obj, start, end, cfg.keypoint_bone_map,
-                                                       cfg.keypoint_map_file,
-                                                       progress=lambda f: self._set(_P_LOAD * f))
+            self.recording = sample()
         except (SceneSourceError, RecordingError) as exc:
             raise SolveError(str(exc)) from exc
         if cfg.fps is None:
