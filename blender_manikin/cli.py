@@ -68,6 +68,8 @@ Options of ``solve`` (they mirror the panel; ``--help`` has them all):
                               and foot trackers worn on the other feet)
 --keep-spikes                 keypoints: keep every sample (default: remove samples
                               30 cm or more off their point's local median)
+--keypoint-floor feet|keep    keypoints: feet (default) stands the body on the floor
+                              found under the feet, at z = 0; keep leaves the heights as given
 --mapping FILE.json           keypoints: a CSV's column names for the layout's points
 --save-layout FILE.json       write the layout detected in the first wide CSV or JSON
 --format blend,fbx,bvh,json,npz  one or several (default blend,fbx,json); without blend
@@ -186,6 +188,10 @@ def _add_solve_options(s):
     s.add_argument("--keep-spikes", action="store_true",
                    help="keypoints: keep every sample as read (default: samples 30 cm or more off their "
                         "point's local median, a detector's misplacements, are removed and bridged)")
+    s.add_argument("--keypoint-floor", default="feet", choices=("feet", "keep"),
+                   help="keypoints: feet (default) moves the floor found under the feet to z = 0, the body "
+                        "on its --sole; keep leaves the joints at the heights given (a source whose floor "
+                        "is the scene's)")
     s.add_argument("--mapping", default=None, metavar="FILE.json",
                    help="keypoints: a CSV's columns for the layout's points "
                         '({"layout": "coco17", "columns": {"nose": "Nose", ...}})')
@@ -378,6 +384,7 @@ def solve_settings(args):
                        model=getattr(args, "model", None), sole=getattr(args, "sole", None),
                        floor=getattr(args, "floor", 0.0), fix_sides=not getattr(args, "keep_sides", False),
                        despike=not getattr(args, "keep_spikes", False),
+                       keypoint_floor=getattr(args, "keypoint_floor", "feet"),
                        overlap=getattr(args, "overlap", SolveSettings.overlap),
                        teleports=getattr(args, "teleports", SolveSettings.teleports),
                        start=getattr(args, "start", None), end=getattr(args, "end", None),

@@ -556,3 +556,29 @@ def test_straight_limbs_of_noisy_keypoints_keep_their_swivel():
         step = np.degrees(rot.geodesic_angle(W[1:30, j], W[:29, j]))
         assert err.max() < 20.0 and step.max() < 15.0, (name, err.max(), step.max())
     assert np.linalg.norm(P - true_pos, axis=-1).mean() < 0.012          # the joints where they were
+
+
+def test_keypoint_floor_keep_leaves_the_joints_at_the_heights_given(motion):
+    """keypoint_floor="keep" (an armature's bones, whose floor is the scene's): the solved joints
+    stay where the keypoints are, 0.4 m up on a platform, whatever the shoe soles; "feet" (the
+    default) stands the body on z = 0 on its soles; anything else is named."""
+    from blender_manikin.core.io_keypoints import keypoints_from_points
+    body, pos, world = motion
+    lifted = pos + np.array([0.0, 0.0, 0.4])
+    rec = keypoints_from_points(np.arange(len(pos)) / 30.0, lifted, "smpl22", "platform")
+    for sole in (0.0, 0.03):
+        out = ks.solve_keypoints(rec, SolveSettings(fps=30.0, keypoint_floor="keep", sole=sole))
+        err = np.linalg.norm(out.result.fk()[0] - lifted, axis=-1)
+        assert err.mean() < 0.003 and np.median(err.max(-1)) < 0.01, (sole, err.mean(), err.max())
+        assert any(re.match(r"floor at \+0\.[34]\d\d m under the feet, heights kept as given", n)
+                   for n in out.info), out.info
+    out = ks.solve_keypoints(rec, SolveSettings(fps=30.0, sole=0.03))
+    dz = np.median(out.result.fk()[0][..., 2] - lifted[..., 2])
+    assert -0.42 < dz < -0.35, dz          # moved to the floor found under the feet, on the soles
+    with pytest.raises(SolveError, match="keypoint floor 'float': expected feet or keep"):
+        ks.solve_keypoints(rec, SolveSettings(keypoint_floor="float"))
+    from blender_manikin import cli
+    p = cli.build_parser()
+    assert cli.solve_settings(p.parse_args(["solve", "k.npy", "--out", "o", "--keypoint-floor", "keep"])) \
+        .keypoint_floor == "keep"
+    assert cli.solve_settings(p.parse_args(["solve", "k.npy", "--out", "o"])).keypoint_floor == "feet"

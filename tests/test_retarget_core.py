@@ -1049,3 +1049,27 @@ def test_guess_maps_a_makehuman_skeleton_from_where_the_legs_and_spine_meet():
     assert np.ptp(ro.world_heads()[:, i["upperleg01.L"]], axis=0).max() < 1e-12
     drift = np.linalg.norm(ro.world_heads()[:, i["upperleg01.L"]] - ro.world_heads()[:, i["spine05"]], axis=-1)
     assert np.ptp(drift) > 0.5
+
+
+@pytest.mark.parametrize("apose_deg, turned", [(0.0, False), (45.0, False), (45.0, True)])
+def test_a_rigs_end_bones_read_back_as_the_bodys_orientations(apose_deg, turned):
+    """rig_keypoints.end_orientations / retarget.body_world_from_bones read a rig's head, hand and
+    foot bones back into the body's convention: a source motion retargeted onto a rig (T- or
+    A-pose rest, random rolls, facing -Y or turned to +Y) reads back as that motion's world
+    orientations (turned with the rig: F R Fᵀ F)."""
+    from blender_manikin.core import rig_keypoints as rk
+    body, local, root, pos, wrot = _smooth_source(frames=40, seed=5)
+    rig, bmap, _ = mixamo_rig(body, apose_deg=apose_deg)
+    F = np.eye(3)
+    if turned:
+        F = rot.axis_angle_rotation(np.array([0, 0, 1.0]), np.array(np.pi))
+        rig = rt.TargetRig(rig.names, rig.parents, F @ rig.rest_rot, rig.heads @ F.T)
+    res = rt.retarget(wrot, pos, body, rig, bmap, "scaled")
+    Gw = rig.world_rot @ res.orientations         # (T, B, 3, 3) world orientations of the bones
+    bones = {j: Gw[:, rig.index[bmap.bones[j]]] for j in rk.END_JOINTS}
+    got = rk.end_orientations(rig, bmap, bones)
+    assert set(got) == set(rk.END_JOINTS)
+    for j in rk.END_JOINTS:
+        want = F @ wrot[:, J[j]] @ F.T @ F
+        ang = np.degrees(rot.geodesic_angle(got[j], want)).max()
+        assert ang < 1e-4, (j, ang)                # degrees

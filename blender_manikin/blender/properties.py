@@ -144,6 +144,14 @@ class MANIKIN_Settings(PropertyGroup):
     keypoint_bone_map: EnumProperty(name="Bone Map", items=_bone_map_items(edited=False), default='AUTO',
                                     description="Which of the armature's bones stands on each joint (the "
                                                 "retarget's maps)")
+    keypoint_floor: EnumProperty(name="Floor", default='AUTO',
+                                 items=[('AUTO', "Auto", "An armature's heights as they are (its floor is the "
+                                         "scene's); a file's or objects' floor found under the feet"),
+                                        ('FEET', "Under the Feet", "The floor found under the feet is moved to "
+                                         "z = 0 and the body stands on it on its Shoe Soles"),
+                                        ('KEEP', "Keep Heights", "The joints stay at the heights given (the "
+                                         "soles lift nothing): the source's floor is the scene's")],
+                                 description="Where the solved body stands")
     keypoint_map_file: StringProperty(name="Map File", subtype='FILE_PATH', default="",
                                       description="A saved bone map (JSON: joint -> bone)")
     keypoint_collection: PointerProperty(type=bpy.types.Collection, name="Collection",
@@ -389,6 +397,8 @@ def config_from_settings(context):
             cfg.keypoint_bone_map = s.keypoint_bone_map.lower()
             cfg.keypoint_map_file = bpy.path.abspath(s.keypoint_map_file) if s.keypoint_map_file else None
             cfg.scene_frames = None if s.use_scene_range else (s.frame_start, s.frame_end)
+        cfg.keypoint_floor = (('keep' if s.keypoint_from == 'ARMATURE' else 'feet') if s.keypoint_floor == 'AUTO'
+                              else s.keypoint_floor.lower())
         cfg.keypoint_layout = None if s.keypoint_layout == 'AUTO' else s.keypoint_layout.lower()
         cfg.up = None if s.keypoint_up == 'AUTO' else s.keypoint_up.lower()
         cfg.rate = float(s.keypoint_rate) if s.use_keypoint_rate else None

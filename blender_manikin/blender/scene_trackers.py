@@ -306,7 +306,8 @@ def armature_bone_map(obj, choice="auto", path=None):
 def sample_armature_keypoints(scene, obj, frame_start, frame_end, choice="auto", path=None, progress=None):
     """3D keypoints from an animated armature (a markerless capture's FBX, an imported BVH,
     another rig's animation): each of the 22 body joints is the world position of the head of
-    the bone the map (:func:`armature_bone_map`) gives it, sampled on scene frames
+    the bone the map (:func:`armature_bone_map`) gives it, and the head's, wrists' and ankles'
+    orientations from their bones (:func:`..core.rig_keypoints.end_orientations`), sampled on scene frames
     ``frame_start..frame_end`` with the scene evaluated (action, NLA, constraints, drivers),
     scene units taken into metres; joints without a bone are placed as
     :mod:`..core.rig_keypoints` says.  Returns a :class:`..core.io_keypoints.KeypointRecording`
@@ -319,6 +320,7 @@ def sample_armature_keypoints(scene, obj, frame_start, frame_end, choice="auto",
     from ..core import rig_keypoints
     from ..core.io_keypoints import keypoints_from_points
     from .armature import PROP_BODY
+    from .retarget_apply import target_rig_from_object
     if obj is None:
         raise SceneSourceError("choose the armature whose animation gives the keypoints")
     if obj.type != 'ARMATURE':
@@ -336,7 +338,7 @@ def sample_armature_keypoints(scene, obj, frame_start, frame_end, choice="auto",
         raise SceneSourceError(str(exc)) from None
     frames = np.arange(frame_start, frame_end + 1, dtype=np.float64)
     resolved = {j: (obj, b) for j, b in bmap.bones.items()}
-    pos, _, _, valid = _sample(scene, resolved, frames, progress=progress)
+    pos, rotm, _, valid = _sample(scene, resolved, frames, progress=progress)
     metres = metres_per_unit(scene)
     heads = {j: pos[j] * metres for j in pos}
     moved = max(float(np.ptp(h, axis=0).max()) for h in heads.values())
@@ -349,5 +351,12 @@ def sample_armature_keypoints(scene, obj, frame_start, frame_end, choice="auto",
     P, derived = rig_keypoints.joints_from_heads(heads)
     fps = float(scene.render.fps) / float(scene.render.fps_base)
     without = f"; without a bone: {rig_keypoints.derived_note(derived)}" if derived else ""
+    try:
+        turned = rig_keypoints.end_orientations(
+            target_rig_from_object(obj), bmap,
+            {j: rot.orthonormalize(rotm[j]) for j in rig_keypoints.END_JOINTS if j in rotm})
+    except ValueError as exc:           # a map the rig's hierarchy does not follow: positions only
+        turned, without = {}, f"{without}; rest twist of the head, wrists and ankles ({exc})"
     said = f"keypoints: {P.shape[1]} joints from armature {obj.name!r} ({label}{without})"
-    return keypoints_from_points(frames / fps, P, "smpl22", f"armature {obj.name!r}", said=said)
+    return keypoints_from_points(frames / fps, P, "smpl22", f"armature {obj.name!r}", said=said,
+                                 orientations=turned)

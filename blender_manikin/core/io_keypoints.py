@@ -67,6 +67,9 @@ class KeypointRecording:
     time: ``(T,)`` float64 seconds, increasing.  points: ``(T, K, 3)`` float64 metres, Blender
     axes (+Z up, right-handed), NaN = missing.  layout: :data:`.keypoint_layouts.LAYOUTS` name.
     metadata: ``units``, ``up``, ``handed``, ``rate`` and ``detected`` (the one-line report).
+    orientations: ``{joint: (T, 3, 3)}`` world orientations the source gives besides its points
+    (body convention, :class:`.keypoint_layouts.Body22`'s ``end_rot``: the head, wrists and
+    ankles; e.g. an armature's bones, :func:`.rig_keypoints.end_orientations`), empty for files.
     """
     time: np.ndarray
     points: np.ndarray
@@ -74,6 +77,7 @@ class KeypointRecording:
     source: str = ""
     metadata: dict = field(default_factory=dict)
     warnings: list = field(default_factory=list)
+    orientations: dict = field(default_factory=dict)
 
     @property
     def num_frames(self) -> int:
@@ -181,13 +185,16 @@ def read_keypoints(path, layout=None, units=None, up=None, rate=None, mapping=No
     return _finish(X, conf, name, src, decided, hands, units, up, handed, rate, time)
 
 
-def keypoints_from_points(time, points, layout, source, units="m", up="+z", how="as given", said=None):
+def keypoints_from_points(time, points, layout, source, units="m", up="+z", how="as given", said=None,
+                          orientations=None):
     """A :class:`KeypointRecording` from points already in hand (e.g. empties sampled in a Blender
     scene): ``time`` ``(T,)`` seconds, ``points`` ``(T, K, 3)`` in ``units`` with ``up`` (default
     metres, +Z up), NaN where missing; ``layout`` a layout name whose points they are, in its
     order; ``how`` says where the layout came from in the one-line report (``said``, when given,
     is that report's first item instead: what was read, e.g. an armature's bones).  The handedness
-    is still told from the body (a mirrored source is put right), as for files."""
+    is still told from the body (a mirrored source is put right), as for files.  orientations:
+    ``{joint: (T, 3, 3)}`` (see :class:`KeypointRecording`), given in metres, +Z up, right-handed
+    (a source putting them otherwise is refused)."""
     X = np.array(points, dtype=np.float64, copy=True)
     name = kl.canonical_layout(layout)
     if X.ndim != 3 or X.shape[1:] != (len(kl.LAYOUTS[name].points), 3):
@@ -196,7 +203,18 @@ def keypoints_from_points(time, points, layout, source, units="m", up="+z", how=
     if X.shape[0] < 2:
         raise RecordingError(f"{X.shape[0]} frame(s): at least 2 are needed", path=source)
     decided = [said or f"keypoints: {name} ({X.shape[1]} points, {how})"]
-    return _finish(X, None, name, source, decided, None, units, up, None, None, np.asarray(time, np.float64))
+    rec = _finish(X, None, name, source, decided, None, units, up, None, None, np.asarray(time, np.float64))
+    if orientations:
+        from .skeleton import J
+        if str(up).lower() != "+z" or rec.metadata.get("handed") not in (None, "right"):
+            raise RecordingError("orientations are taken in Blender's axes only (+Z up, right-handed)",
+                                 path=source)
+        bad = [j for j, R in orientations.items() if j not in J or np.shape(R) != (X.shape[0], 3, 3)]
+        if bad:
+            raise RecordingError(f"orientations of {', '.join(map(str, bad))}: expected a (T, 3, 3) rotation "
+                                 f"per frame of a body joint", path=source)
+        rec.orientations = {j: np.asarray(R, np.float64) for j, R in orientations.items()}
+    return rec
 
 
 def _finish(X, conf, name, src, decided, hands, units, up, handed, rate, time):

@@ -23,7 +23,8 @@ Stages (each a function, for tests and benchmarks):
    the rest directions of :func:`.skeleton.make_body`, so bones never stretch (a spine the
    layout does not measure: to the straight trunk's length);
 7. :func:`estimate_floor`: the floor height from the lowest foot points; the take is moved so
-   the floor is ``z = 0``;
+   the floor is ``z = 0`` (``keypoint_floor="keep"``, :data:`KEYPOINT_FLOORS`: solved so, then
+   put back, so that the joints stay at the heights given, e.g. an armature's in its scene);
 8. IK (:func:`.hybrik.ik_from_positions`, adaptive by default: each bone aims at its keypoint
    from where the chain actually is; a trunk the layout does not measure is first fitted to the
    hips and shoulders, :func:`rigid_trunk`): limbs through the analytic limb solver, so elbows and
@@ -33,6 +34,7 @@ Stages (each a function, for tests and benchmarks):
 """
 from __future__ import annotations
 
+import dataclasses
 import time as _time
 from dataclasses import dataclass
 import numpy as np
@@ -49,6 +51,23 @@ from .pose_result import PoseResult
 from .resample import Gap, GapReport
 from .smoothing import AUTO_FILTERS, parse_smoothing, smooth, smooth_auto, smoothing_note
 from .solve import SolveError, SolveOutcome, SolveSettings, parse_floor, trim_span
+
+#: the keypoint solve's floor choices (``SolveSettings.keypoint_floor``): ``"feet"``, the floor
+#: found under the feet (:func:`estimate_floor`) becomes z = 0 and the body stands on its shoe
+#: soles, the feet kept above it; ``"keep"``, the joints stay at the heights given: the solve runs
+#: on the floor found (the feet's contacts are told from it) and the result is moved back by it,
+#: the soles lifting nothing and a foot through the floor left there: a source whose floor is the
+#: scene's own (an armature in the scene)
+KEYPOINT_FLOORS = ("feet", "keep")
+
+
+def parse_keypoint_floor(value) -> str:
+    """``SolveSettings.keypoint_floor`` checked: one of :data:`KEYPOINT_FLOORS` (None: ``"feet"``)."""
+    key = "feet" if value is None else str(value).strip().lower()
+    if key not in KEYPOINT_FLOORS:
+        raise SolveError(f"keypoint floor {value!r}: expected {' or '.join(KEYPOINT_FLOORS)}")
+    return key
+
 
 #: left / right joint pairs whose bone lengths are averaged
 _PAIRS = [(sk.J[f"left_{n}"], sk.J[f"right_{n}"]) for n in
@@ -216,6 +235,21 @@ def foot_contacts(ankle_pos, body: sk.Body, fps):
     return ((v < CONTACT_SPEED) & (a[..., 2] < rest_h + CONTACT_HEIGHT)).astype(np.float64)
 
 
+def _with_given_orientations(b22: kl.Body22, names, Q):
+    """``b22`` with the orientations a source gives itself (``names``, joint names; ``Q``
+    ``(T, len(names), 4)`` their quaternions on the solve's grid, linearly interpolated, w x y z)
+    in place of those the layout shows or not: their joints' twist no longer rest twist."""
+    if not names:
+        return b22
+    R = rot.quat_to_matrix(rot.normalize(Q))
+    told = set()
+    for k, name in enumerate(names):
+        b22.end_rot[sk.J[name]] = R[:, k]
+        told |= {name, name.replace("_ankle", "_foot")}
+    b22.no_twist = tuple(n for n in b22.no_twist if n not in told)
+    return b22
+
+
 def _finite_orientations(b22: kl.Body22):
     """Drop orientations whose points were never seen (after bridging they stay NaN)."""
     no_twist = list(b22.no_twist)
@@ -295,9 +329,11 @@ def rigid_trunk(P, body: sk.Body):
     return P, R0
 
 
-def fit_keypoints(P, end_rot, body: sk.Body, fps, adaptive=True, lock_feet=True, derived_spine=False):
+def fit_keypoints(P, end_rot, body: sk.Body, fps, adaptive=True, lock_feet=True, derived_spine=False,
+                  above_floor=True):
     """IK of the 22 joints ``P`` ``(T, 22, 3)`` (floor at ``z = 0``) onto ``body``: a
-    :class:`PoseResult` with contacts and the ankles kept above the floor.  derived_spine: the
+    :class:`PoseResult` with contacts and (``above_floor``) the ankles kept above the floor
+    (False: where the keypoints put them, a foot below the floor left there).  derived_spine: the
     layout has no spine points (:func:`rigid_trunk` fits the trunk to the hips and shoulders)."""
     if derived_spine:
         P, pelvis_rot = rigid_trunk(P, body)
@@ -312,7 +348,8 @@ def fit_keypoints(P, end_rot, body: sk.Body, fps, adaptive=True, lock_feet=True,
         targets = pipeline.lock_planted_feet(targets, contacts, threshold=0.5, axes=pipeline.LOCK_AXES,
                                              blend_s=CONTACT_BLEND_S, fps=fps,
                                              max_drift=LOCK_MAX_DRIFT)
-    targets = pipeline.keep_feet_above_floor(targets, ik.world_rot[:, ank], body)
+    if above_floor:
+        targets = pipeline.keep_feet_above_floor(targets, ik.world_rot[:, ank], body)
     # the limbs reach the chain the keypoints give (aim_chain): the first pass's reach error is
     # what the summary reports; a planted or lifted ankle the leg misses by a few millimetres
     # is the lock's own doing, not a sizing problem the user should check
@@ -380,13 +417,18 @@ def prepare_keypoints(rec, fps, smoothing, height=None, max_frames=None, sole=No
         chosen = [AUTO_FILTERS[c][0] for k, c in enumerate(choice) if lay.points[k] not in never]
     elif smoothing:
         X = smooth(X, rate, smoothing)
+    given = list(rec.orientations or {})          # a source's own orientations (an armature's bones)
+    Qg = np.stack([rot.quat_continuous(rot.matrix_to_quat(rot.orthonormalize(rec.orientations[j])), axis=0)
+                   for j in given], 1) if given else np.zeros((len(rec.time), 0, 4))
     times, X = resample_points(rec.time, X, fps)
+    _, Qg = resample_points(rec.time, Qg, fps)
     span = trim_span(times, start, end)
     if span is not None:
-        times, X = times[span[0]:span[1]], X[span[0]:span[1]]
+        times, X, Qg = times[span[0]:span[1]], X[span[0]:span[1]], Qg[span[0]:span[1]]
     if max_frames and len(times) > max_frames:
-        times, X = times[:max_frames], X[:max_frames]
-    b22 = _finite_orientations(kl.body22_from_keypoints(X, lay))
+        times, X, Qg = times[:max_frames], X[:max_frames], Qg[:max_frames]
+    b22 = _with_given_orientations(kl.body22_from_keypoints(X, lay), given, Qg)
+    b22 = _finite_orientations(b22)
     P = b22.positions
     bad = [sk.JOINT_NAMES[j] for j in range(sk.NUM_JOINTS) if not np.isfinite(P[:, j]).all()]
     if bad:
@@ -409,14 +451,17 @@ def solve_keypoints(source, settings: SolveSettings | None = None, progress=None
     units, up, rate, mapping (see :func:`.io_keypoints.read_keypoints`), smoothing (``"auto"`` or
     a window in seconds, see :func:`prepare_keypoints`),
     ik (``adaptive`` / ``naive``), height (scales the measured body to this stature, metres),
-    max_frames, fix_sides, despike.  Tracker options (axes, offsets, calibration, floor) do not
-    apply: the floor is found under the feet (:func:`estimate_floor`).
+    max_frames, fix_sides, despike, keypoint_floor (``"feet"``: the floor found under the feet,
+    :func:`estimate_floor`, moved to z = 0; ``"keep"``: the result put back by it, so the joints
+    stay at the heights given, the shoe soles then lifting nothing).  Tracker options (axes,
+    offsets, calibration, floor) do not apply.
     progress: ``(fraction, stage)`` callback; an exception raised from it stops the solve."""
     from .io_keypoints import KeypointRecording, read_keypoints
     s = settings or SolveSettings()
     if str(s.ik).lower() not in ("adaptive", "naive"):
         raise SolveError(f"ik {s.ik!r}: expected adaptive or naive")
     adaptive = str(s.ik).lower() == "adaptive"
+    keep = parse_keypoint_floor(s.keypoint_floor) == "keep"
     report = progress or (lambda f, stage=None: None)
     out = SolveOutcome()
     t = _time.perf_counter()
@@ -441,14 +486,21 @@ def solve_keypoints(source, settings: SolveSettings | None = None, progress=None
     out.timings["prepare"] = _time.perf_counter() - t
     report(0.4, "solving")
     t = _time.perf_counter()
-    result = fit_keypoints(prep.P, b22.end_rot, prep.body, fps, adaptive=adaptive, derived_spine=prep.derived_spine)
+    result = fit_keypoints(prep.P, b22.end_rot, prep.body, fps, adaptive=adaptive, derived_spine=prep.derived_spine,
+                           above_floor=not keep)
     result.t0 = float(prep.times[0])
+    if keep:                    # solved on the floor found (contacts, feet above it), put back where given
+        result = dataclasses.replace(result, root_pos=np.asarray(result.root_pos, np.float64)
+                                     + np.array([0.0, 0.0, prep.floor]), _fk=None)
     out.result = result
     out.timings["solve"] = _time.perf_counter() - t
     told = smoothing_note(smoothing, prep.windows, "point")
     out.info.append(f"keypoints: {'adaptive' if adaptive else 'naive'} HybrIK, floor at {prep.floor:+.3f} m "
-                    f"moved to 0")
+                    + ("not moved" if keep else "moved to 0"))
     out.info.append(told)
+    if keep:
+        out.info.append(f"floor at {prep.floor:+.3f} m under the feet, heights kept as given (the shoe soles "
+                        f"lift nothing, the feet are not kept above it)")
     if s.start is not None or s.end is not None:
         out.info.append(f"trimmed to {prep.times[0] - rec.time[0]:.2f}-{prep.times[-1] - rec.time[0]:.2f} s")
     rate = 1.0 / float(np.median(np.diff(rec.time)))          # the file's samples per second

@@ -559,6 +559,28 @@ def _assemble(plan: RetargetPlan, mapped_world: dict, root_head_world) -> Retarg
                           mapped_world, root_head_world)
 
 
+def body_world_from_bones(plan: RetargetPlan, bone_world: dict) -> dict:
+    """The rest alignment read backwards: a rig's own motion as body-model world orientations.
+
+    bone_world: ``{joint name: (T, 3, 3)}`` world orientation (columns the bone's X, Y, Z axes,
+    unit: any object scale taken out) of the bone ``plan`` maps to that joint.  Returns
+    ``{joint name: (T, 3, 3)}``: the joint's world rotation in the body's convention (identity:
+    its frame in the body's T-pose rest facing -Y, :mod:`.skeleton`), the one whose body, turned
+    to the rig's facing and posed by it, has the bone in ``G``: with ``align`` = ``O_k G_k^0``
+    (the bone posed into the body's rest, T-pose or not, module docstring) and ``F`` the rig's
+    facing, ``G = R Fᵀ align`` at rest ``R = F``, hence ``R = G alignᵀ F``.  So the rig's rest
+    (A-pose or T-pose, any rolls) gives the body's rest turned to its facing, and a hand turned
+    palm-up about its bone is the body's wrist turned palm-up.  Joints the plan leaves without a
+    bone are skipped."""
+    out = {}
+    for name, G in bone_world.items():
+        j = J[name]
+        if plan.bone_of[j] < 0:
+            continue
+        out[name] = np.asarray(G, np.float64) @ (plan.align[j].T @ plan.F)
+    return out
+
+
 def retarget(world_rot, positions, source_body: Body, target: TargetRig, bone_map, root_motion: str = "scaled",
              facing_yaw: Optional[float] = None, plan: Optional[RetargetPlan] = None) -> RetargetResult:
     """Retarget a source motion onto ``target`` (see the module docstring for the conventions).

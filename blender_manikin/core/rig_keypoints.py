@@ -21,9 +21,15 @@ Joints the map leaves without a bone (a rig with fewer spine bones, without coll
   bone or were placed (one spine bone, mapped to spine2 by the guess: spine1 half-way from the
   pelvis to it, spine3 half-way from it to the neck).
 
-What was made up is said (:func:`derived_note`), for the solve's summary.  Twist is not read from
-the bones (the keypoint solve takes positions; the rest twist of the wrists, head and feet is
-used and said), so a rig's hand and foot rolls do not carry over.
+What was made up is said (:func:`derived_note`), for the solve's summary.
+
+The head's, wrists' and ankles' orientations (:data:`END_JOINTS`, their twist: a hand turned
+palm-up, a foot rolled, a head turned) are read from their bones too (:func:`end_orientations`):
+each bone's world orientation is taken into the body's convention through the rig's rest pose,
+as the retarget aligns a rig to the body (:func:`.retarget.make_plan`,
+:func:`.retarget.body_world_from_bones`): the bone's rest direction (to the next mapped joint's
+bone, the ankle's to the toe's; the hand's and head's own Y axis) is swung onto the body's rest
+direction, so a T-pose, an A-pose or any rest with any bone rolls gives the body's rest twist.
 """
 from __future__ import annotations
 
@@ -31,7 +37,12 @@ import numpy as np
 
 from . import bone_maps
 from . import keypoint_layouts as kl
+from . import retarget as rt
+from . import skeleton as sk
 from .skeleton import J, JOINT_NAMES, NUM_JOINTS
+
+#: the joints whose orientation (twist) the keypoint solve takes (:class:`.keypoint_layouts.Body22`)
+END_JOINTS = ("head", "left_wrist", "right_wrist", "left_ankle", "right_ankle")
 
 #: joints that must have a bone: the limbs' and the head
 REQUIRED = tuple(f"{s}_{j}" for s in ("left", "right")
@@ -107,3 +118,16 @@ def derived_note(derived) -> str:
         key = "along the spine chain" if how.startswith("along the chain") else how
         groups.setdefault(key, []).append(j)
     return "; ".join(f"{', '.join(js)} {how}" for how, js in groups.items())
+
+
+def end_orientations(target, bmap, bone_world):
+    """The :data:`END_JOINTS`' world orientations, body convention, from their bones.
+
+    target: the rig at rest (:class:`.retarget.TargetRig`); bmap: its bone map (as
+    :func:`checked_map` gives it); bone_world: ``{joint: (T, 3, 3)}`` the mapped bones' world
+    orientations (scale taken out), for the end joints.  Returns ``{joint: (T, 3, 3)}``
+    (identity: the joint's frame in the body's T-pose rest facing -Y; :func:`.retarget.body_world_from_bones`).
+    Raises ``ValueError`` (from :func:`.retarget.make_plan`) when the map does not fit the rig's
+    hierarchy."""
+    plan = rt.make_plan(sk.make_body(), target, bmap)
+    return rt.body_world_from_bones(plan, {j: R for j, R in bone_world.items() if j in END_JOINTS})

@@ -81,7 +81,10 @@ class SolveSettings:
     fix_sides (undo a detector's left/right label swaps, :mod:`.keypoint_sides`; default on; for
     trackers, controllers held in the other hands or foot trackers on the other feet,
     :mod:`.tracker_sides`) and
-    despike (remove a detector's misplaced samples, :mod:`.keypoint_spikes`; default on).
+    despike (remove a detector's misplaced samples, :mod:`.keypoint_spikes`; default on) and
+    keypoint_floor (``"feet"``, the default: the floor is found under the feet and moved to
+    z = 0, the body standing on its soles; ``"keep"``: the heights as given, the joints where the
+    keypoints are, e.g. an armature's bones in the scene, :data:`.keypoint_solve.KEYPOINT_FLOORS`).
     Tracker inputs also use model (the pose network) and overlap (how many network windows see
     each frame: 2, the default, keeps 10,000 frames/s; 3 and 4 are a little more accurate at 1.5
     and 2 times the network time; :data:`.pipeline.OVERLAP_CHOICES`), and teleports (what to
@@ -112,6 +115,7 @@ class SolveSettings:
     mapping: object = None
     fix_sides: bool = True            # undo left/right label swaps (keypoint_sides; tracker_sides)
     despike: bool = True              # keypoints: remove samples far off their point's path (keypoint_spikes)
+    keypoint_floor: str = "feet"      # keypoints: "feet" (found under them, moved to z = 0) or "keep" (as given)
     model: str | None = None          # None / "auto": by the recording's trackers; a shipped name or .onnx
     overlap: int = DEFAULT_OVERLAP    # windows seeing each frame: 2, 3 or 4 (pipeline.OVERLAP_CHOICES)
     teleports: str = "keep"           # "keep", "remove" or "ignore" (teleports.TELEPORT_CHOICES)

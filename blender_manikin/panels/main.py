@@ -57,6 +57,7 @@ class MANIKIN_PT_solve(_Base, Panel):
                 col.prop(s, "keypoint_units")
                 col.prop(s, "keypoint_up")
                 toggled_row(col, s, "use_keypoint_rate", "keypoint_rate", "Rate")
+            col.prop(s, "keypoint_floor")
             col.separator()
             smoothing_rows(col, s)
             fix_sides_row(col, s)
