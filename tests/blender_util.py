@@ -659,6 +659,14 @@ class PanelLayout:
         pass
 
 
+def drawn_props(panel_cls, context):
+    """The names of the properties ``panel_cls.draw`` draws in ``context`` (:class:`PanelLayout`)."""
+    from types import SimpleNamespace
+    log = []
+    panel_cls.draw(SimpleNamespace(layout=PanelLayout(log)), context)
+    return {name for kind, name in log if kind == "prop"}
+
+
 def live_auto_rig_pro_character(name="ARP", stature=1.7, seed=11):
     """A character built the way a live Auto-Rig Pro rig works, as far as a retarget sees it
     (ARP itself is a commercial add-on, not available to the tests): deforming bones (root.x,

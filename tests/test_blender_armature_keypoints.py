@@ -209,17 +209,14 @@ def test_the_armature_errors_name_the_problem(addon):
 
 
 def test_the_panel_shows_the_armature_and_its_map(addon):
-    from types import SimpleNamespace
     from blender_manikin.panels import main as panels
-    from blender_util import PanelLayout
+    from blender_util import drawn_props
     s = bpy.context.scene.manikin
     s.source, s.keypoint_from = 'KEYPOINTS', 'ARMATURE'
     drawn = {}
     for m in ('AUTO', 'FILE'):
         s.keypoint_bone_map = m
-        log = []
-        panels.MANIKIN_PT_solve.draw(SimpleNamespace(layout=PanelLayout(log)), bpy.context)
-        drawn[m] = {name for kind, name in log if kind == "prop"}
+        drawn[m] = drawn_props(panels.MANIKIN_PT_solve, bpy.context)
     assert {"keypoint_armature", "keypoint_bone_map"} <= drawn['AUTO']
     assert "keypoint_path" not in drawn['AUTO'] and "keypoint_map_file" not in drawn['AUTO']
     assert "keypoint_map_file" in drawn['FILE']

@@ -93,17 +93,14 @@ def test_objects_that_are_no_layout_are_refused_with_what_is_missing(addon):
 
 
 def test_the_panel_shows_the_collection_for_scene_objects(addon):
-    from types import SimpleNamespace
     from blender_manikin.panels import main as panels
-    from blender_util import PanelLayout
+    from blender_util import drawn_props
     s = bpy.context.scene.manikin
     s.source = 'KEYPOINTS'
     drawn = {}
     for frm in ('FILE', 'OBJECTS'):
         s.keypoint_from = frm
-        log = []
-        panels.MANIKIN_PT_solve.draw(SimpleNamespace(layout=PanelLayout(log)), bpy.context)
-        drawn[frm] = {name for kind, name in log if kind == "prop"}
+        drawn[frm] = drawn_props(panels.MANIKIN_PT_solve, bpy.context)
     assert {"keypoint_from", "keypoint_path", "keypoint_layout"} <= drawn['FILE']
     assert "keypoint_collection" not in drawn['FILE']
     assert "keypoint_collection" in drawn['OBJECTS'] and "keypoint_path" not in drawn['OBJECTS']

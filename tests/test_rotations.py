@@ -208,3 +208,13 @@ def test_axis_angle_continuous_keeps_the_rotation_and_its_axis():
     # no rotation before any axis was seen: Blender's default axis, +Y
     lead = rot.quat_to_axis_angle_continuous(np.concatenate([[[1.0, 0, 0, 0]] * 2, qs[:2]]))
     np.testing.assert_allclose(lead[:2], [[0.0, 0, 1, 0]] * 2, atol=1e-12)
+
+
+def test_wrap_angle():
+    from blender_manikin.core.rotations import wrap_angle
+    a = np.array([0.0, np.pi, -np.pi, 3 * np.pi / 2, -7.0, 10.0])
+    w = wrap_angle(a)
+    assert np.all((w >= -np.pi) & (w < np.pi))
+    np.testing.assert_allclose(np.cos(w), np.cos(a), atol=1e-12)
+    np.testing.assert_allclose(np.sin(w), np.sin(a), atol=1e-12)
+    assert w[1] == pytest.approx(-np.pi) and w[3] == pytest.approx(-np.pi / 2)

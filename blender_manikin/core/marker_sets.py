@@ -61,6 +61,8 @@ import re
 
 import numpy as np
 
+from .rotations import normalize
+
 #: Harrington et al. (2007) pelvis-only regression, millimetres: (coefficient, constant) of
 #: PD for the anterior, of PW for the superior and the lateral offset from the mid-ASIS
 HARRINGTON_MM = {"anterior": (-0.24, -9.9), "superior": (-0.30, -10.9), "lateral": (0.33, 7.3)}
@@ -157,15 +159,9 @@ def rules_used(names, set_name) -> str:
     return f"{set_name} markers: " + "; ".join(parts)
 
 
-def _unit(v):
-    n = np.linalg.norm(v, axis=-1, keepdims=True)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        return v / n
-
-
 def _square(v, axis):
     """``v`` less its component along the unit ``axis``, normalised (per frame)."""
-    return _unit(v - np.sum(v * axis, -1, keepdims=True) * axis)
+    return normalize(v - np.sum(v * axis, -1, keepdims=True) * axis)
 
 
 def joint_centres(names, markers, metres_per_unit=1.0, set_name=None):
@@ -193,7 +189,7 @@ def joint_centres(names, markers, metres_per_unit=1.0, set_name=None):
     # pelvis frame (Harrington 2007): origin mid-ASIS, lateral to the right along the ASIS line
     la, ra = m("left", "asis"), m("right", "asis")
     mid_asis, mid_psis = 0.5 * (la + ra), 0.5 * (m("left", "psis") + m("right", "psis"))
-    right = _unit(ra - la)
+    right = normalize(ra - la)
     anterior = _square(mid_asis - mid_psis, right)
     up = np.cross(right, anterior)
     la_sh, ra_sh = m("left", "shoulder"), m("right", "shoulder")
@@ -210,7 +206,7 @@ def joint_centres(names, markers, metres_per_unit=1.0, set_name=None):
         hjc = m(side, "hjc")
         out[f"{side}_hip"] = hjc if hjc is not None else mid_asis + ant * anterior + sup * up + sign * lat * right
     # shoulders: below the acromion along the trunk made square to the acromion line (Rab 2002)
-    sh_line = _unit(ra_sh - la_sh)
+    sh_line = normalize(ra_sh - la_sh)
     trunk_up = _square(mid_sh - 0.5 * (out["left_hip"] + out["right_hip"]), sh_line)
     width = np.linalg.norm(ra_sh - la_sh, axis=-1, keepdims=True)
     for side in ("left", "right"):
@@ -223,7 +219,7 @@ def joint_centres(names, markers, metres_per_unit=1.0, set_name=None):
         lat_m, med_m = m(side, f"{joint}_lat"), m(side, f"{joint}_med")
         if med_m is not None:
             return 0.5 * (lat_m + med_m)
-        v, a = _unit(towards), _unit(lat_m - proximal)
+        v, a = normalize(towards), normalize(lat_m - proximal)
         medial = v - np.sum(v * a, -1, keepdims=True) * a
         return lat_m + HALF_WIDTH[joint] / float(metres_per_unit) * medial
     mid_hips = 0.5 * (out["left_hip"] + out["right_hip"])

@@ -334,6 +334,11 @@ def _twist(q, axis):
     return q, tw, angle
 
 
+def wrap_angle(a):
+    """Angles ``a`` (radians, any shape) wrapped into ``[-pi, pi)``."""
+    return (np.asarray(a, dtype=np.float64) + np.pi) % (2 * np.pi) - np.pi
+
+
 def twist_angle(R, axis):
     """Twist angle (radians, (-pi, pi]) of rotation matrices ``R`` about ``axis``."""
     return _twist(matrix_to_quat(R), axis)[2]

@@ -57,7 +57,7 @@ import numpy as np
 
 from .features import rot_z
 from .recording import Recording, TrackerStream
-from .rotations import matrix_to_quat, quat_to_matrix, twist_angle
+from .rotations import matrix_to_quat, quat_to_matrix, twist_angle, wrap_angle
 
 _Z = np.array([0.0, 0.0, 1.0])
 
@@ -112,10 +112,6 @@ def _yaw(R):
     return twist_angle(R, _Z)
 
 
-def _wrap(a):
-    return (a + np.pi) % (2 * np.pi) - np.pi
-
-
 def _valid_samples(stream):
     ok = stream.valid & np.all(np.isfinite(stream.pos), -1) & np.all(np.isfinite(stream.quat), -1)
     return np.nonzero(ok)[0]
@@ -133,7 +129,7 @@ def _head_motion_before(t, p, R, k, first=0):
         return np.zeros(3), 0.0
     dt = t[j] - t[i]
     v = (p[j] - p[i]) / dt
-    w = _wrap(_yaw(R[j] @ R[i].T)) / dt
+    w = wrap_angle(_yaw(R[j] @ R[i].T)) / dt
     return v, w
 
 
@@ -248,7 +244,7 @@ def find_rig_jumps(recording: Recording) -> list:
     after = 0                      # the first head sample after the last jump found
     dt = np.diff(t)
     step = np.linalg.norm(p[1:] - p[:-1], axis=-1)
-    turn = np.abs(_wrap(_yaw(R[1:] @ np.swapaxes(R[:-1], -1, -2))))
+    turn = np.abs(wrap_angle(_yaw(R[1:] @ np.swapaxes(R[:-1], -1, -2))))
     candidate = (dt <= MAX_STEP_S) & (
         ((step > TELEPORT_MIN_M) & (step > TELEPORT_MIN_SPEED * dt))
         | ((turn > np.radians(TURN_MIN_DEG)) & (turn > np.radians(TURN_MIN_RATE) * dt)))
@@ -256,7 +252,7 @@ def find_rig_jumps(recording: Recording) -> list:
         a, b = c, c + 1
         v, w = _head_motion_before(t, p, R, b, after)
         h = t[b] - t[a]
-        yaw = _wrap(_yaw(R[b] @ R[a].T) - w * h)
+        yaw = wrap_angle(_yaw(R[b] @ R[a].T) - w * h)
         rot = rot_z(yaw)
         trans = p[b] - rot @ (p[a] + v * h)
         moved = np.linalg.norm(p[b] - (p[a] + v * h))
@@ -266,7 +262,7 @@ def find_rig_jumps(recording: Recording) -> list:
             continue
         if b + 1 < len(t) and t[b + 1] - t[b] <= MAX_STEP_S:     # the head stays where it jumped
             back_p = np.linalg.norm(p[b + 1] - p[a]) < np.linalg.norm(p[b + 1] - p[b])
-            back_r = abs(_wrap(_yaw(R[b + 1] @ R[a].T))) < abs(_wrap(_yaw(R[b + 1] @ R[b].T)))
+            back_r = abs(wrap_angle(_yaw(R[b + 1] @ R[a].T))) < abs(wrap_angle(_yaw(R[b + 1] @ R[b].T)))
             if (teleport and back_p) or (turned and not teleport and back_r):
                 continue
         checks = [_hand_check(s, t[a], t[b], rot, trans) for s in hands]

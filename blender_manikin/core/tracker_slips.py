@@ -44,7 +44,8 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from .rotations import axis_angle_rotation
+from .features import heading_yaw
+from .rotations import axis_angle_rotation, wrap_angle
 
 #: metres per second under which an implied ankle counts as still (planted)
 PLANT_SPEED = 0.15
@@ -95,17 +96,6 @@ class TrackerSlip:
     @property
     def corrected(self) -> bool:
         return bool(self.slide)
-
-
-def _heading(rot):
-    """Heading (radians, about +Z) of the -Y axis of ``rot`` ``(T, 3, 3)``: where a flat foot,
-    the pelvis or the headset's joint points (:mod:`.skeleton`: facing -Y at rest)."""
-    fwd = -rot[:, :, 1]
-    return np.arctan2(fwd[:, 1], fwd[:, 0])
-
-
-def _wrap(a):
-    return (a + np.pi) % (2 * np.pi) - np.pi
 
 
 def plants(pos, valid, fps):
@@ -159,7 +149,7 @@ def find_tracker_slips(targets, fps=None, rest_ankle_z=None) -> list:
     body); without ``rest_ankle_z``, before it."""
     fps = float(fps or targets.fps)
     ref = "pelvis" if "pelvis" in targets.rot else "head"
-    ref_heading = _heading(targets.rot[ref]) if ref in targets.rot else None
+    ref_heading = heading_yaw(targets.rot[ref]) if ref in targets.rot else None
     upright = targets.rot[ref][:, 2, 2] > np.cos(np.radians(UPRIGHT_MAX_DEG)) if ref in targets.rot else True
     out = []
     for d in FOOT_DEVICES:
@@ -179,7 +169,7 @@ def find_tracker_slips(targets, fps=None, rest_ankle_z=None) -> list:
         m_h, slide = _best_step(height)
         m_t, turn = None, 0.0
         if ref_heading is not None:
-            rel = _wrap(_heading(rot) - ref_heading)
+            rel = wrap_angle(heading_yaw(rot) - ref_heading)
             heading = np.array([np.median(rel[a:b + 1]) for a, b in segs])
             m_t, turn = _best_step(heading)
         slide = slide if m_h is not None and abs(slide) >= SLIP_SLIDE_M else 0.0
@@ -233,7 +223,7 @@ def _moment(value, before, after, step, angle=False):
     a0, a1 = before
     b0, b1 = after
     ref = np.median(value[a0:a1 + 1])
-    moved = np.abs(_wrap(value - ref) if angle else value - ref) > abs(step) / 2
+    moved = np.abs(wrap_angle(value - ref) if angle else value - ref) > abs(step) / 2
     tail = np.cumprod(moved[a0:a1 + 1][::-1])[::-1].astype(bool)        # moved to the plant's end
     if tail.any():
         f = a0 + int(np.argmax(tail))
