@@ -88,7 +88,7 @@ def test_a_slipped_foot_tracker_is_found_and_put_right(kind, device, slide, turn
 
 def test_the_solve_names_the_slip_and_the_leg_follows_the_body():
     """End to end: the summary names the tracker, the time and the slip, and the solved left leg
-    stays on the performer's after it (solved as recorded: the knee 11.6 cm and the ankle 7 cm
+    stays on the performer's after it (solved as recorded: the knee 11.6 cm and the ankle 6.9 cm
     off on average for the rest of the take, and nothing said)."""
     rec, P, _, t = slip_recording(BODY, random_mounts(1), "walk", slip=("left_foot", AT, 0.07, 0.0), seed=1)
     out = cs.solve_recording(rec, cs.SolveSettings(fps=30.0))
