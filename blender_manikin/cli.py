@@ -444,8 +444,18 @@ def convert_one_core(path, out_dir, args, formats, stem=None):
 
 
 def _stem(path):
-    """The output name of the input ``path`` (``.`` and ``dir/`` name the folder)."""
-    return os.path.splitext(os.path.basename(os.path.abspath(path)))[0]
+    """The output name of the input ``path`` (``.`` and ``dir/`` name the folder), one Windows
+    accepts (:func:`.core.file_names.windows_safe`: ``con.bsor`` -> ``con_``)."""
+    from .core.file_names import windows_safe
+    return windows_safe(os.path.splitext(os.path.basename(os.path.abspath(path)))[0])
+
+
+def output_tail(formats) -> int:
+    """The most characters written after a stem in ``--out`` for ``formats``: the longest
+    extension, and the longer of a writer's own ``.tmp.npz`` and the FBX exporter's temporary
+    folder ``.manikin-fbx-XXXXXXXX/`` (:func:`_write_fbx`)."""
+    ext = max((len(_formats.WRITERS[f].extension) for f in formats if f in _formats.WRITERS), default=0)
+    return ext + max(len(".tmp.npz"), len(".manikin-fbx-XXXXXXXX") + 1)
 
 
 def write_core_formats(path, out_dir, result, args, formats, stem=None):
@@ -625,14 +635,21 @@ def main(argv=None):
     if os.path.exists(args.out) and not os.path.isdir(args.out):
         print(f"blender_manikin: error: --out {args.out} is a file, not a folder", file=sys.stderr)
         return 2
+    from .core import output_guard
+    from .core.convert import output_stems
+    from .core.file_names import check_folder
+    try:
+        check_folder(args.out, output_tail(formats))      # too deep for Windows' 260 characters
+    except ValueError as exc:
+        print(f"blender_manikin: error: {exc}", file=sys.stderr)
+        return 2
     os.makedirs(args.out, exist_ok=True)
     inputs = expand_inputs(args.inputs)
     if not inputs:
         print("blender_manikin: error: no recordings found in the inputs", file=sys.stderr)
         return 1
-    from .core import output_guard
-    from .core.convert import output_stems
-    stems = output_stems(inputs)          # two inputs named alike never write the same file
+    # two inputs named alike never write the same file; names Windows accepts, paths under 260
+    stems = output_stems(inputs, args.out, output_tail(formats))
     failed = done = 0
     path = inputs[0]
     with _ctrl_c() as interrupted:

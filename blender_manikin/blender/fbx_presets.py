@@ -293,7 +293,8 @@ def export_fbx_takes(directory, armature, preset: str = DEFAULT, context=None, a
     """One FBX per take (:func:`take_actions`, or ``actions``) of the character ``armature`` in ``directory`` (``//``
     relative to the .blend): ``<armature>_<take>.fbx`` (:func:`..core.file_names.file_stem`: letters of any script
     kept; takes whose names would be one file on Windows or macOS, ``Walk`` and ``walk``, ``Walk.001`` and
-    ``Walk_001``, made unique with ``_2``...), each with its action assigned and the scene's frame range set to the
+    ``Walk_001``, made unique with ``_2``...; on Windows cut, with a hash, so the path stays under 260
+    characters), each with its action assigned and the scene's frame range set to the
     action's keys while it is written (:func:`export_fbx`), the armature's NLA tracks not evaluated meanwhile: each
     file holds its take alone, a bone channel the take does not key at its rest value when the action shown, an NLA
     strip or another take animates it (it would otherwise carry that animation's last value) and as posed otherwise.
@@ -305,7 +306,7 @@ def export_fbx_takes(directory, armature, preset: str = DEFAULT, context=None, a
     import os
     import bpy
     from ..core import output_guard
-    from ..core.file_names import file_stem, unique_stems
+    from ..core.file_names import file_stem, fit_stem, unique_stems
     from . import keying
     from . import character_swivel
     context = context or bpy.context
@@ -318,9 +319,12 @@ def export_fbx_takes(directory, armature, preset: str = DEFAULT, context=None, a
     actions = list(actions) if actions is not None else take_actions(armature)
     if not actions:
         raise ValueError(f"{armature.name!r} has no retargeted takes (MANIKIN_retarget_* actions) to export")
-    takes = (act.name.replace('MANIKIN_retarget_', '').replace('MANIKIN_', '') for act in actions)
+    takes = [act.name.replace('MANIKIN_retarget_', '').replace('MANIKIN_', '') for act in actions]
     stems = unique_stems(file_stem(f"{armature.name}_{t}") for t in takes)   # never one file on Windows, macOS
-    paths = [os.path.join(bpy.path.abspath(directory), s + ".fbx") for s in stems]
+    folder = bpy.path.abspath(directory)
+    # on Windows the whole path stays under 260 characters (a long take name cut, with a hash)
+    stems = [fit_stem(s, f"{armature.name}_{t}", folder, len(".fbx")) for s, t in zip(stems, takes)]
+    paths = [os.path.join(folder, s + ".fbx") for s in stems]
     ad = armature.animation_data
     if ad is not None and ad.use_tweak_mode:
         raise ValueError(f"{armature.name!r} has an NLA strip in tweak mode (Tab in the NLA editor), so its "

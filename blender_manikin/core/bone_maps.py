@@ -197,7 +197,7 @@ def save_bone_map(path, bmap) -> None:
     d = bm.to_dict()
     d["bones"] = {j: d["bones"][j] for j in JOINT_NAMES if j in d["bones"]}
     d["twist"] = {j: d["twist"][j] for j in JOINT_NAMES if j in d["twist"]}
-    Path(path).write_text(json.dumps(d, indent=2, ensure_ascii=False) + "\n", encoding="utf-8")
+    Path(path).write_text(json.dumps(d, indent=2, ensure_ascii=False) + "\n", encoding="utf-8", newline="\n")
 
 
 def load_bone_map(path) -> BoneMap:

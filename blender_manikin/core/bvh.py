@@ -611,10 +611,10 @@ def write_bvh(path, clip: BvhClip, precision: int = 10):
         return
     path = os.fspath(path)
     if path.lower().endswith(".gz"):
-        with gzip.open(path, "wt", encoding="utf-8") as f:
+        with gzip.open(path, "wt", encoding="utf-8", newline="\n") as f:
             f.write(text)
     else:
-        with open(path, "w", encoding="utf-8") as f:
+        with open(path, "w", encoding="utf-8", newline="\n") as f:
             f.write(text)
 
 

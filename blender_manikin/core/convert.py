@@ -29,7 +29,6 @@ Needs the ``[dask]`` extra (``dask[distributed]``); no bpy.
 from __future__ import annotations
 
 import glob
-import hashlib
 import json
 import os
 import re
@@ -38,7 +37,7 @@ import threading
 import time
 
 from . import formats, output_guard
-from .file_names import fit_bytes, fold
+from .file_names import check_folder, fit_bytes, fit_stem, fold, short_hash, windows_safe
 from .solve import SolveSettings, error_message, solve_recording
 
 MANIFEST = "manifest.jsonl"
@@ -115,27 +114,40 @@ def _read_manifest_file(path):
     return paths
 
 
-def output_stems(paths):
+def output_stems(paths, out_dir=None, tail=0, windows=None):
     """``{input: output stem}``: the file (or FreeMoCap folder) name without extension, made unique
     with a short hash of the input's absolute path when two inputs share a name (in different
     folders, or side by side with different extensions: ``take.csv`` and ``take.bsor``).  Names
     are compared as Windows and macOS compare file names (:func:`.file_names.fold`: ``Take.csv``
     and ``take.csv``; ``Übung`` composed and decomposed), so an output folder on such a disk (or
-    shared with one) never gets one output over another.  A name longer than
-    :data:`.file_names.MAX_STEM_BYTES` (UTF-8) is cut there and given the hash too: a file
-    system's 255-byte names must hold the stem, the extension and the temporary ``.part``
-    suffix the output is written under first."""
-    stems = {p: os.path.splitext(os.path.basename(os.path.abspath(p)))[0] for p in paths}
+    shared with one) never gets one output over another.  Every name is one Windows accepts, on
+    every system (:func:`.file_names.windows_safe`: ``con.bsor`` -> ``con_``, ``a:b.csv`` ->
+    ``a_b``).  A name longer than :data:`.file_names.MAX_STEM_BYTES` (UTF-8) is cut there and
+    given the hash too: a file system's 255-byte names must hold the stem, the extension and the
+    temporary ``.part`` suffix the output is written under first.  With ``out_dir``, on Windows
+    (``windows``: default, whether this is Windows) a name is also cut, with the hash, so the
+    whole path with ``tail`` more characters (extension, temporary suffix) stays under 260
+    (:func:`.file_names.fit_stem`); ``ValueError`` naming ``out_dir`` when even a short name
+    cannot."""
+    stems = {p: windows_safe(os.path.splitext(os.path.basename(os.path.abspath(p)))[0]) for p in paths}
     counts = {}
     for s in stems.values():
         counts[fold(s)] = counts.get(fold(s), 0) + 1
 
     def stem(p, s):
         short = fit_bytes(s)
-        if counts[fold(s)] == 1 and short == s:
-            return s
-        return f"{short}-{hashlib.sha1(os.path.abspath(p).encode('utf-8', 'surrogateescape')).hexdigest()[:8]}"
+        if counts[fold(s)] > 1 or short != s:
+            s = f"{short}-{short_hash(os.path.abspath(p))}"
+        return s if out_dir is None else fit_stem(s, os.path.abspath(p), out_dir, tail, windows)
     return {p: stem(p, s) for p, s in stems.items()}
+
+
+def temp_tail(fmts) -> int:
+    """The most characters :func:`convert_task` writes after a stem, around it, in ``DIR``: the
+    leading ``.``, ``.part<pid>`` (10 digits at most), the longest extension of ``fmts`` and a
+    writer's own ``.tmp.npz``.  :func:`output_stems`' ``tail``."""
+    ext = max((len(formats.WRITERS[f].extension) for f in fmts if f in formats.WRITERS), default=0)
+    return len(".") + len(".part") + 10 + ext + len(".tmp.npz")
 
 
 def read_manifest(out_dir):
@@ -193,7 +205,7 @@ def _open_manifest(out_dir):
         if man.read(1) != b"\n":
             man.write(b"\n")
     man.close()
-    return open(path, "a", encoding="utf-8")
+    return open(path, "a", encoding="utf-8", newline="\n")   # one byte a line break, on Windows too
 
 
 # --------------------------------------------------------------------------
@@ -325,13 +337,14 @@ def run(inputs, out_dir, fmts, settings: SolveSettings, scheduler=None, workers=
         raise ValueError(f"convert writes {', '.join(n for n, w in formats.WRITERS.items() if not w.needs_blender)}"
                          f" (without Blender); not {', '.join(bad)}")
     out_dir = os.path.abspath(out_dir)       # the manifest's outputs hold wherever a rerun starts
+    check_folder(out_dir, temp_tail(fmts))   # a folder too deep for Windows' 260 characters: said first
     os.makedirs(out_dir, exist_ok=True)
     removed = remove_partial_outputs(out_dir)
     if removed:
         log(f"removed {removed} partial output(s) a killed run left in {out_dir}")
     done = read_manifest(out_dir)
     # the names of earlier runs' inputs count too: a later take.csv never writes over an earlier one's
-    stems = output_stems(list(dict.fromkeys(list(inputs) + list(done))))
+    stems = output_stems(list(dict.fromkeys(list(inputs) + list(done))), out_dir, temp_tail(fmts))
     todo = [p for p in inputs if not is_done(done.get(p), fmts)]
     skipped = len(inputs) - len(todo)
     if skipped:

@@ -428,7 +428,7 @@ def save_offsets(path, offsets) -> None:
     """Write offsets (any form :func:`validate_offsets` accepts) as JSON."""
     data = validate_offsets(offsets)
     data = {"format": "blender_manikin.device_offsets", "version": 1, **data}
-    with open(os.fspath(path), "w", encoding="utf-8") as fh:
+    with open(os.fspath(path), "w", encoding="utf-8", newline="\n") as fh:
         json.dump(data, fh, indent=2)
         fh.write("\n")
 

@@ -246,7 +246,7 @@ def write_json(path, result, source: str = "", decimals: int = 6, indent=None, g
                                            for d in doc["trackers"]) + "}"
     sep = ",\n" if indent else ","
     tmp = os.fspath(path) + ".tmp"
-    with open(tmp, "w", encoding="utf-8") as f:
+    with open(tmp, "w", encoding="utf-8", newline="\n") as f:
         f.write("{")
         for i, (k, v) in enumerate(doc.items()):
             if i:

@@ -6,15 +6,106 @@ macOS, Unicode normalisation (``Übung`` composed, U+00DC, is ``Übung`` decompo
 U+0308): two outputs whose names differ only so are one file there, the second over the first,
 even when they are two files on Linux.  :func:`fold` is the name as those systems compare it;
 :func:`unique_stems` keeps outputs apart by it.
+
+Windows also refuses some names outright, whatever system the file is made on (a name made on
+Linux must still copy there): :func:`windows_safe` is the one rule for them (device names such
+as ``CON`` or ``COM1``, the characters ``<>:"/\\|?*`` and control characters, trailing dots and
+spaces), and :func:`fit_stem` keeps a whole path under Windows' classic 260-character limit.
 """
 from __future__ import annotations
 
+import hashlib
+import os
+import re
 import unicodedata
 
 
 #: the longest output stem in UTF-8 bytes: a name (255 bytes on ext4, APFS, NTFS: 255 UTF-16
 #: units) must also hold a hash suffix, the extension and a temporary ``.part<pid>`` / ``.tmp``
 MAX_STEM_BYTES = 200
+
+
+#: names Windows keeps for devices: no file may be called so, with any extension (``con.json``,
+#: ``Aux.tar.gz``), in any case; ``¹²³`` are the superscript digits Windows also takes as ``1 2 3``
+RESERVED = frozenset(["CON", "PRN", "AUX", "NUL"] + [f"{d}{n}" for d in ("COM", "LPT") for n in "0123456789¹²³"])
+
+#: the characters no Windows file name may hold: ``<>:"/\\|?*`` and the control characters
+_FORBIDDEN = re.compile(r'[<>:"/\\|?*\x00-\x1f\x7f]')
+
+#: the classic Windows limit of a whole path (``MAX_PATH``), in UTF-16 units, its ending NUL
+#: included: a path may hold 259 characters where long paths are not enabled
+MAX_PATH = 260
+
+#: the shortest stem :func:`fit_stem` cuts to: a few characters of the name, ``-`` and 8 hex digits
+MIN_STEM = 12
+
+
+def windows_safe(stem: str, fallback: str = "take") -> str:
+    """``stem`` (a file name without its extension, in any script) made a name Windows accepts,
+    on every system so the file can move there: each of ``<>:"/\\|?*`` and each control
+    character ``_``; trailing dots and spaces removed (Windows drops them, so ``take.`` and
+    ``take`` would be one file); a reserved device name (:data:`RESERVED`: ``CON``, ``nul``,
+    ``COM1``, ``LPT¹``..., before the first dot, as Windows reads it) given a ``_`` after it:
+    ``con`` -> ``con_``, ``aux.take`` -> ``aux_.take``; ``LPT9-take`` is no device and kept.
+    ``fallback`` when nothing is left.  Other names are returned unchanged."""
+    s = _FORBIDDEN.sub("_", str(stem)).rstrip(" .")
+    if not s:
+        return fallback
+    head, dot, rest = s.partition(".")
+    if head.rstrip(" ").upper() in RESERVED:
+        s = head + "_" + dot + rest
+    return s
+
+
+def _units(text: str) -> int:
+    """``text``'s length in UTF-16 units, as Windows counts a path (``𝄞``: 2)."""
+    return len(str(text).encode("utf-16-le", "surrogatepass")) // 2
+
+
+def short_hash(key: str) -> str:
+    """8 hex digits of the SHA-1 of ``key`` (an input's absolute path): the suffix that keeps
+    a shortened or clashing output name apart from others."""
+    return hashlib.sha1(str(key).encode("utf-8", "surrogateescape")).hexdigest()[:8]
+
+
+def stem_room(folder: str, tail: int, windows: bool | None = None):
+    """How many UTF-16 units a stem may have so that ``folder``/``stem`` plus ``tail`` more
+    units (the extension, a temporary suffix) stays under :data:`MAX_PATH`; ``None`` where the
+    limit does not apply (``windows``: default, whether this is Windows).  ``folder`` is made
+    absolute first, as Windows counts it."""
+    if not (os.name == "nt" if windows is None else windows):
+        return None
+    folder = os.path.abspath(folder)
+    sep = 0 if folder.endswith(("/", "\\")) else 1
+    return MAX_PATH - 1 - _units(folder) - sep - int(tail)
+
+
+def check_folder(folder: str, tail: int, windows: bool | None = None):
+    """:func:`stem_room` of ``folder``; ``ValueError`` naming ``folder`` when it leaves no room
+    for a :data:`MIN_STEM`-unit name (call it before making the folder: Windows cannot make it)."""
+    room = stem_room(folder, tail, windows)
+    if room is not None and room < MIN_STEM:
+        raise ValueError(f"output folder {os.path.abspath(folder)}: its path is too long for Windows "
+                         f"({_units(os.path.abspath(folder))} characters; a file in it may have at most "
+                         f"{MAX_PATH - 1} in all): choose a folder with a shorter path")
+    return room
+
+
+def fit_stem(stem: str, key: str, folder: str, tail: int, windows: bool | None = None) -> str:
+    """``stem`` as it fits ``folder`` under :data:`MAX_PATH` (:func:`stem_room`): unchanged when
+    it fits (always, off Windows), else cut and given ``-`` and :func:`short_hash` of ``key``,
+    so two long names cut alike stay apart.  ``ValueError`` naming ``folder`` when not even a
+    :data:`MIN_STEM`-unit name fits."""
+    room = check_folder(folder, tail, windows)
+    if room is None or _units(stem) <= room:
+        return stem
+    keep, n = [], 0
+    for c in stem:
+        n += _units(c)
+        if n > room - 9:
+            break
+        keep.append(c)
+    return windows_safe("".join(keep), "take") + "-" + short_hash(key)
 
 
 def fit_bytes(name: str, limit: int = MAX_STEM_BYTES) -> str:
@@ -33,10 +124,11 @@ def file_stem(name: str, fallback: str = "take") -> str:
     (``Übung``, ``テイク``, ``café``), every other character ``_`` (spaces, ``.``, ``/``, ``:``,
     ``*``, ``#``, ``%``...: the characters Windows forbids and those URLs and shells treat
     specially); for ASCII names this is ``bpy.path.clean_name``.  NFC, so a macOS name and the
-    same name typed elsewhere give one stem, cut to :data:`MAX_STEM_BYTES`; ``fallback``
-    when nothing is left."""
+    same name typed elsewhere give one stem, cut to :data:`MAX_STEM_BYTES`; a Windows device
+    name given a ``_`` (:func:`windows_safe`: ``CON`` -> ``CON_``); ``fallback`` when nothing
+    is left."""
     s = "".join(c if c.isalnum() else "_" for c in unicodedata.normalize("NFC", str(name)))
-    return fit_bytes(s) if s.strip("_") else fallback
+    return windows_safe(fit_bytes(s), fallback) if s.strip("_") else fallback
 
 
 def unique_stems(stems) -> list:

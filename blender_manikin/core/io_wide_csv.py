@@ -326,7 +326,7 @@ def save_layout(path, layout):
     """Write a layout dict (``Recording.metadata["layout"]``) as a JSON layout file."""
     import json
     tmp = os.fspath(path) + ".tmp"
-    with open(tmp, "w", encoding="utf-8") as f:
+    with open(tmp, "w", encoding="utf-8", newline="\n") as f:
         json.dump(layout, f, indent=2)
         f.write("\n")
     os.replace(tmp, path)

@@ -94,6 +94,6 @@ def _update(paths, entry):
             except OSError:
                 rec.pop(name, None)
         tmp = os.path.join(folder, RECORD + ".tmp")
-        with open(tmp, "w", encoding="utf-8") as f:
+        with open(tmp, "w", encoding="utf-8", newline="\n") as f:
             json.dump(rec, f, indent=0, sort_keys=True)
         os.replace(tmp, os.path.join(folder, RECORD))

@@ -175,9 +175,11 @@ class MANIKIN_OT_save_bone_map(Operator):
 
 
 def _file_name(name: str) -> str:
-    """``name`` as a file name (letters, digits, ``-``, ``_``, ``.``)."""
+    """``name`` as a file name (letters, digits, ``-``, ``_``, ``.``), one Windows accepts
+    (:func:`..core.file_names.windows_safe`: ``CON`` -> ``CON_``)."""
     import re
-    return re.sub(r"[^\w.-]+", "_", str(name)).strip("._") or "bone_map"
+    from ..core.file_names import windows_safe
+    return windows_safe(re.sub(r"[^\w.-]+", "_", str(name)).strip("._"), "bone_map")
 
 
 CLASSES = (MANIKIN_OT_retarget, MANIKIN_OT_load_bone_map, MANIKIN_OT_save_bone_map)

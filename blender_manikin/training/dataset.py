@@ -584,10 +584,10 @@ def build_cache(source, cache_dir=None, fps=MODEL_FPS, workers=2, verbose=True):
                  code_version=code_version(fmt), preprocess_version=PREPROCESS_VERSION,
                  clips=results, frames=int(frames), skipped=errors, build_seconds=round(elapsed, 1),
                  contact_rule=dict(speed_mps=CONTACT_SPEED, height_m=CONTACT_HEIGHT))
-    with open(os.path.join(d, "split.json"), "w") as f:
+    with open(os.path.join(d, "split.json"), "w", newline="\n") as f:
         json.dump(split, f, indent=1)
     tmp = index_path + ".tmp"
-    with open(tmp, "w") as f:
+    with open(tmp, "w", newline="\n") as f:
         json.dump(index, f, indent=1)
     os.replace(tmp, index_path)
     if verbose:

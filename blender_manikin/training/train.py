@@ -451,7 +451,7 @@ def main(argv=None):
                 raw = evaluate(model, select_batches, cfg.kind, cfg.devices, lam=lam)
                 rec.update({f"raw_select_{k}": round(raw[k], 5) for k in ("mpjpe_cm", "lower_cm")})
         history.append(rec)
-        with open(os.path.join(args.out, "metrics.jsonl"), "a") as f:
+        with open(os.path.join(args.out, "metrics.jsonl"), "a", encoding="utf-8", newline="\n") as f:
             f.write(json.dumps(rec) + "\n")
         bar.newline()
         say(f"[val] step {step} ({elapsed / 60:.1f} min): loss {m['loss']:.4f}  MPJPE {m['mpjpe_cm']:.2f} cm  "
