@@ -70,6 +70,10 @@ Options of ``solve`` (they mirror the panel; ``--help`` has them all):
                               30 cm or more off their point's local median)
 --keypoint-floor feet|keep    keypoints: feet (default) stands the body on the floor
                               found under the feet, at z = 0; keep leaves the heights as given
+--subject-params FILE|none    keypoints: a Vicon subject parameter file (.mp / .vsk) for a
+                              Plug-in Gait .trc: knee, ankle, elbow widths and height
+                              (default: <Subject>.mp / .vsk beside the .trc, or the folder's
+                              only .mp; none: use none)
 --mapping FILE.json           keypoints: a CSV's column names for the layout's points
 --save-layout FILE.json       write the layout detected in the first wide CSV or JSON
 --format blend,fbx,bvh,json,npz  one or several (default blend,fbx,json); without blend
@@ -192,6 +196,11 @@ def _add_solve_options(s):
                    help="keypoints: feet (default) moves the floor found under the feet to z = 0, the body "
                         "on its --sole; keep leaves the joints at the heights given (a source whose floor "
                         "is the scene's)")
+    s.add_argument("--subject-params", default=None, metavar="FILE",
+                   help="keypoints: a Vicon subject parameter file (.mp or .vsk) for a Plug-in Gait .trc: the "
+                        "subject's knee, ankle and elbow widths place the joint centres from lateral markers, "
+                        "its Height is the stature unless --height is given (default: <Subject>.mp / .vsk "
+                        "beside the .trc, or the folder's only .mp; 'none': none)")
     s.add_argument("--mapping", default=None, metavar="FILE.json",
                    help="keypoints: a CSV's columns for the layout's points "
                         '({"layout": "coco17", "columns": {"nose": "Nose", ...}})')
@@ -385,6 +394,7 @@ def solve_settings(args):
                        floor=getattr(args, "floor", 0.0), fix_sides=not getattr(args, "keep_sides", False),
                        despike=not getattr(args, "keep_spikes", False),
                        keypoint_floor=getattr(args, "keypoint_floor", "feet"),
+                       subject_params=getattr(args, "subject_params", None),
                        overlap=getattr(args, "overlap", SolveSettings.overlap),
                        teleports=getattr(args, "teleports", SolveSettings.teleports),
                        start=getattr(args, "start", None), end=getattr(args, "end", None),

@@ -163,6 +163,11 @@ class MANIKIN_Settings(PropertyGroup):
                                                       ('M', "Metres", ""), ('CM', "Centimetres", ""),
                                                       ('MM', "Millimetres", "")], default='AUTO')
     keypoint_up: EnumProperty(name="Up Axis", items=_UP_ITEMS, default='AUTO')
+    keypoint_subject_file: StringProperty(
+        name="Subject File", subtype='FILE_PATH', default="",
+        description="A Vicon subject parameter file (.mp or .vsk) for a Plug-in Gait .trc: the subject's knee, "
+                    "ankle and elbow widths and height (empty: a <Subject>.mp / .vsk beside the .trc, or the "
+                    "folder's only .mp, is used when there is one)")
     use_keypoint_rate: BoolProperty(name="Set Rate", default=False,
                                     description="Give the sample rate of a keypoint file that has no times "
                                                 "(else 30 Hz is assumed, and said)")
@@ -401,6 +406,8 @@ def config_from_settings(context):
                               else s.keypoint_floor.lower())
         cfg.keypoint_layout = None if s.keypoint_layout == 'AUTO' else s.keypoint_layout.lower()
         cfg.up = None if s.keypoint_up == 'AUTO' else s.keypoint_up.lower()
+        if s.keypoint_from == 'FILE' and s.keypoint_subject_file:
+            cfg.subject_params = bpy.path.abspath(s.keypoint_subject_file)
         cfg.rate = float(s.keypoint_rate) if s.use_keypoint_rate else None
         cfg.ik = s.ik.lower()
         cfg.despike = bool(s.despike)

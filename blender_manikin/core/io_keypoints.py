@@ -20,7 +20,11 @@ Inputs:
   markers named as a layout's points (``RHip``, ``LBigToe``, ``Hip`` for the hips' midpoint,
   ``Head`` for the head top: :func:`trc_point`), the layout the one whose points they cover most
   (Pose2Sim's 22 markers of Halpe 26 make ``halpe26`` without the eyes and ears), its other
-  points missing; ``Time``, ``DataRate`` and ``Units`` from the file.
+  points missing; ``Time``, ``DataRate`` and ``Units`` from the file.  Anatomical markers
+  (OpenCap's, Vicon Plug-in Gait's) become joint centres (:mod:`.marker_sets`); for Plug-in Gait a
+  Vicon subject parameter file (``.mp`` / ``.vsk``, :mod:`.subject_params`) given, or found
+  beside the TRC (:func:`.subject_params.find_subject_params`), gives the subject's joint widths
+  and stature (``metadata["subject_height"]``, metres).
 
 The layout (:mod:`.keypoint_layouts`) is given (``layout=``, ``--layout``), stored in the file,
 or told from the point count (17 points: COCO-17 or Human3.6M-17, told apart by their first
@@ -48,6 +52,7 @@ import numpy as np
 
 from . import keypoint_layouts as kl
 from . import marker_sets
+from . import subject_params as sp
 from . import rotations as rot
 from .plain import shown
 from .recording import RecordingError, UNITS, canonical_units, decode_head, load_json_file, read_text, time_unit_of_step
@@ -119,18 +124,21 @@ def is_keypoint_input(path) -> bool:
 
 # --------------------------------------------------------------------------
 def read_keypoints(path, layout=None, units=None, up=None, rate=None, mapping=None,
-                   handed=None) -> KeypointRecording:
+                   handed=None, subject_params=None) -> KeypointRecording:
     """Read keypoints from ``path`` (see the module docstring).
 
     layout: a layout name (overrides the file).  units: ``m``/``cm``/``mm`` (default: told from
     the leg's length).  up: the file's up axis, ``+x``/``-x``/``+y``/``-y``/``+z``/``-z``
     (default: told from the body).  rate: samples per second when the file has no time (default
     :data:`DEFAULT_RATE`, said in the report).  mapping: a mapping file's path or dict for a CSV.
-    handed: ``right``/``left`` (default: told from the face or feet).
+    handed: ``right``/``left`` (default: told from the face or feet).  subject_params: a TRC's
+    Vicon subject parameter file (``.mp`` / ``.vsk``), ``"none"`` for none, or None / ``"auto"``
+    (default): the one found beside a Plug-in Gait TRC (:func:`.subject_params.find_subject_params`).
     """
     p = os.fspath(path)
     body_file = freemocap_body_file(p)
     decided = []
+    subject = None
     time = None
     conf = None
     file_layout = None
@@ -155,7 +163,7 @@ def read_keypoints(path, layout=None, units=None, up=None, rate=None, mapping=No
         elif ext == ".csv":
             X, time, file_layout, rate = _load_csv(p, mapping, rate)
         elif ext == ".trc":
-            X, time, file_layout, rate, trc_units, rules = _load_trc(p, rate)
+            X, time, file_layout, rate, trc_units, rules, subject = _load_trc(p, rate, subject_params)
             units = units or trc_units
             decided += [rules] if rules else []
         else:
@@ -181,8 +189,18 @@ def read_keypoints(path, layout=None, units=None, up=None, rate=None, mapping=No
         raise RecordingError(f"layout {name} has {len(kl.LAYOUTS[name].points)} points, the file {K}",
                              path=src)
     decided.insert(0, f"keypoints: {name} ({K} points, {how})")
+    if _explicit(subject_params) and subject is None:
+        decided.append(f"subject parameters {os.path.basename(os.fspath(subject_params))} not used (only for "
+                       "a TRC's Plug-in Gait markers)")
+    rec = _finish(X, conf, name, src, decided, hands, units, up, handed, rate, time)
+    if subject is not None and subject.height:
+        rec.metadata["subject_height"] = subject.height
+    return rec
 
-    return _finish(X, conf, name, src, decided, hands, units, up, handed, rate, time)
+
+def _explicit(subject_params):
+    """Whether ``subject_params`` names a file (not None, ``""``, ``"auto"`` or ``"none"``)."""
+    return bool(subject_params) and str(subject_params).strip().lower() not in ("auto", "none")
 
 
 def keypoints_from_points(time, points, layout, source, units="m", up="+z", how="as given", said=None,
@@ -519,9 +537,12 @@ def trc_point(marker) -> str:
     return _TRC_NAMES.get(key.replace("_", ""), key)
 
 
-def _load_trc(path, rate):
-    """``(X (T, K, 3), time (T,) s or None, layout, rate, units, rules)`` of an OpenSim ``.trc`` file
-    (``rules``: how anatomical markers became joint centres, :func:`.marker_sets.rules_used`, or None)."""
+def _load_trc(path, rate, subject_params=None):
+    """``(X (T, K, 3), time (T,) s or None, layout, rate, units, rules, subject)`` of an OpenSim
+    ``.trc`` file (``rules``: how anatomical markers became joint centres,
+    :func:`.marker_sets.rules_used`, and the subject parameter file used, or None; ``subject``: the
+    :class:`.subject_params.SubjectParams` used, or None).  subject_params: as
+    :func:`read_keypoints` takes it."""
     lines = read_text(path).splitlines()
 
     def cells(line):
@@ -588,16 +609,29 @@ def _load_trc(path, rate):
             ends = [k.index(f"{s}_asis" if marker_set == "opencap" else f"{s}asi") for s in "lr"]
             pw = float(np.nanmedian(np.linalg.norm(M[:, ends[0]] - M[:, ends[1]], axis=-1)))
             units = "m" if pw < 1.0 else "cm" if pw < 100.0 else "mm"
-        _, centres = marker_sets.joint_centres(names, M, UNITS[units], marker_set)
+        subject, how = None, ""
+        if _explicit(subject_params):
+            subject, how = sp.read_subject_params(subject_params), "as set"
+        elif marker_set == "plugingait" and str(subject_params or "auto").strip().lower() == "auto":
+            found = sp.find_subject_params(path, names)
+            if found:
+                subject, how = sp.read_subject_params(found), "found beside the TRC"
+        offsets = {} if subject is None else {
+            (s, j): subject.offset(s, j) for s in ("left", "right") for j in marker_sets.HALF_WIDTH
+            if subject.offset(s, j) is not None}
+        _, centres = marker_sets.joint_centres(names, M, UNITS[units], marker_set, offsets=offsets)
         for k, p in enumerate(lay.points):
             X[:, k] = centres[p]
         time, rate = _trc_time(data, rate, file_rate)
-        return X, time, best, rate, units, marker_sets.rules_used(names, marker_set)
+        rules = marker_sets.rules_used(names, marker_set, offsets)
+        if subject is not None:
+            rules += f"; {subject.summary()} ({how})"
+        return X, time, best, rate, units, rules, subject
     for k, p in enumerate(lay.points):
         if p in points:
             X[:, k] = M[:, points.index(p)]
     time, rate = _trc_time(data, rate, file_rate)
-    return X, time, best, rate, units, None
+    return X, time, best, rate, units, None, None
 
 
 def _trc_time(data, rate, file_rate):

@@ -450,7 +450,8 @@ def solve_keypoints(source, settings: SolveSettings | None = None, progress=None
     settings (:class:`.solve.SolveSettings`): fps (None: the file's rate), keypoint_layout,
     units, up, rate, mapping (see :func:`.io_keypoints.read_keypoints`), smoothing (``"auto"`` or
     a window in seconds, see :func:`prepare_keypoints`),
-    ik (``adaptive`` / ``naive``), height (scales the measured body to this stature, metres),
+    ik (``adaptive`` / ``naive``), height (scales the measured body to this stature, metres; None:
+    a TRC's subject parameter file's ``Height`` where it has one, ``subject_params``),
     max_frames, fix_sides, despike, keypoint_floor (``"feet"``: the floor found under the feet,
     :func:`estimate_floor`, moved to z = 0; ``"keep"``: the result put back by it, so the joints
     stay at the heights given, the shoe soles then lifting nothing).  Tracker options (axes,
@@ -470,14 +471,15 @@ def solve_keypoints(source, settings: SolveSettings | None = None, progress=None
     else:
         report(0.0, "reading keypoints")
         rec = read_keypoints(source, layout=s.keypoint_layout, units=s.units, up=s.up, rate=s.rate,
-                             mapping=s.mapping)
+                             mapping=s.mapping, subject_params=s.subject_params)
     out.recording = rec
     out.timings["read"] = _time.perf_counter() - t
     t = _time.perf_counter()
     report(0.1, "preparing keypoints")
     fps = float(s.fps) if s.fps else 1.0 / float(np.median(np.diff(rec.time)))
     smoothing = parse_smoothing(s.smoothing)
-    prep = prepare_keypoints(rec, fps, smoothing, height=s.height, max_frames=s.max_frames, sole=s.sole,
+    height = s.height or rec.metadata.get("subject_height")     # typed, else the subject file's stature
+    prep = prepare_keypoints(rec, fps, smoothing, height=height, max_frames=s.max_frames, sole=s.sole,
                              fix_sides=s.fix_sides, despike=s.despike, start=s.start, end=s.end)
     lay, b22, never = kl.LAYOUTS[rec.layout], prep.b22, prep.never
     out.report = GapReport(fps=fps, t0=float(prep.times[0]), t_end=float(prep.times[-1]),
@@ -494,6 +496,8 @@ def solve_keypoints(source, settings: SolveSettings | None = None, progress=None
                                      + np.array([0.0, 0.0, prep.floor]), _fk=None)
     out.result = result
     out.timings["solve"] = _time.perf_counter() - t
+    if not s.height and height:
+        out.info.append(f"stature {height:.3f} m from the subject parameter file")
     told = smoothing_note(smoothing, prep.windows, "point")
     out.info.append(f"keypoints: {'adaptive' if adaptive else 'naive'} HybrIK, floor at {prep.floor:+.3f} m "
                     + ("not moved" if keep else "moved to 0"))

@@ -32,12 +32,14 @@ handedness; lengths in the file's unit, ``metres_per_unit`` converting the const
   error against MRI is the paper's; a marker's skin motion adds to it;
 * knees, ankles, elbows, wrists: the midpoint of the lateral and medial (radial and ulnar)
   markers.  Where only the lateral marker is there (Plug-in Gait without medial markers) the
-  centre is taken :data:`HALF_WIDTH` medially of it: for the knee and ankle along the pelvis's
-  left-right line, for the elbow along the line from the acromion to the hips' midpoint, each
-  made square to the segment (and scaled by the sine of the angle between them).  That follows
-  the epicondyles while the humerus and femur keep their neutral rotation (an arm hanging or
-  held out sideways, a leg swinging); a thigh or upper arm turned in or out by an angle a puts the
-  centre about ``2 HALF_WIDTH sin(a / 2)`` off (3 cm at 45°), and an arm raised forward is
+  centre is taken the subject's measured half width plus the marker's radius (a Vicon ``.mp`` /
+  ``.vsk``, :mod:`.subject_params`, as Plug-in Gait does), else :data:`HALF_WIDTH`, medially of
+  it: for the knee and ankle along the pelvis's left-right line, for the elbow along the line
+  from the acromion to the hips' midpoint, each made square to the segment (and scaled by the
+  sine of the angle between them).  That follows the epicondyles while the humerus and femur
+  keep their neutral rotation (an arm hanging or held out sideways, a leg swinging); a thigh or
+  upper arm turned in or out by an angle a puts the centre about ``2 HALF_WIDTH sin(a / 2)`` off
+  (3 cm at 45°), and an arm raised forward is
   guessed half way between medial and down.  A medial marker removes the guess;
 * shoulders: the glenohumeral centre :data:`SHOULDER_BELOW` of the acromia's distance below the
   acromion marker, along the trunk (mid-hips to mid-acromia) made square to the acromion line
@@ -143,14 +145,21 @@ def detect_marker_set(names):
     return best or (None, [])
 
 
-def rules_used(names, set_name) -> str:
+def rules_used(names, set_name, offsets=None) -> str:
     """How :func:`joint_centres` places the joints of a file with these marker ``names``, in
     words for the read's report, e.g. ``"plugingait markers: hips by Harrington 2007, knees,
-    ankles, elbows HALF_WIDTH from the lateral marker (no medial one)"``."""
+    ankles, elbows a typical half width from the lateral marker (no medial marker)"``;
+    ``offsets`` as :func:`joint_centres` takes them (the subject's measured widths)."""
     found, _ = _roles([marker_key(n) for n in names], set_name)
+    offsets = offsets or {}
     both = all((s, "hjc") in found for s in _SIDES)
     parts = ["hips from the file's hip centres" if both else "hips by Harrington 2007"]
-    guessed = [j for j in HALF_WIDTH if not all((s, f"{j}_med") in found for s in _SIDES)]
+    lateral_only = [j for j in HALF_WIDTH if not all((s, f"{j}_med") in found for s in _SIDES)]
+    measured = [j for j in lateral_only if all((s, j) in offsets for s in _SIDES)]
+    guessed = [j for j in lateral_only if j not in measured]
+    if measured:
+        parts.append(", ".join(f"{j}s" for j in measured) + " the subject's half width from the lateral marker "
+                     "(no medial marker)")
     if guessed:
         parts.append(", ".join(f"{j}s" for j in guessed) + " a typical half width from the lateral marker "
                      "(no medial marker)")
@@ -164,11 +173,15 @@ def _square(v, axis):
     return normalize(v - np.sum(v * axis, -1, keepdims=True) * axis)
 
 
-def joint_centres(names, markers, metres_per_unit=1.0, set_name=None):
+def joint_centres(names, markers, metres_per_unit=1.0, set_name=None, offsets=None):
     """The joint centres of a marker set (see the module doc).
 
     names: the markers' names (K); markers: ``(T, K, 3)`` in the file's unit and axes, NaN where
-    lost; metres_per_unit: the file's unit in metres (1000 mm: 0.001).  Returns ``(set name,
+    lost; metres_per_unit: the file's unit in metres (1000 mm: 0.001); offsets: ``{(side,
+    joint): metres}`` from a lateral marker to its joint centre (side ``"left"`` / ``"right"``,
+    joint ``"knee"``, ``"ankle"``, ``"elbow"``), the subject's measured half widths plus the
+    marker's radius (:meth:`.subject_params.SubjectParams.offset`), replacing
+    :data:`HALF_WIDTH` where given and the medial marker is missing.  Returns ``(set name,
     {point: (T, 3)})`` with the points of the layout of that name (``left_hip``, ``left_knee``,
     ..., the feet's points and, for Plug-in Gait, ``left_ear``, ``right_ear``, ``nose``), in the
     file's unit and axes.  Raises ``ValueError`` naming the markers a set lacks."""
@@ -213,15 +226,31 @@ def joint_centres(names, markers, metres_per_unit=1.0, set_name=None):
         out[f"{side}_shoulder"] = m(side, "shoulder") - SHOULDER_BELOW * width * trunk_up
 
     def centre(side, joint, proximal, towards):
-        """The centre from the lateral and medial markers, else ``HALF_WIDTH`` from the lateral
-        one along ``towards`` (a per-frame vector pointing medially) made square to the segment
-        and scaled by the sine of the angle between them."""
+        """The centre from the lateral and medial markers, else the subject's offset (else
+        ``HALF_WIDTH``) from the lateral one, scaled by the sine of the angle between
+        ``towards`` (a per-frame vector pointing medially) and the bone: in the plane of
+        ``towards`` and the proximal centre's line to the marker, on the medial side, the offset
+        square to the bone (proximal centre to joint centre, as Plug-in Gait's chord), not to
+        the line to the marker (that put the centre about ``offset² / bone`` distal: 7 mm at a
+        knee)."""
         lat_m, med_m = m(side, f"{joint}_lat"), m(side, f"{joint}_med")
         if med_m is not None:
             return 0.5 * (lat_m + med_m)
-        v, a = normalize(towards), normalize(lat_m - proximal)
-        medial = v - np.sum(v * a, -1, keepdims=True) * a
-        return lat_m + HALF_WIDTH[joint] / float(metres_per_unit) * medial
+        seg = lat_m - proximal
+        L = np.linalg.norm(seg, axis=-1, keepdims=True)
+        v, a = normalize(towards), seg / L
+        w = normalize(v - np.sum(v * a, -1, keepdims=True) * a)     # medial, square to the segment
+        dist = (offsets or {}).get((side, joint), HALF_WIDTH[joint]) / float(metres_per_unit)
+        # the right triangle proximal - centre - marker: hypotenuse L, the offset d opposite the
+        # angle t at the proximal centre; d = dist times the sine of the angle between `towards`
+        # and the bone (proximal to centre), found by a few fixed-point steps from t = 0
+        sin_t, cos_t = np.zeros_like(L), np.ones_like(L)
+        for _ in range(4):
+            u = cos_t * a + sin_t * w
+            sine = np.sqrt(np.clip(1.0 - np.sum(v * u, -1, keepdims=True) ** 2, 0.0, 1.0))
+            sin_t = np.clip(dist * sine / L, 0.0, 1.0)
+            cos_t = np.sqrt(1.0 - sin_t ** 2)
+        return proximal + L * cos_t * (cos_t * a + sin_t * w)
     mid_hips = 0.5 * (out["left_hip"] + out["right_hip"])
     for side, sign in (("left", 1.0), ("right", -1.0)):
         # legs: toward the other side along the pelvis's left-right line; arms: toward the

@@ -84,7 +84,10 @@ class SolveSettings:
     despike (remove a detector's misplaced samples, :mod:`.keypoint_spikes`; default on) and
     keypoint_floor (``"feet"``, the default: the floor is found under the feet and moved to
     z = 0, the body standing on its soles; ``"keep"``: the heights as given, the joints where the
-    keypoints are, e.g. an armature's bones in the scene, :data:`.keypoint_solve.KEYPOINT_FLOORS`).
+    keypoints are, e.g. an armature's bones in the scene, :data:`.keypoint_solve.KEYPOINT_FLOORS`)
+    and subject_params (a Vicon subject parameter file, ``.mp`` / ``.vsk``, for a Plug-in Gait
+    TRC: the subject's joint widths and, unless ``height`` is given, stature; ``"none"``: not
+    used; None: the one found beside the TRC, :mod:`.subject_params`).
     Tracker inputs also use model (the pose network) and overlap (how many network windows see
     each frame: 2, the default, keeps 10,000 frames/s; 3 and 4 are a little more accurate at 1.5
     and 2 times the network time; :data:`.pipeline.OVERLAP_CHOICES`), and teleports (what to
@@ -123,6 +126,7 @@ class SolveSettings:
     start: float | None = None        # seconds from the first sample: solve from here (None: the start)
     end: float | None = None          # seconds from the first sample: solve up to here (None: the end)
     calibration_take: str | None = None   # a recording whose T-pose calibrates this take (body, offsets)
+    subject_params: str | None = None     # keypoints: a Vicon .mp / .vsk for a Plug-in Gait TRC, "none", or None: auto
 
 
 @dataclass
