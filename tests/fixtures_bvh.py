@@ -323,3 +323,107 @@ def write_fixture(path, clip: BvhClip):
     from blender_manikin.core.bvh import write_bvh
     write_bvh(path, clip)
     return path
+
+
+# --------------------------------------------------------------------------
+# LaFAN1 and 100STYLE layouts (joint names, hierarchy and channel orders as the datasets' files)
+LAFAN1_ROOT_CHANNELS = ("Xposition", "Yposition", "Zposition", "Zrotation", "Yrotation", "Xrotation")
+LAFAN1_CHANNELS = ("Zrotation", "Yrotation", "Xrotation")
+
+
+def lafan1_joints(body: skeleton.Body):
+    """LaFAN1's rig: every OFFSET along the parent's local +X (so the zero pose is not a T-pose);
+    Hips/Spine*/Neck/Head frames +X up, +Y forward, +Z left; left arm +X along the arm, +Y back,
+    +Z up (the back of the hand); right arm +X along the arm, +Y back, -Z up; legs +X down,
+    +Z to the right; feet +X towards the toe, +Z to the right (as read off a LaFAN1 take)."""
+    p = body.rest_positions()
+    D = REST_FOOT_DIRECTION
+    O_trunk = _cols(_ez, -_ey, _ex)
+    O_arm_l = _cols(_ex, _ey, _ez)
+    O_arm_r = _cols(-_ex, _ey, -_ez)
+    O_leg = _cols(-_ez, -_ey, -_ex)
+    O_foot = _cols(D, np.cross(-_ex, D), -_ex)
+
+    def clav(side, sx, O):
+        d = p[J[f"{side}_shoulder"]] - p[J[f"{side}_collar"]]
+        return rotation_between(sx * _ex, d) @ O
+
+    zero = np.zeros(3)
+    js = [SrcJoint("Hips", None, "pelvis", O_trunk, p[J["pelvis"]])]
+    for side, S in (("left", "Left"), ("right", "Right")):
+        js += [
+            SrcJoint(f"{S}UpLeg", "Hips", f"{side}_hip", O_leg, p[J[f"{side}_hip"]]),
+            SrcJoint(f"{S}Leg", f"{S}UpLeg", f"{side}_knee", O_leg, p[J[f"{side}_knee"]]),
+            SrcJoint(f"{S}Foot", f"{S}Leg", f"{side}_ankle", O_foot, p[J[f"{side}_ankle"]]),
+            SrcJoint(f"{S}Toe", f"{S}Foot", f"{side}_foot", O_foot, p[J[f"{side}_foot"]], end=zero),
+        ]
+    js += [
+        SrcJoint("Spine", "Hips", "spine1", O_trunk, p[J["spine1"]]),
+        SrcJoint("Spine1", "Spine", "spine2", O_trunk, p[J["spine2"]]),
+        SrcJoint("Spine2", "Spine1", "spine3", O_trunk, p[J["spine3"]]),
+        SrcJoint("Neck", "Spine2", "neck", O_trunk, p[J["neck"]]),
+        SrcJoint("Head", "Neck", "head", O_trunk, p[J["head"]], end=zero),
+    ]
+    for side, S, sx, O in (("left", "Left", 1.0, O_arm_l), ("right", "Right", -1.0, O_arm_r)):
+        js += [
+            SrcJoint(f"{S}Shoulder", "Spine2", f"{side}_collar", clav(side, sx, O), p[J[f"{side}_collar"]]),
+            SrcJoint(f"{S}Arm", f"{S}Shoulder", f"{side}_shoulder", O, p[J[f"{side}_shoulder"]]),
+            SrcJoint(f"{S}ForeArm", f"{S}Arm", f"{side}_elbow", O, p[J[f"{side}_elbow"]]),
+            SrcJoint(f"{S}Hand", f"{S}ForeArm", f"{side}_wrist", O, p[J[f"{side}_wrist"]], end=zero),
+        ]
+    return js
+
+
+def lafan1_clip(body, pos, rot, name="synthetic_lafan1", fps=30.0, scale=0.01) -> BvhClip:
+    """Body motion as a LaFAN1-layout BVH (cm, Y-up, ZYX channels, 30 fps)."""
+    js = lafan1_joints(body)
+    chans = {j.name: LAFAN1_CHANNELS for j in js}
+    chans["Hips"] = LAFAN1_ROOT_CHANNELS
+    return _build(js, pos, rot, scale, chans, {"Hips": pos[:, J["pelvis"]]}, name, 1.0 / fps)
+
+
+STYLE100_ROOT_CHANNELS = ("Xposition", "Yposition", "Zposition", "Yrotation", "Xrotation", "Zrotation")
+STYLE100_CHANNELS = ("Yrotation", "Xrotation", "Zrotation")
+
+
+def style100_joints(body: skeleton.Body):
+    """100STYLE's (Xsens MVN) rig: Hips, Chest..Chest4, Neck, Head, collars on Chest4, T-pose zero
+    pose with world-aligned frames; Chest..Chest3 at the body's spine1-3, Chest4 halfway from
+    spine3 to the neck, the collar joint where lerp(Collar, Shoulder; 0.4) is the body's collar."""
+    p = body.rest_positions()
+    M, f = M_YUP, 0.4
+    js = [SrcJoint("Hips", None, "pelvis", M, p[J["pelvis"]])]
+    js += [
+        SrcJoint("Chest", "Hips", "spine1", M, p[J["spine1"]]),
+        SrcJoint("Chest2", "Chest", "spine2", M, p[J["spine2"]]),
+        SrcJoint("Chest3", "Chest2", "spine3", M, p[J["spine3"]]),
+        SrcJoint("Chest4", "Chest3", "spine3", M, 0.5 * (p[J["spine3"]] + p[J["neck"]])),
+        SrcJoint("Neck", "Chest4", "neck", M, p[J["neck"]]),
+        SrcJoint("Head", "Neck", "head", M, p[J["head"]], end=np.array([0.0, 0.0, 0.17])),
+    ]
+    for side, S, sx in (("right", "Right", -1.0), ("left", "Left", 1.0)):
+        collar, shoulder = p[J[f"{side}_collar"]], p[J[f"{side}_shoulder"]]
+        js += [
+            SrcJoint(f"{S}Collar", "Chest4", f"{side}_collar", M, (collar - f * shoulder) / (1.0 - f)),
+            SrcJoint(f"{S}Shoulder", f"{S}Collar", f"{side}_shoulder", M, shoulder),
+            SrcJoint(f"{S}Elbow", f"{S}Shoulder", f"{side}_elbow", M, p[J[f"{side}_elbow"]]),
+            SrcJoint(f"{S}Wrist", f"{S}Elbow", f"{side}_wrist", M, p[J[f"{side}_wrist"]],
+                     end=np.array([sx * 0.18, 0.0, 0.0])),
+        ]
+    for side, S in (("right", "Right"), ("left", "Left")):
+        js += [
+            SrcJoint(f"{S}Hip", "Hips", f"{side}_hip", M, p[J[f"{side}_hip"]]),
+            SrcJoint(f"{S}Knee", f"{S}Hip", f"{side}_knee", M, p[J[f"{side}_knee"]]),
+            SrcJoint(f"{S}Ankle", f"{S}Knee", f"{side}_ankle", M, p[J[f"{side}_ankle"]]),
+            SrcJoint(f"{S}Toe", f"{S}Ankle", f"{side}_foot", M, p[J[f"{side}_foot"]],
+                     end=0.07 * REST_FOOT_DIRECTION * np.array([1, 1, 0])),
+        ]
+    return js
+
+
+def style100_clip(body, pos, rot, name="synthetic_100style", fps=60.0, scale=0.01) -> BvhClip:
+    """Body motion as a 100STYLE-layout BVH (cm, Y-up, YXZ channels, 60 fps)."""
+    js = style100_joints(body)
+    chans = {j.name: STYLE100_CHANNELS for j in js}
+    chans["Hips"] = STYLE100_ROOT_CHANNELS
+    return _build(js, pos, rot, scale, chans, {"Hips": pos[:, J["pelvis"]]}, name, 1.0 / fps)

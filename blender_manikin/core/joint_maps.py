@@ -11,7 +11,7 @@ Axis and unit conversion
 A :class:`JointMap` names the source's up axis and the direction a performer
 faces in the source's rest convention.  The rotation ``M`` (3x3, det +1)
 takes source left/forward/up to Blender ``+X / -Y / +Z``; positions become
-``p_blender = unit_scale * M @ p_source``.  For both built-in maps (source
+``p_blender = unit_scale * M @ p_source``.  For the built-in maps (source
 +Y up, facing +Z, left +X) this is ``(x, y, z) -> (x, -z, y) * unit_scale``.
 
 Checked on the Bandai Namco files: with the pelvis forward axis
@@ -72,6 +72,29 @@ BVH export) has every cgspeed name, so it maps like CMU but for the spine:
 spine1-3 at the quarters of ``chain(Hips, Spine, Spine1, Spine2, Neck)``, and
 its ``Neck`` (on ``Spine2``, where cgspeed's is on ``Spine1``) is the neck base.
 The hierarchy tells the two rigs apart (:func:`detect_joint_map`).
+
+LaFAN1 (Ubisoft La Forge, CC BY-NC-ND 4.0; ``lafan1``): Hips, Left/RightUpLeg, Leg, Foot,
+Toe, Spine, Spine1, Spine2, Neck, Head, Left/RightShoulder, Arm, ForeArm, Hand; centimetres,
++Y up, 30 fps, ``Zrotation Yrotation Xrotation`` channels.  It has the cgspeed limb names but
+``LeftToe`` (the ball of the foot) where cgspeed and Mixamo have ``LeftToeBase``, which tells
+them apart.  Every OFFSET lies along the parent's local +X, so its zero pose is every chain
+pointing +X, not a T-pose.  Positions as Mixamo's (spine1-3 at the quarters of
+``chain(Hips, Spine, Spine1, Spine2, Neck)``) but for the collar, its ``LeftShoulder``
+(clavicle root, 6 cm off the midline).  Orientations come from the joints' own axes, read off
+the first frame of a LaFAN1 take quoted in a public README (a T-pose, performer facing +Z):
+Hips and Head +X up, +Y forward, +Z left; LeftHand +X along the hand, +Z back of the hand
+(+Y backward); RightHand +X along the hand, -Z back of the hand; feet +X towards the toe, -Z
+to the performer's left.  One frame, so the hand and head axes are a convention seen once,
+not a measured mean as for Bandai.
+
+100STYLE (Mason et al. 2022, CC BY 4.0; ``100style``) is an Xsens MVN skeleton: Hips, Chest,
+Chest2, Chest3, Chest4, Neck, Head, Left/RightCollar, Shoulder, Elbow, Wrist, Left/RightHip,
+Knee, Ankle, Toe; centimetres, +Y up, faces +Z, 60 fps, ``Yrotation Xrotation Zrotation``;
+zero pose a T-pose with world-aligned frames (so ``rest`` axes, as CMU).  spine1-3 are the
+quarters of ``chain(Hips, Chest, ..., Chest4, Neck)``, the collar ``lerp(Collar, Shoulder;
+0.4)`` (the Collar joint sits 3 cm off the midline), the foot its ``Toe`` (ball of the foot).
+
+Any other rig: a joint-map file (JSON, :func:`load_joint_map`, README "Joint-map files").
 
 Orientations
 ------------
@@ -168,6 +191,7 @@ for legs that suggest about 1.63 m.)
 """
 from __future__ import annotations
 
+import json
 import os
 import re
 import warnings
@@ -178,11 +202,13 @@ import numpy as np
 
 from . import skeleton
 from .bvh import BvhClip
+from .plain import shown
 from .rotations import normalize
 
 __all__ = [
     "Point", "joint", "lerp", "chain", "Axis", "local", "bone", "rest", "OrientationSpec",
-    "JointMap", "BANDAI", "CMU", "MIXAMO", "JOINT_MAPS", "ORIENTED_JOINTS", "MotionClip",
+    "JointMap", "BANDAI", "CMU", "MIXAMO", "LAFAN1", "STYLE100", "JOINT_MAPS", "load_joint_map",
+    "ORIENTED_JOINTS", "MotionClip",
     "detect_joint_map", "get_joint_map", "axis_conversion", "detect_unit_scale",
     "estimate_floor", "clip_to_body_motion", "take_id_from_name", "rest_pose_report",
     "UNIT_CANDIDATES", "REST_FOOT_DIRECTION", "REST_FOOT_PITCH", "BANDAI_FOOT_PITCH",
@@ -447,10 +473,81 @@ def _mixamo() -> JointMap:
                           "Mixamo rig as BVH (mixamorig: names, T-pose rest, Y-up, faces +Z, units detected)")
 
 
+def _lafan1() -> JointMap:
+    """Ubisoft La Forge LaFAN1 (cm, Y-up, 30 fps; see the module docstring).  Every OFFSET lies
+    along the parent's local +X, so the zero pose is every chain pointing +X, not a T-pose;
+    orientations come from the joints' own axes, read off the first frame of a LaFAN1 take
+    (a T-pose): Hips/Head +X up, +Y forward, +Z left; LeftHand +X along the hand, +Z back of
+    the hand; RightHand +X along the hand, -Z back of the hand; LeftFoot/RightFoot +X towards
+    the toe, -Z to the performer's left."""
+    spine = ("Hips", "Spine", "Spine1", "Spine2", "Neck")
+    pos = {
+        "pelvis": joint("Hips"),
+        "spine1": chain(spine, 0.25), "spine2": chain(spine, 0.5), "spine3": chain(spine, 0.75),
+        "neck": joint("Neck"), "head": joint("Head"),
+    }
+    for side, S in (("left", "Left"), ("right", "Right")):
+        pos[f"{side}_hip"] = joint(f"{S}UpLeg")
+        pos[f"{side}_knee"] = joint(f"{S}Leg")
+        pos[f"{side}_ankle"] = joint(f"{S}Foot")
+        pos[f"{side}_foot"] = joint(f"{S}Toe")
+        pos[f"{side}_collar"] = joint(f"{S}Shoulder")
+        pos[f"{side}_shoulder"] = joint(f"{S}Arm")
+        pos[f"{side}_elbow"] = joint(f"{S}ForeArm")
+        pos[f"{side}_wrist"] = joint(f"{S}Hand")
+    ori = {
+        "pelvis": OrientationSpec("Hips", local(1, 0, 0), bone("RightUpLeg", "LeftUpLeg")),
+        "head": OrientationSpec("Head", local(1, 0, 0), local(0, 1, 0)),
+        "left_wrist": OrientationSpec("LeftHand", local(1, 0, 0), local(0, 0, 1)),
+        "right_wrist": OrientationSpec("RightHand", local(1, 0, 0), local(0, 0, -1)),
+        "left_ankle": OrientationSpec("LeftFoot", bone("LeftFoot", "LeftToe"), local(0, 0, -1)),
+        "right_ankle": OrientationSpec("RightFoot", bone("RightFoot", "RightToe"), local(0, 0, -1)),
+    }
+    return JointMap("lafan1", pos, ori, unit_scale=0.01, up="y", forward="z", rest_is_tpose=False,
+                    foot_pitch="auto", parents=(("LeftToe", "LeftFoot"), ("Neck", "Spine2")),
+                    description="Ubisoft La Forge LaFAN1 (cm, Y-up, faces +Z, bones along local +X)")
+
+
+def _style100() -> JointMap:
+    """100STYLE (Mason et al. 2022), an Xsens MVN skeleton: Hips, Chest..Chest4, Neck, Head,
+    Left/RightCollar, Shoulder, Elbow, Wrist, Left/RightHip, Knee, Ankle, Toe; cm, Y-up, faces +Z,
+    the zero pose a T-pose with world-aligned frames (arms along +-X, the Toe joint the ball of
+    the foot 7 cm below and 16 cm ahead of the ankle)."""
+    spine = ("Hips", "Chest", "Chest2", "Chest3", "Chest4", "Neck")
+    pos = {
+        "pelvis": joint("Hips"),
+        "spine1": chain(spine, 0.25), "spine2": chain(spine, 0.5), "spine3": chain(spine, 0.75),
+        "neck": joint("Neck"), "head": joint("Head"),
+    }
+    for side, S in (("left", "Left"), ("right", "Right")):
+        pos[f"{side}_hip"] = joint(f"{S}Hip")
+        pos[f"{side}_knee"] = joint(f"{S}Knee")
+        pos[f"{side}_ankle"] = joint(f"{S}Ankle")
+        pos[f"{side}_foot"] = joint(f"{S}Toe")
+        pos[f"{side}_collar"] = lerp(f"{S}Collar", f"{S}Shoulder", 0.4)
+        pos[f"{side}_shoulder"] = joint(f"{S}Shoulder")
+        pos[f"{side}_elbow"] = joint(f"{S}Elbow")
+        pos[f"{side}_wrist"] = joint(f"{S}Wrist")
+    ori = {
+        "pelvis": OrientationSpec("Hips", rest(), rest()),
+        "head": OrientationSpec("Head", rest(), rest()),
+        "left_wrist": OrientationSpec("LeftWrist", rest(), rest()),
+        "right_wrist": OrientationSpec("RightWrist", rest(), rest()),
+        "left_ankle": OrientationSpec("LeftAnkle", bone("LeftAnkle", "LeftToe"), rest()),
+        "right_ankle": OrientationSpec("RightAnkle", bone("RightAnkle", "RightToe"), rest()),
+    }
+    return JointMap("100style", pos, ori, unit_scale=0.01, up="y", forward="z", rest_is_tpose=True,
+                    foot_pitch="auto", parents=(("Neck", "Chest4"),),
+                    description="100STYLE / Xsens MVN BVH (cm, Y-up, faces +Z, T-pose rest)")
+
+
 BANDAI = _bandai()
 CMU = _cmu()
 MIXAMO = _mixamo()
-JOINT_MAPS: Dict[str, JointMap] = {"bandai": BANDAI, "cmu": CMU, "mixamo": MIXAMO}
+LAFAN1 = _lafan1()
+STYLE100 = _style100()
+JOINT_MAPS: Dict[str, JointMap] = {"bandai": BANDAI, "cmu": CMU, "mixamo": MIXAMO, "lafan1": LAFAN1,
+                                   "100style": STYLE100}
 
 
 # --------------------------------------------------------------------------
@@ -508,10 +605,179 @@ def get_joint_map(joint_map: Union[None, str, JointMap], clip: Optional[BvhClip]
         if clip is None:
             raise ValueError("auto-detecting a joint map needs a clip")
         return detect_joint_map(clip.joint_names, clip.parents)
+    if str(joint_map).lower().endswith(".json"):
+        return load_joint_map(joint_map)
     try:
         return JOINT_MAPS[str(joint_map).lower()]
     except KeyError:
-        raise ValueError(f"unknown joint map {joint_map!r}; known: {', '.join(JOINT_MAPS)}") from None
+        raise ValueError(f"unknown joint map {joint_map!r}; known: {', '.join(JOINT_MAPS)} "
+                         "or a joint-map .json file") from None
+
+
+# --------------------------------------------------------------------------
+# joint-map files
+_FILE_KEYS = {"name", "positions", "orientations", "units", "up", "forward", "rest_is_tpose",
+              "foot_pitch", "parents", "description"}
+
+
+def _file_point(v, where):
+    """A :class:`Point` from a file's position entry: ``"Joint"``, ``{"lerp": [a, b], "t": t}``
+    or ``{"chain": [a, b, ...], "at": f}``."""
+    if isinstance(v, str) and v.strip():
+        return joint(v.strip())
+    if isinstance(v, dict):
+        names = v.get("lerp", v.get("chain"))
+        kind = "lerp" if "lerp" in v else "chain" if "chain" in v else None
+        key = "t" if kind == "lerp" else "at"
+        extra = sorted(set(v) - {kind, key})
+        ok_names = (isinstance(names, list) and all(isinstance(n, str) and n.strip() for n in names)
+                    and (len(names) == 2 if kind == "lerp" else len(names) >= 2))
+        f = v.get(key)
+        ok_f = isinstance(f, (int, float)) and not isinstance(f, bool) and 0.0 <= f <= 1.0
+        if kind and ok_names and ok_f and not extra:
+            return lerp(names[0], names[1], f) if kind == "lerp" else chain(names, f)
+    raise ValueError(f"{where}: bad position {shown(v)} (expected a joint name, "
+                     '{"lerp": ["A", "B"], "t": 0..1} or {"chain": ["A", "B", ...], "at": 0..1})')
+
+
+def _file_axis(v, where):
+    """An :class:`Axis` from ``"rest"``, a local axis (``"+x"``, ``"-z"``, ``[x, y, z]``) or
+    ``{"bone": ["A", "B"]}``."""
+    if v == "rest":
+        return rest()
+    if isinstance(v, str) and re.fullmatch(r"[+-]?[xyzXYZ]", v.strip()):
+        return local(*_axis_vec(v))
+    if (isinstance(v, list) and len(v) == 3 and all(isinstance(x, (int, float)) and not isinstance(x, bool)
+                                                    for x in v) and any(x != 0 for x in v)):
+        return local(*v)
+    if (isinstance(v, dict) and set(v) == {"bone"} and isinstance(v["bone"], list) and len(v["bone"]) == 2
+            and all(isinstance(n, str) and n.strip() for n in v["bone"])):
+        return bone(*v["bone"])
+    raise ValueError(f"{where}: bad axis {shown(v)} (expected \"rest\", a local axis such as \"+x\" "
+                     'or [1, 0, 0], or {"bone": ["A", "B"]})')
+
+
+def _default_orientation(name, pos, where):
+    """Default for an oriented joint a file leaves out: the T-pose rest axes (``rest``) on the
+    joint its position names; the ankles' primary axis is the bone ankle -> ball of the foot."""
+    p = pos[name]
+    if p.kind != "joint":
+        raise ValueError(f"{where}: orientations.{name} is needed, since positions.{name} is "
+                         f"{p.describe()}, not a single joint")
+    if name.endswith("_ankle"):
+        f = pos[name.replace("_ankle", "_foot")]
+        if f.kind != "joint":
+            raise ValueError(f"{where}: orientations.{name} is needed, since positions."
+                             f"{name.replace('_ankle', '_foot')} is not a single joint")
+        return OrientationSpec(p.joints[0], bone(p.joints[0], f.joints[0]), rest())
+    return OrientationSpec(p.joints[0], rest(), rest())
+
+
+def load_joint_map(path) -> JointMap:
+    """Read a joint-map file (JSON, see README "Joint-map files") into a :class:`JointMap`.
+
+    Required: ``positions`` with a source point for each of the 22 body joints
+    (``skeleton.JOINT_NAMES``).  Optional: ``name`` (default: the file stem), ``units``
+    (metres per source unit, a name in :data:`UNIT_CANDIDATES` or ``"auto"``; default
+    ``"auto"``), ``up`` / ``forward`` (source axes, default ``"y"`` / ``"z"``),
+    ``rest_is_tpose`` (default ``true``), ``foot_pitch`` (degrees, ``"auto"`` (default) or
+    ``null``), ``orientations`` (per joint of :data:`ORIENTED_JOINTS`: ``{"joint": J,
+    "primary": AXIS, "secondary": AXIS}``; a joint left out takes its position's joint with the
+    T-pose rest axes, the ankles the bone ankle -> ball of the foot, which needs
+    ``rest_is_tpose``), ``parents`` (``[[child, parent], ...]`` for detection) and
+    ``description``.  Errors name the file and the problem.
+    """
+    from .recording import read_text
+    where = os.fspath(path)
+    try:
+        text = read_text(path)
+    except OSError as exc:
+        raise ValueError(f"{where}: cannot read the joint-map file ({exc.strerror or exc})") from None
+    try:
+        data = json.loads(text)
+    except json.JSONDecodeError as exc:
+        raise ValueError(f"{where}: not valid JSON (line {exc.lineno}: {exc.msg})") from None
+    if not isinstance(data, dict):
+        raise ValueError(f"{where}: expected a JSON object with \"positions\"")
+    unknown = sorted(set(data) - _FILE_KEYS)
+    if unknown:
+        raise ValueError(f"{where}: unknown field(s) {', '.join(unknown)} (expected "
+                         f"{', '.join(sorted(_FILE_KEYS))})")
+    positions = data.get("positions")
+    if not isinstance(positions, dict):
+        raise ValueError(f"{where}: \"positions\" must be an object naming a source joint for each body "
+                         f"joint ({', '.join(JN)})")
+    bad = sorted(set(positions) - set(JN))
+    if bad:
+        raise ValueError(f"{where}: positions: unknown body joint(s) {', '.join(bad)} "
+                         f"(body joints: {', '.join(JN)})")
+    missing = [n for n in JN if n not in positions]
+    if missing:
+        raise ValueError(f"{where}: positions: missing body joint(s) {', '.join(missing)}")
+    pos = {n: _file_point(positions[n], f"{where}: positions.{n}") for n in JN}
+
+    units = data.get("units", "auto")
+    if isinstance(units, bool) or not (
+            (isinstance(units, (int, float)) and np.isfinite(units) and units > 0)
+            or units == "auto" or units in UNIT_CANDIDATES):
+        raise ValueError(f"{where}: units must be metres per unit (a positive number), \"auto\" or one of "
+                         f"{', '.join(UNIT_CANDIDATES)}; got {shown(units)}")
+    if isinstance(units, str) and units != "auto":
+        units = UNIT_CANDIDATES[units]
+    up, fwd = data.get("up", "y"), data.get("forward", "z")
+    for k, v in (("up", up), ("forward", fwd)):
+        if not (isinstance(v, str) and re.fullmatch(r"[+-]?[xyzXYZ]", v.strip())):
+            raise ValueError(f"{where}: {k} must be an axis such as \"y\" or \"-z\"; got {shown(v)}")
+    try:
+        axis_conversion(up, fwd)
+    except ValueError as exc:
+        raise ValueError(f"{where}: {exc}") from None
+    tpose = data.get("rest_is_tpose", True)
+    if not isinstance(tpose, bool):
+        raise ValueError(f"{where}: rest_is_tpose must be true or false; got {shown(tpose)}")
+    fp = data.get("foot_pitch", "auto")
+    if not (fp is None or fp == "auto" or (isinstance(fp, (int, float)) and not isinstance(fp, bool)
+                                            and 0.0 <= fp <= 70.0)):
+        raise ValueError(f"{where}: foot_pitch must be degrees (0-70), \"auto\" or null; got {shown(fp)}")
+
+    oris_in = data.get("orientations", {})
+    if not isinstance(oris_in, dict):
+        raise ValueError(f"{where}: \"orientations\" must be an object")
+    bad = sorted(set(oris_in) - set(ORIENTED_JOINTS))
+    if bad:
+        raise ValueError(f"{where}: orientations: unknown joint(s) {', '.join(bad)} "
+                         f"(oriented joints: {', '.join(ORIENTED_JOINTS)})")
+    ori = {}
+    for n in ORIENTED_JOINTS:
+        w = f"{where}: orientations.{n}"
+        if n not in oris_in:
+            ori[n] = _default_orientation(n, pos, where)
+            if not tpose:
+                raise ValueError(f"{w} is needed: the default (the T-pose rest axes) needs "
+                                 "\"rest_is_tpose\": true")
+            continue
+        o = oris_in[n]
+        if not (isinstance(o, dict) and set(o) == {"joint", "primary", "secondary"}
+                and isinstance(o["joint"], str) and o["joint"].strip()):
+            raise ValueError(f'{w}: expected {{"joint": "Name", "primary": AXIS, "secondary": AXIS}}, '
+                             f"got {shown(o)}")
+        ori[n] = OrientationSpec(o["joint"].strip(), _file_axis(o["primary"], f"{w}.primary"),
+                                 _file_axis(o["secondary"], f"{w}.secondary"))
+        if not tpose and "rest" in (ori[n].primary.kind, ori[n].secondary.kind):
+            raise ValueError(f'{w}: "rest" axes need "rest_is_tpose": true')
+
+    parents = data.get("parents", [])
+    if not (isinstance(parents, list) and all(
+            isinstance(p, list) and len(p) == 2 and all(isinstance(x, str) and x.strip() for x in p)
+            for p in parents)):
+        raise ValueError(f'{where}: parents must be a list of ["child", "parent"] joint names; got {shown(parents)}')
+    name = data.get("name", os.path.splitext(os.path.basename(where))[0])
+    desc = data.get("description", f"joint-map file {os.path.basename(where)}")
+    for k, v in (("name", name), ("description", desc)):
+        if not (isinstance(v, str) and v.strip()):
+            raise ValueError(f"{where}: {k} must be a non-empty string; got {shown(v)}")
+    return JointMap(name, pos, ori, unit_scale=units, up=up.strip(), forward=fwd.strip(), rest_is_tpose=tpose,
+                    foot_pitch=fp, parents=tuple(tuple(p) for p in parents), description=desc)
 
 
 # --------------------------------------------------------------------------
@@ -802,8 +1068,9 @@ def clip_to_body_motion(clip: BvhClip, joint_map: Union[None, str, JointMap] = N
                         name: Optional[str] = None) -> MotionClip:
     """Map a BVH clip onto the 22-joint body (metres, Blender axes, floor z = 0).
 
-    ``joint_map``: a :class:`JointMap`, a registered name (``"bandai"``,
-    ``"cmu"``, ``"mixamo"``) or ``None``/``"auto"`` to detect it from the joint names.
+    ``joint_map``: a :class:`JointMap`, a registered name (``"bandai"``, ``"cmu"``,
+    ``"mixamo"``, ``"lafan1"``, ``"100style"``), the path of a joint-map ``.json`` file
+    (:func:`load_joint_map`) or ``None``/``"auto"`` to detect it from the joint names.
     ``unit_scale``: metres per source unit, ``"auto"``, or ``None`` for the
     map's default.  ``floor``: ``"auto"`` or the floor height in metres in
     converted axes.  ``up``/``forward`` override the map's source axes.

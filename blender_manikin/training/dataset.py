@@ -106,7 +106,9 @@ class MotionSource:
 
     path: a folder, a file or a tar archive of BVH or ASF/AMC takes.  name: what the model card
     calls it (default: the file name).  joint_map: ``"bandai"``, ``"cmu"`` (cgspeed BVH),
-    ``"cmu_asf"`` (CMU/HDM05 ASF) or ``None`` (detected from the joint names).  unit_scale:
+    ``"mixamo"``, ``"lafan1"``, ``"100style"``, ``"cmu_asf"`` (CMU/HDM05 ASF), a joint-map
+    ``.json`` file (:func:`core.joint_maps.load_joint_map`; relative to the sources file) or
+    ``None`` (detected from the joint names).  unit_scale:
     metres per source unit, ``"auto"``, or ``None`` (the map's).  up / forward: the source's
     up and facing axes (``"y"``, ``"z"``, ...; ``None``: the map's).  fps: the takes' frame rate
     (AMC, which does not state it: default 120; BVH: replaces the files' Frame Time).  licence:
@@ -127,8 +129,13 @@ class MotionSource:
 
     def read_options(self):
         """The options that change the cached ground truth (part of the cache key)."""
-        return {k: getattr(self, k) for k in ("joint_map", "unit_scale", "up", "forward", "fps")
+        opts = {k: getattr(self, k) for k in ("joint_map", "unit_scale", "up", "forward", "fps")
                 if getattr(self, k) is not None}
+        jm = opts.get("joint_map")
+        if isinstance(jm, str) and jm.lower().endswith(".json") and os.path.isfile(jm):
+            with open(jm, "rb") as f:      # an edited joint-map file makes new ground truth
+                opts["joint_map_sha1"] = hashlib.sha1(f.read()).hexdigest()
+        return opts
 
 
 #: licences of the sources this project knows by name (the sources file can state any other)
@@ -136,6 +143,8 @@ KNOWN_LICENCES = {
     "bandai": "CC BY-NC-ND 4.0 (Bandai Namco Research Motiondataset; non-commercial, no derivatives)",
     "hdm05": "CC BY-SA 3.0 (HDM05; share-alike)",
     "cmu": "CMU Graphics Lab Motion Capture Database: free for all uses",
+    "lafan1": "CC BY-NC-ND 4.0 (Ubisoft La Forge LaFAN1; non-commercial, no derivatives)",
+    "100style": "CC BY 4.0 (100STYLE, Mason et al. 2022; attribution, commercial use allowed)",
 }
 
 
@@ -202,8 +211,14 @@ def _check_source(src):
         if not (v is None and k != "path") and not (isinstance(v, str) and v.strip()):
             return f"{k} must be a non-empty string, got {v!r}"
     maps = sorted(set(joint_maps.JOINT_MAPS) | {"cmu_asf"})
-    if src.joint_map is not None and src.joint_map not in maps:
-        return f"unknown joint_map {src.joint_map!r} (expected one of {', '.join(maps)})"
+    if isinstance(src.joint_map, str) and src.joint_map.lower().endswith(".json"):
+        try:
+            joint_maps.load_joint_map(src.joint_map)
+        except ValueError as exc:
+            return f"joint_map file: {exc}"
+    elif src.joint_map is not None and src.joint_map not in maps:
+        return (f"unknown joint_map {src.joint_map!r} (expected one of {', '.join(maps)} "
+                "or a joint-map .json file)")
     u = src.unit_scale
     if u is not None and not (number(u) and u > 0) and not (isinstance(u, str) and (
             u == "auto" or u in joint_maps.UNIT_CANDIDATES)):
@@ -247,6 +262,10 @@ def load_sources(path):
             raise ValueError(f"{where}: unknown field(s) {', '.join(unknown)} "
                              f"(expected {', '.join(sorted(fields))})")
         src = MotionSource(**entry)
+        jm = src.joint_map
+        if isinstance(jm, str) and jm.lower().endswith(".json"):      # relative to the sources file
+            jm = os.path.expanduser(jm)
+            src.joint_map = jm if os.path.isabs(jm) else os.path.join(os.path.dirname(os.path.abspath(path)), jm)
         problem = _check_source(src)
         if problem:
             raise ValueError(f"{where}: {problem}")
