@@ -11,7 +11,8 @@ from blender_manikin.core import bone_maps  # noqa: E402
 from blender_manikin.core import rotations as rot  # noqa: E402
 from blender_manikin.core import skeleton as sk  # noqa: E402
 
-from blender_util import evaluated_heads, fresh_scene, mixamo_style_character, synthetic_result  # noqa: E402
+from blender_util import (build_armature, evaluated_heads, fresh_scene, humanoid_bones,  # noqa: E402
+                          humanoid_joints, mixamo_style_character, synthetic_result)
 
 T = 30
 
@@ -71,6 +72,35 @@ def test_retarget_onto_an_a_pose_mixamo_rig(addon):
     short = mixamo_style_character("Short", stature=1.5)
     _, out, notes = retarget_apply.retarget_onto(src, short, "mixamo", None, "as_is", True)
     assert any("out of the character's reach" in n for n in notes), notes
+
+
+def test_a_character_resting_palms_forward_gets_the_performers_hands(addon):
+    """A T-pose character resting palms-forward, its fingers on the turned palms: the retarget keeps
+    the finger bones it reads the rest palms from, so each hand has the performer's hand turn
+    (before: 90° off, the rest taken as palms-down), and the notes say the hands were turned."""
+    res, src = _source()
+    P = humanoid_joints(1.8, 0.0)
+    names = bone_maps.preset("mixamo").bones
+    bones = humanoid_bones(P, names)
+    Tw = rot.axis_angle_rotation(np.array([1.0, 0.0, 0.0]), np.radians(-90.0))   # palm-down -> palm-forward
+    for side, S, sx in (("left", "Left", 1.0), ("right", "Right", -1.0)):
+        w = P[sk.J[f"{side}_wrist"]]
+        for n, off in (("Index", (0.09, -0.03, 0.0)), ("Pinky", (0.08, 0.03, 0.0)), ("Thumb", (0.03, -0.04, -0.01))):
+            h = w + Tw @ np.array([sx * off[0], off[1], off[2]])
+            bones.append((f"mixamorig:{S}Hand{n}1", f"mixamorig:{S}Hand", h, h + np.array([sx * 0.03, 0.0, 0.0])))
+    char = build_armature("PalmsForward", bones, seed=5)
+    _, out, notes = retarget_apply.retarget_onto(src, char, "mixamo", None, "as_is", False)
+    assert sum("rests turned 90° from palms-down" in n for n in notes) == 2, notes
+    pos, world = res.fk()
+    W = np.array(char.matrix_world)[:3, :3]
+    for k in (0, 11, 29):
+        bpy.context.scene.frame_set(1 + k)
+        for side, S in (("left", "Left"), ("right", "Right")):
+            b = f"mixamorig:{S}Hand"
+            rest = W @ np.array(char.data.bones[b].matrix_local)[:3, :3]
+            want = world[k, sk.J[f"{side}_wrist"]] @ Tw.T @ rest     # the hand in the body's rest, posed
+            got = W @ np.array(char.pose.bones[b].matrix)[:3, :3]
+            assert np.degrees(rot.geodesic_angle(got, want)) < 1.0, (k, side)
 
 
 def test_retarget_directions_without_keep_ends_and_a_saved_map(addon, tmp_path):

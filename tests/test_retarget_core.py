@@ -1073,3 +1073,166 @@ def test_a_rigs_end_bones_read_back_as_the_bodys_orientations(apose_deg, turned)
         want = F @ wrot[:, J[j]] @ F.T @ F
         ang = np.degrees(rot.geodesic_angle(got[j], want)).max()
         assert ang < 1e-4, (j, ang)                # degrees
+
+
+def _rig_with_turned_hands(body, apose_deg, turn_deg, seed=7, forearm_twist=False):
+    """A Mixamo-named rig (random rolls) whose hands rest turned about their bones by ``turn_deg``
+    (left, right) from the body's palms-down (turned with the arm in an A-pose), with index,
+    middle, ring, little finger and thumb bones placed on that turned palm.  Returns ``(rig, map,
+    M)``: M ``{wrist joint: (3, 3)}`` the hand bone's world orientation in the body's rest pose
+    (palms down, T-pose), what the body's wrist rotation poses."""
+    rig, bmap, _ = mixamo_rig(body, seed=seed, extra=False, apose_deg=apose_deg)
+    leaf = end_site_offsets(body)
+    names, B, heads = list(rig.names), list(rig.rest_rot), list(rig.heads)
+    parents = [rig.names[p] if p >= 0 else None for p in rig.parents]
+    M = {}
+    for (side, S, sgn), turn in zip((("left", "Left", 1.0), ("right", "Right", -1.0)), turn_deg):
+        e = rot.normalize(leaf[J[f"{side}_wrist"]])
+        Ra = rot.axis_angle_rotation(np.array([0, 1.0, 0]), np.array(sgn * np.radians(apose_deg)))
+        Tw = rot.axis_angle_rotation(e, np.array(np.radians(turn)))
+        k = rig.index[f"mixamorig:{S}Hand"]
+        M[f"{side}_wrist"] = Ra.T @ rig.rest_rot[k]             # Y along e, the rig's random roll
+        B[k] = Ra @ Tw @ M[f"{side}_wrist"]
+        # knuckles across the palm-down hand, thumb side (-Y, the body faces -Y) to little finger
+        for n, off in (("Index", (0.09, -0.03, 0.0)), ("Middle", (0.095, -0.01, 0.0)),
+                       ("Ring", (0.09, 0.01, 0.0)), ("Pinky", (0.08, 0.03, 0.0)), ("Thumb", (0.03, -0.04, -0.01))):
+            o = np.array([sgn * off[0], off[1], off[2]])
+            for i in (1, 2):
+                names.append(f"mixamorig:{S}Hand{n}{i}")
+                parents.append(f"mixamorig:{S}Hand" if i == 1 else f"mixamorig:{S}Hand{n}1")
+                B.append(Ra @ Tw @ _frame(o, rng=np.random.default_rng(i)))
+                heads.append(rig.heads[k] + Ra @ Tw @ (o * (1.0 + 0.4 * (i - 1))))
+        if forearm_twist:
+            ke = rig.index[f"mixamorig:{S}ForeArm"]
+            names.append(f"mixamorig:{S}ForeArmTwist")
+            parents.append(f"mixamorig:{S}ForeArm")
+            B.append(rig.rest_rot[ke])
+            heads.append(0.5 * (rig.heads[ke] + rig.heads[k]))
+            bmap.twist[f"{side}_elbow"] = [f"mixamorig:{S}ForeArmTwist"]
+    return rt.TargetRig(names, parents, np.array(B), np.array(heads)), bmap, M
+
+
+@pytest.mark.parametrize("apose_deg, turn", [(0.0, (-90.0, 90.0)), (40.0, (30.0, 30.0)), (40.0, (-25.0, 35.0))])
+def test_a_rig_resting_with_its_palms_turned_gets_the_bodys_hand_turn(apose_deg, turn):
+    """A rig resting palms-forward (T-pose) or with its hands turned 30° in an A-pose: its rest palm
+    is read from its finger bones, so the retargeted hand has the body's hand orientation (before,
+    the rest twist was taken as palms-down and the hand came out 90° / 30° off), the plan says so,
+    and the rest of the rig is as without the turn."""
+    body, local, root, pos, wrot = _smooth_source(frames=30, seed=2)
+    rig, bmap, M = _rig_with_turned_hands(body, apose_deg, turn)
+    res = rt.retarget(wrot, pos, body, rig, bmap, "scaled")
+    Gw = res.world_orientations()
+    for side, S, t in (("left", "Left", turn[0]), ("right", "Right", turn[1])):
+        j = f"{side}_wrist"
+        ang = np.degrees(rot.geodesic_angle(Gw[:, rig.index[f"mixamorig:{S}Hand"]], wrot[:, J[j]] @ M[j])).max()
+        assert ang < 1.0, (j, ang)
+        assert res.plan.palms[j].startswith(f"fingers 'mixamorig:{S}HandIndex1' to 'mixamorig:{S}HandPinky1'")
+        assert f"{abs(t):.0f}° from palms-down" in " ".join(res.plan.notes)
+    # the same rig resting palms-down: every other bone as before
+    flat, _, _ = _rig_with_turned_hands(body, apose_deg, (0.0, 0.0))
+    ref = rt.retarget(wrot, pos, body, flat, bmap, "scaled")
+    assert ref.plan.notes == [] and "+0.0°" in ref.plan.palms["left_wrist"]
+    others = [k for k, n in enumerate(rig.names) if "Hand" not in n]
+    np.testing.assert_allclose(res.world_orientations()[:, others], ref.world_orientations()[:, others], atol=1e-9)
+
+
+def test_a_turned_rest_palm_is_carried_by_the_forearm_twist_bones():
+    """With a forearm twist bone the rest palm's turn is shared along the forearm as any forearm
+    twist is (the twist bone half-way takes 3/4 of it, the forearm 1/4), the hand has it whole."""
+    body, local, root, pos, wrot = _smooth_source(frames=10, seed=2)
+    rig, bmap, M = _rig_with_turned_hands(body, 0.0, (-90.0, 90.0), forearm_twist=True)
+    flat, _, _ = _rig_with_turned_hands(body, 0.0, (0.0, 0.0), forearm_twist=True)
+    a = rt.retarget(wrot, pos, body, rig, bmap, "scaled")
+    b = rt.retarget(wrot, pos, body, flat, bmap, "scaled")
+    assert "twist bones" in " ".join(a.plan.notes)
+    Ga, Gb = a.world_orientations(), b.world_orientations()
+    for S, t in (("Left", -90.0), ("Right", 90.0)):
+        for name, share in ((f"{S}ForeArm", 0.25), (f"{S}ForeArmTwist", 0.75)):
+            k = rig.index[f"mixamorig:{name}"]
+            # the turned rig's bone, turned back by its share of the rest turn (-t), is the flat rig's
+            y = Ga[:, k, :, 1]
+            back = rot.axis_angle_rotation(y, np.full(len(y), np.radians(share * t))) @ Ga[:, k]
+            assert np.degrees(rot.geodesic_angle(back, Gb[:, k])).max() < 0.5, name
+        k = rig.index[f"mixamorig:{S}Hand"]
+        j = "left_wrist" if S == "Left" else "right_wrist"
+        assert np.degrees(rot.geodesic_angle(Ga[:, k], wrot[:, J[j]] @ M[j])).max() < 1.0
+
+
+def test_a_rig_without_finger_bones_keeps_its_rest_palm_and_says_so():
+    body, local, root, pos, wrot = _smooth_source(frames=5, seed=2)
+    rig, bmap, _ = mixamo_rig(body)                      # one finger bone per hand: no knuckle line
+    plan = rt.make_plan(body, rig, bmap)
+    assert plan.palms["left_wrist"].startswith("assumed palms-down") and plan.notes == []
+
+
+@pytest.mark.parametrize("apose_deg, turn", [(0.0, (-90.0, 90.0)), (40.0, (30.0, -30.0))])
+def test_an_armatures_palm_up_hand_reads_back_palm_up_whatever_its_rest_palm(apose_deg, turn):
+    """rig_keypoints.end_orientations on a rig resting palms-forward or with its hands turned 30°:
+    a hand bone turned palm-up (180° about the arm, the arm held out sideways) and one lowered,
+    palm-forward, read back as those body wrist rotations (before: off by the rest turn)."""
+    from blender_manikin.core import rig_keypoints as rk
+    body = sk.make_body()
+    rig, bmap, M = _rig_with_turned_hands(body, apose_deg, turn)
+    leaf = end_site_offsets(body)
+    e = rot.normalize(leaf[J["left_wrist"]])
+    want = {"left_wrist": rot.axis_angle_rotation(np.stack([e, e]), np.radians([180.0, 170.0])),
+            "right_wrist": np.stack([rot.axis_angle_rotation(np.array([0, 1.0, 0]), np.radians(80.0)) @
+                                     rot.axis_angle_rotation(np.array([1.0, 0, 0]), np.radians(90.0)), np.eye(3)])}
+    got = rk.end_orientations(rig, rk.checked_map(bmap, rig.names), {j: R @ M[j] for j, R in want.items()})
+    for j, R in want.items():
+        ang = np.degrees(rot.geodesic_angle(got[j], R)).max()
+        assert ang < 1.0, (j, ang)
+
+
+def test_finger_knuckles_by_name_and_kept_by_a_restricted_rig():
+    """finger_knuckles finds each finger's knuckle bone below the hand whatever the rig's naming
+    (metacarpals skipped, the thumb and props ignored); finger_bones keeps them when the rig is
+    restricted to the driven bones, so the restricted rig turns its hands as the full one does."""
+    def knuckles(bones):
+        names = ["hand"] + [n for n, _ in bones]
+        tg = rt.TargetRig(names, [None] + [p for _, p in bones], np.broadcast_to(np.eye(3), (len(names), 3, 3)),
+                          np.zeros((len(names), 3)))
+        return {f: tg.names[b] for f, b in rt.finger_knuckles(tg, "hand").items()}
+
+    assert knuckles([("index_metacarpal_l", "hand"), ("index_01_l", "index_metacarpal_l"),
+                     ("pinky_metacarpal_l", "hand"), ("pinky_01_l", "pinky_metacarpal_l"),
+                     ("thumb_01_l", "hand"), ("weapon_l", "hand")]) == {0: "index_01_l", 3: "pinky_01_l"}
+    assert knuckles([("DEF-palm.01.L", "hand"), ("DEF-f_index.01.L", "DEF-palm.01.L"),
+                     ("DEF-f_index.02.L", "DEF-f_index.01.L"), ("DEF-palm.04.L", "hand"),
+                     ("DEF-f_pinky.01.L", "DEF-palm.04.L"), ("DEF-thumb.01.L", "DEF-palm.01.L")]) \
+        == {0: "DEF-f_index.01.L", 3: "DEF-f_pinky.01.L"}
+    assert knuckles([("index1_base.l", "hand"), ("index1.l", "index1_base.l"), ("c_ring1_base.l", "hand"),
+                     ("ring1.l", "c_ring1_base.l")]) == {0: "index1.l", 2: "ring1.l"}
+    assert knuckles([("CC_Base_L_Mid1", "hand"), ("CC_Base_L_Pinky1", "hand"), ("CC_Base_L_Thumb1", "hand")]) \
+        == {1: "CC_Base_L_Mid1", 3: "CC_Base_L_Pinky1"}
+    assert knuckles([("lCarpal1", "hand"), ("lIndex1", "lCarpal1"), ("lCarpal2", "hand"), ("lPinky1", "lCarpal2")]) \
+        == {0: "lIndex1", 3: "lPinky1"}
+    assert knuckles([("finger1-1.L", "hand"), ("finger2-1.L", "hand"), ("finger5-1.L", "hand")]) \
+        == {0: "finger2-1.L", 3: "finger5-1.L"}
+    body, local, root, pos, wrot = _smooth_source(frames=10, seed=2)
+    rig, bmap, M = _rig_with_turned_hands(body, 0.0, (-90.0, 90.0))
+    small = rig.restricted_to(bmap.target_bones() + rt.finger_bones(rig, bmap))
+    res = rt.retarget(wrot, pos, body, small, bmap, "scaled")
+    k = small.index["mixamorig:LeftHand"]
+    want = wrot[:, J["left_wrist"]] @ M["left_wrist"]
+    assert np.degrees(rot.geodesic_angle(res.world_orientations()[:, k], want)).max() < 1.0
+
+
+def test_a_rest_palm_turned_a_few_degrees_is_taken_as_palms_down():
+    """Knuckles arch and modellers leave hands a little rolled: a rest palm read within
+    ``PALM_TURN_MIN_DEG`` of palms-down is not turned back (the retarget as for a flat palm), and
+    the plan says it was taken so."""
+    body, local, root, pos, wrot = _smooth_source(frames=10, seed=2)
+    rig, bmap, M = _rig_with_turned_hands(body, 40.0, (3.0, -3.0))
+    flat, _, _ = _rig_with_turned_hands(body, 40.0, (0.0, 0.0))
+    a = rt.retarget(wrot, pos, body, rig, bmap, "scaled")
+    b = rt.retarget(wrot, pos, body, flat, bmap, "scaled")
+    assert a.plan.notes == []
+    said = a.plan.palms["left_wrist"]
+    assert "(taken as palms-down)" in said and "3.0° from palms-down" in said
+    others = [k for k, n in enumerate(rig.names) if "Hand" not in n]
+    np.testing.assert_allclose(a.world_orientations()[:, others], b.world_orientations()[:, others], atol=1e-9)
+    # the hand keeps the rig's own 3° roll instead of being turned back
+    hand = rig.index["mixamorig:LeftHand"]
+    off = np.degrees(rot.geodesic_angle(a.world_orientations()[:, hand], b.world_orientations()[:, hand]))
+    np.testing.assert_allclose(off, 3.0, atol=0.2)

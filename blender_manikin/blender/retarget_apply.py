@@ -384,7 +384,9 @@ def retarget_onto(source_obj, target_obj, bone_map="auto", map_path=None, root_m
     bmap, guess = resolve_bone_map(bone_map, target_obj, map_path)
     # only the bones the map drives and those above them: the retarget's arrays hold a row per
     # bone and frame, and fingers, face and props keep their rest pose under their parent anyway
-    target = target_rig_from_object(target_obj).restricted_to(bone_maps.as_bone_map(bmap).target_bones())
+    # (and the hands' knuckle bones, which show how the rig's rest palms face: rt.make_plan)
+    full = target_rig_from_object(target_obj)
+    target = full.restricted_to(bone_maps.as_bone_map(bmap).target_bones() + rt.finger_bones(full, bmap))
     # the live swivel adds bones: a linked character's armature (a library override's) cannot take
     # them, so it gets plain keys
     linked = live_swivel and not (getattr(target_obj.data, "is_editable", True) and target_obj.data.library is None)

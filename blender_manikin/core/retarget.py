@@ -36,6 +36,15 @@ such child (hand, head, toe) uses its own Y axis.  ``d_k`` is that direction in 
   from ``R'[j] F a_j`` to the actual ``p'[c] - p'[j]`` (see :mod:`.bone_maps` on folding).  A bone with
   no usable segment (its chain child's head on its own head, e.g. Rigify's ``torso`` control) and no
   end role keeps ``O_k = I``.
+* Hands: the swing leaves a hand's twist about its bone as the rig's rest has it, and the body's
+  rest hand is palms-down (T-pose).  Where the hand bone has finger bones (two of the index,
+  middle, ring and little finger's knuckle bones, by name, :func:`finger_knuckles`) the rig's rest
+  palm is read from them (:func:`rest_palm_turn`: the knuckle line crossed with the hand's axis)
+  and ``O_k`` also twists the hand about its axis by the angle from that palm to the body's, so a
+  rig resting palms-forward or with its hands turned 30° in an A-pose gets the body's hand turn;
+  the forearm's ``O_k`` takes the same twist when it has twist bones (they carry it along the
+  forearm; without, the turn is at the wrist).  Without finger bones the rest palm is taken as the
+  body's (``RetargetPlan.palms`` says which, and ``notes`` each hand turned).
 
 Pose-bone basis
 ---------------
@@ -82,7 +91,7 @@ from typing import Optional
 import numpy as np
 
 from . import rotations as rot
-from .bone_maps import as_bone_map, validate_bone_map
+from .bone_maps import _tokens, as_bone_map, validate_bone_map
 from .export_bvh import end_site_offsets
 from .limb_solver import solve_limbs
 from .skeleton import CHILDREN, JOINT_NAMES, LIMB_NAMES, LIMBS, NUM_JOINTS, PARENTS, Body, J
@@ -255,6 +264,9 @@ class RetargetPlan:
     twist_of: dict               # twist bone -> (main bone, position, count)
     notes: list
     twist_share: dict = field(default_factory=dict)     # main and twist bones -> share of the twist
+    # wrist joint -> how its rest palm was taken: "fingers" (with the knuckle bones and the turn, degrees,
+    # put into ``align``) or "assumed palms-down" (no usable finger bones), see :func:`rest_palm_turn`
+    palms: dict = field(default_factory=dict)
 
 
 def twist_shares(along) -> np.ndarray:
@@ -319,6 +331,137 @@ def _is_ancestor(a, b, parents):
             return True
         n = parents[n]
     return False
+
+
+#: finger name tokens, radial (index) to ulnar (little finger) side
+_FINGERS = (("index",), ("middle", "mid"), ("ring",), ("pinky", "little", "small"))
+#: tokens of a finger's metacarpal bone (UE5's index_metacarpal_l, ARP's index1_base.l, Daz's lCarpal1)
+_METACARPAL = {"metacarpal", "meta", "carpal", "base", "palm"}
+
+
+def _finger_of(name):
+    """0-3 (index, middle, ring, little finger) from a bone name's tokens, None for other bones
+    (the thumb, props).  MakeHuman's ``finger2-1.L`` .. ``finger5-1.L`` count from the thumb."""
+    toks = _tokens(name)
+    if "thumb" in toks:
+        return None
+    for f, words in enumerate(_FINGERS):
+        if any(w in toks for w in words):
+            return f
+    if "finger" in toks:
+        i = toks.index("finger")
+        if i + 1 < len(toks) and toks[i + 1] in ("2", "3", "4", "5"):
+            return int(toks[i + 1]) - 2
+    return None
+
+
+def finger_knuckles(target: TargetRig, hand) -> dict:
+    """``{finger: bone index}``, finger 0-3 = index, middle, ring, little: the knuckle bone of each
+    finger found below the hand bone ``hand`` (an index or name), by name (Mixamo ``LeftHandIndex1``,
+    UE ``index_01_l``, Rigify ``DEF-f_index.01.L``, CC ``CC_Base_L_Mid1``, VRM ``J_Bip_L_Ring1``,
+    ARP ``index1.l``, Daz ``lPinky1``, MakeHuman ``finger5-1.L``): the finger's bone nearest the
+    hand that is not its metacarpal (``index_metacarpal_l``, ``index1_base.l``), else its metacarpal."""
+    k = target.index[hand] if isinstance(hand, str) else int(hand)
+    children = {}
+    for b, p in enumerate(target.parents):
+        children.setdefault(int(p), []).append(b)
+    best = {}
+    todo = [(c, 1) for c in children.get(k, [])]
+    while todo:
+        b, depth = todo.pop(0)
+        f = _finger_of(target.names[b])
+        if f is not None:
+            key = (bool(_METACARPAL & set(_tokens(target.names[b]))), depth)
+            if f not in best or key < best[f][0]:
+                best[f] = (key, b)
+        todo += [(c, depth + 1) for c in children.get(b, [])]
+    return {f: b for f, (_, b) in sorted(best.items())}
+
+
+def finger_bones(target: TargetRig, bone_map) -> list:
+    """Names of the knuckle bones (:func:`finger_knuckles`) of the hands ``bone_map`` maps on
+    ``target``: what :func:`make_plan` reads the rest palms from, to keep when the rig is
+    :meth:`TargetRig.restricted_to` the driven bones."""
+    bm = as_bone_map(bone_map)
+    out = []
+    for side in ("left", "right"):
+        hand = bm.bones.get(f"{side}_wrist")
+        if isinstance(hand, str) and hand in target.index:
+            out += [target.names[b] for b in finger_knuckles(target, hand).values()]
+    return out
+
+
+#: a rest palm turned less than this (degrees) from palms-down by its knuckles is taken as
+#: palms-down: knuckles arch (the little finger's sits lower than the index's: 2.3° on Blender's
+#: human metarig) and modellers leave hands a little rolled, so a smaller turn is not measured
+#: well enough to twist the wrist by
+PALM_TURN_MIN_DEG = 5.0
+
+
+def rest_palm_turn(target: TargetRig, hand, side: str, align_hand, F):
+    """The twist (radians, about the hand's aligned direction) that turns a rig's rest palm, as
+    its fingers show it, onto the body's rest palm, or ``None`` without two knuckle bones apart.
+
+    hand: the hand bone (index or name); side: ``"left"`` or ``"right"``; align_hand ``(3, 3)``:
+    the hand bone's world orientation posed into the body's rest (``RetargetPlan.align``, before
+    this turn); F ``(3, 3)``: the facing turn.  The rest palm's normal (world, pointing out of the
+    palm) is perpendicular to the knuckle line (the radial-most of index / middle / ring knuckle
+    heads to the ulnar-most of little / ring / middle, :func:`finger_knuckles`) and to the hand
+    bone's Y axis, on the side the side's hand frame gives it; the body's rest palm faces down
+    (``F`` (0, 0, -1)) in its T-pose.
+    Returns ``(angle, (radial bone, ulnar bone))`` or ``(None, reason)``."""
+    k = target.index[hand] if isinstance(hand, str) else int(hand)
+    kn = finger_knuckles(target, k)
+    if len(kn) < 2:
+        return None, "fewer than two finger bones (index, middle, ring, little finger)"
+    fs = sorted(kn)
+    radial, ulnar = kn[fs[0]], kn[fs[-1]]
+    heads = target.rest_world_heads()
+    G0 = target.rest_world_rot()
+    across = heads[ulnar] - heads[radial]
+    d = G0[k] @ _EY
+    if float(np.linalg.norm(np.cross(across, d))) < max(0.2 * float(np.linalg.norm(across)), 1e-9):
+        return None, f"knuckles {target.names[radial]!r}, {target.names[ulnar]!r} lie along the hand bone"
+    # the hand's frame in the body's convention (X along the hand times the side's sign, Y thumb to
+    # little finger, Z out of the back of the hand) as a keypoint layout's hand is read from its
+    # knuckles (:func:`.keypoint_layouts.body22_from_keypoints`); the palm faces -Z
+    n = -rot.frame_from_axes((1.0 if side == "left" else -1.0) * d, across, "xy")[:, 2]
+    n = align_hand @ (G0[k].T @ n)                           # the palm with the hand in the body's rest
+    a = align_hand @ _EY
+    want = F @ np.array([0.0, 0.0, -1.0])
+    n, want = n - (n @ a) * a, want - (want @ a) * a
+    return float(np.arctan2(a @ np.cross(n, want), n @ want)), (radial, ulnar)
+
+
+def _turn_rest_palms(tg, bone_of, twist_main, src_dir, align, F, notes):
+    """Twist each mapped hand's ``align`` by :func:`rest_palm_turn` (and the forearm's, when the
+    forearm has twist bones, so they carry the turn along the forearm); returns ``palms``."""
+    palms = {}
+    for side in ("left", "right"):
+        j = J[f"{side}_wrist"]
+        k = int(bone_of[j])
+        if k < 0:
+            continue
+        ang, why = rest_palm_turn(tg, k, side, align[j], F)
+        if ang is None:
+            palms[JOINT_NAMES[j]] = f"assumed palms-down ({why})"
+            continue
+        deg = float(np.degrees(ang))
+        palms[JOINT_NAMES[j]] = (f"fingers {tg.names[why[0]]!r} to {tg.names[why[1]]!r}: rests turned "
+                                 f"{(deg if abs(deg) >= 0.05 else 0.0):+.1f}° from palms-down"
+                                 + (" (taken as palms-down)" if abs(deg) < PALM_TURN_MIN_DEG else ""))
+        if abs(deg) < PALM_TURN_MIN_DEG:
+            continue
+        align[j] = rot.axis_angle_rotation(src_dir[j], np.array(ang)) @ align[j]
+        e = J[f"{side}_elbow"]
+        ke = int(bone_of[e])
+        carried = ke >= 0 and ke in twist_main
+        if carried:
+            align[e] = rot.axis_angle_rotation(src_dir[e], np.array(ang)) @ align[e]
+        notes.append(f"{tg.names[k]!r} ({JOINT_NAMES[j]}) rests turned {abs(deg):.0f}° from palms-down, by its "
+                     f"fingers ({tg.names[why[0]]!r} to {tg.names[why[1]]!r}): turned back at the "
+                     + (f"wrist and along {tg.names[ke]!r}'s twist bones" if carried else "wrist"))
+    return palms
 
 
 def make_plan(body: Body, target: TargetRig, bone_map, facing_yaw: Optional[float] = None) -> RetargetPlan:
@@ -418,6 +561,7 @@ def make_plan(body: Body, target: TargetRig, bone_map, facing_yaw: Optional[floa
         align[j] = rot.rotation_between(d, a) @ G0[k]
 
     notes += _segments_starting_above(tg, bone_of, chain_child, twist_of, heads_w, G0)
+    palms = _turn_rest_palms(tg, bone_of, twist_main, src_dir, align, F, notes)
 
     # each segment's twist shared by where its bones sit between its head and the next joint's
     twist_share = {}
@@ -452,7 +596,7 @@ def make_plan(body: Body, target: TargetRig, bone_map, facing_yaw: Optional[floa
     c_s = np.array([body.root_rest[0], body.root_rest[1], 0.0])
     c_t = np.array([root_rest_world[0], root_rest_world[1], 0.0])
     return RetargetPlan(body, tg, bm, bone_of, chain_child, tuple(folded), src_dir, align, F, c_s, c_t,
-                        leg_ratio, root_bone, root_rest_world, twist_main, twist_of, notes, twist_share)
+                        leg_ratio, root_bone, root_rest_world, twist_main, twist_of, notes, twist_share, palms)
 
 
 @dataclass

@@ -30,6 +30,10 @@ as the retarget aligns a rig to the body (:func:`.retarget.make_plan`,
 :func:`.retarget.body_world_from_bones`): the bone's rest direction (to the next mapped joint's
 bone, the ankle's to the toe's; the hand's and head's own Y axis) is swung onto the body's rest
 direction, so a T-pose, an A-pose or any rest with any bone rolls gives the body's rest twist.
+A hand's rest twist is read from its finger bones where it has them (:func:`.retarget.rest_palm_turn`:
+the knuckle line, index to little finger), so a rig resting palms-forward or with its hands
+turned in an A-pose reads a palm-up hand as palm-up; without finger bones the rig is taken as
+resting palms-down (palms to the thighs in an A-pose).
 """
 from __future__ import annotations
 
