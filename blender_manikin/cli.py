@@ -74,6 +74,9 @@ Options of ``solve`` (they mirror the panel; ``--help`` has them all):
                               Plug-in Gait .trc: knee, ankle, elbow widths and height
                               (default: <Subject>.mp / .vsk beside the .trc, or the folder's
                               only .mp; none: use none)
+--person all|N|LABEL          keypoints with several people: all (default: each to its
+                              own outputs, <name>_p<label>) or one person's label or index
+--person-axis 0|1             keypoints: a 4-D array's people axis (default: told)
 --mapping FILE.json           keypoints: a CSV's column names for the layout's points
 --save-layout FILE.json       write the layout detected in the first wide CSV or JSON
 --format blend,fbx,bvh,json,npz  one or several (default blend,fbx,json); without blend
@@ -201,6 +204,14 @@ def _add_solve_options(s):
                         "subject's knee, ankle and elbow widths place the joint centres from lateral markers, "
                         "its Height is the stature unless --height is given (default: <Subject>.mp / .vsk "
                         "beside the .trc, or the folder's only .mp; 'none': none)")
+    s.add_argument("--person", default="all", metavar="all|N|LABEL",
+                   help="keypoints with several people (a 4-D array, a CSV with a person column): all "
+                        "(default: each solved to its own outputs, <name>_p<label>) or one person's label "
+                        "or 0-based index")
+    s.add_argument("--person-axis", type=int, choices=(0, 1), default=None,
+                   help="keypoints: a 4-D array's people axis, 0 (people, frames, points, 3|4) or 1 "
+                        "(frames, people, points, 3|4) (default: the .npz's person_axis, else the "
+                        "axis much shorter than the other)")
     s.add_argument("--mapping", default=None, metavar="FILE.json",
                    help="keypoints: a CSV's columns for the layout's points "
                         '({"layout": "coco17", "columns": {"nose": "Nose", ...}})')
@@ -395,6 +406,8 @@ def solve_settings(args):
                        despike=not getattr(args, "keep_spikes", False),
                        keypoint_floor=getattr(args, "keypoint_floor", "feet"),
                        subject_params=getattr(args, "subject_params", None),
+                       person=getattr(args, "person", "all"),
+                       person_axis=getattr(args, "person_axis", None),
                        overlap=getattr(args, "overlap", SolveSettings.overlap),
                        teleports=getattr(args, "teleports", SolveSettings.teleports),
                        start=getattr(args, "start", None), end=getattr(args, "end", None),
@@ -660,36 +673,82 @@ def main(argv=None):
         return 1
     # two inputs named alike never write the same file; names Windows accepts, paths under 260
     stems = output_stems(inputs, args.out, output_tail(formats))
+    jobs = []               # (input, stem, person or None): a keypoint file with several people, one each
+    for path in inputs:
+        people = keypoint_people(path, args)
+        if people and len(people) > 1:
+            jobs.extend((path, s, lab) for lab, s in zip(people, person_stems(stems[path], people)))
+        else:
+            jobs.append((path, stems[path], None))
     failed = done = 0
     path = inputs[0]
     with _ctrl_c() as interrupted:
         try:
-            for path in inputs:
+            for path, stem, person in jobs:
                 try:
                     if not os.path.isfile(path) and not is_keypoint_input(path):
                         raise FileNotFoundError("no such file")
                     # nothing the user made or changed is replaced (core/output_guard.py)
-                    dsts = [os.path.join(args.out, stems[path] + _formats.WRITERS[f].extension) for f in formats]
+                    dsts = [os.path.join(args.out, stem + _formats.WRITERS[f].extension) for f in formats]
                     output_guard.check_free(dsts, getattr(args, "overwrite", False))
                     output_guard.claim(dsts)
+                    run_args = args if person is None else argparse.Namespace(**{**vars(args), "person": person})
                     with quiet_stdout():
-                        written, job = convert(path, args.out, args, formats, stems[path])
+                        written, job = convert(path, args.out, run_args, formats, stem)
                     output_guard.record(written)
                 except Exception as exc:      # one bad input does not stop the others
                     if interrupted:           # Ctrl-C, turned into an error by a Blender operator
                         raise KeyboardInterrupt from exc
                     failed += 1
                     done += 1
-                    print(f"ERROR {path}: {error_message(exc)}", file=sys.stderr, flush=True)
+                    who = "" if person is None else f" [person {person}]"
+                    print(f"ERROR {path}{who}: {error_message(exc)}", file=sys.stderr, flush=True)
                     continue
                 done += 1
-                print(f"OK {path} -> {', '.join(written)} ({job.summary()})", flush=True)
+                who = "" if person is None else f" [person {person} of {_people_said(path, jobs)}]"
+                print(f"OK {path}{who} -> {', '.join(written)} ({job.summary()})", flush=True)
                 save_layout_once(args, job.recording)
         except KeyboardInterrupt:
             print(f"blender_manikin: interrupted during {path}: {done - failed} input(s) converted, "
                   f"{len(inputs) - done} not", file=sys.stderr, flush=True)
             return 130
     return 1 if failed else 0
+
+
+def keypoint_people(path, args):
+    """The labels of the people a keypoint file at ``path`` holds with ``--person all`` (the
+    default), or None: not a keypoint file, one person, one chosen with ``--person``, or a file
+    that cannot be read (its solve then says why)."""
+    from .core.io_keypoints import is_keypoint_input, read_keypoint_people
+    from .core.recording import RecordingError
+    if str(getattr(args, "person", "all") or "all").strip().lower() != "all":
+        return None
+    try:
+        if not is_keypoint_input(path):
+            return None
+        layout = str(getattr(args, "layout", None) or "").strip().lower()
+        people = read_keypoint_people(path, layout=layout if layout in _keypoint_layouts() else None,
+                                      rate=getattr(args, "rate", None), mapping=getattr(args, "mapping", None),
+                                      up=getattr(args, "up", None), units=getattr(args, "units", None),
+                                      person_axis=getattr(args, "person_axis", None),
+                                      subject_params=getattr(args, "subject_params", None))
+    except (RecordingError, OSError, ValueError):
+        return None
+    return [lab for lab, _ in people]
+
+
+def person_stems(stem, labels):
+    """``<stem>_p<label>`` for each person's ``labels`` (:func:`.core.file_names.file_stem`
+    makes a label a file name; :func:`.core.file_names.unique_stems` keeps two labels that
+    come out alike apart)."""
+    from .core.file_names import file_stem, unique_stems
+    return unique_stems([f"{stem}_p{file_stem(lab, 'x')}" for lab in labels])
+
+
+def _people_said(path, jobs):
+    """``"3: 0, 1, 2"``: how many people of ``path`` are solved, and their labels."""
+    labels = [p for q, _, p in jobs if q == path]
+    return f"{len(labels)}: {', '.join(labels)}"
 
 
 def save_layout_once(args, recording):

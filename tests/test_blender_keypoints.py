@@ -101,3 +101,28 @@ def test_cli_in_blender_writes_a_blend_from_a_coco_array(tmp_path, motion):
     bpy.ops.wm.open_mainfile(filepath=str(out / "coco.blend"))
     arm = [o for o in bpy.data.objects if o.type == 'ARMATURE']
     assert len(arm) == 1 and arm[0].animation_data.action is not None
+
+
+def test_panel_person_field_solves_one_person_of_a_group_file(addon, tmp_path, motion):
+    """A (people, frames, points, 3) array: the Keypoints tab's Person field picks the one solved
+    (trimmed to the frames they are seen); "all" refuses the file, naming its people."""
+    from blender_manikin.core import keypoint_layouts as kl
+    from fixtures_keypoints import to_y_up
+    body, pos, world = motion
+    clean = kl.keypoints_from_body22(pos, world, "coco17", body.stature)
+    X = np.stack([to_y_up(clean), to_y_up(clean + [1.5, 0.0, 0.0])])
+    X[1, 60:] = np.nan                           # person 1 leaves after 60 frames
+    path = tmp_path / "group.npy"
+    np.save(path, X)
+    sc = bpy.context.scene
+    sc.render.fps, sc.render.fps_base = 30, 1.0
+    s = sc.manikin
+    s.source, s.keypoint_path, s.live_rig = 'KEYPOINTS', str(path), False
+    assert s.keypoint_person == "all"
+    with pytest.raises(RuntimeError, match=r"2 people in the file \(0, 1\)"):
+        bpy.ops.manikin.solve_full_body()
+    s.keypoint_person = "1"
+    assert bpy.ops.manikin.solve_full_body() == {'FINISHED'}
+    assert "person 1 of 2 (0, 1), frames 0-59" in s.last_report
+    fcs = keying.action_fcurves(s.armature.animation_data.action, s.armature)
+    assert all(len(fc.keyframe_points) == 60 for fc in fcs)

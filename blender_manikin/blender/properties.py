@@ -168,6 +168,11 @@ class MANIKIN_Settings(PropertyGroup):
         description="A Vicon subject parameter file (.mp or .vsk) for a Plug-in Gait .trc: the subject's knee, "
                     "ankle and elbow widths and height (empty: a <Subject>.mp / .vsk beside the .trc, or the "
                     "folder's only .mp, is used when there is one)")
+    keypoint_person: StringProperty(
+        name="Person", default="all",
+        description="In a keypoint file with several people (a 4-D array, a CSV with a person column): the "
+                    "person to solve, their label or 0-based index (all: a one-person file; a file with "
+                    "several is refused, naming its people)")
     use_keypoint_rate: BoolProperty(name="Set Rate", default=False,
                                     description="Give the sample rate of a keypoint file that has no times "
                                                 "(else 30 Hz is assumed, and said)")
@@ -408,6 +413,8 @@ def config_from_settings(context):
         cfg.up = None if s.keypoint_up == 'AUTO' else s.keypoint_up.lower()
         if s.keypoint_from == 'FILE' and s.keypoint_subject_file:
             cfg.subject_params = bpy.path.abspath(s.keypoint_subject_file)
+        if s.keypoint_from == 'FILE':
+            cfg.person = s.keypoint_person.strip() or "all"
         cfg.rate = float(s.keypoint_rate) if s.use_keypoint_rate else None
         cfg.ik = s.ik.lower()
         cfg.despike = bool(s.despike)

@@ -26,6 +26,15 @@ Inputs:
   beside the TRC (:func:`.subject_params.find_subject_params`), gives the subject's joint widths
   and stature (``metadata["subject_height"]``, metres).
 
+Several people in one file (:func:`read_keypoint_people`): a 4-D ``.npy`` / ``.npz``,
+``(P, T, K, 3|4)`` or ``(T, P, K, 3|4)`` (the people axis: the option, the ``.npz``'s
+``person_axis`` / ``people_first``, else :func:`people_axis`'s rule: the shorter axis when at most
+a quarter of the other; too close is refused), or a CSV with a person column
+(:data:`PERSON_COLUMNS`, any case) and a time or frame column, each row one person at one time.
+Each person is trimmed to the frames from the first to the last where they are seen (half the
+points or more), keeps the file's time stamps, and is then read as a one-person file; one seen
+in fewer than :data:`MIN_PERSON_FRAMES` frames is left out with a note.
+
 The layout (:mod:`.keypoint_layouts`) is given (``layout=``, ``--layout``), stored in the file,
 or told from the point count (17 points: COCO-17 or Human3.6M-17, told apart by their first
 points: COCO's nose sits near its ears, Human3.6M's pelvis far from its right ankle) or the
@@ -62,6 +71,10 @@ MIN_CONFIDENCE = 0.3
 #: sample rate assumed for arrays with no time and no rate given (Hz)
 DEFAULT_RATE = 30.0
 FREEMOCAP_BODY = "mediapipe_body_3d_xyz.npy"
+#: CSV columns naming the person a row belongs to (case-insensitive; the first of these found)
+PERSON_COLUMNS = ("person", "person_id", "id", "track", "track_id", "subject")
+#: a person seen (half the points or more) in fewer frames than this is left out
+MIN_PERSON_FRAMES = 5
 _NPZ_KEYS = ("keypoints", "joints3d", "joints", "positions", "points", "pose3d", "kp3d", "data")
 
 
@@ -124,7 +137,7 @@ def is_keypoint_input(path) -> bool:
 
 # --------------------------------------------------------------------------
 def read_keypoints(path, layout=None, units=None, up=None, rate=None, mapping=None,
-                   handed=None, subject_params=None) -> KeypointRecording:
+                   handed=None, subject_params=None, person=None, person_axis=None) -> KeypointRecording:
     """Read keypoints from ``path`` (see the module docstring).
 
     layout: a layout name (overrides the file).  units: ``m``/``cm``/``mm`` (default: told from
@@ -134,42 +147,212 @@ def read_keypoints(path, layout=None, units=None, up=None, rate=None, mapping=No
     handed: ``right``/``left`` (default: told from the face or feet).  subject_params: a TRC's
     Vicon subject parameter file (``.mp`` / ``.vsk``), ``"none"`` for none, or None / ``"auto"``
     (default): the one found beside a Plug-in Gait TRC (:func:`.subject_params.find_subject_params`).
+    person: in a file with several people, the one to read (a label or a 0-based index,
+    :func:`read_keypoint_people`); None or ``"all"`` reads a one-person file and refuses a file
+    with several, naming them.  person_axis: a 4-D array's people axis (0 or 1; default: the
+    file's ``person_axis`` / ``people_first``, else told from the shape, :func:`people_axis`).
     """
+    raw = _load_input(path, rate, mapping, subject_params, person_axis, layout)
+    if raw["people"] is None:
+        pick = _person_key(person)
+        if pick not in (None, "all", "0"):
+            raise RecordingError(f"person {shown(person)}: the file holds one person (0)", path=raw["src"])
+        return _one_person(raw, layout, units, up, handed, subject_params)
+    if _person_key(person) in (None, "all"):
+        labels = [lab for lab, _ in raw["people"]]
+        raise RecordingError(f"{len(labels)} people in the file ({', '.join(labels)}): choose one "
+                             "(--person LABEL or N, the Person field) or read them all with "
+                             "read_keypoint_people", path=raw["src"])
+    return read_keypoint_people(path, layout, units, up, rate, mapping, handed, subject_params,
+                                person=person, person_axis=person_axis, _raw=raw)[0][1]
+
+
+def read_keypoint_people(path, layout=None, units=None, up=None, rate=None, mapping=None, handed=None,
+                         subject_params=None, person="all", person_axis=None, _raw=None) -> list:
+    """``[(label, KeypointRecording), ...]``: each person of a keypoint file, in the file's order
+    (a 4-D array's index ``"0"``, ``"1"``...; a CSV's person column values, numbers in
+    numerical order, names in the order they first appear).  A one-person file gives
+    ``[("0", recording)]``, the recording :func:`read_keypoints` gives.
+
+    Each person's recording holds the frames from the first to the last where that person is
+    seen (at least half the layout's points, above the confidence threshold), NaN between, with
+    the file's time stamps kept (a person who enters at 4 s starts at 4 s), and is read as a
+    one-person file (units, up axis and handedness told from that body).  A person seen in fewer
+    than :data:`MIN_PERSON_FRAMES` frames is left out, said in the others' reports.
+    person: ``"all"`` (default) or one person's label or 0-based index (a label first).
+    Other options as :func:`read_keypoints`."""
+    raw = _raw or _load_input(path, rate, mapping, subject_params, person_axis, layout)
+    src = raw["src"]
+    if raw["people"] is None:
+        pick = _person_key(person)
+        if pick not in (None, "all", "0"):
+            raise RecordingError(f"person {shown(person)}: the file holds one person (0)", path=src)
+        return [("0", _one_person(raw, layout, units, up, handed, subject_params))]
+    people, notes = [], []
+    for lab, (X, conf, first) in raw["people"]:
+        seen = _seen_frames(X, conf)
+        if seen.sum() < MIN_PERSON_FRAMES:
+            notes.append(f"person {lab} left out (seen in {int(seen.sum())} frame(s), fewer than "
+                         f"{MIN_PERSON_FRAMES})")
+            continue
+        idx = np.nonzero(seen)[0]
+        people.append((lab, X, conf, first, slice(int(idx[0]), int(idx[-1]) + 1)))
+    labels = [p[0] for p in people]
+    if not people:
+        raise RecordingError(f"no person seen in {MIN_PERSON_FRAMES} frames or more "
+                             f"({'; '.join(notes)})", path=src)
+    pick = _person_key(person)
+    if pick not in (None, "all"):
+        all_labels = [lab for lab, _ in raw["people"]]
+        if pick in all_labels:
+            k = all_labels.index(pick)
+        elif pick.lstrip("-").isdigit() and 0 <= int(pick) < len(all_labels):
+            k = int(pick)
+        else:
+            raise RecordingError(f"person {shown(person)}: no such person (the file's people: "
+                                 f"{', '.join(all_labels)}; a label or an index 0-{len(all_labels) - 1})",
+                                 path=src)
+        if all_labels[k] not in labels:
+            why = next(n for n in notes if n.startswith(f"person {all_labels[k]} "))
+            raise RecordingError(why, path=src)
+        people = [people[labels.index(all_labels[k])]]
+    out = []
+    for lab, X, conf, first, sl in people:
+        said = f"person {lab} of {len(raw['people'])} ({', '.join(lab2 for lab2, _ in raw['people'])}), " \
+               f"frames {first + sl.start}-{first + sl.stop - 1}"
+        one = dict(raw, X=X[sl], conf=None if conf is None else conf[sl],
+                   time=None if raw["time"] is None else raw["time"][sl],
+                   frames=raw["frames"][sl], decided=list(raw["decided"]) + [said] + notes)
+        rec = _one_person(one, layout, units, up, handed, subject_params)
+        rec.metadata["person"] = lab
+        rec.metadata["people"] = labels
+        out.append((lab, rec))
+    return out
+
+
+def _person_key(person):
+    """``person`` as a label text (None for None / ``""``, ``"all"`` for all)."""
+    if person is None:
+        return None
+    key = str(person).strip()
+    if not key:
+        return None
+    return "all" if key.lower() == "all" else key
+
+
+def _seen_frames(X, conf):
+    """``(T,)`` bool: frames where at least half of the ``(T, K, 3|4)`` points are finite (and
+    at or above :data:`MIN_CONFIDENCE` where a confidence is given)."""
+    ok = np.isfinite(X[..., :3]).all(-1)
+    c = X[..., 3] if X.shape[-1] == 4 and conf is None else conf
+    if c is not None:
+        with np.errstate(invalid="ignore"):
+            ok &= ~(np.asarray(c, np.float64) < MIN_CONFIDENCE)
+    return ok.sum(1) * 2 >= X.shape[1]
+
+
+def _load_input(path, rate, mapping, subject_params, person_axis, layout):
+    """The file read as it stands: a dict of ``X`` (its array), ``time``, ``conf``,
+    ``file_layout``, ``hands``, ``src``, ``decided``, ``subject``, ``units``, ``rate`` and
+    ``people`` (None for one person, else ``[(label, (X (T, K, 3|4), conf, first frame)), ...]``
+    on the file's clock, with ``frames`` (T,) the sample numbers for a rate)."""
     p = os.fspath(path)
     body_file = freemocap_body_file(p)
-    decided = []
-    subject = None
-    time = None
-    conf = None
-    file_layout = None
-    hands = None
+    raw = dict(decided=[], subject=None, time=None, conf=None, file_layout=None, hands=None,
+               units=None, rate=rate, people=None, frames=None)
+    npz_axis = None
     if body_file:
-        X = _load_npy(body_file)
-        file_layout = "mediapipe33"
-        decided.append("FreeMoCap folder")
-        hands = {s: _optional_npy(os.path.join(os.path.dirname(body_file), f"mediapipe_{s}_hand_3d_xyz.npy"))
-                 for s in ("left", "right")}
-        src = body_file
+        raw.update(X=_load_npy(body_file), file_layout="mediapipe33", src=body_file)
+        raw["decided"].append("FreeMoCap folder")
+        raw["hands"] = {s: _optional_npy(os.path.join(os.path.dirname(body_file), f"mediapipe_{s}_hand_3d_xyz.npy"))
+                        for s in ("left", "right")}
     else:
-        src = p
+        raw["src"] = p
         if not os.path.exists(p):
             raise RecordingError("no such file", path=p)
         ext = os.path.splitext(p)[1].lower()
         if ext == ".npy":
-            X = _load_npy(p)
+            raw["X"] = _load_npy(p)
         elif ext == ".npz":
-            X, time, conf, file_layout, npz_rate = _load_npz(p)
-            rate = rate or npz_rate
+            X, time, conf, file_layout, npz_rate, npz_axis = _load_npz(p)
+            raw.update(X=X, time=time, conf=conf, file_layout=file_layout, rate=rate or npz_rate)
         elif ext == ".csv":
-            X, time, file_layout, rate = _load_csv(p, mapping, rate)
+            X, time, file_layout, rate, groups = _load_csv(p, mapping, rate)
+            raw.update(X=X, time=time, file_layout=file_layout, rate=rate)
+            if groups is not None:
+                labels, X4, time, frames = groups
+                raw.update(people=[(lab, (X4[k], None, 0)) for k, lab in enumerate(labels)], time=time,
+                           frames=frames)
+                raw["decided"].append(f"{len(labels)} people (the CSV's person column)")
+                return raw
         elif ext == ".trc":
             X, time, file_layout, rate, trc_units, rules, subject = _load_trc(p, rate, subject_params)
-            units = units or trc_units
-            decided += [rules] if rules else []
+            raw.update(X=X, time=time, file_layout=file_layout, rate=rate, units=trc_units, subject=subject)
+            raw["decided"] += [rules] if rules else []
         else:
             raise RecordingError(f"not a keypoint file: expected a FreeMoCap folder, .npy, .npz, .csv or "
                                  f".trc, got {ext or '(no extension)'!r}", path=p)
-    X, conf = _shape_points(X, conf, src)
+    if np.ndim(raw["X"]) == 4:
+        K = raw["X"].shape[2]
+        n_points = [len(kl.LAYOUTS[kl.canonical_layout(layout)].points)] if layout is not None else None
+        axis, how = people_axis(raw["X"].shape, person_axis if person_axis is not None else npz_axis,
+                                raw["src"], n_points)
+        X4 = np.moveaxis(np.asarray(raw["X"]), axis, 0)
+        conf = raw["conf"]
+        C4 = None if conf is None or np.ndim(conf) != 3 else np.moveaxis(np.asarray(conf), axis, 0)
+        if conf is not None and C4 is None:
+            raise RecordingError(f"confidence shape {tuple(np.shape(conf))} does not match the keypoints' "
+                                 f"{tuple(raw['X'].shape[:3])}", path=raw["src"])
+        raw["decided"].append(f"{X4.shape[0]} people on axis {axis} of {tuple(raw['X'].shape)} ({how}), "
+                              f"{K} points")
+        raw.update(people=[(str(k), (X4[k], None if C4 is None else C4[k], 0)) for k in range(X4.shape[0])],
+                   frames=np.arange(X4.shape[1], dtype=np.float64))
+        if raw["time"] is not None and np.size(raw["time"]) != X4.shape[1]:
+            raise RecordingError(f"{np.size(raw['time'])} times for {X4.shape[1]} frames", path=raw["src"])
+        if raw["time"] is not None:
+            raw["time"] = np.asarray(raw["time"], np.float64).reshape(-1)
+    return raw
+
+
+def people_axis(shape, person_axis=None, path="", point_counts=None):
+    """``(axis, how)``: which of the first two axes of a 4-D keypoint array ``shape``
+    ``(P, T, K, 3|4)`` or ``(T, P, K, 3|4)`` holds the people.
+
+    person_axis: 0 or 1 as set (an option, or the ``.npz``'s ``person_axis``; its
+    ``people_first`` true is 0).  Else the rule: the shorter of the two axes, when it is at most
+    a quarter of the other's length (a take has far more frames than people); two axes closer
+    than that are refused, naming the shape and the option to set.  The third axis must be a
+    layout's point count (``point_counts``: the counts allowed, default every layout's) and the
+    last 3 or 4."""
+    src = path
+    if len(shape) != 4 or shape[3] not in (3, 4):
+        raise RecordingError(f"a 4-D keypoint array must be (people, frames, points, 3|4) or (frames, people, "
+                             f"points, 3|4); found shape {tuple(shape)}", path=src)
+    counts = point_counts or sorted({len(lay.points) for lay in kl.LAYOUTS.values()})
+    if shape[2] not in counts:
+        raise RecordingError(f"shape {tuple(shape)}: its third axis ({shape[2]}) is no layout's point count "
+                             f"({', '.join(map(str, counts))})", path=src)
+    if person_axis is not None:
+        key = str(person_axis).strip().lower()
+        if key not in ("0", "1"):
+            raise RecordingError(f"person axis {shown(person_axis)}: expected 0 (people, frames, ...) or "
+                                 "1 (frames, people, ...)", path=src)
+        return int(key), "as set"
+    a, b = int(shape[0]), int(shape[1])
+    if 4 * min(a, b) <= max(a, b):
+        return (0 if a < b else 1), "the shorter axis: people"
+    raise RecordingError(f"shape {tuple(shape)}: cannot tell the people axis from the frames axis "
+                         f"({a} and {b} are too close); set it: --person-axis 0 for (people, frames, points, "
+                         f"{shape[3]}) or 1 for (frames, people, points, {shape[3]}), or save person_axis "
+                         "in the .npz", path=src)
+
+
+def _one_person(raw, layout, units, up, handed, subject_params):
+    """One person's :class:`KeypointRecording` from :func:`_load_input`'s ``raw`` (or one
+    person's part of it)."""
+    src, decided, subject = raw["src"], list(raw["decided"]), raw["subject"]
+    units = units or raw["units"]
+    X, conf = _shape_points(raw["X"], raw["conf"], src)
     T, K = X.shape[:2]
     if T < 2:
         raise RecordingError(f"{T} frame(s): at least 2 are needed", path=src)
@@ -181,8 +364,8 @@ def read_keypoints(path, layout=None, units=None, up=None, rate=None, mapping=No
         except ValueError as exc:
             raise RecordingError(str(exc), path=src) from None
         how = "as set"
-    elif file_layout is not None:
-        name, how = kl.canonical_layout(file_layout), "from the file"
+    elif raw["file_layout"] is not None:
+        name, how = kl.canonical_layout(raw["file_layout"]), "from the file"
     else:
         name, how = _layout_from_count(X, src)
     if len(kl.LAYOUTS[name].points) != K:
@@ -192,7 +375,8 @@ def read_keypoints(path, layout=None, units=None, up=None, rate=None, mapping=No
     if _explicit(subject_params) and subject is None:
         decided.append(f"subject parameters {os.path.basename(os.fspath(subject_params))} not used (only for "
                        "a TRC's Plug-in Gait markers)")
-    rec = _finish(X, conf, name, src, decided, hands, units, up, handed, rate, time)
+    rec = _finish(X, conf, name, src, decided, raw["hands"], units, up, handed, raw["rate"], raw["time"],
+                  frames=raw["frames"])
     if subject is not None and subject.height:
         rec.metadata["subject_height"] = subject.height
     return rec
@@ -235,9 +419,11 @@ def keypoints_from_points(time, points, layout, source, units="m", up="+z", how=
     return rec
 
 
-def _finish(X, conf, name, src, decided, hands, units, up, handed, rate, time):
+def _finish(X, conf, name, src, decided, hands, units, up, handed, rate, time, frames=None):
     """The shared end of reading: confidence → missing, hand knuckles, units, up axis,
-    handedness, times; returns the :class:`KeypointRecording`."""
+    handedness, times; returns the :class:`KeypointRecording`.  frames: ``(T,)`` sample numbers
+    on the rate's clock when there are no times (a person's frames of a file with several;
+    default ``0 .. T-1``)."""
     T = X.shape[0]
     # confidence → missing
     if conf is not None:
@@ -286,7 +472,7 @@ def _finish(X, conf, name, src, decided, hands, units, up, handed, rate, time):
         r = float(rate) if rate else DEFAULT_RATE
         if not (np.isfinite(r) and r > 0):
             raise RecordingError(f"sample rate {shown(rate)} must be a positive number", path=src)
-        time = np.arange(T, dtype=np.float64) / r
+        time = (np.arange(T, dtype=np.float64) if frames is None else np.asarray(frames, np.float64)) / r
         decided.append(f"{r:g} Hz" + ("" if rate else " (assumed: set the rate)"))
     else:
         time = np.asarray(time, np.float64).reshape(-1)
@@ -359,7 +545,7 @@ def _load_npz(path):
         raise RecordingError(_stand_in(path) or f"not a readable .npz archive ({exc})", path=path) from None
     key = next((k for k in _NPZ_KEYS if k in arrays), None)
     if key is None:
-        cands = [k for k, a in arrays.items() if a.ndim in (2, 3) and a.dtype.kind == "f"]
+        cands = [k for k, a in arrays.items() if a.ndim in (2, 3, 4) and a.dtype.kind == "f"]
         if len(cands) != 1:
             raise RecordingError(f"no keypoint array: expected one of {', '.join(_NPZ_KEYS)} "
                                  f"(the archive holds {', '.join(keys) or 'nothing'})", path=path)
@@ -368,7 +554,12 @@ def _load_npz(path):
     conf = arrays.get("confidence", arrays.get("scores"))
     layout = str(arrays["layout"]) if "layout" in arrays else None
     fps = arrays.get("fps", arrays.get("rate"))
-    return arrays[key], time, conf, layout, (float(fps) if fps is not None and np.size(fps) == 1 else None)
+    axis = None                                 # a 4-D array's people axis, where the archive says it
+    if "person_axis" in arrays:
+        axis = arrays["person_axis"].reshape(-1)[0] if arrays["person_axis"].size == 1 else arrays["person_axis"]
+    elif "people_first" in arrays and arrays["people_first"].size == 1:
+        axis = 0 if bool(arrays["people_first"].reshape(-1)[0]) else 1
+    return arrays[key], time, conf, layout, (float(fps) if fps is not None and np.size(fps) == 1 else None), axis
 
 
 def _shape_points(X, conf, path):
@@ -484,6 +675,7 @@ def _load_csv(path, mapping, rate):
                 raise RecordingError(f"column {c!r} (point {p} of {name}) is missing", path=path, line=hline)
             idx.append(cols.index(c))
     tcol = next((c for c in ("time", "t", "seconds", "timestamp", "frame") if c in cols), None)
+    pcol = next((c for c in PERSON_COLUMNS if c in cols), None)
     data = rows[1:]
     if not data:
         raise RecordingError("no data rows after the header", path=path, line=hline)
@@ -512,11 +704,51 @@ def _load_csv(path, mapping, rate):
     time = None
     if tcol is not None and not np.isfinite(tv).any():
         tcol = None                             # a time column with no time in it: the rate decides
+    if pcol is not None:
+        return X.reshape(len(data), -1, 3), None, name, rate, _csv_people(path, data, cols, pcol, tcol, tv, X)
     if tcol in ("time", "t", "seconds", "timestamp"):
         time = tv                               # its unit from its steps (_time_in_seconds)
     elif tcol == "frame" and rate:
         time = (tv - tv[0]) / float(rate)
-    return X.reshape(len(data), -1, 3), time, name, rate
+    return X.reshape(len(data), -1, 3), time, name, rate, None
+
+
+def _csv_people(path, data, cols, pcol, tcol, tv, X):
+    """``(labels, X (P, G, K, 3), time (G,) or None, frames (G,))`` of a keypoint CSV whose ``pcol`` column
+    names each row's person: the people laid on the file's times (or frame numbers, from 0 at
+    the file's first), NaN where a person has no row.  Labels: numbers in numerical order, else
+    names in the order they first appear."""
+    i = cols.index(pcol)
+    ids = [r[i].strip() for _, r in data]
+    for (ln, _), v in zip(data, ids):
+        if not v:
+            raise RecordingError(f"column {pcol!r} is empty: every row needs its person", path=path, line=ln)
+    if tcol is None:
+        raise RecordingError(f"a {pcol!r} column needs a time or frame column to put the people's rows "
+                             "together", path=path, line=data[0][0])
+    if not np.isfinite(tv).all():
+        k = int(np.nonzero(~np.isfinite(tv))[0][0])
+        raise RecordingError(f"column {tcol!r} is empty: with several people every row needs it",
+                             path=path, line=data[k][0])
+    labels = list(dict.fromkeys(ids))
+    try:
+        labels.sort(key=float)
+    except ValueError:
+        pass
+    grid = np.unique(tv)
+    P, G = len(labels), len(grid)
+    X4 = np.full((P, G, X.shape[1] // 3, 3), np.nan)
+    filled = np.zeros((P, G), bool)
+    col = np.searchsorted(grid, tv)
+    row = np.array([labels.index(v) for v in ids])
+    for k, (ln, _) in enumerate(data):
+        if filled[row[k], col[k]]:
+            raise RecordingError(f"person {ids[k]} has two rows at {tcol} {shown(float(tv[k]))}", path=path, line=ln)
+        filled[row[k], col[k]] = True
+        X4[row[k], col[k]] = X[k].reshape(-1, 3)
+    if tcol == "frame":
+        return labels, X4, None, grid - grid[0]
+    return labels, X4, grid, np.arange(G, dtype=np.float64)
 
 
 #: points a layout chosen from a TRC's markers must have (the limbs' joints)

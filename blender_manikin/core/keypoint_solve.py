@@ -471,7 +471,8 @@ def solve_keypoints(source, settings: SolveSettings | None = None, progress=None
     else:
         report(0.0, "reading keypoints")
         rec = read_keypoints(source, layout=s.keypoint_layout, units=s.units, up=s.up, rate=s.rate,
-                             mapping=s.mapping, subject_params=s.subject_params)
+                             mapping=s.mapping, subject_params=s.subject_params,
+                             person=getattr(s, "person", None), person_axis=getattr(s, "person_axis", None))
     out.recording = rec
     out.timings["read"] = _time.perf_counter() - t
     t = _time.perf_counter()

@@ -87,7 +87,10 @@ class SolveSettings:
     keypoints are, e.g. an armature's bones in the scene, :data:`.keypoint_solve.KEYPOINT_FLOORS`)
     and subject_params (a Vicon subject parameter file, ``.mp`` / ``.vsk``, for a Plug-in Gait
     TRC: the subject's joint widths and, unless ``height`` is given, stature; ``"none"``: not
-    used; None: the one found beside the TRC, :mod:`.subject_params`).
+    used; None: the one found beside the TRC, :mod:`.subject_params`) and person (in a file with
+    several people, the one solved: a label or a 0-based index; ``"all"``, the default, solves a
+    one-person file and refuses one with several: the command line solves each on its own,
+    :func:`.io_keypoints.read_keypoint_people`) and person_axis (a 4-D array's people axis).
     Tracker inputs also use model (the pose network) and overlap (how many network windows see
     each frame: 2, the default, keeps 10,000 frames/s; 3 and 4 are a little more accurate at 1.5
     and 2 times the network time; :data:`.pipeline.OVERLAP_CHOICES`), and teleports (what to
@@ -127,6 +130,8 @@ class SolveSettings:
     end: float | None = None          # seconds from the first sample: solve up to here (None: the end)
     calibration_take: str | None = None   # a recording whose T-pose calibrates this take (body, offsets)
     subject_params: str | None = None     # keypoints: a Vicon .mp / .vsk for a Plug-in Gait TRC, "none", or None: auto
+    person: str | None = "all"        # keypoints: "all" or one person's label / 0-based index (io_keypoints)
+    person_axis: int | None = None    # keypoints: a 4-D array's people axis, 0 or 1 (None: the file's, or told)
 
 
 @dataclass

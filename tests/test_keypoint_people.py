@@ -1,0 +1,171 @@
+"""Keypoint files with several people: 4-D arrays, a CSV with a person column, the person
+setting, each person solved as their own one-person file would be, outputs per person."""
+import json
+
+import numpy as np
+import pytest
+
+from blender_manikin import cli
+from blender_manikin.core import keypoint_layouts as kl
+from blender_manikin.core.io_keypoints import read_keypoint_people, read_keypoints
+from blender_manikin.core.recording import RecordingError
+from blender_manikin.core.solve import SolveSettings, solve_recording
+
+from fixtures_keypoints import hinge_motion, to_y_up, write_layout_csv
+
+FPS = 30.0
+T = 150
+LEAVES = 75          # person 1 is seen up to this frame
+ENTERS = 30          # person 2 is seen from this frame
+
+
+@pytest.fixture(scope="module")
+def people():
+    """``[(body, pos, world, clean keypoints (T, 17, 3) Blender axes, metres)]`` of three people
+    walking apart (each a different motion, moved 1.5 m apart and drifting further)."""
+    out = []
+    for k in range(3):
+        body, pos, world = hinge_motion(frames=T, seed=k)
+        shift = np.zeros((T, 1, 3))
+        shift[:, 0, 0] = 1.5 * k + 0.01 * k * np.arange(T)
+        pos = pos + shift
+        clean = kl.keypoints_from_body22(pos, world, "coco17", body.stature)
+        out.append((body, pos, world, clean))
+    return out
+
+
+def _seen(k):
+    """Frames where person ``k`` is seen."""
+    return {0: slice(0, T), 1: slice(0, LEAVES), 2: slice(ENTERS, T)}[k]
+
+
+def _stack(people):
+    """``(3, T, 17, 3)`` +Y-up metres, NaN where a person is not seen."""
+    X = np.full((3, T, 17, 3), np.nan)
+    for k, (_, _, _, clean) in enumerate(people):
+        X[k, _seen(k)] = to_y_up(clean[_seen(k)])
+    return X
+
+
+def _single(tmp_path, people, k):
+    """Person ``k``'s frames as a one-person ``.npy``."""
+    p = tmp_path / f"single{k}.npy"
+    np.save(p, to_y_up(people[k][3][_seen(k)]))
+    return p
+
+
+def _joints(path, **kw):
+    out = solve_recording(str(path), SolveSettings(fps=FPS, **kw))
+    return out, out.result.fk()[0]
+
+
+def test_people_first_npy_read_and_solved_per_person(tmp_path, people):
+    X = _stack(people)
+    ghost = np.full((1, T, 17, 3), np.nan)
+    ghost[0, 10:13] = X[0, 10:13]                  # a detector's ghost: three frames
+    path = tmp_path / "group.npy"
+    np.save(path, np.concatenate([X, ghost]))      # (P, T, K, 3)
+    got = read_keypoint_people(path)
+    assert [lab for lab, _ in got] == ["0", "1", "2"]
+    for lab, rec in got:
+        k = int(lab)
+        sl = _seen(k)
+        assert rec.num_frames == sl.stop - sl.start
+        assert rec.time[0] == pytest.approx(sl.start / FPS)        # the file's clock kept
+        single = read_keypoints(_single(tmp_path, people, k))
+        np.testing.assert_allclose(rec.points, single.points, atol=1e-9)
+        np.testing.assert_allclose(rec.time - rec.time[0], single.time, atol=1e-9)
+        assert "person 3 left out (seen in 3 frame(s)" in rec.metadata["detected"]
+        assert rec.metadata["person"] == lab
+    # one person solves as their one-person file does, at the time they were seen
+    for k in (1, 2):
+        out, joints = _joints(path, person=str(k))
+        ref_out, ref = _joints(_single(tmp_path, people, k))
+        np.testing.assert_allclose(joints, ref, atol=1e-6)
+        assert out.result.t0 == pytest.approx(_seen(k).start / FPS)
+        assert ref_out.result.t0 == 0.0
+    with pytest.raises(RecordingError, match=r"4 people in the file \(0, 1, 2, 3\).*--person"):
+        read_keypoints(path)
+    with pytest.raises(RecordingError, match="person 3 left out"):
+        read_keypoints(path, person=3)
+    with pytest.raises(RecordingError, match="person 7: no such person"):
+        read_keypoints(path, person=7)
+
+
+def test_frames_first_npz_with_confidence(tmp_path, people):
+    X = _stack(people)
+    conf = np.isfinite(X[..., 0]).astype(np.float64)
+    X = np.nan_to_num(X)                           # unseen people at zeros with confidence 0
+    path = tmp_path / "group.npz"
+    np.savez(path, keypoints=np.concatenate([X, conf[..., None]], -1).transpose(1, 0, 2, 3), fps=FPS)
+    got = dict(read_keypoint_people(path))
+    assert list(got) == ["0", "1", "2"]
+    assert "3 people on axis 1 of (150, 3, 17, 4)" in got["2"].metadata["detected"]
+    assert got["2"].time[0] == pytest.approx(ENTERS / FPS)
+    assert got["1"].num_frames == LEAVES
+    out, joints = _joints(path, person="2")
+    _, ref = _joints(_single(tmp_path, people, 2))
+    np.testing.assert_allclose(joints, ref, atol=1e-6)
+
+
+def test_csv_with_a_track_column(tmp_path, people):
+    path = tmp_path / "group.csv"
+    pts = kl.LAYOUTS["coco17"].points
+    with open(path, "w", encoding="utf-8") as f:
+        f.write(",".join(["Time", "Track_ID"] + [f"{p}_{a}" for p in pts for a in "xyz"]) + "\n")
+        for t in range(T):
+            for k, (_, _, _, clean) in enumerate(people):
+                s = _seen(k)
+                if s.start <= t < s.stop:
+                    f.write(",".join([f"{t / FPS:.6f}", f"{k + 1}"]
+                                     + [f"{v:.6f}" for v in to_y_up(clean[t]).ravel()]) + "\n")
+    got = dict(read_keypoint_people(path))
+    assert list(got) == ["1", "2", "3"]
+    assert got["3"].time[0] == pytest.approx(ENTERS / FPS)
+    assert got["2"].num_frames == LEAVES
+    body, pos, world, _ = people[2]
+    single = tmp_path / "single.csv"
+    write_layout_csv(single, "coco17", body, pos[ENTERS:], world[ENTERS:])
+    np.testing.assert_allclose(got["3"].points, read_keypoints(single).points, atol=1e-5)
+    _, joints = _joints(path, person="3")
+    _, ref = _joints(single)
+    np.testing.assert_allclose(joints, ref, atol=1e-6)
+    assert read_keypoints(path, person=2).num_frames == LEAVES      # a label ("2"), not the index
+
+
+def test_an_ambiguous_shape_is_refused_and_the_axis_can_be_set(tmp_path, people):
+    X = _stack(people)[:, :20]
+    Y = np.concatenate([X] * 4)                    # 12 people, 20 frames: too close to tell
+    path = tmp_path / "square.npy"
+    np.save(path, Y)
+    with pytest.raises(RecordingError, match=r"square\.npy.*shape \(12, 20, 17, 3\): cannot tell the people "
+                                             r"axis.*--person-axis 0"):
+        read_keypoint_people(path)
+    assert len(read_keypoint_people(path, person_axis=0)) == 8      # every third enters at frame 30
+    np.savez(tmp_path / "square.npz", keypoints=Y, person_axis=0)
+    assert len(read_keypoint_people(tmp_path / "square.npz")) == 8
+
+
+def test_cli_writes_one_output_per_person_and_keeps_single_files(tmp_path, people, capsys):
+    X = _stack(people)
+    d = tmp_path / "in"
+    d.mkdir()
+    np.save(d / "group.npy", X)
+    np.save(d / "solo.npy", to_y_up(people[0][3]))
+    out = tmp_path / "out"
+    code = cli.main(["solve", str(d), "--out", str(out), "--format", "json", "--fps", "30"])
+    lines = capsys.readouterr().out.splitlines()
+    assert code == 0
+    assert sorted(p.name for p in out.iterdir() if p.suffix == ".json") == [
+        "group_p0.json", "group_p1.json", "group_p2.json", "solo.json"]
+    ok = [ln for ln in lines if ln.startswith("OK ") and "group.npy" in ln]
+    assert len(ok) == 3 and all("of 3: 0, 1, 2]" in ln for ln in ok)
+    doc = json.loads((out / "group_p2.json").read_text())
+    assert doc["t0"] == pytest.approx(ENTERS / FPS)
+    assert len(doc["positions"]) == T - ENTERS
+    solo = json.loads((out / "solo.json").read_text())
+    assert solo["t0"] == 0.0 and len(solo["positions"]) == T
+    code = cli.main(["solve", str(d / "group.npy"), "--out", str(tmp_path / "one"), "--format", "json",
+                     "--person", "1"])
+    assert code == 0
+    assert [p.name for p in (tmp_path / "one").iterdir() if p.suffix == ".json"] == ["group.json"]
