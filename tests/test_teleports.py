@@ -248,3 +248,60 @@ def test_what_is_not_a_small_shift_of_the_space(example):
     pos[300] += [0.0, 0.08, 0.0]
     glitch = Recording(streams={**rec.streams, "head": TrackerStream("head", s.time, pos, s.quat, s.valid)})
     assert find_rig_jumps(glitch) == []
+
+
+class _Counted(np.ndarray):
+    """An array that adds to :attr:`elements` the size of every ufunc it goes into (comparisons,
+    arithmetic): how much of the take a detector reads, counted without timing it."""
+    elements = 0
+
+    def __array_ufunc__(self, ufunc, method, *inputs, **kwargs):
+        _Counted.elements += max(x.size for x in inputs if isinstance(x, _Counted))
+        plain = [x.view(np.ndarray) if isinstance(x, _Counted) else x for x in inputs]
+        if "out" in kwargs:
+            kwargs["out"] = tuple(x.view(np.ndarray) if isinstance(x, _Counted) else x for x in kwargs["out"])
+        return getattr(ufunc, method)(*plain, **kwargs)
+
+
+def _looped(rec, seconds):
+    """``rec`` repeated (time shifted) to ``seconds`` long."""
+    streams = {}
+    for d, s in rec.streams.items():
+        dur = s.time[-1] - s.time[0] + 1.0 / 90
+        reps = int(np.ceil(seconds / dur))
+        t = np.concatenate([s.time - s.time[0] + k * dur for k in range(reps)])
+        streams[d] = TrackerStream(d, t, np.tile(s.pos, (reps, 1)), np.tile(s.quat, (reps, 1)))
+    return Recording(streams=streams, source="looped", metadata=dict(rec.metadata))
+
+
+def _jump_work(rec, n, monkeypatch):
+    """Elements of the take's time and segment arrays that finding, removing and restoring ``n``
+    snap turns (spread over 50 s from 2 s) read; also checks they are all found."""
+    from blender_manikin.core import teleports as tp
+    jumped, _ = moved(rec, [(2.0 + k * 50.0 / n, 30.0 if k % 2 else -30.0, (0.0, 0.0, 0.0)) for k in range(n)])
+    for s in jumped.streams.values():
+        s.time = s.time.view(_Counted)
+    segments = tp._segments
+    monkeypatch.setattr(tp, "_segments", lambda times, jumps: segments(times, jumps).view(_Counted))
+    _Counted.elements = 0
+    jumps = find_rig_jumps(jumped)
+    assert len(jumps) == n
+    remove_rig_jumps(jumped, jumps)
+    T = 60 * 30
+    body = cs.sk.make_body(cs.sk.BodyMeasurements(stature=1.75))
+    result = cs.PoseResult(fps=30.0, body=body, local_rot=np.tile(np.eye(3), (T, 22, 1, 1)),
+                           root_pos=np.zeros((T, 3)), swivel=np.zeros((T, 4)),
+                           t0=float(jumped.streams["head"].time[0]))
+    tp.restore_rig_jumps(result, jumps)
+    return _Counted.elements
+
+
+def test_jumps_cost_no_pass_over_the_take_each(monkeypatch):
+    """A long VR session with snap turning has thousands of jumps (a snap every 3 s is 1,200 an
+    hour): finding, removing and restoring them must not read the whole take once per jump (that
+    was O(T²): 45 + 28 + 10 s for 60 minutes at 90 Hz; benchmarks/bench_long.py).  Counted, not
+    timed: 60 jumps in a minute read about as much of the take as 3 do."""
+    rec = _looped(load_recording(EXAMPLE), 60.0)
+    few, many = _jump_work(rec, 3, monkeypatch), _jump_work(rec, 60, monkeypatch)
+    samples = sum(len(s) for s in rec.streams.values())
+    assert many < 1.5 * few, (few, many, samples)

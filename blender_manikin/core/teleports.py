@@ -133,15 +133,39 @@ def _head_motion_before(t, p, R, k, first=0):
     return v, w
 
 
-def _hand_check(stream, ta, tb, rot, trans):
-    """``True`` / ``False`` when a hand around ``(ta, tb)`` moved with / against the jump, ``None``
-    when it has no valid samples close enough to tell."""
+def _within(t, lo, hi, increasing):
+    """Indices ``k`` (ascending) of ``t`` ``(N,)`` s with ``lo <= t[k] <= hi``.  ``increasing``:
+    ``t`` never decreases, so the range is found by bisection (O(log N), not a pass over the
+    take: a detector asking this once per jump stays linear in the take's length); the same
+    comparisons decide the ends, so the answer is the same either way."""
+    if not increasing:
+        return np.nonzero((t >= lo) & (t <= hi))[0]
+    return np.arange(np.searchsorted(t, lo, side="left"), np.searchsorted(t, hi, side="right"))
+
+
+def _increasing(t) -> bool:
+    """True when the times ``t`` ``(N,)`` never decrease (every reader's output; a stream built
+    by hand may not be)."""
+    return bool(np.all(np.diff(t) >= 0))
+
+
+def _hand_samples(stream):
+    """``(valid indices (M,), their times (M,) s, times never decrease)`` of a hand stream, for
+    :func:`_hand_check` (computed once per take, not once per jump)."""
     idx = _valid_samples(stream)
+    t = stream.time[idx]
+    return idx, t, _increasing(t)
+
+
+def _hand_check(stream, ta, tb, rot, trans, samples=None):
+    """``True`` / ``False`` when a hand around ``(ta, tb)`` moved with / against the jump, ``None``
+    when it has no valid samples close enough to tell.  samples: the stream's
+    :func:`_hand_samples` (None: found here)."""
+    idx, t, increasing = samples if samples is not None else _hand_samples(stream)
     if idx.size < 2:
         return None
-    t = stream.time[idx]
-    before = idx[(t <= ta + 1e-9) & (t >= ta - MAX_STEP_S)]
-    after = idx[(t >= tb - 1e-9) & (t <= tb + MAX_STEP_S)]
+    before = idx[_within(t, ta - MAX_STEP_S, ta + 1e-9, increasing)]
+    after = idx[_within(t, tb - 1e-9, tb + MAX_STEP_S, increasing)]
     if before.size == 0 or after.size == 0:
         return None
     i, j = before[-1], after[0]
@@ -203,10 +227,16 @@ def _small_jumps(t, p, hands, big):
         if idx.size >= 4:
             hand_steps.append((s.time[idx], _unexplained_steps(s.time[idx], s.pos[idx])[0]))
     out = []
-    big = np.asarray(big, dtype=np.float64)
+    big = np.sort(np.asarray(big, dtype=np.float64))
+    steps = t[:-1]
+    increasing = _increasing(steps)
     for a in cand:
-        near = np.abs(t[:-1] - t[a]) <= VELOCITY_SPAN_S
-        if size[a] < size[near].max() or (big.size and np.any(np.abs(big - t[a + 1]) <= 2 * VELOCITY_SPAN_S)):
+        # the steps within VELOCITY_SPAN_S of this one: bisected a little wider, then the exact
+        # test on those alone (one pass over the take per candidate would be quadratic)
+        near = _within(steps, t[a] - VELOCITY_SPAN_S - 1e-6, t[a] + VELOCITY_SPAN_S + 1e-6, increasing)
+        near = near[np.abs(steps[near] - t[a]) <= VELOCITY_SPAN_S]
+        close = big[_within(big, t[a + 1] - 2 * VELOCITY_SPAN_S - 1e-6, t[a + 1] + 2 * VELOCITY_SPAN_S + 1e-6, True)]
+        if size[a] < size[near].max() or (close.size and np.any(np.abs(close - t[a + 1]) <= 2 * VELOCITY_SPAN_S)):
             continue
         says = []
         for ht, hd in hand_steps:
@@ -240,6 +270,7 @@ def find_rig_jumps(recording: Recording) -> list:
     p = head.pos[idx]
     R = quat_to_matrix(head.quat[idx])
     hands = [recording.streams[d] for d in ("left_hand", "right_hand") if d in recording.streams]
+    hand_samples = [_hand_samples(s) for s in hands]
     jumps = []
     after = 0                      # the first head sample after the last jump found
     dt = np.diff(t)
@@ -265,7 +296,7 @@ def find_rig_jumps(recording: Recording) -> list:
             back_r = abs(wrap_angle(_yaw(R[b + 1] @ R[a].T))) < abs(wrap_angle(_yaw(R[b + 1] @ R[b].T)))
             if (teleport and back_p) or (turned and not teleport and back_r):
                 continue
-        checks = [_hand_check(s, t[a], t[b], rot, trans) for s in hands]
+        checks = [_hand_check(s, t[a], t[b], rot, trans, hs) for s, hs in zip(hands, hand_samples)]
         if any(check is False for check in checks):
             continue
         kind = "teleport and turn" if teleport and turned else ("teleport" if teleport else "snap turn")
@@ -291,6 +322,15 @@ def _segments(times, jumps):
     return np.searchsorted(edges, np.asarray(times) + 1e-9, side="right")
 
 
+def _by_segment(seg, n):
+    """``[indices (ascending) where seg == k for k in range(n)]``: one sort for all the
+    segments, not a pass over the take per jump (a take with a snap turn every few seconds
+    has thousands)."""
+    order = np.argsort(seg, kind="stable")
+    bounds = np.searchsorted(seg[order], np.arange(n + 1), side="left")
+    return [order[bounds[k]:bounds[k + 1]] for k in range(n)]
+
+
 def remove_rig_jumps(recording: Recording, jumps) -> Recording:
     """A copy of ``recording`` with the motion after each jump moved back by it: one continuous
     motion in the space of the first sample.  A hand or foot sample between the head's two
@@ -304,26 +344,28 @@ def remove_rig_jumps(recording: Recording, jumps) -> Recording:
         pos = s.pos.copy()
         quat = s.quat.copy()
         if d != "head":            # samples between the head's two around a jump: the nearer side
+            increasing = _increasing(s.time)
             for k, j in enumerate(jumps, start=1):
                 Ra, ta = W[k - 1]
                 Rb, tb = W[k]
-                for i in np.nonzero((s.time > j.start + 1e-9) & (s.time < j.time - 1e-9))[0]:
+                between = _within(s.time, j.start, j.time, increasing)      # then the strict test
+                between = between[(s.time[between] > j.start + 1e-9) & (s.time[between] < j.time - 1e-9)]
+                for i in between:
                     if i == 0 or not np.all(np.isfinite(s.pos[i - 1])):
                         continue
                     Rp, tp = W[seg[i - 1]]
                     ref = Rp.T @ (s.pos[i - 1] - tp)
                     if np.linalg.norm(Rb.T @ (s.pos[i] - tb) - ref) < np.linalg.norm(Ra.T @ (s.pos[i] - ta) - ref):
                         seg[i] = k
-        for k in range(len(W)):
-            m = seg == k
-            if k == 0 or not m.any():
+        for k, m in enumerate(_by_segment(seg, len(W))):
+            if k == 0 or not m.size:
                 continue
             Rk, tk = W[k]
             pos[m] = (pos[m] - tk) @ Rk           # Rk.T @ (x - tk), row-wise
             q = quat[m]
             ok = np.all(np.isfinite(q), -1)
             if ok.any():
-                quat[np.nonzero(m)[0][ok]] = matrix_to_quat(Rk.T @ quat_to_matrix(q[ok]))
+                quat[m[ok]] = matrix_to_quat(Rk.T @ quat_to_matrix(q[ok]))
         streams[d] = TrackerStream(d, s.time.copy(), pos, quat, s.valid.copy())
     return Recording(streams=streams, source=recording.source, metadata=dict(recording.metadata),
                      warnings=list(recording.warnings))
@@ -348,9 +390,8 @@ def restore_rig_jumps(result, jumps):
     if targets is not None:
         tpos = {d: v.copy() for d, v in targets.pos.items()}
         trot = {d: v.copy() for d, v in targets.rot.items()}
-    for k in range(1, len(W)):
-        m = seg == k
-        if not m.any():
+    for k, m in enumerate(_by_segment(seg, len(W))):
+        if k == 0 or not m.size:
             continue
         Rk, tk = W[k]
         root_pos[m] = root_pos[m] @ Rk.T + tk
