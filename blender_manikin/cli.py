@@ -458,11 +458,13 @@ def export_fbx(path, output, preset="blender"):
     fbx_presets.export_fbx(path, output.armature, preset, extra_objects=list(output.trackers.values()))
 
 
-def convert_one_core(path, out_dir, args, formats, stem=None):
+def convert_one_core(path, out_dir, args, formats, stem=None, keypoints=None):
     """Solve one recording with the numpy core and write JSON / BVH (no Blender needed);
-    returns ``(written paths, outcome)``."""
+    returns ``(written paths, outcome)``.  ``keypoints``: the
+    :class:`.core.io_keypoints.KeypointRecording` of ``path`` already read (one person of a
+    group file), solved instead of reading ``path`` again."""
     from .core.solve import solve_recording
-    out = solve_recording(path, solve_settings(args))
+    out = solve_recording(path if keypoints is None else keypoints, solve_settings(args))
     return write_core_formats(path, out_dir, out.result, args, formats, stem), out
 
 
@@ -495,13 +497,16 @@ def write_core_formats(path, out_dir, result, args, formats, stem=None):
     return written
 
 
-def convert_one(path, out_dir, args, formats, stem=None):
-    """Solve one recording and write its outputs in Blender; returns ``(written paths, job)``."""
+def convert_one(path, out_dir, args, formats, stem=None, keypoints=None):
+    """Solve one recording and write its outputs in Blender; returns ``(written paths, job)``.
+    ``keypoints``: as :func:`convert_one_core`."""
+    import dataclasses
+
     import bpy
     from .blender.solve_job import SolveJob
 
     reset_scene(args.fps)
-    job = SolveJob(_config(path, args))
+    job = SolveJob(dataclasses.replace(_config(path, args), keypoints=keypoints))
     job.run(bpy.context)
     export = job.output
     if getattr(args, "retarget", None):
@@ -673,18 +678,22 @@ def main(argv=None):
         return 1
     # two inputs named alike never write the same file; names Windows accepts, paths under 260
     stems = output_stems(inputs, args.out, output_tail(formats))
-    jobs = []               # (input, stem, person or None): a keypoint file with several people, one each
+    # (input, stem, person or None, their recording or None): a keypoint file with several people,
+    # read once, one job each (stems <stem>_p<label>, fit for Windows as the file's own)
+    jobs = []
     for path in inputs:
         people = keypoint_people(path, args)
         if people and len(people) > 1:
-            jobs.extend((path, s, lab) for lab, s in zip(people, person_stems(stems[path], people)))
-        else:
-            jobs.append((path, stems[path], None))
+            labels = [lab for lab, _ in people]
+            fitted = person_stems(stems[path], labels, os.path.abspath(path), args.out, output_tail(formats))
+            jobs.extend((path, s, lab, rec) for (lab, rec), s in zip(people, fitted))
+        else:                   # one person: the file's own name (its recording, when read, solved)
+            jobs.append((path, stems[path], None, people[0][1] if people else None))
     failed = done = 0
     path = inputs[0]
     with _ctrl_c() as interrupted:
         try:
-            for path, stem, person in jobs:
+            for path, stem, person, keypoints in jobs:
                 try:
                     if not os.path.isfile(path) and not is_keypoint_input(path):
                         raise FileNotFoundError("no such file")
@@ -694,7 +703,7 @@ def main(argv=None):
                     output_guard.claim(dsts)
                     run_args = args if person is None else argparse.Namespace(**{**vars(args), "person": person})
                     with quiet_stdout():
-                        written, job = convert(path, args.out, run_args, formats, stem)
+                        written, job = convert(path, args.out, run_args, formats, stem, keypoints)
                     output_guard.record(written)
                 except Exception as exc:      # one bad input does not stop the others
                     if interrupted:           # Ctrl-C, turned into an error by a Blender operator
@@ -716,9 +725,10 @@ def main(argv=None):
 
 
 def keypoint_people(path, args):
-    """The labels of the people a keypoint file at ``path`` holds with ``--person all`` (the
-    default), or None: not a keypoint file, one person, one chosen with ``--person``, or a file
-    that cannot be read (its solve then says why)."""
+    """``[(label, KeypointRecording), ...]``: the people a keypoint file at ``path`` holds with
+    ``--person all`` (the default), read once (:func:`.core.io_keypoints.read_keypoint_people`;
+    each is solved from its recording, not read again), or None: not a keypoint file, one
+    chosen with ``--person``, or a file that cannot be read (its solve then says why)."""
     from .core.io_keypoints import is_keypoint_input, read_keypoint_people
     from .core.recording import RecordingError
     if str(getattr(args, "person", "all") or "all").strip().lower() != "all":
@@ -734,20 +744,19 @@ def keypoint_people(path, args):
                                       subject_params=getattr(args, "subject_params", None))
     except (RecordingError, OSError, ValueError):
         return None
-    return [lab for lab, _ in people]
+    return people
 
 
-def person_stems(stem, labels):
-    """``<stem>_p<label>`` for each person's ``labels`` (:func:`.core.file_names.file_stem`
-    makes a label a file name; :func:`.core.file_names.unique_stems` keeps two labels that
-    come out alike apart)."""
-    from .core.file_names import file_stem, unique_stems
-    return unique_stems([f"{stem}_p{file_stem(lab, 'x')}" for lab in labels])
+def person_stems(stem, labels, key="", folder=None, tail=0):
+    """``<stem>_p<label>`` for each person's ``labels``, fit for ``folder`` under Windows' 260
+    characters with ``tail`` more (:func:`.core.file_names.person_stems`, as ``convert``)."""
+    from .core.file_names import person_stems as stems_of
+    return stems_of(stem, labels, key, folder, tail)
 
 
 def _people_said(path, jobs):
     """``"3: 0, 1, 2"``: how many people of ``path`` are solved, and their labels."""
-    labels = [p for q, _, p in jobs if q == path]
+    labels = [p for q, _, p, _ in jobs if q == path]
     return f"{len(labels)}: {', '.join(labels)}"
 
 
@@ -788,8 +797,8 @@ def convert_main(args, fmts):
         return 1
     def report(rec):                  # each input's OK line as it finishes, before the summary
         if rec["status"] == "ok":
-            print(f"OK {rec['input']} -> {', '.join(rec['outputs'])} ({rec['frames']} frames, {rec['seconds']:.2f} s)",
-                  flush=True)
+            print(f"OK {convert.said(rec)} -> {', '.join(rec['outputs'])} ({rec['frames']} frames, "
+                  f"{rec['seconds']:.2f} s)", flush=True)
 
     try:
         code, records = convert.run(inputs, args.out, fmts, settings, scheduler=args.scheduler,

@@ -105,7 +105,7 @@ def test_cli_in_blender_writes_a_blend_from_a_coco_array(tmp_path, motion):
 
 def test_panel_person_field_solves_one_person_of_a_group_file(addon, tmp_path, motion):
     """A (people, frames, points, 3) array: the Keypoints tab's Person field picks the one solved
-    (trimmed to the frames they are seen); "all" refuses the file, naming its people."""
+    (trimmed to the frames they are seen)."""
     from blender_manikin.core import keypoint_layouts as kl
     from fixtures_keypoints import to_y_up
     body, pos, world = motion
@@ -119,10 +119,82 @@ def test_panel_person_field_solves_one_person_of_a_group_file(addon, tmp_path, m
     s = sc.manikin
     s.source, s.keypoint_path, s.live_rig = 'KEYPOINTS', str(path), False
     assert s.keypoint_person == "all"
-    with pytest.raises(RuntimeError, match=r"2 people in the file \(0, 1\)"):
-        bpy.ops.manikin.solve_full_body()
     s.keypoint_person = "1"
     assert bpy.ops.manikin.solve_full_body() == {'FINISHED'}
     assert "person 1 of 2 (0, 1), frames 0-59" in s.last_report
     fcs = keying.action_fcurves(s.armature.animation_data.action, s.armature)
     assert all(len(fc.keyframe_points) == 60 for fc in fcs)
+
+
+def _group_npy(tmp_path, motion):
+    """``group.npy``: three people (people, frames, points, 3), +Y up: person 1 leaves after 60
+    frames, person 2 enters at frame 20."""
+    from blender_manikin.core import keypoint_layouts as kl
+    from fixtures_keypoints import to_y_up
+    body, pos, world = motion
+    clean = kl.keypoints_from_body22(pos, world, "coco17", body.stature)
+    X = np.stack([to_y_up(clean + [1.5 * k, 0.0, 0.0]) for k in range(3)])
+    X[1, 60:] = np.nan
+    X[2, :20] = np.nan
+    path = tmp_path / "group.npy"
+    np.save(path, X)
+    return path
+
+
+def test_panel_person_all_solves_each_person_onto_their_own_armature_in_one_undo_step(addon, tmp_path, motion):
+    """Person "all" on a file with three people: one new armature per person, named as the command
+    line's outputs (MANIKIN_<take>_p<label>), each with its own action keyed over the frames that
+    person is seen, the box listing them; made in one undo step (one undo removes all three)."""
+    path = _group_npy(tmp_path, motion)
+    sc = bpy.context.scene
+    sc.render.fps, sc.render.fps_base = 30, 1.0
+    s = sc.manikin
+    s.source, s.keypoint_path, s.live_rig = 'KEYPOINTS', str(path), False
+    assert s.keypoint_person == "all"
+    from blender_manikin.blender import solve_job as sj
+    from blender_manikin.blender.properties import config_from_settings
+    q = sj.SolveQueue(sj.people_configs(config_from_settings(bpy.context)))
+    q.index = 1                                  # the modal operator's status bar, on the second person
+    assert len(q) == 3 and q.stage == "person 2 of 3 (1): done"
+    bpy.ops.ed.undo_push(message="before solve")
+    names = sorted(o.name for o in bpy.data.objects)
+    n_act = len(bpy.data.actions)
+    assert bpy.ops.manikin.solve_full_body('EXEC_DEFAULT', True) == {'FINISHED'}
+    arms = sorted((o for o in bpy.data.objects if o.type == 'ARMATURE'), key=lambda o: o.name)
+    assert [o.name for o in arms] == ["MANIKIN_group_p0", "MANIKIN_group_p1", "MANIKIN_group_p2"]
+    acts = [o.animation_data.action for o in arms]
+    assert [a.name for a in acts] == ["MANIKIN_solve_group_p0", "MANIKIN_solve_group_p1", "MANIKIN_solve_group_p2"]
+    for obj, act, n in zip(arms, acts, (90, 60, 70)):
+        assert {len(fc.keyframe_points) for fc in keying.action_fcurves(act, obj)} == {n}
+    assert s.last_report.startswith("3 of 3 people of group.npy solved: MANIKIN_group_p0 / MANIKIN_solve_group_p0, "
+                                    "MANIKIN_group_p1 / MANIKIN_solve_group_p1, MANIKIN_group_p2 / ")
+    assert s.armature == arms[-1]
+    bpy.ops.ed.undo()
+    assert sorted(o.name for o in bpy.data.objects) == names
+    assert len(bpy.data.actions) == n_act
+
+
+def test_person_all_a_person_that_fails_leaves_nothing_and_is_named(addon, tmp_path, motion, monkeypatch):
+    """One person's solve failing while it is written (its live rig) removes what was made for
+    that person only; the others are kept and the box names the one that failed."""
+    path = _group_npy(tmp_path, motion)
+    real = live_rig.build_live_rig
+
+    def build(obj, *a, **kw):
+        if obj.name.endswith("_p1"):
+            raise RuntimeError("rig refused")
+        return real(obj, *a, **kw)
+
+    monkeypatch.setattr(live_rig, "build_live_rig", build)
+    sc = bpy.context.scene
+    sc.render.fps, sc.render.fps_base = 30, 1.0
+    s = sc.manikin
+    s.source, s.keypoint_path, s.live_rig = 'KEYPOINTS', str(path), True
+    assert bpy.ops.manikin.solve_full_body() == {'FINISHED'}
+    assert sorted(o.name for o in bpy.data.objects if o.type == 'ARMATURE') == ["MANIKIN_group_p0",
+                                                                                 "MANIKIN_group_p2"]
+    assert not [a for a in bpy.data.actions if "group_p1" in a.name]
+    assert not [o for o in bpy.data.objects if "group_p1" in o.name]
+    assert not [d for d in list(bpy.data.meshes) + list(bpy.data.armatures) if "group_p1" in d.name]
+    assert s.last_report.startswith("2 of 3 people of group.npy solved: MANIKIN_group_p0 / MANIKIN_live_group_p0, "
+                                    "MANIKIN_group_p2 / MANIKIN_live_group_p2; failed: person 1: rig refused")

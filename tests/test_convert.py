@@ -359,3 +359,39 @@ def test_the_progress_line_counts_converted_and_failed_apart(tmp_path, capsys):
     assert code == 1 and sorted(r["status"] for r in records) == ["error", "ok"]
     bars = [part for part in capsys.readouterr().err.replace("\n", "\r").split("\r") if part.startswith("[")]
     assert bars[-1].endswith("] 2/2 done: 1 converted, 1 failed"), bars
+
+
+def test_a_file_with_several_people_is_one_task_per_person_and_resumes_per_person(tmp_path):
+    """A keypoint array with three people: one output per person, named as ``solve`` names them
+    (``<stem>_p<label>``), one manifest line each (with the person); a rerun skips them all, and
+    after one person's output is removed converts that person only."""
+    from fixtures_keypoints import hinge_motion, to_y_up
+    from blender_manikin.core import keypoint_layouts as kl
+    body, pos, world = hinge_motion(frames=90, seed=1)
+    clean = kl.keypoints_from_body22(pos, world, "coco17", body.stature)
+    X = np.stack([to_y_up(clean + [1.5 * k, 0.0, 0.0]) for k in range(3)])
+    X[1, 60:] = np.nan                               # person 1 leaves after 60 frames
+    d = tmp_path / "in"
+    d.mkdir()
+    np.save(d / "group.npy", X)
+    shutil.copy(EXAMPLE, d / "take.csv")             # and a tracker take beside it, as before
+    out = tmp_path / "out"
+
+    def run():
+        return convert.run(convert.collect_inputs([str(d)]), str(out), ["json"], SolveSettings(fps=30.0),
+                           workers=1, progress=False, log=lambda m: None)
+
+    code, recs = run()
+    assert code == 0, [r["error"] for r in recs]
+    assert sorted(n for n in os.listdir(out) if n.endswith(".json")) == [
+        "group_p0.json", "group_p1.json", "group_p2.json", "take.json"]
+    group = sorted((r for r in _manifest_lines(out) if r["input"].endswith("group.npy")), key=lambda r: r["person"])
+    assert [(r["person"], r["people"], r["frames"]) for r in group] == [
+        ("0", ["0", "1", "2"], 90), ("1", ["0", "1", "2"], 60), ("2", ["0", "1", "2"], 90)]
+    assert len(json.loads((out / "group_p1.json").read_text())["positions"]) == 60
+    assert run()[1] == []                                            # all done: nothing converted
+    os.remove(out / "group_p1.json")
+    code, recs = run()
+    assert code == 0 and [(os.path.basename(r["input"]), r["person"]) for r in recs] == [("group.npy", "1")]
+    assert (out / "group_p1.json").is_file()
+    assert run()[1] == []

@@ -169,3 +169,40 @@ def test_cli_writes_one_output_per_person_and_keeps_single_files(tmp_path, peopl
                      "--person", "1"])
     assert code == 0
     assert [p.name for p in (tmp_path / "one").iterdir() if p.suffix == ".json"] == ["group.json"]
+
+
+def test_cli_reads_a_group_file_once_and_solves_each_person_from_it(tmp_path, people, monkeypatch):
+    """``solve --person all``: the file is read once, each person solved from their recording
+    (the outputs as when each was read on its own)."""
+    from blender_manikin.core import io_keypoints
+    path = tmp_path / "group.npy"
+    np.save(path, _stack(people))
+    loads = []
+    real = io_keypoints._load_input
+
+    def load(p, *a, **kw):
+        loads.append(str(p))
+        return real(p, *a, **kw)
+
+    monkeypatch.setattr(io_keypoints, "_load_input", load)
+    out = tmp_path / "out"
+    assert cli.main(["solve", str(path), "--out", str(out), "--format", "json", "--fps", "30"]) == 0
+    assert loads == [str(path)]
+    monkeypatch.setattr(io_keypoints, "_load_input", real)
+    doc = json.loads((out / "group_p2.json").read_text())
+    _, ref = _joints(path, person="2")
+    assert len(doc["positions"]) == len(ref) == T - ENTERS and doc["t0"] == pytest.approx(ENTERS / FPS)
+
+
+def test_person_stems_fit_windows_260_characters(tmp_path):
+    """Each person's stem (``<stem>_p<label>``) is cut to fit a deep folder on Windows, with a hash
+    that keeps two people apart; off Windows, or where it fits, it is unchanged."""
+    from blender_manikin.core.file_names import MAX_PATH, person_stems
+    deep = "/" + "/".join(["folder" * 5] * 6)            # 186 characters
+    long = "a_very_long_take_name_" * 4
+    got = person_stems(long, ["0", "1"], key="/in/group.npy", folder=deep, tail=20, windows=True)
+    assert len(set(got)) == 2 and all(len(deep) + 1 + len(s) + 20 <= MAX_PATH - 1 for s in got)
+    assert all(s.startswith(long[:10]) and len(s.rsplit("-", 1)[1]) == 8 for s in got)
+    assert person_stems("take", ["0", "1"], key="k", folder=deep, tail=20, windows=True) == ["take_p0", "take_p1"]
+    assert person_stems(long, ["0", "a b"], folder=str(tmp_path), windows=False) == [f"{long}_p0", f"{long}_pa_b"]
+    assert cli.person_stems("take", ["x", "X"]) == ["take_px", "take_pX_2"]

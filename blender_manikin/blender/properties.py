@@ -171,8 +171,8 @@ class MANIKIN_Settings(PropertyGroup):
     keypoint_person: StringProperty(
         name="Person", default="all",
         description="In a keypoint file with several people (a 4-D array, a CSV with a person column): the "
-                    "person to solve, their label or 0-based index (all: a one-person file; a file with "
-                    "several is refused, naming its people)")
+                    "person to solve, their label or 0-based index (all: each person onto a new armature "
+                    "of their own, MANIKIN_<file>_p<label>, in one undo step)")
     use_keypoint_rate: BoolProperty(name="Set Rate", default=False,
                                     description="Give the sample rate of a keypoint file that has no times "
                                                 "(else 30 Hz is assumed, and said)")

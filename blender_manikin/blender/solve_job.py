@@ -59,7 +59,9 @@ class SolveConfig(SolveSettings):
     elbows/knees follow the swivel properties and the hand/foot controls; False keeps plain FK
     keys only.  mark_problems: timeline markers where the solve is worth a look
     (:mod:`core.review_marks`).  set_scene_range, armature_name, reuse_armature: how the result is
-    written.
+    written.  take: the take's name when it is not the file's (one person of a keypoint file with
+    several: ``<file>_p<label>``, :func:`people_configs`).  keypoints: that person's
+    :class:`core.io_keypoints.KeypointRecording`, already read (solved instead of the file).
     """
     fps: float | None = None
     source: str = "FILE"
@@ -79,10 +81,15 @@ class SolveConfig(SolveSettings):
     keypoint_bone_map: str = "auto"           # its bone map: auto, a preset, file (keypoint_map_file)
     keypoint_map_file: str | None = None
     marker_take: str | None = None     # timeline markers named "MANIKIN <take>: ..." (several takes)
+    take: str | None = None            # the take's name when not the file's (a person: <file>_p<label>)
+    keypoints: object = None           # a KeypointRecording already read (a person of a group file)
 
     def take_name(self) -> str:
         """The take's name for the actions a solve makes (``MANIKIN_live_<take>``): the recording
-        file's (or keypoint folder's) name without its extension, ``scene`` for scene objects."""
+        file's (or keypoint folder's) name without its extension, ``scene`` for scene objects;
+        ``take`` when given."""
+        if self.take:
+            return self.take
         if self.source.upper() == "KEYPOINTS" and self.keypoint_armature:
             return self.keypoint_armature
         if self.source.upper() == "KEYPOINTS" and self.keypoint_collection:
@@ -234,6 +241,8 @@ class SolveJob:
         ``info``, ``timings``)."""
         cfg = self.config
         source = self.recording if self.recording is not None else cfg.filepath
+        if self.recording is None and cfg.keypoints is not None:      # one person of a group file, read
+            source = cfg.keypoints
         if source is None or source == "":
             raise SolveError("no recording file chosen")
         timings = dict(self.timings)
@@ -387,7 +396,10 @@ class SolveQueue:
         stage = self.job.stage if self.job is not None else "done"
         if len(self.configs) < 2:
             return stage
-        name = os.path.basename(self.configs[max(self.index, 0)].filepath or "") or "take"
+        cfg = self.configs[max(self.index, 0)]
+        if cfg.keypoints is not None and len({c.filepath for c in self.configs}) == 1:    # a group file's people
+            return f"person {max(self.index, 0) + 1} of {len(self.configs)} ({cfg.person}): {stage}"
+        name = os.path.basename(cfg.filepath or "") or "take"
         return f"file {max(self.index, 0) + 1} of {len(self.configs)} ({name}): {stage}"
 
     def _attempt(self, job, step, context):
@@ -457,6 +469,37 @@ class SolveQueue:
             self._attempt(job, job.run, context)
         self.job = None
         return self
+
+
+def people_configs(config: SolveConfig) -> list:
+    """The solves of ``config``: a keypoint file (``source`` KEYPOINTS, a ``filepath``) read once
+    (:func:`core.io_keypoints.read_keypoint_people`), each solve handed its recording
+    (``keypoints``).  With ``person`` ``"all"`` and several people in the file, one configuration
+    per person, as the command line's outputs: take ``<file>_p<label>``
+    (:func:`core.file_names.person_stems`), a new armature ``MANIKIN_<take>`` (never the reused
+    one: each person is a body of its own), timeline markers of its own, no scene range (the
+    operator sets one over them all).  Otherwise ``[config]`` (a person chosen, a one-person file:
+    read once too).  A file that cannot be read gives ``[config]``: its solve says why."""
+    import dataclasses
+    from ..core.file_names import person_stems
+    from ..core.io_keypoints import read_keypoint_people
+    from ..core.recording import RecordingError
+    cfg = config
+    if cfg.source.upper() != "KEYPOINTS" or not cfg.filepath or cfg.keypoint_armature or cfg.keypoint_collection:
+        return [cfg]
+    s = cfg.settings()
+    try:
+        people = read_keypoint_people(cfg.filepath, layout=s.keypoint_layout, units=s.units, up=s.up, rate=s.rate,
+                                      mapping=s.mapping, subject_params=s.subject_params,
+                                      person=s.person or "all", person_axis=s.person_axis)
+    except (RecordingError, OSError, ValueError):
+        return [cfg]
+    if len(people) == 1:          # one person (chosen, alone in the file, or the only one seen)
+        return [dataclasses.replace(cfg, keypoints=people[0][1])]
+    takes = person_stems(cfg.take_name(), [lab for lab, _ in people])
+    return [dataclasses.replace(cfg, person=lab, keypoints=rec, take=take, armature_name=f"MANIKIN_{take}",
+                                reuse_armature=None, set_scene_range=False, marker_take=take)
+            for (lab, rec), take in zip(people, takes)]
 
 
 def find_tpose_time(config: SolveConfig, context=None):

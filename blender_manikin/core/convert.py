@@ -12,6 +12,11 @@ dask-kubernetes: any ``distributed`` scheduler address).
 * Each worker loads the model once; each input is one task that reads one recording, solves it
   (:func:`.solve.solve_recording`) and writes ``DIR/STEM.<ext>`` per format under a temporary
   name, renamed when complete, so memory per worker is bounded by one recording.
+* A keypoint file with several people (:func:`.io_keypoints.read_keypoint_people`) and the
+  person setting ``all`` (the default) is one task per person, each written to
+  ``DIR/STEM_p<label>.<ext>`` as ``solve`` names them (:func:`.file_names.person_stems`); its
+  manifest lines carry ``person`` (the label) and ``people`` (all of the file's), and each person
+  is done, skipped or redone on its own as an input is.
 * ``DIR/manifest.jsonl`` gets one line per finished input: status (``ok``/``error``), frames,
   seconds, stature, quality notes, outputs, the error, and the input's size and modification
   time when it was read (``source``).  A rerun skips the inputs already converted (every output
@@ -37,7 +42,7 @@ import threading
 import time
 
 from . import formats, output_guard
-from .file_names import check_folder, fit_bytes, fit_stem, fold, short_hash, windows_safe
+from .file_names import check_folder, fit_bytes, fit_stem, fold, person_stems, short_hash, windows_safe
 from .solve import SolveSettings, error_message, solve_recording
 
 MANIFEST = "manifest.jsonl"
@@ -150,9 +155,16 @@ def temp_tail(fmts) -> int:
     return len(".") + len(".part") + 10 + ext + len(".tmp.npz")
 
 
+def task_key(path, person=None):
+    """The manifest's key of a task: the input ``path``, or ``(path, label)`` for one person of a
+    keypoint file with several."""
+    return path if person is None else (path, str(person))
+
+
 def read_manifest(out_dir):
-    """The records of ``DIR/manifest.jsonl`` (last record per input wins); ``{}`` when absent.
-    A line cut off by a crash is ignored."""
+    """The records of ``DIR/manifest.jsonl`` by :func:`task_key` (the input's path; ``(path,
+    label)`` for a person of a file with several), the last record per key winning; ``{}`` when
+    absent.  A line cut off by a crash is ignored."""
     path = os.path.join(out_dir, MANIFEST)
     records = {}
     if os.path.isfile(path):
@@ -163,7 +175,7 @@ def read_manifest(out_dir):
                 except json.JSONDecodeError:
                     continue
                 if isinstance(rec, dict) and "input" in rec:
-                    records[rec["input"]] = rec
+                    records[task_key(rec["input"], rec.get("person"))] = rec
     return records
 
 
@@ -210,14 +222,14 @@ def _open_manifest(out_dir):
 
 # --------------------------------------------------------------------------
 # one task (runs on a worker)
-def convert_task(path, out_dir, stem, fmts, settings, model=None, options=None):
-    """Convert one recording; returns its manifest record (never raises for a bad file)."""
+def convert_task(path, out_dir, stem, fmts, settings, model=None, options=None, person=None, people=None):
+    """Convert one recording (with ``person``: that person of a keypoint file with several,
+    ``people`` all of its labels); returns its manifest record (never raises for a bad file)."""
     from . import model_choice, pipeline
     t0 = time.perf_counter()
-    rec = {"input": path, "status": "error", "outputs": [], "frames": 0, "seconds": 0.0, "stature": None,
-           "notes": [], "error": None, "source": input_signature(path)}   # before reading: a change after shows
+    rec = _error_record(path, None, person, people)    # its source before reading: a change after shows
     try:
-        st = SolveSettings(**settings)
+        st = SolveSettings(**(settings if person is None else dict(settings, person=person)))
         spec = model if model is not None else st.model
 
         def solver(targets, body, progress=None):
@@ -278,9 +290,62 @@ def _client(scheduler, workers, timeout=None):
                                    "is it running, and is the address right (tcp://HOST:PORT)?") from None
 
 
-def _error_record(path, message):
-    return {"input": path, "status": "error", "outputs": [], "frames": 0, "seconds": 0.0, "stature": None,
-            "notes": [], "error": message, "source": input_signature(path)}
+def _error_record(path, message, person=None, people=None):
+    rec = {"input": path, "status": "error", "outputs": [], "frames": 0, "seconds": 0.0, "stature": None,
+           "notes": [], "error": message, "source": input_signature(path)}
+    if person is not None:
+        rec.update(person=str(person), people=list(people or ()))
+    return rec
+
+
+def said(rec_or_path, person=None) -> str:
+    """How a log line names a task: the input's path, and ``[person LABEL]`` for one person."""
+    if isinstance(rec_or_path, dict):
+        rec_or_path, person = rec_or_path["input"], rec_or_path.get("person")
+    return rec_or_path if person is None else f"{rec_or_path} [person {person}]"
+
+
+def people_tasks(inputs, settings: SolveSettings, done=None):
+    """``[(input, person label or None, all labels or None), ...]``: one task per input, and for a
+    keypoint file with several people and ``settings.person`` ``"all"`` one per person
+    (:func:`.io_keypoints.keypoint_person_labels`: the file is loaded, no person read; a file
+    where only one person is seen long enough gives that one, written under the file's name).  The
+    people of an input that ``done`` (:func:`read_manifest`) already holds, unchanged since
+    (same ``source``), are taken from it without reading the file (and one converted whole is
+    one task, not read either).  A file that cannot be read
+    is one task (its error is said by the solve)."""
+    from .io_keypoints import is_keypoint_input, keypoint_person_labels
+    from .recording import RecordingError
+    every = str(settings.person or "all").strip().lower() == "all"
+    known = {}
+    for rec in (done or {}).values():
+        if rec.get("person") is not None and rec.get("people"):
+            known.setdefault(rec["input"], []).append(rec)
+    tasks = []
+    for p in inputs:
+        labels = None
+        if every:
+            sig = input_signature(p)
+            seen = [r for r in known.get(p, ()) if r.get("source") == sig]
+            whole = (done or {}).get(p)
+            if seen and sig is not None:
+                labels = list(seen[-1]["people"])
+            elif whole and whole.get("status") == "ok" and sig is not None and whole.get("source") == sig:
+                labels = None       # converted whole before, unchanged since: one person, not read again
+            else:
+                try:
+                    if is_keypoint_input(p):
+                        labels = keypoint_person_labels(p, layout=settings.keypoint_layout, rate=settings.rate,
+                                                        mapping=settings.mapping,
+                                                        subject_params=settings.subject_params,
+                                                        person_axis=settings.person_axis)
+                except (RecordingError, OSError, ValueError):
+                    labels = None
+        if labels:              # one seen of several: solved as that person, under the file's own name
+            tasks.extend((p, lab, labels) for lab in labels)
+        else:
+            tasks.append((p, None, None))
+    return tasks
 
 
 def _lost_task_message(exc):
@@ -344,51 +409,69 @@ def run(inputs, out_dir, fmts, settings: SolveSettings, scheduler=None, workers=
         log(f"removed {removed} partial output(s) a killed run left in {out_dir}")
     done = read_manifest(out_dir)
     # the names of earlier runs' inputs count too: a later take.csv never writes over an earlier one's
-    stems = output_stems(list(dict.fromkeys(list(inputs) + list(done))), out_dir, temp_tail(fmts))
-    todo = [p for p in inputs if not is_done(done.get(p), fmts)]
-    skipped = len(inputs) - len(todo)
+    earlier = [r["input"] for r in done.values()]
+    stems = output_stems(list(dict.fromkeys(list(inputs) + earlier)), out_dir, temp_tail(fmts))
+    # a keypoint file with several people: one task each, <stem>_p<label>, done or redone on its own
+    tasks = people_tasks(inputs, settings, done)
+    names = {}
+    for p, person, people in tasks:
+        if person is None or len(people) < 2:
+            names[task_key(p, person)] = stems[p]
+        elif task_key(p, person) not in names:
+            for lab, st in zip(people, person_stems(stems[p], people, os.path.abspath(p), out_dir, temp_tail(fmts))):
+                names[task_key(p, lab)] = st
+    split = sum(person is not None and len(people) > 1 for _, person, people in tasks)
+    if split:
+        log(f"{split} people of {len({p for p, person, _ in tasks if person is not None})} keypoint file(s) "
+            "with several: converted each on their own")
+    todo = [t for t in tasks if not is_done(done.get(task_key(*t[:2])), fmts)]
+    skipped = len(tasks) - len(todo)
     if skipped:
-        log(f"{skipped} of {len(inputs)} input(s) already converted (manifest): skipped")
-    changed = [p for p in todo if p in done and "source" in done[p]
-               and is_done({**done[p], "source": input_signature(p)}, fmts)]
+        log(f"{skipped} of {len(tasks)} input(s) already converted (manifest): skipped")
+    changed = [t for t in todo if task_key(*t[:2]) in done and "source" in done[task_key(*t[:2])]
+               and is_done({**done[task_key(*t[:2])], "source": input_signature(t[0])}, fmts)]
     if changed:
         log(f"{len(changed)} input(s) changed since converted (size or modification time): converted again")
     # an output that would replace a file the user made or changed stops its input (output_guard)
     blocked = []
-    for p in todo:
+    for p, person, people in todo:
         try:
-            output_guard.check_free([os.path.join(out_dir, stems[p] + formats.WRITERS[f].extension) for f in fmts],
-                                    bool(getattr(options, "overwrite", False)))
+            output_guard.check_free([os.path.join(out_dir, names[task_key(p, person)] + formats.WRITERS[f].extension)
+                                     for f in fmts], bool(getattr(options, "overwrite", False)))
         except output_guard.OutputInTheWay as exc:
-            blocked.append({"input": p, "status": "error", "outputs": [], "frames": 0, "seconds": 0.0,
-                            "stature": None, "notes": [], "error": str(exc)})
+            rec = _error_record(p, str(exc), person, people)
+            del rec["source"]
+            blocked.append(rec)
     if blocked:
-        gone = {r["input"] for r in blocked}
-        todo = [p for p in todo if p not in gone]
+        gone = {task_key(r["input"], r.get("person")) for r in blocked}
+        todo = [t for t in todo if task_key(*t[:2]) not in gone]
         with _open_manifest(out_dir) as man:
             for rec in blocked:
                 man.write(json.dumps(rec) + "\n")
-                log(f"ERROR {rec['input']}: {rec['error']}")
+                log(f"ERROR {said(rec)}: {rec['error']}")
     if not todo:
         log(summary(out_dir, 0, len(blocked), skipped))
-        return 0 if all(is_done(done.get(p), fmts) for p in inputs) else 1, blocked
+        return 0 if all(is_done(done.get(task_key(*t[:2])), fmts) for t in tasks) else 1, blocked
     client, cluster = _client(scheduler, workers, timeout=connect_timeout)
     # claimed before they are written: what a killed run leaves under these names is replaceable
-    output_guard.claim([os.path.join(out_dir, stems[p] + formats.WRITERS[f].extension) for p in todo for f in fmts])
+    output_guard.claim([os.path.join(out_dir, names[task_key(*t[:2])] + formats.WRITERS[f].extension)
+                        for t in todo for f in fmts])
     records, failed = list(blocked), len(blocked)
     try:
         log(f"dask dashboard: {client.dashboard_link}")
         st = dataclasses.asdict(settings)
-        futures = client.map(convert_task, todo, [out_dir] * len(todo), [stems[p] for p in todo],
-                             [list(fmts)] * len(todo), [st] * len(todo), [model] * len(todo),
-                             [options] * len(todo), pure=False)
-        which = {fut.key: p for fut, p in zip(futures, todo)}
+        n = len(todo)
+        futures = client.map(convert_task, [t[0] for t in todo], [out_dir] * n,
+                             [names[task_key(*t[:2])] for t in todo], [list(fmts)] * n, [st] * n, [model] * n,
+                             [options] * n, [t[1] for t in todo], [t[2] for t in todo], pure=False)
+        which = {fut.key: t for fut, t in zip(futures, todo)}
         with _open_manifest(out_dir) as man:
             for i, fut in enumerate(as_completed(futures), 1):
                 try:
                     rec = fut.result()
                 except Exception as exc:      # its worker died (KilledWorker): an error, the others go on
-                    rec = _error_record(which[fut.key], _lost_task_message(exc))
+                    p, person, people = which[fut.key]
+                    rec = _error_record(p, _lost_task_message(exc), person, people)
                 if rec["status"] == "ok":
                     output_guard.record(rec["outputs"])
                 man.write(json.dumps(rec) + "\n")
@@ -403,14 +486,14 @@ def run(inputs, out_dir, fmts, settings: SolveSettings, scheduler=None, workers=
                     sys.stderr.write(f"\r[{bar:<30}] {i}/{len(todo)} done: {i - failed} converted, {failed} failed")
                     sys.stderr.flush()
                 if rec["status"] != "ok":
-                    log(("\n" if progress else "") + f"ERROR {rec['input']}: {rec['error']}")
+                    log(("\n" if progress else "") + f"ERROR {said(rec)}: {rec['error']}")
         if progress:
             sys.stderr.write("\n")
     except KeyboardInterrupt:
         if progress:
             sys.stderr.write("\n")
         log("interrupted (Ctrl-C): " + summary(out_dir, len(records) - failed, failed, skipped,
-                                               len(inputs) - skipped - len(records)))
+                                               len(tasks) - skipped - len(records)))
         raise
     finally:
         client.close()

@@ -144,3 +144,16 @@ def unique_stems(stems) -> list:
         seen.add(fold(cand))
         out.append(cand)
     return out
+
+
+def person_stems(stem: str, labels, key: str = "", folder: str | None = None, tail: int = 0,
+                 windows: bool | None = None) -> list:
+    """``<stem>_p<label>`` for each of a keypoint file's people ``labels`` (their outputs,
+    side by side): :func:`file_stem` makes a label a file name, :func:`unique_stems` keeps two
+    labels that come out alike apart, and with ``folder`` each is :func:`fit_stem` cut to fit it
+    under Windows' 260 characters with ``tail`` more (the hash of ``key``, the input's absolute
+    path, and the label, so two people cut alike stay apart)."""
+    stems = unique_stems([f"{stem}_p{file_stem(lab, 'x')}" for lab in labels])
+    if folder is None:
+        return stems
+    return [fit_stem(s, f"{key}#person={lab}", folder, tail, windows) for s, lab in zip(stems, labels)]

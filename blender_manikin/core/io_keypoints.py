@@ -188,15 +188,7 @@ def read_keypoint_people(path, layout=None, units=None, up=None, rate=None, mapp
         if pick not in (None, "all", "0"):
             raise RecordingError(f"person {shown(person)}: the file holds one person (0)", path=src)
         return [("0", _one_person(raw, layout, units, up, handed, subject_params))]
-    people, notes = [], []
-    for lab, (X, conf, first) in raw["people"]:
-        seen = _seen_frames(X, conf)
-        if seen.sum() < MIN_PERSON_FRAMES:
-            notes.append(f"person {lab} left out (seen in {int(seen.sum())} frame(s), fewer than "
-                         f"{MIN_PERSON_FRAMES})")
-            continue
-        idx = np.nonzero(seen)[0]
-        people.append((lab, X, conf, first, slice(int(idx[0]), int(idx[-1]) + 1)))
+    people, notes = _people_seen(raw)
     labels = [p[0] for p in people]
     if not people:
         raise RecordingError(f"no person seen in {MIN_PERSON_FRAMES} frames or more "
@@ -228,6 +220,35 @@ def read_keypoint_people(path, layout=None, units=None, up=None, rate=None, mapp
         rec.metadata["people"] = labels
         out.append((lab, rec))
     return out
+
+
+def keypoint_person_labels(path, layout=None, rate=None, mapping=None, subject_params=None,
+                           person_axis=None):
+    """The labels of the people :func:`read_keypoint_people` would read from ``path`` (those
+    seen in :data:`MIN_PERSON_FRAMES` frames or more, in the file's order), or None for a
+    one-person file: the file is loaded but no person is read (no units, up axis or
+    handedness told), so it is cheaper than reading them.  Options as :func:`read_keypoints`;
+    raises as it does for a file it cannot read."""
+    raw = _load_input(path, rate, mapping, subject_params, person_axis, layout)
+    if raw["people"] is None:
+        return None
+    return [p[0] for p in _people_seen(raw)[0]]
+
+
+def _people_seen(raw):
+    """``([(label, X, conf, first frame, slice of the frames seen), ...], notes)``: the people of
+    ``raw`` (:func:`_load_input`) seen in :data:`MIN_PERSON_FRAMES` frames or more, each with the
+    slice from the first to the last frame they are seen; ``notes`` says who was left out."""
+    people, notes = [], []
+    for lab, (X, conf, first) in raw["people"]:
+        seen = _seen_frames(X, conf)
+        if seen.sum() < MIN_PERSON_FRAMES:
+            notes.append(f"person {lab} left out (seen in {int(seen.sum())} frame(s), fewer than "
+                         f"{MIN_PERSON_FRAMES})")
+            continue
+        idx = np.nonzero(seen)[0]
+        people.append((lab, X, conf, first, slice(int(idx[0]), int(idx[-1]) + 1)))
+    return people, notes
 
 
 def _person_key(person):

@@ -89,8 +89,9 @@ class SolveSettings:
     TRC: the subject's joint widths and, unless ``height`` is given, stature; ``"none"``: not
     used; None: the one found beside the TRC, :mod:`.subject_params`) and person (in a file with
     several people, the one solved: a label or a 0-based index; ``"all"``, the default, solves a
-    one-person file and refuses one with several: the command line solves each on its own,
-    :func:`.io_keypoints.read_keypoint_people`) and person_axis (a 4-D array's people axis).
+    one-person file and refuses one with several: ``solve``, ``convert`` and the Blender solve
+    split such a file into one solve per person, :func:`.io_keypoints.read_keypoint_people`) and
+    person_axis (a 4-D array's people axis).
     Tracker inputs also use model (the pose network) and overlap (how many network windows see
     each frame: 2, the default, keeps 10,000 frames/s; 3 and 4 are a little more accurate at 1.5
     and 2 times the network time; :data:`.pipeline.OVERLAP_CHOICES`), and teleports (what to

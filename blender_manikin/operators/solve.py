@@ -9,7 +9,9 @@ in one step, followed by the operator's undo push (``bl_options`` ``UNDO``), so
 Ctrl+Z removes the whole solve.  Several files are solved one after another
 (:class:`~blender_manikin.blender.solve_job.SolveQueue`); Esc stops the file
 being solved (nothing of it is written) and the rest, and the files solved
-before stay, in the operator's undo step.  Run with ``EXEC_DEFAULT`` (scripts,
+before stay, in the operator's undo step.  *Solve Full Body* on a keypoint file with several
+people (Person ``all``) solves each person the same way, onto an armature of their own
+(:func:`~blender_manikin.blender.solve_job.people_configs`).  Run with ``EXEC_DEFAULT`` (scripts,
 background mode) both run synchronously.  Errors are shown with
 ``self.report({'ERROR'}, ...)``.
 """
@@ -70,6 +72,42 @@ def _finish_report(op, context, job):
         for g in getattr(job.report, "gaps", [])[:5]:
             op.report({'INFO'}, f"bridged {g}")
     op.report({'INFO'}, f"MANIKIN: {out.armature.name} / {out.action.name}: {summary}")
+
+
+def _written_one(op, context, job, who=None):
+    """One of several solves written (a file of *Solve Several Files*, a person of a group
+    keypoint file): kept in ``op._written`` as plain values (the objects may be gone by the end:
+    an undo while the next are solved frees them) and reported."""
+    out = job.output
+    context.scene.manikin.armature = out.armature          # the swivel panel's: the last
+    name = f"{out.armature.name} / {out.action.name}"
+    op._written.append((name, float(out.frames[0]), float(out.frames[-1])))
+    op.report({'INFO'}, f"MANIKIN: {who + ': ' if who else ''}{name}: {job.summary(timings=False)}")
+
+
+def _finish_several(op, context, what, unit, who):
+    """The end of several solves in one operator run (one undo step): the scene range over them
+    all (when the settings ask for one), the panel's box saying ``N of M <what> solved: <armature /
+    action>, ...; failed: <who(job)>: <why>; ...`` (after Esc: how many ``unit`` were not solved)
+    and the operator's return value."""
+    q, scene = op._queue, context.scene
+    if op._written and op._base.set_scene_range:
+        scene.frame_start = int(min(a for _, a, _ in op._written))
+        scene.frame_end = max(int(max(b for _, _, b in op._written) + 0.999), scene.frame_start)
+    solved = [name for name, _, _ in op._written]
+    failed = [f"{who(j)}: {sj.error_message(e)}" for j, e in q.failed]
+    report = f"{len(solved)} of {len(q)} {what} solved: " + ", ".join(solved)
+    if failed:
+        report += f"; failed: {'; '.join(failed)}"
+    if q.cancelled:
+        left = len(q) - len(q.solved) - len(q.failed)
+        report += f"; cancelled (Esc), {left} {unit} not solved"
+    scene.manikin.last_report = report
+    if not solved:
+        op.report({'WARNING'} if q.cancelled else {'ERROR'}, f"MANIKIN: {report}")
+        return {'CANCELLED'}
+    op.report({'INFO'}, f"MANIKIN: {report}")
+    return {'FINISHED'}
 
 
 class _ModalSolves:
@@ -186,7 +224,12 @@ class MANIKIN_OT_solve_full_body(_ModalSolves, Operator):
 
     def _configs(self, context):
         from ..blender.properties import config_from_settings
-        return [config_from_settings(context)]
+        base = config_from_settings(context)
+        configs = sj.people_configs(base)       # a keypoint file read once; with several people, one each
+        self._base = base
+        self._people = len(configs) > 1
+        self._written = []
+        return configs
 
     def execute(self, context):
         return self._start(context, modal=False)
@@ -195,16 +238,26 @@ class MANIKIN_OT_solve_full_body(_ModalSolves, Operator):
         return self._start(context, modal=not bpy.app.background and context.window is not None)
 
     def _queue_done(self, context, job):
-        _finish_report(self, context, job)
+        if not getattr(self, "_people", False):
+            _finish_report(self, context, job)
+            return
+        _written_one(self, context, job, f"person {job.config.person}")
 
     def _queue_failed(self, context, job, exc):
         if isinstance(exc, sj.SolveCancelled):
             return                                   # said once, by _queue_finish
+        if getattr(self, "_people", False):          # the others go on; said with them at the end
+            self.report({'WARNING'}, f"MANIKIN: person {job.config.person}: {sj.error_message(exc)}")
+            return
         context.scene.manikin.last_report = f"{FAILED}{sj.error_message(exc)}"
         self.report({'ERROR'}, f"MANIKIN: {sj.error_message(exc)}")
 
     def _queue_finish(self, context):
         q = self._queue
+        if getattr(self, "_people", False):
+            name = os.path.basename(self._base.filepath)
+            return _finish_several(self, context, f"people of {name}", "person(s)",
+                                   lambda j: f"person {j.config.person}")
         if q.solved:
             return {'FINISHED'}
         if q.cancelled or any(isinstance(e, sj.SolveCancelled) for _, e in q.failed):
@@ -264,34 +317,13 @@ class MANIKIN_OT_solve_files(_ModalSolves, Operator):
                            and context.window is not None)
 
     def _queue_done(self, context, job):
-        out = job.output
-        context.scene.manikin.armature = out.armature          # the swivel panel's: the last
-        name = f"{out.armature.name} / {out.action.name}"
-        self._written.append((name, float(out.frames[0]), float(out.frames[-1])))
-        self.report({'INFO'}, f"MANIKIN: {name}: {job.summary(timings=False)}")
+        _written_one(self, context, job)
 
     def _queue_failed(self, context, job, exc):
         self.report({'WARNING'}, f"MANIKIN: {os.path.basename(job.config.filepath)}: {sj.error_message(exc)}")
 
     def _queue_finish(self, context):
-        q, scene = self._queue, context.scene
-        if self._written and self._base.set_scene_range:
-            scene.frame_start = int(min(a for _, a, _ in self._written))
-            scene.frame_end = max(int(max(b for _, _, b in self._written) + 0.999), scene.frame_start)
-        solved = [name for name, _, _ in self._written]
-        failed = [f"{os.path.basename(j.config.filepath)}: {sj.error_message(e)}" for j, e in q.failed]
-        report = f"{len(solved)} of {len(q)} files solved: " + ", ".join(solved)
-        if failed:
-            report += f"; failed: {'; '.join(failed)}"
-        if q.cancelled:
-            left = len(q) - len(q.solved) - len(q.failed)
-            report += f"; cancelled (Esc), {left} file(s) not solved"
-        scene.manikin.last_report = report
-        if not solved:
-            self.report({'WARNING'} if q.cancelled else {'ERROR'}, f"MANIKIN: {report}")
-            return {'CANCELLED'}
-        self.report({'INFO'}, f"MANIKIN: {report}")
-        return {'FINISHED'}
+        return _finish_several(self, context, "files", "file(s)", lambda j: os.path.basename(j.config.filepath))
 
 
 CLASSES = (MANIKIN_OT_solve_full_body, MANIKIN_OT_solve_files)
