@@ -14,6 +14,7 @@ from blender_manikin.core.recording import RecordingError
 from fixtures_keypoints import hinge_motion, write_layout_csv, write_layout_npy, write_trc
 from fixtures_recordings import make_recording, write_recording_csv, write_wide_poses
 
+from test_io_unity_anim import anim_text, motion
 from test_json_recording import unity_json
 
 LFS = b"version https://git-lfs.github.com/spec/v1\noid sha256:4d7a2146\nsize 12345\n"
@@ -42,7 +43,10 @@ def _sources(tmp_path):
     body, P, W = hinge_motion(frames=40)
     write_layout_csv(tmp_path / "kp.csv", "coco17", body, P, W)
     write_trc(os.fspath(tmp_path / "kp.trc"), body, P, W)
-    return {"native.csv": write_recording_csv(tmp_path, "native.csv", duration=2.0)[0],
+    t, m = motion(30)
+    (tmp_path / "take.anim").write_text(anim_text({p: {"time": t, "pos": x, "quat": q} for p, (x, q) in m.items()}))
+    return {"take.anim": os.fspath(tmp_path / "take.anim"),
+            "native.csv": write_recording_csv(tmp_path, "native.csv", duration=2.0)[0],
             "wide.csv": _wide(os.fspath(tmp_path / "wide.csv")),
             "take.json": os.fspath(unity_json(tmp_path / "take.json")),
             "kp.csv": os.fspath(tmp_path / "kp.csv"), "kp.trc": os.fspath(tmp_path / "kp.trc")}
@@ -89,7 +93,7 @@ def test_excel_unicode_text_tab_separated_utf16(tmp_path):
 @pytest.mark.parametrize("stand_in, problem, name", [
     (stand_in, problem, name)
     for stand_in, problem in ((LFS, "Git LFS pointer"), (HTML, "HTML page"), ("gzip", "gzip-compressed"))
-    for name in ("take.csv", "take.json", "kp.trc", "take.bsor", "kp.npy", "kp.npz", "テイク_01.csv.gz")
+    for name in ("take.csv", "take.json", "take.anim", "kp.trc", "take.bsor", "kp.npy", "kp.npz", "テイク_01.csv.gz")
     if not (stand_in == "gzip" and name.endswith((".npz", ".npy", ".bsor")))])
 def test_stand_ins_for_the_data_are_named(tmp_path, stand_in, problem, name):
     if stand_in == "gzip":

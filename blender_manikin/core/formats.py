@@ -239,6 +239,23 @@ def _read_keypoints(path, axes=None, units=None):
 register_reader(ReaderFormat("keypoints", "3D keypoints", (".npy", ".npz", ".trc"), _read_keypoints, kind="keypoints"))
 
 
+def _read_unity_anim(path, axes=None, units=None):
+    from .io_unity_anim import read_unity_anim
+    return read_unity_anim(path, axes=axes, units=units)
+
+
+def _sniff_unity_anim(head: bytes) -> bool:
+    from .io_unity_anim import looks_like_anim
+    return looks_like_anim(decode_head(head))
+
+
+# Unity .anim clips (Unity Recorder, GameObjectRecorder): a Main Camera is a headset's view pose,
+# a head bone the joint's, so, as for JSON, "none" and the take's T-pose or the head's name decide
+# (core/offsets_auto.py: the reader gives the object's name as the head's label)
+register_reader(ReaderFormat("unity_anim", "Unity animation clip", (".anim",), _read_unity_anim,
+                             _sniff_unity_anim))
+
+
 def _write_json(path, result, source="", options=None):
     from .export_json import write_json
     return write_json(path, result, source=source)
