@@ -665,7 +665,7 @@ def main(argv=None):
         return 2
     from .core import output_guard
     from .core.convert import output_stems
-    from .core.file_names import check_folder
+    from .core.file_names import check_folder, keep_people_apart
     try:
         check_folder(args.out, output_tail(formats))      # too deep for Windows' 260 characters
     except ValueError as exc:
@@ -689,6 +689,10 @@ def main(argv=None):
             jobs.extend((path, s, lab, rec) for (lab, rec), s in zip(people, fitted))
         else:                   # one person: the file's own name (its recording, when read, solved)
             jobs.append((path, stems[path], None, people[0][1] if people else None))
+    # a person's <stem>_p<label> never the name of another input's outputs (group_p0.npy beside group.npy)
+    apart = keep_people_apart({(p, lab): s for p, s, lab, _ in jobs}, [(p, lab) for p, _, lab, _ in jobs if lab],
+                              folder=args.out, tail=output_tail(formats))
+    jobs = [(p, apart[(p, lab)], lab, rec) for p, _, lab, rec in jobs]
     failed = done = 0
     path = inputs[0]
     with _ctrl_c() as interrupted:

@@ -198,3 +198,27 @@ def test_person_all_a_person_that_fails_leaves_nothing_and_is_named(addon, tmp_p
     assert not [d for d in list(bpy.data.meshes) + list(bpy.data.armatures) if "group_p1" in d.name]
     assert s.last_report.startswith("2 of 3 people of group.npy solved: MANIKIN_group_p0 / MANIKIN_live_group_p0, "
                                     "MANIKIN_group_p2 / MANIKIN_live_group_p2; failed: person 1: rig refused")
+
+
+def test_solve_several_files_splits_a_group_file_as_solve_full_body_does(addon, tmp_path, motion):
+    """*Solve Several Files* with Person ``all`` and a keypoint file with three people beside a
+    one-person file: each person onto an armature of their own (``MANIKIN_group_p<label>``, as
+    *Solve Full Body* names them), the other file onto its own (the group file was refused:
+    "3 people in the file (0, 1, 2): choose one ...")."""
+    from blender_manikin.core import keypoint_layouts as kl
+    from fixtures_keypoints import to_y_up
+    _group_npy(tmp_path, motion)
+    body, pos, world = motion
+    np.save(tmp_path / "solo.npy", to_y_up(kl.keypoints_from_body22(pos, world, "coco17", body.stature)))
+    sc = bpy.context.scene
+    sc.render.fps, sc.render.fps_base = 30, 1.0
+    s = sc.manikin
+    s.source, s.live_rig = 'KEYPOINTS', False
+    assert s.keypoint_person == "all"
+    res = bpy.ops.manikin.solve_files(directory=str(tmp_path), files=[{"name": "group.npy"}, {"name": "solo.npy"}])
+    assert res == {'FINISHED'}
+    arms = sorted(o.name for o in bpy.data.objects if o.type == 'ARMATURE')
+    assert arms == ["MANIKIN_group_p0", "MANIKIN_group_p1", "MANIKIN_group_p2", "MANIKIN_solo"]
+    assert s.last_report.startswith("4 of 4 takes solved: MANIKIN_group_p0 / MANIKIN_solve_group_p0, ")
+    obj = bpy.data.objects["MANIKIN_group_p1"]
+    assert {len(fc.keyframe_points) for fc in keying.action_fcurves(obj.animation_data.action, obj)} == {60}

@@ -168,3 +168,22 @@ def test_sources_file_accepts_a_joint_map_file(tmp_path):
     with pytest.raises(ValueError, match=r"sources.json line 1: source 1: joint_map file: .*lafan.json: "
                                          r"positions: missing body joint\(s\) head"):
         load_sources(src)
+
+
+def test_a_misspelt_joint_in_a_joint_map_file_is_named_with_its_entry(motion, tmp_path):
+    """A joint name in a joint-map file that the skeleton lacks (``LeftHnad``) is refused naming
+    the clip, the map's file and the entries that use it, with the skeleton's joints (it was a
+    ``KeyError: "walk: source joint 'LeftHnad' not found"`` per clip, naming neither)."""
+    body, _, _, pos, rot = motion
+    clip = lafan1_clip(body, pos[:10], rot[:10])
+    d = _lafan1_file_dict()
+    d["positions"]["left_wrist"] = "LeftHnad"
+    d["orientations"]["left_wrist"]["joint"] = "LeftHnad"
+    d["orientations"]["left_ankle"]["primary"] = {"bone": ["LeftFoot", "LeftToee"]}
+    f = tmp_path / "studio.json"
+    f.write_text(json.dumps(d))
+    with pytest.raises(ValueError, match=r"joint map 'my_lafan' \(joint-map file studio\.json\) names joint\(s\) "
+                                         r"this skeleton does not have: positions\.left_wrist: 'LeftHnad'; "
+                                         r"orientations\.left_wrist: 'LeftHnad'; orientations\.left_ankle: "
+                                         r"'LeftToee' \(its joints: Hips, .*LeftHand"):
+        clip_to_body_motion(clip, str(f))

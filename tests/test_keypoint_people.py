@@ -206,3 +206,54 @@ def test_person_stems_fit_windows_260_characters(tmp_path):
     assert person_stems("take", ["0", "1"], key="k", folder=deep, tail=20, windows=True) == ["take_p0", "take_p1"]
     assert person_stems(long, ["0", "a b"], folder=str(tmp_path), windows=False) == [f"{long}_p0", f"{long}_pa_b"]
     assert cli.person_stems("take", ["x", "X"]) == ["take_px", "take_pX_2"]
+
+
+def test_one_person_csv_with_a_row_id_or_a_one_value_subject_column_reads_as_before(tmp_path, people):
+    """A one-person CSV with an ``id`` column numbering the rows (a value on every row: not a
+    person column) or a ``subject`` column with one value (one person) is read, and solved with
+    the default person ``all``, as the same file without the column (both were refused: "60
+    people in the file", "1 people in the file (S01): choose one")."""
+    body, pos, world, _ = people[0]
+    plain = tmp_path / "plain.csv"
+    write_layout_csv(plain, "coco17", body, pos, world)
+    head, *rows = plain.read_text().splitlines()
+    ref = read_keypoints(plain)
+    for name, col, cell in (("rowid.csv", "id", lambda k: str(k)), ("subject.csv", "subject", lambda k: "S01")):
+        path = tmp_path / name
+        path.write_text("\n".join([f"{col},{head}"] + [f"{cell(k)},{r}" for k, r in enumerate(rows)]) + "\n")
+        rec = read_keypoints(path)
+        np.testing.assert_allclose(rec.points, ref.points, atol=1e-12)
+        np.testing.assert_allclose(rec.time, ref.time, atol=1e-12)
+        out = solve_recording(str(path), SolveSettings(fps=FPS))
+        assert out.result.fk()[0].shape[0] == T
+    assert "1 person (the CSV's person column)" in read_keypoints(tmp_path / "subject.csv").metadata["detected"]
+    notime = tmp_path / "rowid_notime.csv"                   # no time column: the rate decides, as before
+    notime.write_text("\n".join(["id," + head.split(",", 1)[1]]
+                                + [f"{k},{r.split(',', 1)[1]}" for k, r in enumerate(rows)]) + "\n")
+    assert read_keypoints(notime).num_frames == T
+
+
+def test_a_persons_output_never_takes_another_inputs_name(tmp_path, people):
+    """``group.npy`` (two people) beside a one-person ``group_p0.npy``: person 0's outputs would be
+    ``group_p0.json``, the other file's name, and one was written over the other (solve and
+    convert alike); person 0 now gets a hash, as inputs sharing a name do, the same in both."""
+    from blender_manikin.core import convert
+    from blender_manikin.core.file_names import short_hash
+    d = tmp_path / "in"
+    d.mkdir()
+    np.save(d / "group.npy", _stack(people)[:2])
+    np.save(d / "group_p0.npy", to_y_up(people[2][3]))
+    want = f"group_p0-{short_hash(str(d / 'group.npy') + '#person=0')}.json"
+    out = tmp_path / "solve"
+    assert cli.main(["solve", str(d), "--out", str(out), "--format", "json", "--fps", "30"]) == 0
+    code, _ = convert.run(convert.collect_inputs([str(d)]), str(tmp_path / "convert"), ["json"],
+                          SolveSettings(fps=FPS), workers=1, progress=False, log=lambda m: None)
+    assert code == 0
+    for o in (out, tmp_path / "convert"):
+        assert sorted(p.name for p in o.iterdir() if p.suffix == ".json") == sorted(
+            ["group_p0.json", "group_p1.json", want])
+        mine = json.loads((o / want).read_text())                      # the group's person 0, near x = 0
+        other = json.loads((o / "group_p0.json").read_text())          # the other file: person 2, 3 m away
+        assert len(mine["positions"]) == len(other["positions"]) == T
+        assert abs(mine["positions"][0][0][0]) < 1.0 and other["positions"][0][0][0] > 2.0
+        assert len(json.loads((o / "group_p1.json").read_text())["positions"]) == LEAVES

@@ -220,3 +220,29 @@ def test_cli_option_reaches_the_solve(tmp_path):
     out = solve_recording(str(trc), SolveSettings(fps=30.0, subject_params=mp))
     assert out.body.stature == pytest.approx(1.812, abs=1e-6)
     assert "stature 1.812 m from the subject parameter file" in out.info
+
+
+def test_a_nexus_vsk_with_static_parameters_is_read(tmp_path):
+    """Nexus writes a subject's measurements as ``<StaticParameter NAME= VALUE=>`` (as pyCGM2 reads
+    them) and leaves ``VALUE`` out of one not measured: the widths are read from them, the one
+    without a value is not measured (both were missed: no widths, or the file refused)."""
+    text = """<?xml version="1.0" encoding="UTF-8"?>
+<KinematicModel>
+  <Parameters>
+    <Parameter NAME="Bob_LeftFemurLength" PRIOR="0" SD="0"/>
+  </Parameters>
+  <StaticParameters>
+    <StaticParameter NAME="MarkerDiameter" VALUE="14"/>
+    <StaticParameter NAME="LeftKneeWidth" VALUE="130"/>
+    <StaticParameter NAME="RightKneeWidth" VALUE="128"/>
+    <StaticParameter NAME="LeftAnkleWidth" VALUE="90"/>
+    <StaticParameter NAME="RightAnkleWidth"/>
+    <StaticParameter NAME="Height" VALUE="1812"/>
+  </StaticParameters>
+</KinematicModel>
+"""
+    p = sp.read_subject_params(_write(tmp_path / "Bob.vsk", text))
+    assert p.widths == {("left", "knee"): pytest.approx(0.130), ("right", "knee"): pytest.approx(0.128),
+                        ("left", "ankle"): pytest.approx(0.090)}
+    assert p.height == pytest.approx(1.812) and p.marker_diameter_given
+    assert p.summary() == "subject Bob.vsk: knee 130/128 mm, ankle 90/- mm (L/R), marker 14 mm, height 1.812 m"

@@ -42,7 +42,8 @@ import threading
 import time
 
 from . import formats, output_guard
-from .file_names import check_folder, fit_bytes, fit_stem, fold, person_stems, short_hash, windows_safe
+from .file_names import (check_folder, fit_bytes, fit_stem, fold, keep_people_apart, person_stems, short_hash,
+                         windows_safe)
 from .solve import SolveSettings, error_message, solve_recording
 
 MANIFEST = "manifest.jsonl"
@@ -420,6 +421,10 @@ def run(inputs, out_dir, fmts, settings: SolveSettings, scheduler=None, workers=
         elif task_key(p, person) not in names:
             for lab, st in zip(people, person_stems(stems[p], people, os.path.abspath(p), out_dir, temp_tail(fmts))):
                 names[task_key(p, lab)] = st
+    # a person's <stem>_p<label> never the name of another input's outputs (group_p0.npy beside group.npy)
+    split_keys = [task_key(p, person) for p, person, people in tasks if person is not None and len(people) > 1]
+    names = keep_people_apart(names, split_keys, [s for p, s in stems.items() if p not in inputs],
+                              out_dir, temp_tail(fmts))
     split = sum(person is not None and len(people) > 1 for _, person, people in tasks)
     if split:
         log(f"{split} people of {len({p for p, person, _ in tasks if person is not None})} keypoint file(s) "

@@ -157,3 +157,27 @@ def person_stems(stem: str, labels, key: str = "", folder: str | None = None, ta
     if folder is None:
         return stems
     return [fit_stem(s, f"{key}#person={lab}", folder, tail, windows) for s, lab in zip(stems, labels)]
+
+
+def keep_people_apart(names: dict, people, taken=(), folder: str | None = None, tail: int = 0,
+                      windows: bool | None = None) -> dict:
+    """``names`` (``{key: output stem}``, a key an input or ``(input, person label)``) with each
+    stem of a key in ``people`` (a person's ``<stem>_p<label>``, :func:`person_stems`) that
+    :func:`fold` makes equal to another key's stem, or to one of ``taken`` (other inputs' stems),
+    given ``-`` and the :func:`short_hash` of its key (the input's absolute path and the label, so
+    ``solve`` and ``convert`` name it alike): ``group.npy``'s person 0 and a file
+    ``group_p0.npy`` beside it never write one ``group_p0.json``.  With ``folder``, a stem so
+    lengthened is :func:`fit_stem` cut to fit it on Windows."""
+    people = set(people)
+    count = {}
+    for s in list(names.values()) + list(taken):
+        count[fold(s)] = count.get(fold(s), 0) + 1
+    out = {}
+    for k, s in names.items():
+        if k in people and count[fold(s)] > 1:
+            key = f"{os.path.abspath(k[0])}#person={k[1]}" if isinstance(k, tuple) else os.path.abspath(k)
+            s = f"{s}-{short_hash(key)}"
+            if folder is not None:
+                s = fit_stem(s, key, folder, tail, windows)
+        out[k] = s
+    return out

@@ -30,7 +30,10 @@ Several people in one file (:func:`read_keypoint_people`): a 4-D ``.npy`` / ``.n
 ``(P, T, K, 3|4)`` or ``(T, P, K, 3|4)`` (the people axis: the option, the ``.npz``'s
 ``person_axis`` / ``people_first``, else :func:`people_axis`'s rule: the shorter axis when at most
 a quarter of the other; too close is refused), or a CSV with a person column
-(:data:`PERSON_COLUMNS`, any case) and a time or frame column, each row one person at one time.
+(:data:`PERSON_COLUMNS`, any case) and a time or frame column, each row one person at one time
+(a column with a different value on every row numbers the rows: it is not a person column, and
+the file is one person's; a person column with one value is one person, read by
+:func:`read_keypoints` without choosing them).
 Each person is trimmed to the frames from the first to the last where they are seen (half the
 points or more), keeps the file's time stamps, and is then read as a one-person file; one seen
 in fewer than :data:`MIN_PERSON_FRAMES` frames is left out with a note.
@@ -148,9 +151,10 @@ def read_keypoints(path, layout=None, units=None, up=None, rate=None, mapping=No
     Vicon subject parameter file (``.mp`` / ``.vsk``), ``"none"`` for none, or None / ``"auto"``
     (default): the one found beside a Plug-in Gait TRC (:func:`.subject_params.find_subject_params`).
     person: in a file with several people, the one to read (a label or a 0-based index,
-    :func:`read_keypoint_people`); None or ``"all"`` reads a one-person file and refuses a file
-    with several, naming them.  person_axis: a 4-D array's people axis (0 or 1; default: the
-    file's ``person_axis`` / ``people_first``, else told from the shape, :func:`people_axis`).
+    :func:`read_keypoint_people`); None or ``"all"`` reads a one-person file (a CSV whose person
+    column holds one person too) and refuses a file with several, naming them.  person_axis: a
+    4-D array's people axis (0 or 1; default: the file's ``person_axis`` / ``people_first``, else
+    told from the shape, :func:`people_axis`).
     """
     raw = _load_input(path, rate, mapping, subject_params, person_axis, layout)
     if raw["people"] is None:
@@ -158,6 +162,8 @@ def read_keypoints(path, layout=None, units=None, up=None, rate=None, mapping=No
         if pick not in (None, "all", "0"):
             raise RecordingError(f"person {shown(person)}: the file holds one person (0)", path=raw["src"])
         return _one_person(raw, layout, units, up, handed, subject_params)
+    if _person_key(person) in (None, "all") and len(raw["people"]) == 1:
+        person = raw["people"][0][0]            # a person column naming one person: theirs
     if _person_key(person) in (None, "all"):
         labels = [lab for lab, _ in raw["people"]]
         raise RecordingError(f"{len(labels)} people in the file ({', '.join(labels)}): choose one "
@@ -304,7 +310,8 @@ def _load_input(path, rate, mapping, subject_params, person_axis, layout):
                 labels, X4, time, frames = groups
                 raw.update(people=[(lab, (X4[k], None, 0)) for k, lab in enumerate(labels)], time=time,
                            frames=frames)
-                raw["decided"].append(f"{len(labels)} people (the CSV's person column)")
+                raw["decided"].append(f"{len(labels)} {'person' if len(labels) == 1 else 'people'} "
+                                      "(the CSV's person column)")
                 return raw
         elif ext == ".trc":
             X, time, file_layout, rate, trc_units, rules, subject = _load_trc(p, rate, subject_params)
@@ -700,6 +707,9 @@ def _load_csv(path, mapping, rate):
     data = rows[1:]
     if not data:
         raise RecordingError("no data rows after the header", path=path, line=hline)
+    if pcol is not None and len(data) > 1 and len({r[cols.index(pcol)].strip() for _, r in data
+                                                   if len(r) == len(cols)}) == len(data):
+        pcol = None                 # a value on every row: a row number (an "id" column), not a person
     X = np.empty((len(data), len(idx)))
     tv = np.empty(len(data))
     for k, (ln, r) in enumerate(data):

@@ -1061,6 +1061,22 @@ def _body_from_motion(pos: np.ndarray, R_pelvis: np.ndarray, foot_pitch: float =
 
 
 # --------------------------------------------------------------------------
+def _check_source_joints(jm: JointMap, clip: BvhClip) -> None:
+    """``ValueError`` naming the clip, the map (its description: a joint-map file's name) and each
+    entry (``positions.left_wrist``, ``orientations.left_ankle``) whose source joint the clip's
+    skeleton does not have (a misspelt name in a joint-map file), with the skeleton's joints."""
+    miss = set(jm.missing(clip.joint_names))
+    if not miss:
+        return
+    entries = [(f"positions.{n}", p.joints) for n, p in jm.positions.items()]
+    entries += [(f"orientations.{n}", (o.source,) + o.primary.joints + o.secondary.joints)
+                for n, o in jm.orientations.items()]
+    where = [f"{w}: {', '.join(repr(j) for j in dict.fromkeys(js) if j in miss)}"
+             for w, js in entries if miss & set(js)]
+    raise ValueError(f"{clip.name}: joint map {jm.name!r} ({jm.description or 'built in'}) names joint(s) this "
+                     f"skeleton does not have: {'; '.join(where)} (its joints: {', '.join(clip.joint_names)})")
+
+
 def clip_to_body_motion(clip: BvhClip, joint_map: Union[None, str, JointMap] = None, *,
                         unit_scale: Union[None, float, str] = None, floor: Union[str, float] = "auto",
                         up: Optional[str] = None, forward: Optional[str] = None,
@@ -1081,6 +1097,7 @@ def clip_to_body_motion(clip: BvhClip, joint_map: Union[None, str, JointMap] = N
     ``None`` is the body model's 20.3.
     """
     jm = get_joint_map(joint_map, clip)
+    _check_source_joints(jm, clip)
     M = axis_conversion(up or jm.up, forward or jm.forward)
     res = _Resolver(clip.joint_names)
     pos_src, rot_src = clip.global_transforms()

@@ -6,8 +6,10 @@ Vicon Nexus keeps each subject's measurements, in millimetres, in two files besi
   ``$LeftKneeWidth = 104.5``, ``$MarkerDiameter = 14``, ``$Height = 1750``; blank lines and
   comments (a line starting with ``{*``, ``#``, ``//`` or ``;``; a trailing ``{* ... *}``) are
   skipped;
-* ``<Subject>.vsk``: XML, ``<Parameter NAME="LeftKneeWidth" VALUE="104.5" .../>`` (a name may
-  carry a ``Subject:`` or ``Subject_`` prefix).
+* ``<Subject>.vsk``: XML, ``<StaticParameter NAME="LeftKneeWidth" VALUE="104.5" .../>`` (as Nexus
+  writes the subject's measurements; pyCGM2 reads them so) or ``<Parameter NAME=... VALUE=...>``
+  (a name may carry a ``Subject:`` or ``Subject_`` prefix); an element without ``VALUE`` (Nexus
+  leaves it out of a measurement not taken) is not measured, as 0.
 
 Names match case-insensitively.  Used here (:data:`WIDTHS`): ``{Left,Right}{Knee,Ankle,Elbow,
 Wrist}Width`` (an unsided ``KneeWidth`` ... applies to both sides, a sided one wins),
@@ -99,8 +101,9 @@ def _parse_mp(text, path):
 
 
 def _parse_vsk(text, path):
-    """``[(name, value text, line)]`` of a ``.vsk`` file's ``<Parameter NAME= VALUE=>`` elements
-    (the line is the element's, where the parser tells it)."""
+    """``[(name, value text, line)]`` of a ``.vsk`` file's ``<StaticParameter NAME= VALUE=>`` and
+    ``<Parameter NAME= VALUE=>`` elements (the line is the element's, where the parser tells it);
+    one without ``VALUE`` is left out (not measured)."""
     import xml.etree.ElementTree as ET
     try:
         parser = ET.XMLPullParser(events=("start",))
@@ -113,7 +116,7 @@ def _parse_vsk(text, path):
     lines = text.splitlines()
     out = []
     for _, el in events:
-        if el.tag.rsplit("}", 1)[-1].lower() != "parameter":
+        if el.tag.rsplit("}", 1)[-1].lower() not in ("parameter", "staticparameter"):
             continue
         attrs = {k.lower(): v for k, v in el.attrib.items()}
         name = attrs.get("name", "")
@@ -121,7 +124,7 @@ def _parse_vsk(text, path):
         if not name:
             raise RecordingError("a <Parameter> has no NAME", path=path, line=line)
         if "value" not in attrs:
-            raise RecordingError(f"parameter {shown(name)} has no VALUE", path=path, line=line)
+            continue                    # not measured (Nexus writes no VALUE for it)
         name = name.rsplit(":", 1)[-1]
         out.append((name, attrs["value"].strip(), line))
     return out

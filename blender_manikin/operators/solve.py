@@ -11,7 +11,8 @@ Ctrl+Z removes the whole solve.  Several files are solved one after another
 being solved (nothing of it is written) and the rest, and the files solved
 before stay, in the operator's undo step.  *Solve Full Body* on a keypoint file with several
 people (Person ``all``) solves each person the same way, onto an armature of their own
-(:func:`~blender_manikin.blender.solve_job.people_configs`).  Run with ``EXEC_DEFAULT`` (scripts,
+(:func:`~blender_manikin.blender.solve_job.people_configs`), and so does *Solve Several Files* for
+each such file among its files.  Run with ``EXEC_DEFAULT`` (scripts,
 background mode) both run synchronously.  Errors are shown with
 ``self.report({'ERROR'}, ...)``.
 """
@@ -306,10 +307,14 @@ class MANIKIN_OT_solve_files(_ModalSolves, Operator):
         configs = []
         for path in paths:
             take = os.path.splitext(os.path.basename(path))[0]
-            configs.append(dataclasses.replace(
+            cfg = dataclasses.replace(
                 base, source=source, filepath=path, keypoint_collection=None, keypoint_armature=None,
                 reuse_armature=None,
-                armature_name=f"MANIKIN_{take}", set_scene_range=False, create_trackers=False, marker_take=take))
+                armature_name=f"MANIKIN_{take}", set_scene_range=False, create_trackers=False, marker_take=take)
+            # a keypoint file with several people (Person all): one solve each, as Solve Full Body does
+            # (a one-person file is read when solved, not kept read meanwhile)
+            people = sj.people_configs(cfg)
+            configs.extend(people if len(people) > 1 else [cfg])
         return configs
 
     def execute(self, context):
@@ -320,10 +325,18 @@ class MANIKIN_OT_solve_files(_ModalSolves, Operator):
         _written_one(self, context, job)
 
     def _queue_failed(self, context, job, exc):
-        self.report({'WARNING'}, f"MANIKIN: {os.path.basename(job.config.filepath)}: {sj.error_message(exc)}")
+        self.report({'WARNING'}, f"MANIKIN: {_file_who(job)}: {sj.error_message(exc)}")
 
     def _queue_finish(self, context):
-        return _finish_several(self, context, "files", "file(s)", lambda j: os.path.basename(j.config.filepath))
+        return _finish_several(self, context, "takes" if any(c.take for c in self._queue.configs) else "files",
+                               "file(s)", _file_who)
+
+
+def _file_who(job):
+    """A solve of *Solve Several Files* as its report names it: the file, and the person of a file
+    with several (``group.npy person 1``)."""
+    name = os.path.basename(job.config.filepath)
+    return f"{name} person {job.config.person}" if job.config.take else name
 
 
 CLASSES = (MANIKIN_OT_solve_full_body, MANIKIN_OT_solve_files)
