@@ -156,8 +156,9 @@ def test_sources_file_accepts_a_joint_map_file(tmp_path):
     src.write_text(json.dumps([
         {"path": "a", "name": "studio", "joint_map": "maps/lafan.json", "licence": "ours"},
         {"path": "b", "name": "LaFAN1", "joint_map": "lafan1"},
-        {"path": "c", "name": "100STYLE", "joint_map": "100style"}]))
+        {"path": "c", "name": "100STYLE", "joint_map": "100STYLE "}]))
     s = load_sources(src)
+    assert s[2].joint_map == "100style"            # a built-in map's name in any case
     assert s[0].joint_map == str(tmp_path / "maps" / "lafan.json")
     assert "joint_map_sha1" in s[0].read_options()
     assert source_licence(s[1]).startswith("CC BY-NC-ND 4.0")

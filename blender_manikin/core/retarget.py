@@ -448,7 +448,7 @@ def _turn_rest_palms(tg, bone_of, twist_main, src_dir, align, F, notes):
             continue
         deg = float(np.degrees(ang))
         palms[JOINT_NAMES[j]] = (f"fingers {tg.names[why[0]]!r} to {tg.names[why[1]]!r}: rests turned "
-                                 f"{(deg if abs(deg) >= 0.05 else 0.0):+.1f}° from palms-down"
+                                 f"{abs(deg):.1f}° from palms-down"
                                  + (" (taken as palms-down)" if abs(deg) < PALM_TURN_MIN_DEG else ""))
         if abs(deg) < PALM_TURN_MIN_DEG:
             continue

@@ -266,6 +266,8 @@ def load_sources(path):
         if isinstance(jm, str) and jm.lower().endswith(".json"):      # relative to the sources file
             jm = os.path.expanduser(jm)
             src.joint_map = jm if os.path.isabs(jm) else os.path.join(os.path.dirname(os.path.abspath(path)), jm)
+        elif isinstance(jm, str):                # a built-in map's name in any case: "LaFAN1"
+            src.joint_map = jm.strip().lower()
         problem = _check_source(src)
         if problem:
             raise ValueError(f"{where}: {problem}")
