@@ -249,3 +249,31 @@ def test_a_recorded_clip_solves_end_to_end(tmp_path):
     ref = solve_recording(EXAMPLE, SolveSettings(fps=30.0))
     assert out.result.num_frames == ref.result.num_frames
     assert np.abs(out.result.positions - ref.result.positions).max() < 1e-3
+
+
+def test_clips_of_no_tracked_object_are_refused_saying_what_they_animate(tmp_path):
+    """Clips that are not recordings of tracked objects, as found in public Unity projects: one
+    moving its own root object (``path:`` left empty, as Unity 6 writes it beside a script's
+    curve, ``- serializedVersion: 2`` before ``curve:``), a humanoid clip (Animator muscle
+    curves) and an empty clip.  Each is refused naming what it animates.  Before: "the clip
+    animates ''" for the root and "the clip animates none" for the other two."""
+    t, m = motion(4)
+    root = anim_text({"": {"time": t, "pos": m[HEAD][0]}})
+    root = root.replace("  m_FloatCurves: []\n", "  m_FloatCurves:\n  - serializedVersion: 2\n    curve:\n"
+                        "      serializedVersion: 2\n      m_Curve:\n      - serializedVersion: 3\n        time: 0\n"
+                        "        value: 2500\n        inSlope: 0\n        outSlope: 0\n      m_PreInfinity: 2\n"
+                        "      m_PostInfinity: 2\n      m_RotationOrder: 4\n    attribute: K_Value\n"
+                        "    path: MetalCube\n    classID: 114\n    script: {fileID: 11500000}\n    flags: 0\n")
+    with pytest.raises(RecordingError, match=r"crush\.anim: no head curve.*; the clip animates the root object "
+                                             r"\(path ''\)$"):
+        formats.load_recording(write(tmp_path, "crush.anim", root))
+    muscles = "".join(f"  - curve:\n      serializedVersion: 2\n      m_Curve:\n      - time: 0\n        value: 0\n"
+                      f"      m_PreInfinity: 2\n    attribute: {a}\n    path: \n    classID: 95\n"
+                      f"    script: {{fileID: 0}}\n" for a in ("RootT.x", "RootT.y", "RootT.z", "RootQ.x",
+                                                                  "Left Arm Down-Up", "Neck Nod Down-Up"))
+    humanoid = anim_text({}).replace("  m_FloatCurves: []\n", "  m_FloatCurves:\n" + muscles)
+    with pytest.raises(RecordingError, match=r"walk\.anim: no head curve.*the clip animates no Transform, only "
+                                             r"Animator 'RootT\.x', .* and 2 more \(a humanoid clip's muscle curves"):
+        formats.load_recording(write(tmp_path, "walk.anim", humanoid))
+    with pytest.raises(RecordingError, match=r"empty\.anim: no head curve.*; the clip has no curve$"):
+        formats.load_recording(write(tmp_path, "empty.anim", anim_text({})))

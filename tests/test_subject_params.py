@@ -246,3 +246,32 @@ def test_a_nexus_vsk_with_static_parameters_is_read(tmp_path):
                         ("left", "ankle"): pytest.approx(0.090)}
     assert p.height == pytest.approx(1.812) and p.marker_diameter_given
     assert p.summary() == "subject Bob.vsk: knee 130/128 mm, ankle 90/- mm (L/R), marker 14 mm, height 1.812 m"
+
+
+def test_a_labelling_skeletons_parameter_is_not_a_measurement(tmp_path):
+    """A Nexus *PlugInGait FullBody Ai* ``.vsk`` (as in cadop/pyCGM's sample data) keeps the
+    subject's measurements as ``<StaticParameter>`` and the labelling skeleton's fitted values as
+    ``<Parameter>``, among them an unsided ``WristWidth`` of 32 mm (a marker offset, not the
+    wrist).  A wrist width left unmeasured (no ``VALUE``) stays unmeasured: it was taken from the
+    skeleton's ``WristWidth`` (32 mm on both sides), a ``<Parameter Height>`` as the stature."""
+    text = """<?xml version="1.0" encoding="UTF-8" standalone="no"?>
+<KinematicModel MODEL="PlugInGait FullBody Ai" VERSION="3.2">
+\t<Parameters>
+\t\t<StaticParameter NAME="Height" VALUE="1679" PRIOR="1700" HIDDEN="false" REQUIRED="true" QUANTITY="length"/>
+\t\t<StaticParameter NAME="LeftKneeWidth" VALUE="144" PRIOR="120" HIDDEN="false" REQUIRED="true" QUANTITY="length"/>
+\t\t<StaticParameter NAME="LeftWristWidth" PRIOR="40" HIDDEN="false" REQUIRED="true" QUANTITY="length"/>
+\t\t<StaticParameter NAME="RightWristWidth" VALUE="65" PRIOR="40" HIDDEN="false" REQUIRED="true" QUANTITY="length"/>
+\t\t<Parameter NAME="WristWidth" VALUE="31.906095504760742" PRIOR="31.085922241210937" SD="0" HIDDEN="false"/>
+\t\t<Parameter NAME="KneeWidth" VALUE="88.5" PRIOR="90" SD="0" HIDDEN="false"/>
+\t\t<Parameter NAME="LeftHandWidth" VALUE="-17.935661315917969" PRIOR="15.54" SD="0" HIDDEN="false"/>
+\t</Parameters>
+</KinematicModel>
+"""
+    p = sp.read_subject_params(_write(tmp_path / "Test.vsk", text))
+    assert p.widths == {("left", "knee"): pytest.approx(0.144), ("right", "wrist"): pytest.approx(0.065)}
+    assert p.height == pytest.approx(1.679)
+    assert p.raw["parameter:wristwidth"] == "31.906095504760742"
+    # a hand-written .vsk of <Parameter>s only is still read as measurements
+    q = sp.read_subject_params(_write(tmp_path / "Hand.vsk", '<KinematicModel><Parameter NAME="KneeWidth" VALUE="100"/>'
+                                                            '</KinematicModel>'))
+    assert q.widths == {("left", "knee"): pytest.approx(0.1), ("right", "knee"): pytest.approx(0.1)}

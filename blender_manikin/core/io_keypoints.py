@@ -42,7 +42,8 @@ The layout (:mod:`.keypoint_layouts`) is given (``layout=``, ``--layout``), stor
 or told from the point count (17 points: COCO-17 or Human3.6M-17, told apart by their first
 points: COCO's nose sits near its ears, Human3.6M's pelvis far from its right ankle) or the
 CSV's column names.  Units (m, cm, mm) come from the leg's length, the up axis from the
-shoulders standing above the ankles, and the handedness from the face or the feet pointing
+shoulders standing above the ankles (the hips where no frame has shoulders: a lower-body marker
+set), and the handedness from the face or the feet pointing
 forward of the body's left-right axis; a floor tilted in the file (a pitched camera's frame) is
 levelled from the planted feet (:func:`_floor_tilt`).  What was decided is said in one line
 (``metadata["detected"]``), e.g. ``keypoints: coco17 (17 points, told from the point count and
@@ -931,17 +932,24 @@ def _up_matrix(X, lay, up, path):
         a, s = _AXIS[key]
         how = " (as set)"
     else:
-        sh = 0.5 * (X[:, lay.index("left_shoulder")] + X[:, lay.index("right_shoulder")])
         an = 0.5 * (X[:, lay.index("left_ankle")] + X[:, lay.index("right_ankle")])
-        v = np.nanmedian(rot.normalize(sh - an), axis=0)
-        if not np.all(np.isfinite(v)):
-            raise RecordingError("cannot tell the up axis (no frame with shoulders and ankles); set it", path=path)
+        # the shoulders, else the hips (a lower-body marker set, e.g. Plug-in Gait Lower Body)
+        for upper in ("shoulder", "hip"):
+            top = 0.5 * (X[:, lay.index(f"left_{upper}")] + X[:, lay.index(f"right_{upper}")])
+            with np.errstate(invalid="ignore"):
+                ok = np.all(np.isfinite(top - an), axis=-1)
+            if ok.any():
+                break
+        else:
+            raise RecordingError("cannot tell the up axis (no frame with shoulders or hips, and ankles); set it",
+                                 path=path)
+        v = np.median(rot.normalize(top[ok] - an[ok]), axis=0)
         a = int(np.argmax(np.abs(v)))
         if abs(v[a]) < 0.7 * np.linalg.norm(v):
             raise RecordingError(f"cannot tell the up axis: the body lies along no axis "
-                                 f"(shoulders − ankles ≈ {np.round(v, 2).tolist()}); set it", path=path)
+                                 f"({upper}s − ankles ≈ {np.round(v, 2).tolist()}); set it", path=path)
         s = float(np.sign(v[a]))
-        how = " (shoulders above the ankles)"
+        how = f" ({upper}s above the ankles)"
     # as Blender's importers turn +Y up into +Z up ((x, y, z) -> (x, -z, y)): X stays where it
     # is (the first axis that is not up), Z is up, Y completes a right-handed frame
     z = np.zeros(3)

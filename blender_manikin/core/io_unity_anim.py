@@ -454,6 +454,33 @@ def _collect(clip, path):
     return found, orders
 
 
+#: Unity class IDs of float curves that are not a Transform's, for the refusal's words
+_CLASS_NAMES = {"1": "GameObject", "95": "Animator", "114": "script", "212": "SpriteRenderer",
+                "224": "RectTransform", "23": "MeshRenderer", "137": "SkinnedMeshRenderer"}
+
+
+def _what_it_animates(clip, paths):
+    """The end of a refusal or warning: the objects whose Transform the clip animates (the root,
+    path ``''``, named so), else the other properties its float curves animate (a humanoid clip's
+    Animator muscle curves, a UI or script property) or that it has no curve."""
+    if paths:
+        return "the clip animates " + ", ".join(shown(p) if p else "the root object (path '')" for p in paths)
+    other = []
+    for list_name in ("m_FloatCurves", "m_PPtrCurves"):
+        for item in clip.get(list_name) or ():
+            if isinstance(item, dict):
+                cls = str(item.get("classID", "")).strip()
+                what = f"{_CLASS_NAMES.get(cls, 'class ' + cls)} {shown(str(item.get('attribute') or ''))}"
+                other.append(what if not item.get("path") else f"{what} of {shown(str(item.get('path')))}")
+    if not other:
+        return "the clip has no curve"
+    humanoid = any(w.startswith("Animator ") for w in other)
+    listed = ", ".join(other[:4]) + (f" and {len(other) - 4} more" if len(other) > 4 else "")
+    return (f"the clip animates no Transform, only {listed}"
+            + (" (a humanoid clip's muscle curves: record the tracked objects' Transforms instead)"
+               if humanoid else ""))
+
+
 def _local_pose(chans, order, t):
     """``(pos (N, 3), quat (N, 4) wxyz)`` of an object's local curves at times ``t``, Unity axes;
     components without a curve are 0 (position, Euler) or identity."""
@@ -530,9 +557,8 @@ def read_unity_anim(path, axes=None, units=None) -> Recording:
         devices[d] = p
         labels[d] = p.rsplit("/", 1)[-1]
     if "head" not in devices:
-        listed = ", ".join(shown(p) for p in paths) or "none"
         raise RecordingError(f"no head curve: no animated object's name is a headset or head (Main Camera, "
-                             f"CenterEyeAnchor, HMD, Head ...); the clip animates {listed}", path=path)
+                             f"CenterEyeAnchor, HMD, Head ...); {_what_it_animates(clip, paths)}", path=path)
     scale = UNITS[units]
     streams, composed = {}, {}
     for d in DEVICES:
@@ -556,7 +582,7 @@ def read_unity_anim(path, axes=None, units=None) -> Recording:
         streams[d] = TrackerStream(d, t, bp, bq, ok)
     missing = [d for d in ("left_hand", "right_hand") if d not in streams]
     if missing:
-        warnings.append(f"no curve for {', '.join(missing)}: the clip animates {', '.join(shown(p) for p in paths)}")
+        warnings.append(f"no curve for {', '.join(missing)}: {_what_it_animates(clip, paths)}")
     rate = clip.get("m_SampleRate")
     where = "; ".join(f"{d}={shown(devices[d])}" for d in DEVICES if d in devices)
     parents = ("; composed with the keyed parents " + ", ".join(f"{d}: {'/'.join(shown(x) for x in c)}"

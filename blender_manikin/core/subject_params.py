@@ -9,7 +9,10 @@ Vicon Nexus keeps each subject's measurements, in millimetres, in two files besi
 * ``<Subject>.vsk``: XML, ``<StaticParameter NAME="LeftKneeWidth" VALUE="104.5" .../>`` (as Nexus
   writes the subject's measurements; pyCGM2 reads them so) or ``<Parameter NAME=... VALUE=...>``
   (a name may carry a ``Subject:`` or ``Subject_`` prefix); an element without ``VALUE`` (Nexus
-  leaves it out of a measurement not taken) is not measured, as 0.
+  leaves it out of a measurement not taken) is not measured, as 0.  In a file that has
+  ``<StaticParameter>`` elements the ``<Parameter>`` ones are the labelling skeleton's fitted
+  values (marker offsets, segment lengths; a *FullBody Ai* skeleton's ``WristWidth`` of 32 mm is
+  not the subject's wrist), read into :attr:`SubjectParams.raw` but not used as measurements.
 
 Names match case-insensitively.  Used here (:data:`WIDTHS`): ``{Left,Right}{Knee,Ankle,Elbow,
 Wrist}Width`` (an unsided ``KneeWidth`` ... applies to both sides, a sided one wins),
@@ -45,7 +48,8 @@ class SubjectParams:
     :data:`WIDTHS`), only those measured (non-zero); marker_diameter: metres (the file's, else
     :data:`MARKER_DIAMETER_MM`); marker_diameter_given: whether the file gave it; height: the
     stature, metres, or None; raw: every parameter read, ``{lower-case name: value in the
-    file's unit (mm)}``; path: the file."""
+    file's unit (mm)}`` (a ``.vsk``'s labelling-skeleton ``<Parameter>`` of a used name under
+    ``"parameter:<name>"``, its text); path: the file."""
     path: str
     widths: dict = field(default_factory=dict)
     marker_diameter: float = MARKER_DIAMETER_MM / 1000.0
@@ -101,9 +105,10 @@ def _parse_mp(text, path):
 
 
 def _parse_vsk(text, path):
-    """``[(name, value text, line)]`` of a ``.vsk`` file's ``<StaticParameter NAME= VALUE=>`` and
-    ``<Parameter NAME= VALUE=>`` elements (the line is the element's, where the parser tells it);
-    one without ``VALUE`` is left out (not measured)."""
+    """``[(name, value text, line, used)]`` of a ``.vsk`` file's ``<StaticParameter NAME= VALUE=>``
+    and ``<Parameter NAME= VALUE=>`` elements (the line is the element's, where the parser tells
+    it); one without ``VALUE`` is left out (not measured).  ``used``: whether it may be a
+    measurement: every element where the file has no ``<StaticParameter>``, else only those."""
     import xml.etree.ElementTree as ET
     try:
         parser = ET.XMLPullParser(events=("start",))
@@ -114,9 +119,11 @@ def _parse_vsk(text, path):
         raise RecordingError(f"not valid XML ({exc})", path=path, line=exc.position[0]) from None
     # ElementTree keeps no line numbers: find each parameter's line by its NAME in the text
     lines = text.splitlines()
+    has_static = any(el.tag.rsplit("}", 1)[-1].lower() == "staticparameter" for _, el in events)
     out = []
     for _, el in events:
-        if el.tag.rsplit("}", 1)[-1].lower() not in ("parameter", "staticparameter"):
+        tag = el.tag.rsplit("}", 1)[-1].lower()
+        if tag not in ("parameter", "staticparameter"):
             continue
         attrs = {k.lower(): v for k, v in el.attrib.items()}
         name = attrs.get("name", "")
@@ -126,7 +133,7 @@ def _parse_vsk(text, path):
         if "value" not in attrs:
             continue                    # not measured (Nexus writes no VALUE for it)
         name = name.rsplit(":", 1)[-1]
-        out.append((name, attrs["value"].strip(), line))
+        out.append((name, attrs["value"].strip(), line, tag == "staticparameter" or not has_static))
     return out
 
 
@@ -152,11 +159,16 @@ def read_subject_params(path) -> SubjectParams:
         raise RecordingError(f"not a subject parameter file: expected .mp or .vsk, got {shown(ext or '(none)')}",
                              path=p)
     text = read_text(p)
-    entries = _parse_mp(text, p) if ext == ".mp" else _parse_vsk(text, p)
+    if ext == ".mp":
+        entries = [(name, value, line, True) for name, value, line in _parse_mp(text, p)]
+    else:
+        entries = _parse_vsk(text, p)
     raw, lines = {}, {}
-    for name, value, line in entries:
+    for name, value, line, used in entries:
         k = _key(name)
-        if k in _USED:
+        if k in _USED and not used:         # a labelling skeleton's <Parameter>: kept, not used
+            raw[f"parameter:{k}"] = value
+        elif k in _USED:
             try:
                 v = float(value)
             except ValueError:
