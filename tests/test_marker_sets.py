@@ -183,6 +183,8 @@ def test_opencap_trc_gives_the_joint_centres(tmp_path, motion, units):
                             np.concatenate([vpts, pts], axis=1), units=units)
     rec = read_keypoints(path)
     assert rec.layout == "opencap" and rec.metadata["units"] == units, rec.metadata["detected"]
+    assert f"units {units} (the file's)" in rec.metadata["detected"]      # the header's, not "as set"
+    assert f"units {units} (as set)" in read_keypoints(path, units=units).metadata["detected"]
     assert ("opencap markers: hips by Harrington 2007; no head markers: the head follows the trunk"
             in rec.metadata["detected"]), rec.metadata["detected"]
     err = joint_errors(rec, pos, LIMBS)

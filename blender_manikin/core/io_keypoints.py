@@ -380,6 +380,7 @@ def _one_person(raw, layout, units, up, handed, subject_params):
     """One person's :class:`KeypointRecording` from :func:`_load_input`'s ``raw`` (or one
     person's part of it)."""
     src, decided, subject = raw["src"], list(raw["decided"]), raw["subject"]
+    units_said = "as set" if units else "the file's"          # the option, else the file's header (TRC)
     units = units or raw["units"]
     X, conf = _shape_points(raw["X"], raw["conf"], src)
     T, K = X.shape[:2]
@@ -405,7 +406,7 @@ def _one_person(raw, layout, units, up, handed, subject_params):
         decided.append(f"subject parameters {os.path.basename(os.fspath(subject_params))} not used (only for "
                        "a TRC's Plug-in Gait markers)")
     rec = _finish(X, conf, name, src, decided, raw["hands"], units, up, handed, raw["rate"], raw["time"],
-                  frames=raw["frames"])
+                  frames=raw["frames"], units_said=units_said)
     if subject is not None and subject.height:
         rec.metadata["subject_height"] = subject.height
     return rec
@@ -448,11 +449,12 @@ def keypoints_from_points(time, points, layout, source, units="m", up="+z", how=
     return rec
 
 
-def _finish(X, conf, name, src, decided, hands, units, up, handed, rate, time, frames=None):
+def _finish(X, conf, name, src, decided, hands, units, up, handed, rate, time, frames=None, units_said="as set"):
     """The shared end of reading: confidence → missing, hand knuckles, units, up axis,
     handedness, times; returns the :class:`KeypointRecording`.  frames: ``(T,)`` sample numbers
     on the rate's clock when there are no times (a person's frames of a file with several;
-    default ``0 .. T-1``)."""
+    default ``0 .. T-1``).  units_said: where ``units`` came from, for the read's line (``"as
+    set"``, ``"the file's"``)."""
     T = X.shape[0]
     # confidence → missing
     if conf is not None:
@@ -475,7 +477,7 @@ def _finish(X, conf, name, src, decided, hands, units, up, handed, rate, time, f
             u = canonical_units(units)
         except ValueError as exc:
             raise RecordingError(f"units option: {exc}", path=src) from None
-        decided.append(f"units {u} (as set)")
+        decided.append(f"units {u} ({units_said})")
     else:
         u = None
         for cand in ("m", "cm", "mm"):
