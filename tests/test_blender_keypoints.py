@@ -222,3 +222,24 @@ def test_solve_several_files_splits_a_group_file_as_solve_full_body_does(addon, 
     assert s.last_report.startswith("4 of 4 takes solved: MANIKIN_group_p0 / MANIKIN_solve_group_p0, ")
     obj = bpy.data.objects["MANIKIN_group_p1"]
     assert {len(fc.keyframe_points) for fc in keying.action_fcurves(obj.animation_data.action, obj)} == {60}
+
+
+def test_panel_solves_a_lower_body_plugin_gait_trc(addon, tmp_path):
+    """A Plug-in Gait lower-body trial (no upper-body markers) in the Keypoints tab: solved, the
+    trunk, arms and head on the pelvis at rest, said in the report.  Before: refused ("joint(s)
+    pelvis, spine1, ... cannot be placed")."""
+    from test_lower_body import _pig_trc
+    path = _pig_trc(tmp_path / "lower.trc", hinge_motion(frames=150, seed=3), True)
+    sc = bpy.context.scene
+    sc.render.fps, sc.render.fps_base = 60, 1.0
+    s = sc.manikin
+    s.source, s.keypoint_path, s.keypoint_layout = 'KEYPOINTS', str(path), 'AUTO'
+    s.live_rig = False
+    assert bpy.ops.manikin.solve_full_body() == {'FINISHED'}
+    obj = s.armature
+    assert obj is not None and obj.animation_data.action is not None
+    assert "lower body only: the trunk, arms and head follow the pelvis at rest" in s.last_report, s.last_report
+    ref = solve_recording(str(path), SolveSettings(fps=60.0)).result.fk()[0]
+    names = ["left_knee", "right_ankle", "head", "left_wrist"]
+    got = _bone_heads(obj, 1 + 40, names)
+    np.testing.assert_allclose(got, ref[40, [sk.J[n] for n in names]], atol=1e-3)

@@ -1043,8 +1043,10 @@ def _handedness(X, lay, handed, path):
             raise RecordingError(f"handedness {handed!r}: expected right or left", path=path)
         return key == "left", "as set"
     up = np.array([0.0, 0.0, 1.0])
+    # the body's left from the hips and, where seen, the shoulders (a lower-body take has none)
+    shoulders = X[:, lay.index("left_shoulder")] - X[:, lay.index("right_shoulder")]
     left = X[:, lay.index("left_hip")] - X[:, lay.index("right_hip")] + \
-        X[:, lay.index("left_shoulder")] - X[:, lay.index("right_shoulder")]
+        np.where(np.isfinite(shoulders), shoulders, 0.0)
     fwd = np.cross(left, up)
     cues = []
     if "nose" in lay and "left_ear" in lay:

@@ -17,7 +17,12 @@ names its K points in file order.  :func:`body22_from_keypoints` places the 22 b
   head's frame), or 0.24 of the way from the neck to the head top; with no face points (none
   in the layout, or none ever seen in the file) it stands on the trunk's up axis, untwisted;
 * the toes / ball of the foot (the ``foot`` joints) come from the layout's toe points, else
-  flat ahead of the ankle, facing the way the hips face.
+  flat ahead of the ankle, facing the way the hips face;
+* a lower-body take (:func:`lower_body_only`: no upper-body point ever seen, the legs seen):
+  the pelvis stands on the world's up made square to the hip line, and the spine, neck, head,
+  collars and arms (:data:`UPPER_BODY_JOINTS`) are the rest body's about it (arms lowered
+  :data:`ARM_DROP_DEG` from the T-pose), sized by the stature the legs give
+  (:func:`stature_from_legs`); ``Body22.lower_body`` says so.
 
 Twist (rotation about a bone) cannot be seen from one point per joint.  Where a layout has the
 points for it, :func:`body22_from_keypoints` also returns world orientations: the head from the
@@ -80,6 +85,18 @@ _OPENCAP = _LIMBS + ("left_heel", "right_heel", "left_big_toe", "right_big_toe",
 #: and Vicon Plug-in Gait's (the head band's markers as the ears and nose; one toe marker)
 _PLUGINGAIT = _LIMBS + ("left_heel", "right_heel", "left_foot_index", "right_foot_index", "left_ear", "right_ear",
                         "nose")
+
+#: the points of a lower-body take (Plug-in Gait's lower-body marker set, a crop to the legs):
+#: every other point of a layout is the upper body's (:func:`lower_body_only`)
+LOWER_BODY_POINTS = frozenset(
+    [f"{s}_{j}" for s in ("left", "right") for j in ("hip", "knee", "ankle", "heel", "foot_index", "big_toe",
+                                                     "small_toe")] + ["pelvis", "mid_hip"])
+#: degrees below horizontal the arms of a lower-body take hang (a relaxed A-pose, elbows straight,
+#: palms down as in the rest T-pose)
+ARM_DROP_DEG = 70.0
+#: the joints a lower-body take's pelvis carries as the rest body puts them
+UPPER_BODY_JOINTS = ("spine1", "spine2", "spine3", "neck", "left_collar", "right_collar", "head",
+                     "left_shoulder", "right_shoulder", "left_elbow", "right_elbow", "left_wrist", "right_wrist")
 
 #: the head joint (top of the neck) lies this far from the neck base to the head top
 _HEAD_ALONG_NECK = (PROPORTIONS["head_height"] - PROPORTIONS["neck_height"]) / (1.0 - PROPORTIONS["neck_height"])
@@ -178,10 +195,59 @@ class Body22:
     end_rot: joint index → ``(T, 3, 3)`` world orientation (body-model convention; NaN on
     frames where its points were missing) for the joints whose twist the layout shows.
     no_twist: names of the joints whose twist the layout cannot show (rest twist used).
+    lower_body: no upper-body point was ever seen (:func:`lower_body_only`): the trunk, collars,
+    head and arms (:data:`UPPER_BODY_JOINTS`) are the rest body's on the pelvis, sized from the legs.
     """
     positions: np.ndarray
     end_rot: dict
     no_twist: tuple
+    lower_body: bool = False
+
+
+def lower_body_only(points, layout) -> bool:
+    """True when ``points`` ``(T, K, 3)`` (``layout``'s, NaN = missing) never show an upper-body
+    point (shoulders, elbows, wrists, neck, face, hands: any point not in
+    :data:`LOWER_BODY_POINTS`) but do show both hips, knees and ankles: a lower-body take."""
+    lay = LAYOUTS[canonical_layout(layout)] if not isinstance(layout, KeypointLayout) else layout
+    seen = np.isfinite(np.asarray(points, np.float64)).all(-1).any(0)
+    legs = [f"{s}_{j}" for s in ("left", "right") for j in ("hip", "knee", "ankle")]
+    if not all(p in lay for p in legs):
+        return False
+    upper = [k for k, p in enumerate(lay.points) if p not in LOWER_BODY_POINTS]
+    return bool(upper) and not seen[upper].any() and all(seen[lay.index(p)] for p in legs)
+
+
+def stature_from_legs(P):
+    """Stature (metres) of a body whose legs are ``P`` ``(T, 22, 3)``'s: the median hip-to-knee
+    plus knee-to-ankle length, left and right averaged, over the rest body's leg length
+    (:data:`~.skeleton.PROPORTIONS` ``thigh + shank`` of the stature).  NaN when never seen."""
+    legs = []
+    for side in ("left", "right"):
+        hip, knee, ankle = (P[:, J[f"{side}_{j}"]] for j in ("hip", "knee", "ankle"))
+        legs.append(np.linalg.norm(knee - hip, axis=-1) + np.linalg.norm(ankle - knee, axis=-1))
+    legs = np.concatenate(legs)
+    if not np.isfinite(legs).any():
+        return np.nan
+    return float(np.nanmedian(legs)) / (PROPORTIONS["thigh"] + PROPORTIONS["shank"])
+
+
+def _upper_body_at_rest(pelvis, hip_left, up, H):
+    """``{joint: (T, 3)}`` of :data:`UPPER_BODY_JOINTS` placed as a rest body of stature ``H``
+    metres (:func:`.skeleton.make_body`) puts them about its pelvis, turned into the pelvis's frame
+    (+X along ``hip_left``, the right hip to the left one; +Z ``up`` made square to it; the body faces
+    -Y), the arms lowered :data:`ARM_DROP_DEG` from the T-pose about the shoulders' forward axis.
+    pelvis, hip_left, up ``(T, 3)`` metres / directions, Blender axes."""
+    from .skeleton import make_body
+    rest = make_body(H).rest_positions()
+    rel = rest - rest[J["pelvis"]]
+    a = np.radians(ARM_DROP_DEG)
+    for side, sx in (("left", 1.0), ("right", -1.0)):
+        sh = rel[J[f"{side}_shoulder"]]
+        for j in ("elbow", "wrist"):
+            out = rel[J[f"{side}_{j}"], 0] - sh[0]            # along ±X in the T-pose
+            rel[J[f"{side}_{j}"]] = sh + [out * np.cos(a), 0.0, -abs(out) * np.sin(a)]
+    R = rot.frame_from_axes(hip_left, up, "xz")                       # (T, 3, 3), columns the axes
+    return {n: pelvis + np.einsum("tij,j->ti", R, rel[J[n]]) for n in UPPER_BODY_JOINTS}
 
 
 def _flat_roll(fwd):
@@ -233,11 +299,18 @@ def body22_from_keypoints(points, layout) -> Body22:
         for j in ("hip", "knee", "ankle", "shoulder", "elbow", "wrist"):
             P[:, J[f"{side}_{j}"]] = pt(f"{side}_{j}")
     up, mid_hip, mid_sh = _trunk_up(P)
-    # a stature estimate per take, only for the small fixed offsets below (pelvis above the
-    # hips, neck above the shoulders): the median shoulder-to-hip distance / its rest fraction
-    span = np.linalg.norm(mid_sh - mid_hip, axis=-1)
-    trunk = np.nanmedian(span) if np.isfinite(span).any() else np.nan      # a hip or shoulder never seen
-    H = trunk / (PROPORTIONS["shoulder_height"] - PROPORTIONS["hip_height"]) if np.isfinite(trunk) else 1.7
+    lower = lower_body_only(X, lay)
+    if lower:
+        # no shoulders: the trunk stands on the world's up (made square to the hip line below,
+        # so the pelvis keeps the hips' heading and sideways tilt), the body sized from the legs
+        H = stature_from_legs(P)
+        up = np.broadcast_to([0.0, 0.0, 1.0], up.shape)
+    else:
+        # a stature estimate per take, only for the small fixed offsets below (pelvis above the
+        # hips, neck above the shoulders): the median shoulder-to-hip distance / its rest fraction
+        span = np.linalg.norm(mid_sh - mid_hip, axis=-1)
+        trunk = np.nanmedian(span) if np.isfinite(span).any() else np.nan      # a hip or shoulder never seen
+        H = trunk / (PROPORTIONS["shoulder_height"] - PROPORTIONS["hip_height"]) if np.isfinite(trunk) else 1.7
     # the pelvis above the hips' midpoint and the neck above the shoulders' along the trunk's up
     # made square to the hip line / the shoulder line: the derived joint stays equidistant from
     # the two measured ones, so the hips and shoulders fit a rigid body however the trunk bends
@@ -290,6 +363,12 @@ def body22_from_keypoints(points, layout) -> Body22:
             head = np.where(seen[:, None], head, P[:, J["head"]])
             R = np.where(seen[:, None, None], R, end_rot[J["head"]])
         end_rot[J["head"]], P[:, J["head"]] = R, head
+    if lower:
+        # a lower-body take: the trunk, collars, head and arms ride on the pelvis at rest
+        for name, v in _upper_body_at_rest(pelvis, P[:, J["left_hip"]] - P[:, J["right_hip"]], up_hips, H).items():
+            P[:, J[name]] = v
+        end_rot.pop(J["head"], None)
+        no_twist.append("head")
     # no face points, or a file whose face points are never there (OpenCap's video keypoints are
     # BODY_25 without the face): the head on the trunk's up axis, untwisted
     if not np.isfinite(P[:, J["head"]]).all(-1).any():
@@ -325,7 +404,7 @@ def body22_from_keypoints(points, layout) -> Body22:
             R = _flat_roll(np.cross(hip_left, np.broadcast_to([0.0, 0.0, 1.0], hip_left.shape)))
             P[:, J[f"{side}_foot"]] = ankle + R @ _rest_foot(H)
             no_twist.append(f"{side}_foot")
-    return Body22(P, end_rot, tuple(no_twist))
+    return Body22(P, end_rot, tuple(no_twist), lower)
 
 
 def _rest_foot(H):

@@ -518,6 +518,11 @@ def solve_keypoints(source, settings: SolveSettings | None = None, progress=None
                         f"{100 * spike_threshold(rate):.0f} cm or more (bridged)")
     if parse_floor(s.floor) != 0.0:
         out.info.append(f"the floor setting ({s.floor!r}) is for trackers: keypoints find the floor under the feet")
+    if b22.lower_body:
+        sized = "the stature given" if height else "the stature from the legs' length"
+        out.info.append(f"lower body only: the trunk, arms and head follow the pelvis at rest (the trunk "
+                        f"upright on the pelvis, turned and tilted sideways with the hips; the arms hanging "
+                        f"{kl.ARM_DROP_DEG:.0f}\N{DEGREE SIGN} below horizontal), {sized}")
     if b22.no_twist:
         out.info.append(f"no twist information: {', '.join(b22.no_twist)} (rest twist)")
     if never:

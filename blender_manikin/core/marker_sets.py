@@ -26,10 +26,10 @@ handedness; lengths in the file's unit, ``metres_per_unit`` converting the const
   joint centre in adults, children, and patients with cerebral palsy based on magnetic resonance
   imaging", J. Biomech. 40(3):595-602, pelvis-only form: from the mid-ASIS, in the pelvis frame
   (lateral along the ASIS line, anterior square to it toward the mid-ASIS from the mid-PSIS,
-  superior completing it, toward the shoulders), ``anterior = -0.24 PD - 9.9 mm``, ``superior =
-  -0.30 PW - 10.9 mm``, ``lateral = ±(0.33 PW + 7.3 mm)``; PW the ASIS-to-ASIS distance, PD the
-  mid-ASIS-to-mid-PSIS distance (the take's medians: the pelvis is rigid).  The regression's
-  error against MRI is the paper's; a marker's skin motion adds to it;
+  superior completing it, toward the shoulders, or away from the knees in a lower-body trial),
+  ``anterior = -0.24 PD - 9.9 mm``, ``superior = -0.30 PW - 10.9 mm``, ``lateral = ±(0.33 PW + 7.3 mm)``;
+  PW the ASIS-to-ASIS distance, PD the mid-ASIS-to-mid-PSIS distance (the take's medians: the pelvis
+  is rigid).  The regression's error against MRI is the paper's; a marker's skin motion adds to it;
 * knees, ankles, elbows, wrists: the midpoint of the lateral and medial (radial and ulnar)
   markers.  Where only the lateral marker is there (Plug-in Gait without medial markers) the
   centre is taken the subject's measured half width plus the marker's radius (a Vicon ``.mp`` /
@@ -207,7 +207,11 @@ def joint_centres(names, markers, metres_per_unit=1.0, set_name=None, offsets=No
     up = np.cross(right, anterior)
     la_sh, ra_sh = m("left", "shoulder"), m("right", "shoulder")
     mid_sh = 0.5 * (la_sh + ra_sh)
-    flip = np.sum(up * (mid_sh - mid_asis), -1, keepdims=True) < 0     # a left-handed file
+    # a left-handed file: the up found points away from the shoulders, or (a lower-body trial,
+    # no shoulders) towards the knees
+    to_sh = np.sum(up * (mid_sh - mid_asis), -1, keepdims=True)
+    to_knees = np.sum(up * (0.5 * (m("left", "knee_lat") + m("right", "knee_lat")) - mid_asis), -1, keepdims=True)
+    flip = np.where(np.isfinite(to_sh), to_sh < 0, to_knees > 0)
     up = np.where(flip, -up, up)
     PW = np.nanmedian(np.linalg.norm(ra - la, axis=-1)) / mm
     PD = np.nanmedian(np.linalg.norm(mid_asis - mid_psis, axis=-1)) / mm

@@ -1,0 +1,143 @@
+"""Lower-body takes (``core/keypoint_layouts.py`` ``lower_body_only``): a Vicon Plug-in Gait
+lower-body TRC and COCO-17 keypoints of the legs only are solved, the legs as a full-body take of
+the same motion gives them, the trunk, arms and head riding on the pelvis at rest, the stature
+from the legs.  Before: refused ("joint(s) pelvis, spine1, ... cannot be placed: point(s)
+left_shoulder, ... never seen")."""
+import numpy as np
+import pytest
+
+from blender_manikin import cli
+from blender_manikin.core import keypoint_layouts as kl
+from blender_manikin.core import rotations as rot
+from blender_manikin.core import skeleton as sk
+from blender_manikin.core.io_keypoints import keypoints_from_points
+from blender_manikin.core.solve import SolveError, SolveSettings, solve_recording
+
+from fixtures_keypoints import hinge_motion
+from test_marker_sets import anatomical_markers, write_marker_trc
+
+LEGS = [f"{s}_{j}" for s in ("left", "right") for j in ("hip", "knee", "ankle")]
+UPPER_MARKERS = ("SHO", "ELB", "WRA", "WRB", "FHD", "BHD")
+#: COCO-17's upper-body points (a crop to the legs never sees them)
+UPPER_COCO = ("nose", "left_eye", "right_eye", "left_ear", "right_ear", "left_shoulder", "right_shoulder",
+              "left_elbow", "right_elbow", "left_wrist", "right_wrist")
+
+
+@pytest.fixture(scope="module")
+def motion():
+    return hinge_motion(frames=150, seed=3)
+
+
+def _pig_trc(path, motion, lower, mirror=False):
+    """A Plug-in Gait TRC (lateral markers only) of ``motion``; ``lower``: the upper body's columns
+    left empty, as Vicon writes a lower-body trial; ``mirror``: a left-handed file."""
+    body, pos, world = motion
+    names, pts = anatomical_markers(pos, world, body.stature, "plugingait", medial=False)
+    pts = pts.copy()
+    if lower:
+        for k, n in enumerate(names):
+            if n[1:] in UPPER_MARKERS:
+                pts[:, k] = np.nan
+    write_marker_trc(path, names, pts, mirror=mirror)
+    text = path.read_text(encoding="utf-8")
+    path.write_text("\n".join("\t".join("" if c.strip() == "nan" else c for c in line.split("\t"))
+                              for line in text.split("\n")), encoding="utf-8")
+    return path
+
+
+def _leg_errors(P, pos):
+    """Median distance (metres) per leg joint between a solve's joints and the skeleton's, both
+    relative to the first frame's hips' midpoint (the solve moves the floor)."""
+    n = min(len(P), len(pos))              # the solve's grid may end a frame short of the file
+    P, pos = P[:n], pos[:n]
+    hips = [sk.J["left_hip"], sk.J["right_hip"]]
+    o_p, o_w = P[:1, hips].mean(1), pos[:1, hips].mean(1)
+    return {j: float(np.median(np.linalg.norm((P[:, sk.J[j]] - o_p) - (pos[:, sk.J[j]] - o_w), axis=-1)))
+            for j in LEGS}
+
+
+def _check_upright_trunk(out):
+    """The trunk, neck and head stand on the pelvis as at rest: no bend between them; the pelvis's
+    up axis square to the hip line (the trunk follows the pelvis's heading and sideways tilt)."""
+    res = out.result
+    P, W = res.fk()
+    for j in ("spine1", "spine2", "spine3", "neck", "head"):
+        rel = np.swapaxes(W[:, sk.J["pelvis"]], -1, -2) @ W[:, sk.J[j]]
+        ang = np.degrees(np.arccos(np.clip((np.trace(rel, axis1=-2, axis2=-1) - 1.0) / 2.0, -1.0, 1.0)))
+        assert ang.max() < 1.0, (j, ang.max())
+    trunk = rot.normalize(P[:, sk.J["neck"]] - P[:, sk.J["pelvis"]])
+    hip_line = rot.normalize(P[:, sk.J["left_hip"]] - P[:, sk.J["right_hip"]])
+    assert np.abs(np.sum(trunk * hip_line, -1)).max() < 0.02
+    # upright: the trunk's forward tilt is nil (the hips cannot show it)
+    fwd = rot.normalize(np.cross(np.broadcast_to([0.0, 0.0, 1.0], hip_line.shape), hip_line))
+    assert np.abs(np.sum(trunk * fwd, -1)).max() < 0.02
+    # the arms hang below the shoulders, beside the body
+    for side in ("left", "right"):
+        assert (P[:, sk.J[f"{side}_wrist"], 2] < P[:, sk.J[f"{side}_shoulder"], 2] - 0.3).all()
+
+
+def test_a_lower_body_plugin_gait_take_is_solved(tmp_path, motion):
+    body, pos, world = motion
+    full = solve_recording(str(_pig_trc(tmp_path / "full.trc", motion, False)), SolveSettings(fps=60.0))
+    lower = solve_recording(str(_pig_trc(tmp_path / "lower.trc", motion, True)), SolveSettings(fps=60.0))
+    e_full, e_low = _leg_errors(full.result.positions, pos), _leg_errors(lower.result.positions, pos)
+    for j in LEGS:
+        assert e_low[j] < e_full[j] + 0.005, (j, e_low[j], e_full[j])
+        assert e_low[j] < 0.02, (j, e_low[j])
+    _check_upright_trunk(lower)
+    summary = lower.summary()
+    assert "lower body only: the trunk, arms and head follow the pelvis at rest" in summary, summary
+    assert "the stature from the legs' length" in summary
+    assert abs(lower.body.stature - body.stature) < 0.03 * body.stature, (lower.body.stature, body.stature)
+    # a stature given scales it, and is said so
+    sized = solve_recording(str(tmp_path / "lower.trc"), SolveSettings(fps=60.0, height=1.9))
+    assert abs(sized.body.stature - 1.9) < 1e-6 and "the stature given" in sized.summary()
+
+
+def test_a_left_handed_lower_body_take_is_told_from_its_feet(tmp_path, motion):
+    """No shoulders: the body's left comes from the hips, its facing from the toes ahead of the
+    heels, so a mirrored (left-handed) file is put right and its legs land where they were.
+    Before: "right-handed (assumed: no clear facing)", the legs solved mirrored."""
+    from blender_manikin.core.io_keypoints import read_keypoints
+    body, pos, world = motion
+    path = _pig_trc(tmp_path / "mirrored.trc", motion, True, mirror=True)
+    rec = read_keypoints(path)
+    assert rec.metadata["handed"] == "left", rec.metadata["detected"]
+    assert "left-handed (toes ahead of the heels)" in rec.metadata["detected"], rec.metadata["detected"]
+    e = _leg_errors(solve_recording(rec, SolveSettings(fps=60.0)).result.positions, pos)
+    assert max(e.values()) < 0.02, e
+
+
+def test_lower_body_coco_keypoints_are_solved(motion):
+    body, pos, world = motion
+    clean = kl.keypoints_from_body22(pos, world, "coco17", body.stature)
+    t = np.arange(len(clean)) / 30.0
+    full = solve_recording(keypoints_from_points(t, clean, "coco17", "full"), SolveSettings(fps=30.0))
+    legs_only = clean.copy()
+    legs_only[:, [kl.LAYOUTS["coco17"].index(p) for p in UPPER_COCO]] = np.nan
+    assert kl.lower_body_only(legs_only, "coco17") and not kl.lower_body_only(clean, "coco17")
+    lower = solve_recording(keypoints_from_points(t, legs_only, "coco17", "legs"), SolveSettings(fps=30.0))
+    e_full, e_low = _leg_errors(full.result.positions, pos), _leg_errors(lower.result.positions, pos)
+    for j in LEGS:
+        assert e_low[j] < e_full[j] + 0.005, (j, e_low[j], e_full[j])
+    _check_upright_trunk(lower)
+    assert "lower body only" in lower.summary()
+    assert abs(lower.body.stature - body.stature) < 0.03 * body.stature, (lower.body.stature, body.stature)
+    # shoulders seen, arms never: not a lower-body take; refused as before, naming what is missing
+    arms = clean.copy()
+    lay = kl.LAYOUTS["coco17"]
+    arms[:, [lay.index(f"{s}_{j}") for s in ("left", "right") for j in ("elbow", "wrist")]] = np.nan
+    assert not kl.lower_body_only(arms, "coco17")
+    with pytest.raises(SolveError, match=r"left_elbow, right_elbow, left_wrist, right_wrist cannot be placed"):
+        solve_recording(keypoints_from_points(t, arms, "coco17", "arms"), SolveSettings(fps=30.0))
+
+
+def test_cli_solve_and_convert_a_lower_body_trc(tmp_path, motion, capsys):
+    path = _pig_trc(tmp_path / "lower.trc", motion, True)
+    assert cli.main(["solve", str(path), "--out", str(tmp_path / "s"), "--format", "json"]) == 0
+    assert (tmp_path / "s" / "lower.json").stat().st_size > 0
+    assert "lower body only" in capsys.readouterr().out
+    pytest.importorskip("dask")
+    assert cli.main(["convert", str(path), "--out", str(tmp_path / "c"), "--format", "json",
+                     "--workers", "1", "--no-progress"]) == 0
+    assert (tmp_path / "c" / "lower.json").stat().st_size > 0
