@@ -427,35 +427,49 @@ def _bandai() -> JointMap:
                     description="Bandai Namco Research Motiondataset 1/2 (cm, Y-up, faces +Z)")
 
 
-def _cgspeed_style(name, spine, neck_parent, description) -> JointMap:
-    """A map for the rigs with the cgspeed BVH names (``LeftUpLeg``, ``LeftArm``, ...; T-pose rest
-    with world-aligned frames): CMU's and Mixamo's, which differ in their spine (``spine``: the
-    joints from Hips to the neck base whose arc spine1-3 split in quarters) and in the joint the
-    ``Neck`` sits on (``neck_parent``, what tells the two apart)."""
+#: the cgspeed BVH names' limb joints (``LeftUpLeg``, ``LeftArm``, ...), as :func:`_tpose_style` takes them
+_CGSPEED_LIMBS = {"hip": "UpLeg", "knee": "Leg", "ankle": "Foot", "toe": "ToeBase", "collar": "Shoulder",
+                  "shoulder": "Arm", "elbow": "ForeArm", "wrist": "Hand"}
+
+
+def _tpose_style(name, spine, limbs, unit_scale, parents, description) -> JointMap:
+    """A map for a rig whose zero pose is a T-pose with world-aligned frames, Y-up, facing +Z,
+    and whose joints are ``Hips``, ``Neck``, ``Head`` and ``Left``/``Right`` + a limb name
+    (``limbs``: part -> name: ``hip``, ``knee``, ``ankle``, ``toe`` (the ball of the foot),
+    ``collar``, ``shoulder``, ``elbow``, ``wrist``); ``spine``: the joints from Hips to the neck
+    base whose arc spine1-3 split in quarters; ``parents``: the hierarchy checks that tell it from
+    other rigs with the same names."""
     pos = {
         "pelvis": joint("Hips"),
         "spine1": chain(spine, 0.25), "spine2": chain(spine, 0.5), "spine3": chain(spine, 0.75),
         "neck": joint("Neck"), "head": joint("Head"),
     }
     for side, S in (("left", "Left"), ("right", "Right")):
-        pos[f"{side}_hip"] = joint(f"{S}UpLeg")
-        pos[f"{side}_knee"] = joint(f"{S}Leg")
-        pos[f"{side}_ankle"] = joint(f"{S}Foot")
-        pos[f"{side}_foot"] = joint(f"{S}ToeBase")
-        pos[f"{side}_collar"] = lerp(f"{S}Shoulder", f"{S}Arm", 0.4)
-        pos[f"{side}_shoulder"] = joint(f"{S}Arm")
-        pos[f"{side}_elbow"] = joint(f"{S}ForeArm")
-        pos[f"{side}_wrist"] = joint(f"{S}Hand")
-    ori = {
-        "pelvis": OrientationSpec("Hips", rest(), rest()),
-        "head": OrientationSpec("Head", rest(), rest()),
-        "left_wrist": OrientationSpec("LeftHand", rest(), rest()),
-        "right_wrist": OrientationSpec("RightHand", rest(), rest()),
-        "left_ankle": OrientationSpec("LeftFoot", bone("LeftFoot", "LeftToeBase"), rest()),
-        "right_ankle": OrientationSpec("RightFoot", bone("RightFoot", "RightToeBase"), rest()),
-    }
-    return JointMap(name, pos, ori, unit_scale="auto", up="y", forward="z", rest_is_tpose=True,
-                    foot_pitch="auto", parents=(("Neck", neck_parent),), description=description)
+        n = {part: f"{S}{limb}" for part, limb in limbs.items()}
+        pos[f"{side}_hip"] = joint(n["hip"])
+        pos[f"{side}_knee"] = joint(n["knee"])
+        pos[f"{side}_ankle"] = joint(n["ankle"])
+        pos[f"{side}_foot"] = joint(n["toe"])
+        pos[f"{side}_collar"] = lerp(n["collar"], n["shoulder"], 0.4)
+        pos[f"{side}_shoulder"] = joint(n["shoulder"])
+        pos[f"{side}_elbow"] = joint(n["elbow"])
+        pos[f"{side}_wrist"] = joint(n["wrist"])
+    ori = {"pelvis": OrientationSpec("Hips", rest(), rest()), "head": OrientationSpec("Head", rest(), rest())}
+    for side, S in (("left", "Left"), ("right", "Right")):
+        ori[f"{side}_wrist"] = OrientationSpec(f"{S}{limbs['wrist']}", rest(), rest())
+    for side, S in (("left", "Left"), ("right", "Right")):
+        ankle, toe = f"{S}{limbs['ankle']}", f"{S}{limbs['toe']}"
+        ori[f"{side}_ankle"] = OrientationSpec(ankle, bone(ankle, toe), rest())
+    return JointMap(name, pos, ori, unit_scale=unit_scale, up="y", forward="z", rest_is_tpose=True,
+                    foot_pitch="auto", parents=parents, description=description)
+
+
+def _cgspeed_style(name, spine, neck_parent, description) -> JointMap:
+    """A map for the rigs with the cgspeed BVH names (``LeftUpLeg``, ``LeftArm``, ...; T-pose rest
+    with world-aligned frames): CMU's and Mixamo's, which differ in their spine (``spine``: the
+    joints from Hips to the neck base whose arc spine1-3 split in quarters) and in the joint the
+    ``Neck`` sits on (``neck_parent``, what tells the two apart)."""
+    return _tpose_style(name, spine, _CGSPEED_LIMBS, "auto", (("Neck", neck_parent),), description)
 
 
 def _cmu() -> JointMap:
@@ -513,32 +527,10 @@ def _style100() -> JointMap:
     Left/RightCollar, Shoulder, Elbow, Wrist, Left/RightHip, Knee, Ankle, Toe; cm, Y-up, faces +Z,
     the zero pose a T-pose with world-aligned frames (arms along +-X, the Toe joint the ball of
     the foot 7 cm below and 16 cm ahead of the ankle)."""
-    spine = ("Hips", "Chest", "Chest2", "Chest3", "Chest4", "Neck")
-    pos = {
-        "pelvis": joint("Hips"),
-        "spine1": chain(spine, 0.25), "spine2": chain(spine, 0.5), "spine3": chain(spine, 0.75),
-        "neck": joint("Neck"), "head": joint("Head"),
-    }
-    for side, S in (("left", "Left"), ("right", "Right")):
-        pos[f"{side}_hip"] = joint(f"{S}Hip")
-        pos[f"{side}_knee"] = joint(f"{S}Knee")
-        pos[f"{side}_ankle"] = joint(f"{S}Ankle")
-        pos[f"{side}_foot"] = joint(f"{S}Toe")
-        pos[f"{side}_collar"] = lerp(f"{S}Collar", f"{S}Shoulder", 0.4)
-        pos[f"{side}_shoulder"] = joint(f"{S}Shoulder")
-        pos[f"{side}_elbow"] = joint(f"{S}Elbow")
-        pos[f"{side}_wrist"] = joint(f"{S}Wrist")
-    ori = {
-        "pelvis": OrientationSpec("Hips", rest(), rest()),
-        "head": OrientationSpec("Head", rest(), rest()),
-        "left_wrist": OrientationSpec("LeftWrist", rest(), rest()),
-        "right_wrist": OrientationSpec("RightWrist", rest(), rest()),
-        "left_ankle": OrientationSpec("LeftAnkle", bone("LeftAnkle", "LeftToe"), rest()),
-        "right_ankle": OrientationSpec("RightAnkle", bone("RightAnkle", "RightToe"), rest()),
-    }
-    return JointMap("100style", pos, ori, unit_scale=0.01, up="y", forward="z", rest_is_tpose=True,
-                    foot_pitch="auto", parents=(("Neck", "Chest4"),),
-                    description="100STYLE / Xsens MVN BVH (cm, Y-up, faces +Z, T-pose rest)")
+    limbs = {"hip": "Hip", "knee": "Knee", "ankle": "Ankle", "toe": "Toe", "collar": "Collar",
+             "shoulder": "Shoulder", "elbow": "Elbow", "wrist": "Wrist"}
+    return _tpose_style("100style", ("Hips", "Chest", "Chest2", "Chest3", "Chest4", "Neck"), limbs, 0.01,
+                        (("Neck", "Chest4"),), "100STYLE / Xsens MVN BVH (cm, Y-up, faces +Z, T-pose rest)")
 
 
 BANDAI = _bandai()
