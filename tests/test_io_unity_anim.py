@@ -277,3 +277,22 @@ def test_clips_of_no_tracked_object_are_refused_saying_what_they_animate(tmp_pat
         formats.load_recording(write(tmp_path, "walk.anim", humanoid))
     with pytest.raises(RecordingError, match=r"empty\.anim: no head curve.*; the clip has no curve$"):
         formats.load_recording(write(tmp_path, "empty.anim", anim_text({})))
+
+
+def test_rig_names_pick_their_devices(tmp_path):
+    """Meta's OVRCameraRig anchors, XR Interaction Toolkit 2.x controllers and body trackers
+    named with a ``Tracker`` word ("Hip Tracker", "Pelvis Tracker", as the README's
+    Waist / Hip / Pelvis trackers).  Before: "Hip Tracker" and "Pelvis Tracker" were no device
+    (left out) while "Waist Tracker" and "Left Foot Tracker" were read."""
+    t, m = motion()
+    head, left, right = (m[p] for p in (HEAD, LEFT, RIGHT))
+    for names in (("OVRCameraRig/TrackingSpace/CenterEyeAnchor", "OVRCameraRig/TrackingSpace/LeftHandAnchor",
+                   "OVRCameraRig/TrackingSpace/RightHandAnchor", "OVRCameraRig/TrackingSpace/Hip Tracker"),
+                  ("XR Origin (XR Rig)/Camera Offset/Main Camera", "XR Origin (XR Rig)/Camera Offset/Left Controller",
+                   "XR Origin (XR Rig)/Camera Offset/Right Controller", "XR Origin (XR Rig)/Pelvis Tracker")):
+        objs = {n: {"time": t, "pos": pos, "quat": q}
+                for n, (pos, q) in zip(names, (head, left, right, (head[0] - [0, 0.7, 0], head[1])))}
+        rec = formats.load_recording(write(tmp_path, "rig.anim", anim_text(objs)))
+        assert rec.devices == ("head", "left_hand", "right_hand", "pelvis"), (names, rec.devices)
+        assert rec.metadata["device_paths"] == dict(zip(rec.devices, names))
+        assert np.abs(rec.streams["left_hand"].pos - unity_to_blender_pos(left[0])).max() < 1e-5

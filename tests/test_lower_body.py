@@ -87,7 +87,7 @@ def test_a_lower_body_plugin_gait_take_is_solved(tmp_path, motion):
     _check_upright_trunk(lower)
     summary = lower.summary()
     assert "lower body only: the trunk, arms and head follow the pelvis at rest" in summary, summary
-    assert "the stature from the legs' length" in summary
+    assert "the stature estimated from the legs' length (hip to ankle taken as 49% of it" in summary
     assert abs(lower.body.stature - body.stature) < 0.03 * body.stature, (lower.body.stature, body.stature)
     # a stature given scales it, and is said so
     sized = solve_recording(str(tmp_path / "lower.trc"), SolveSettings(fps=60.0, height=1.9))
@@ -141,3 +141,62 @@ def test_cli_solve_and_convert_a_lower_body_trc(tmp_path, motion, capsys):
     assert cli.main(["convert", str(path), "--out", str(tmp_path / "c"), "--format", "json",
                      "--workers", "1", "--no-progress"]) == 0
     assert (tmp_path / "c" / "lower.json").stat().st_size > 0
+
+
+def test_stray_upper_body_samples_keep_a_lower_body_take(motion):
+    """A detector's false positives in a crop to the legs (a wrist on one frame, a nose on
+    another) leave it a lower-body take: the strays are dropped and said, the legs solved as
+    without them.  Before: the take went the full-body way and was refused ("joint(s) pelvis,
+    spine1, ... cannot be placed: point(s) ... left_shoulder ... never seen")."""
+    body, pos, world = motion
+    clean = kl.keypoints_from_body22(pos, world, "coco17", body.stature)
+    t = np.arange(len(clean)) / 30.0
+    lay = kl.LAYOUTS["coco17"]
+    legs_only = clean.copy()
+    legs_only[:, [lay.index(p) for p in UPPER_COCO]] = np.nan
+    stray = legs_only.copy()
+    stray[40, lay.index("left_wrist")] = clean[40, lay.index("left_wrist")] + [0.3, 0.1, -0.5]
+    stray[90, lay.index("nose")] = clean[90, lay.index("nose")]
+    assert kl.lower_body_only(stray, "coco17")
+    assert kl.drop_stray_upper_body(stray, "coco17")[1] == 2
+    ref = solve_recording(keypoints_from_points(t, legs_only, "coco17", "legs"), SolveSettings(fps=30.0))
+    out = solve_recording(keypoints_from_points(t, stray, "coco17", "stray"), SolveSettings(fps=30.0))
+    assert "2 stray upper-body sample(s) left out" in out.summary(), out.summary()
+    assert np.allclose(out.result.positions, ref.result.positions, atol=1e-9)
+    _check_upright_trunk(out)
+    # body22 straight from the raw points (no solve): the stray wrist does not reach the arms
+    b22 = kl.body22_from_keypoints(stray, "coco17")
+    assert b22.lower_body and np.allclose(b22.positions, kl.body22_from_keypoints(legs_only, "coco17").positions,
+                                          equal_nan=True)
+    # upper-body points seen on more frames: not strays, the full-body way (refused, naming them)
+    many = legs_only.copy()
+    many[:20, lay.index("left_wrist")] = clean[:20, lay.index("left_wrist")]
+    assert not kl.lower_body_only(many, "coco17")
+
+
+@pytest.mark.parametrize("layout", ["mediapipe33", "body25"])
+def test_feet_never_seen_lie_flat_facing_the_hips(motion, layout):
+    """A crop above the toes (heels and toes never seen) in a layout that has them: the feet lie
+    flat ahead of the ankles facing the way the hips face, as in a layout without them (COCO),
+    their twist said missing.  Before: refused ("joint(s) left_foot, right_foot cannot be placed")."""
+    body, pos, world = motion
+    lay = kl.LAYOUTS[layout]
+    clean = kl.keypoints_from_body22(pos, world, layout, body.stature)
+    t = np.arange(len(clean)) / 30.0
+    feet = [k for k, p in enumerate(lay.points) if any(w in p for w in ("heel", "toe", "foot_index"))]
+    full = clean.copy()
+    full[:, feet] = np.nan
+    out = solve_recording(keypoints_from_points(t, full, layout, "nofeet"), SolveSettings(fps=30.0))
+    assert {"left_foot", "right_foot"} <= set(kl.body22_from_keypoints(full, layout).no_twist)
+    assert "right_foot" in next(x for x in out.summary().split("; ") if x.startswith("no twist")), out.summary()
+    legs = full.copy()
+    legs[:, [k for k, p in enumerate(lay.points) if p not in kl.LOWER_BODY_POINTS]] = np.nan
+    lower = solve_recording(keypoints_from_points(t, legs, layout, "legs"), SolveSettings(fps=30.0))
+    assert "lower body only" in lower.summary() and "left_foot" in lower.summary()
+    e = _leg_errors(lower.result.positions, pos)
+    assert max(e.values()) < 0.03, e
+    b22 = kl.body22_from_keypoints(legs, layout)
+    fwd = rot.normalize(b22.positions[:, sk.J["left_foot"]] - b22.positions[:, sk.J["left_ankle"]])
+    hip_left = b22.positions[:, sk.J["left_hip"]] - b22.positions[:, sk.J["right_hip"]]
+    facing = rot.normalize(np.cross(hip_left, np.broadcast_to([0.0, 0.0, 1.0], hip_left.shape)))
+    assert np.all(np.sum(fwd * facing, -1) > 0.7) and np.abs(fwd[:, 2]).max() < 0.75

@@ -40,7 +40,7 @@ import re
 import numpy as np
 
 from . import rotations as rot
-from .devices import DEVICES, canonical_device, snake_name
+from .devices import DEVICES, canonical_device, device_of_object_name, snake_name
 from .plain import shown
 from .recording import (
     Recording, RecordingError, TrackerStream, canonical_axes, canonical_units, read_text, to_blender,
@@ -514,11 +514,13 @@ def _key_times(chans):
 
 
 def _device_of_path(obj):
-    """The device an object path's last name stands for, or None."""
+    """The device an object path's last name stands for (also with a ``Tracker`` / ``VR`` word
+    around it: ``Hip Tracker``, ``Pelvis Tracker``; :func:`.devices.device_of_object_name`), or None."""
     name = obj.rsplit("/", 1)[-1].strip()
     if not name:
         return None
-    return canonical_device(snake_name(name)) or canonical_device(name)
+    return (canonical_device(snake_name(name)) or canonical_device(name)
+            or device_of_object_name(snake_name(name)))
 
 
 def read_unity_anim(path, axes=None, units=None) -> Recording:

@@ -17,8 +17,10 @@ names its K points in file order.  :func:`body22_from_keypoints` places the 22 b
   head's frame), or 0.24 of the way from the neck to the head top; with no face points (none
   in the layout, or none ever seen in the file) it stands on the trunk's up axis, untwisted;
 * the toes / ball of the foot (the ``foot`` joints) come from the layout's toe points, else
-  flat ahead of the ankle, facing the way the hips face;
-* a lower-body take (:func:`lower_body_only`: no upper-body point ever seen, the legs seen):
+  (none in the layout, or never seen in the take) flat ahead of the ankle, facing the way the
+  hips face;
+* a lower-body take (:func:`lower_body_only`: the legs seen, no upper-body point seen but on a
+  few stray frames, which are dropped):
   the pelvis stands on the world's up made square to the hip line, and the spine, neck, head,
   collars and arms (:data:`UPPER_BODY_JOINTS`) are the rest body's about it (arms lowered
   :data:`ARM_DROP_DEG` from the T-pose), sized by the stature the legs give
@@ -204,17 +206,48 @@ class Body22:
     lower_body: bool = False
 
 
+#: an upper-body point seen on at most this share of the frames the legs are seen on is a
+#: detector's stray sample (a false wrist or nose in a crop to the legs), not an upper body
+STRAY_UPPER_SHARE = 0.05
+
+
+def _upper_body_indices(lay):
+    return [k for k, p in enumerate(lay.points) if p not in LOWER_BODY_POINTS]
+
+
 def lower_body_only(points, layout) -> bool:
-    """True when ``points`` ``(T, K, 3)`` (``layout``'s, NaN = missing) never show an upper-body
-    point (shoulders, elbows, wrists, neck, face, hands: any point not in
-    :data:`LOWER_BODY_POINTS`) but do show both hips, knees and ankles: a lower-body take."""
+    """True when ``points`` ``(T, K, 3)`` (``layout``'s, NaN = missing) show both hips, knees and
+    ankles but no upper-body point (shoulders, elbows, wrists, neck, face, hands: any point not in
+    :data:`LOWER_BODY_POINTS`) on more than :data:`STRAY_UPPER_SHARE` of the frames the legs are
+    seen on: a lower-body take (a few stray upper-body samples, a detector's false positives, do
+    not make it a full-body one; :func:`drop_stray_upper_body` removes them)."""
     lay = LAYOUTS[canonical_layout(layout)] if not isinstance(layout, KeypointLayout) else layout
-    seen = np.isfinite(np.asarray(points, np.float64)).all(-1).any(0)
+    seen = np.isfinite(np.asarray(points, np.float64)).all(-1)              # (T, K)
     legs = [f"{s}_{j}" for s in ("left", "right") for j in ("hip", "knee", "ankle")]
     if not all(p in lay for p in legs):
         return False
-    upper = [k for k, p in enumerate(lay.points) if p not in LOWER_BODY_POINTS]
-    return bool(upper) and not seen[upper].any() and all(seen[lay.index(p)] for p in legs)
+    upper = _upper_body_indices(lay)
+    leg_frames = seen[:, [lay.index(p) for p in legs]].any(-1).sum()
+    if not upper or not all(seen[:, lay.index(p)].any() for p in legs):
+        return False
+    return bool((seen[:, upper].sum(0) <= STRAY_UPPER_SHARE * leg_frames).all())
+
+
+def drop_stray_upper_body(points, layout):
+    """``(points, dropped)``: ``points`` ``(T, K, 3)`` with the upper-body samples of a lower-body
+    take (:func:`lower_body_only`) set to NaN, and how many samples (point-frames) that was; the
+    points as given and 0 otherwise."""
+    lay = LAYOUTS[canonical_layout(layout)] if not isinstance(layout, KeypointLayout) else layout
+    X = np.asarray(points, np.float64)
+    if not lower_body_only(X, lay):
+        return X, 0
+    upper = _upper_body_indices(lay)
+    dropped = int(np.isfinite(X[:, upper]).all(-1).sum())
+    if not dropped:
+        return X, 0
+    X = X.copy()
+    X[:, upper] = np.nan
+    return X, dropped
 
 
 def stature_from_legs(P):
@@ -301,6 +334,11 @@ def body22_from_keypoints(points, layout) -> Body22:
     up, mid_hip, mid_sh = _trunk_up(P)
     lower = lower_body_only(X, lay)
     if lower:
+        X, _ = drop_stray_upper_body(X, lay)              # a detector's stray wrist or nose
+        for side in ("left", "right"):
+            for j in ("shoulder", "elbow", "wrist"):
+                P[:, J[f"{side}_{j}"]] = np.nan
+        _, mid_hip, mid_sh = _trunk_up(P)
         # no shoulders: the trunk stands on the world's up (made square to the hip line below,
         # so the pelvis keeps the hips' heading and sideways tilt), the body sized from the legs
         H = stature_from_legs(P)
@@ -383,27 +421,31 @@ def body22_from_keypoints(points, layout) -> Body22:
             end_rot[J[f"{side}_wrist"]] = rot.frame_from_axes(sign * (0.5 * (idx + pky) - w), -(idx - pky), "xy")
         else:
             no_twist.append(f"{side}_wrist")
-    # feet: heel -> toes gives the foot's direction, big -> small toe its roll
+    # feet: heel -> toes gives the foot's direction, big -> small toe its roll; toes or heels
+    # never seen in the take (a crop above them, a marker set without them): as a layout without
+    # them, flat ahead of the ankle facing the way the hips face
     hip_left = P[:, J["left_hip"]] - P[:, J["right_hip"]]
+
+    def ever(R):
+        return R is not None and bool(np.isfinite(R).all((-1, -2)).any())
+
     for side, sign in (("left", 1.0), ("right", -1.0)):
         ankle = P[:, J[f"{side}_ankle"]]
-        if f"{side}_heel" in lay and (f"{side}_foot_index" in lay or f"{side}_big_toe" in lay):
-            heel = pt(f"{side}_heel")
-            if f"{side}_big_toe" in lay:
-                big, small = pt(f"{side}_big_toe"), pt(f"{side}_small_toe")
-                toe = 0.5 * (big + small)
-                R = rot.frame_from_axes(-(toe - heel), sign * (small - big), "yx")
-            else:
-                toe = pt(f"{side}_foot_index")
-                R = _flat_roll(toe - heel)
-                no_twist.append(f"{side}_foot")
+        R, twist = None, False
+        if f"{side}_heel" in lay and f"{side}_big_toe" in lay:
+            heel, big, small = pt(f"{side}_heel"), pt(f"{side}_big_toe"), pt(f"{side}_small_toe")
+            R, twist = rot.frame_from_axes(-(0.5 * (big + small) - heel), sign * (small - big), "yx"), True
+            if not ever(R):                                   # small toe never seen: the big toe's line
+                R, twist = _flat_roll(big - heel), False
+        elif f"{side}_heel" in lay and f"{side}_foot_index" in lay:
+            R = _flat_roll(pt(f"{side}_foot_index") - pt(f"{side}_heel"))
+        if ever(R):
             end_rot[J[f"{side}_ankle"]] = R
-            P[:, J[f"{side}_foot"]] = ankle + R @ _rest_foot(H)
         else:
-            # flat, facing the way the hips face (forward = left x up)
             R = _flat_roll(np.cross(hip_left, np.broadcast_to([0.0, 0.0, 1.0], hip_left.shape)))
-            P[:, J[f"{side}_foot"]] = ankle + R @ _rest_foot(H)
+        if not twist or not ever(R):
             no_twist.append(f"{side}_foot")
+        P[:, J[f"{side}_foot"]] = ankle + R @ _rest_foot(H)
     return Body22(P, end_rot, tuple(no_twist), lower)
 
 

@@ -380,7 +380,8 @@ class PreparedKeypoints:
     derived_spine: the layout has no spine points (:func:`rigid_trunk` applies); windows: with
     ``smoothing="auto"``, the window (seconds, 0: none) :func:`.smoothing.smooth_auto` chose for each point
     seen, else None; sides: the :class:`.keypoint_sides.SideSwaps` undone (None: not looked for);
-    spikes: ``(T_read, K)`` bool, the samples removed as spikes (None: not looked for)."""
+    spikes: ``(T_read, K)`` bool, the samples removed as spikes (None: not looked for); stray_upper:
+    upper-body samples dropped from a lower-body take (:func:`.keypoint_layouts.drop_stray_upper_body`)."""
     times: np.ndarray
     P: np.ndarray
     b22: kl.Body22
@@ -392,6 +393,7 @@ class PreparedKeypoints:
     windows: list = None
     sides: object = None
     spikes: np.ndarray = None
+    stray_upper: int = 0
 
 
 def prepare_keypoints(rec, fps, smoothing, height=None, max_frames=None, sole=None,
@@ -408,6 +410,9 @@ def prepare_keypoints(rec, fps, smoothing, height=None, max_frames=None, sole=No
     rate = 1.0 / float(np.median(np.diff(rec.time)))
     points, sides = fix_side_swaps(rec.points, lay.points) if fix_sides else (rec.points, None)
     points, spikes = remove_spikes(points, rate) if despike else (points, None)
+    # a lower-body take's stray upper-body samples (a detector's false wrist) dropped before the
+    # gaps are bridged, which would hold them over the whole take
+    points, stray_upper = kl.drop_stray_upper_body(points, lay)
     X, gaps = bridge_gaps(rec.time, points, lay.points)
     never = [lay.points[k] for k in range(X.shape[1]) if not np.isfinite(X[:, k]).any()]
     smoothing = parse_smoothing(smoothing)
@@ -438,7 +443,7 @@ def prepare_keypoints(rec, fps, smoothing, height=None, max_frames=None, sole=No
     body = size_body(P, height, derived_spine=derived_spine, sole=sole)
     floor = estimate_floor(P, body)
     return PreparedKeypoints(times, P - np.array([0.0, 0.0, floor]), b22, body, floor, gaps, never, derived_spine,
-                             chosen, sides, spikes)
+                             chosen, sides, spikes, stray_upper)
 
 
 def solve_keypoints(source, settings: SolveSettings | None = None, progress=None) -> SolveOutcome:
@@ -519,10 +524,16 @@ def solve_keypoints(source, settings: SolveSettings | None = None, progress=None
     if parse_floor(s.floor) != 0.0:
         out.info.append(f"the floor setting ({s.floor!r}) is for trackers: keypoints find the floor under the feet")
     if b22.lower_body:
-        sized = "the stature given" if height else "the stature from the legs' length"
+        legs = sk.PROPORTIONS["thigh"] + sk.PROPORTIONS["shank"]
+        sized = ("the stature given" if height else
+                 f"the stature estimated from the legs' length (hip to ankle taken as {100 * legs:.0f}% of it: "
+                 f"long or short legs for the body's height make it off: --height, or a .mp / .vsk Height, sets it)")
         out.info.append(f"lower body only: the trunk, arms and head follow the pelvis at rest (the trunk "
                         f"upright on the pelvis, turned and tilted sideways with the hips; the arms hanging "
-                        f"{kl.ARM_DROP_DEG:.0f}\N{DEGREE SIGN} below horizontal), {sized}")
+                        f"{kl.ARM_DROP_DEG:.0f}\N{DEGREE SIGN} below horizontal), {sized}"
+                        + (f"; {prep.stray_upper} stray upper-body sample(s) left out (seen on at most "
+                           f"{100 * kl.STRAY_UPPER_SHARE:.0f}% of the frames: a detector's false positives)"
+                           if prep.stray_upper else ""))
     if b22.no_twist:
         out.info.append(f"no twist information: {', '.join(b22.no_twist)} (rest twist)")
     if never:
