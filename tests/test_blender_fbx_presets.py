@@ -352,3 +352,26 @@ def test_each_take_exported_alone_not_blended_with_the_nla(tmp_path):
         fbx_presets.export_fbx_takes(str(tmp_path / "tweak"), ob, "blender")
     assert ad.use_tweak_mode and ad.action == idle and not (tmp_path / "tweak").exists()
     ad.use_tweak_mode = False
+
+
+def test_an_export_path_too_long_for_windows_is_refused_naming_it(addon, tmp_path, monkeypatch):
+    """On Windows (its limits switched on here), Export FBX and Save Map to a path over 259
+    characters say so, naming the path, and write nothing (Blender's or the system's own failure
+    said neither); a path that fits is written as before."""
+    from blender_manikin.core import file_names
+    monkeypatch.setattr(file_names, "ON_WINDOWS", True)
+    char = _character_with_motion(mesh=False)
+    s = bpy.context.scene.manikin
+    s.retarget_target = char
+    deep = tmp_path / ("d" * 100) / ("e" * 100)
+    deep.mkdir(parents=True)
+    path = deep / ("hero" * 10 + ".fbx")
+    assert len(str(path)) > 259
+    with pytest.raises(ValueError, match="too long for Windows"):
+        fbx_presets.export_fbx(str(path), char, "unity")
+    with pytest.raises(RuntimeError, match="export FBX: .*heroherohero.fbx: the path is too long for Windows"):
+        bpy.ops.manikin.export_fbx(filepath=str(path), preset='UNITY')
+    with pytest.raises(RuntimeError, match="save bone map: .*mapmapmap.json: the path is too long for Windows"):
+        bpy.ops.manikin.save_bone_map(filepath=str(deep / ("map" * 20 + ".json")))
+    assert list(deep.iterdir()) == []
+    assert bpy.ops.manikin.export_fbx(filepath=str(tmp_path / "hero.fbx"), preset='UNITY') == {'FINISHED'}

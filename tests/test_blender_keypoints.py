@@ -243,3 +243,27 @@ def test_panel_solves_a_lower_body_plugin_gait_trc(addon, tmp_path):
     names = ["left_knee", "right_ankle", "head", "left_wrist"]
     got = _bone_heads(obj, 1 + 40, names)
     np.testing.assert_allclose(got, ref[40, [sk.J[n] for n in names]], atol=1e-3)
+
+
+def test_people_configs_reads_only_files_that_may_hold_several_people(tmp_path, motion, monkeypatch):
+    """Solve Full Body / Solve Several Files list a keypoint file's people on Blender's own thread:
+    a file surely holding one person (a 3-D ``.npy``, told by its header) and a chosen person
+    are not read there (the solve's background job reads them, so a big file leaves the window
+    live); a group file is still read once and split."""
+    from blender_manikin.blender import solve_job as sj
+    from blender_manikin.core import io_keypoints as ik
+    single = tmp_path / "one.npy"
+    write_layout_npy(single, "coco17", *motion)
+    group = _group_npy(tmp_path, motion)
+    real, reads = ik.read_keypoint_people, []
+
+    def counted(path, **kw):
+        reads.append(os.path.basename(str(path)))
+        return real(path, **kw)
+    monkeypatch.setattr(ik, "read_keypoint_people", counted)
+    one = sj.SolveConfig(source="KEYPOINTS", filepath=str(single), fps=30)
+    assert sj.people_configs(one) == [one] and reads == []
+    chosen = sj.SolveConfig(source="KEYPOINTS", filepath=str(group), fps=30, person="1")
+    assert sj.people_configs(chosen) == [chosen] and reads == []
+    everyone = sj.people_configs(sj.SolveConfig(source="KEYPOINTS", filepath=str(group), fps=30))
+    assert [c.take for c in everyone] == ["group_p0", "group_p1", "group_p2"] and reads == ["group.npy"]

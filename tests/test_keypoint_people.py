@@ -1,6 +1,7 @@
 """Keypoint files with several people: 4-D arrays, a CSV with a person column, the person
 setting, each person solved as their own one-person file would be, outputs per person."""
 import json
+import os
 
 import numpy as np
 import pytest
@@ -264,3 +265,69 @@ def test_a_persons_output_never_takes_another_inputs_name(tmp_path, people):
         assert len(mine["positions"]) == len(other["positions"]) == T
         assert abs(mine["positions"][0][0][0]) < 1.0 and other["positions"][0][0][0] > 2.0
         assert len(json.loads((o / "group_p1.json").read_text())["positions"]) == LEAVES
+
+
+def test_one_person_file_is_told_without_reading_the_samples(tmp_path, people, monkeypatch):
+    """``one_person_file`` tells a file surely holding one person from its header only (the
+    Blender operators then read it in their background job): a 3-D ``.npy`` (its samples never
+    loaded), a ``.trc``, a CSV without a person column; a 4-D array, a CSV with a track column,
+    a ``.npz`` and a missing file are not (they are read to list their people)."""
+    from blender_manikin.core import io_keypoints as ik
+    body, pos, world, _ = people[0]
+    single = _single(tmp_path, people, 0)
+    group = tmp_path / "group.npy"
+    np.save(group, _stack(people))
+    plain = tmp_path / "plain.csv"
+    write_layout_csv(plain, "coco17", body, pos, world)
+    head, *rows = plain.read_text().splitlines()
+    tracked = tmp_path / "tracked.csv"
+    tracked.write_text("\n".join(["# made by a tracker", "", f"Track,{head}"] + [f"0,{r}" for r in rows]) + "\n")
+    trc = tmp_path / "take.trc"
+    trc.write_text("PathFileType\t4\t(X/Y/Z)\ttake.trc\n")
+    np.savez(tmp_path / "one.npz", keypoints=to_y_up(people[0][3]))
+    loads = []
+    real_load = np.load
+    monkeypatch.setattr(ik.np, "load", lambda *a, **kw: loads.append(kw.get("mmap_mode")) or real_load(*a, **kw))
+    assert ik.one_person_file(single) and ik.one_person_file(str(plain)) and ik.one_person_file(trc)
+    assert loads == ["r"]                                   # the .npy's header only, mapped, not read
+    assert not ik.one_person_file(group) and not ik.one_person_file(tracked)
+    assert not ik.one_person_file(tmp_path / "one.npz") and not ik.one_person_file(tmp_path / "missing.npy")
+
+
+def test_a_device_named_group_files_people_are_named_alike_everywhere_and_old_outputs_kept(tmp_path, people):
+    """``con.npy`` with two people: ``solve`` and ``convert`` write ``con_p0`` / ``con_p1`` (no longer
+    ``con__p1``: the person suffix already makes a name Windows accepts), as Blender names the
+    takes; a convert folder an earlier version filled with ``con__p*`` outputs keeps them: the
+    changed input is converted again into the same files, no second set."""
+    d = tmp_path / "in"
+    d.mkdir()
+    np.save(d / "con.npy", _stack(people)[:2])
+    out = tmp_path / "solve"
+    assert cli.main(["solve", str(d / "con.npy"), "--out", str(out), "--format", "json", "--fps", "30"]) == 0
+    assert sorted(p.name for p in out.glob("*.json")) == ["con_p0.json", "con_p1.json"]
+    try:                        # convert needs the [dask] extra (not in every test environment)
+        import distributed  # noqa: F401
+    except ImportError:
+        return
+    from blender_manikin.core import convert, output_guard
+    conv = tmp_path / "convert"
+
+    def run():
+        code, _ = convert.run(convert.collect_inputs([str(d)]), str(conv), ["json"], SolveSettings(fps=FPS),
+                              workers=1, progress=False, log=lambda m: None)
+        assert code == 0
+        return sorted(p.name for p in conv.glob("*.json"))
+    assert run() == ["con_p0.json", "con_p1.json"]
+    # the folder as the earlier version left it: con__p0/1.json in the outputs, manifest and record
+    for k in "01":
+        os.rename(conv / f"con_p{k}.json", conv / f"con__p{k}.json")
+    man = conv / convert.MANIFEST
+    man.write_text(man.read_text().replace("con_p", "con__p"))
+    rec = conv / output_guard.RECORD
+    rec.write_text(rec.read_text().replace("con_p", "con__p"))
+    assert run() == ["con__p0.json", "con__p1.json"]            # done: nothing converted, nothing new
+    st = os.stat(d / "con.npy")
+    os.utime(d / "con.npy", ns=(st.st_atime_ns, st.st_mtime_ns + 10**9))
+    before = (conv / "con__p1.json").stat().st_mtime_ns
+    assert run() == ["con__p0.json", "con__p1.json"]            # converted again, into the same files
+    assert (conv / "con__p1.json").stat().st_mtime_ns != before

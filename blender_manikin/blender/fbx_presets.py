@@ -176,7 +176,8 @@ def export_fbx(filepath, armature, preset: str = DEFAULT, extra_objects=(), cont
     meshes skinned to it) exist only during the export.  Tracker empties keep the unit scale on
     their nodes.  Returns
     ``{"preset", "kwargs", "objects", "stand_in"}`` (kwargs as passed to the exporter; objects:
-    the names written).  ``RuntimeError`` when the exporter fails.
+    the names written).  ``RuntimeError`` when the exporter fails; ``ValueError`` naming
+    ``filepath`` when it is too long for Windows (:func:`..core.file_names.check_path`), first.
     """
     import bpy
     context = context or bpy.context
@@ -184,6 +185,8 @@ def export_fbx(filepath, armature, preset: str = DEFAULT, extra_objects=(), cont
     kwargs = exporter_kwargs(key)
     if armature is None or armature.type != 'ARMATURE':
         raise ValueError("choose an armature to export")
+    from ..core.file_names import check_path
+    check_path(bpy.path.abspath(str(filepath)))     # too long for Windows: said, nothing written
     meshes = [o for o in armature.children if o.type == 'MESH']
     extra = [o for o in extra_objects if o is not None]
     types = {'ARMATURE'} | ({'MESH'} if meshes else set()) | {o.type for o in extra}

@@ -478,16 +478,25 @@ def people_configs(config: SolveConfig) -> list:
     per person, as the command line's outputs: take ``<file>_p<label>``
     (:func:`core.file_names.person_stems`), a new armature ``MANIKIN_<take>`` (never the reused
     one: each person is a body of its own), timeline markers of its own, no scene range (the
-    operator sets one over them all).  Otherwise ``[config]`` (a person chosen, a one-person file:
-    read once too).  A file that cannot be read gives ``[config]``: its solve says why."""
+    operator sets one over them all).  Otherwise ``[config]``: a one-person file read here is handed
+    over (read once); see below for those not read here.  A file that cannot be read gives
+    ``[config]``: its solve says why.
+
+    Only a file that may hold several people is read here (on the caller's thread: the operator's,
+    before its status bar starts): with a person chosen, or a file that surely holds one
+    (:func:`core.io_keypoints.one_person_file`: a 3-D ``.npy`` by its header, a ``.trc``, a CSV
+    without a person column), ``[config]`` is returned unread and the solve reads the file in its
+    background job, so a large one-person file never freezes Blender's window."""
     import dataclasses
     from ..core.file_names import person_stems
-    from ..core.io_keypoints import read_keypoint_people
+    from ..core.io_keypoints import one_person_file, read_keypoint_people
     from ..core.recording import RecordingError
     cfg = config
     if cfg.source.upper() != "KEYPOINTS" or not cfg.filepath or cfg.keypoint_armature or cfg.keypoint_collection:
         return [cfg]
     s = cfg.settings()
+    if str(s.person or "all").strip().lower() != "all" or one_person_file(cfg.filepath):
+        return [cfg]              # one solve: its job reads the file (and picks the person) off the UI
     try:
         people = read_keypoint_people(cfg.filepath, layout=s.keypoint_layout, units=s.units, up=s.up, rate=s.rate,
                                       mapping=s.mapping, subject_params=s.subject_params,

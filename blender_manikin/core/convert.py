@@ -156,6 +156,19 @@ def temp_tail(fmts) -> int:
     return len(".") + len(".part") + 10 + ext + len(".tmp.npz")
 
 
+def recorded_stem(record, out_dir):
+    """The stem of the outputs ``record`` (a manifest record) says were written in ``out_dir``
+    (``DIR/con__p1.bvh`` -> ``con__p1``); None without one there."""
+    exts = sorted({w.extension for w in formats.WRITERS.values()}, key=len, reverse=True)
+    for p in (record or {}).get("outputs", []):
+        if os.path.dirname(os.path.abspath(p)) == os.path.abspath(out_dir):
+            name = os.path.basename(p)
+            ext = next((e for e in exts if name.endswith(e)), None)
+            if ext and len(name) > len(ext):
+                return name[:-len(ext)]
+    return None
+
+
 def task_key(path, person=None):
     """The manifest's key of a task: the input ``path``, or ``(path, label)`` for one person of a
     keypoint file with several."""
@@ -425,6 +438,12 @@ def run(inputs, out_dir, fmts, settings: SolveSettings, scheduler=None, workers=
     split_keys = [task_key(p, person) for p, person, people in tasks if person is not None and len(people) > 1]
     names = keep_people_apart(names, split_keys, [s for p, s in stems.items() if p not in inputs],
                               out_dir, temp_tail(fmts))
+    # a person's outputs an earlier run wrote keep their name (con__p1: device-named files' people
+    # had a doubled _ before), so a rerun adds a format to them or replaces them, never a second set
+    for key in split_keys:
+        old = recorded_stem(done.get(key), out_dir)
+        if old and old != names[key] and all(fold(old) != fold(s) for k, s in names.items() if k != key):
+            names[key] = old
     split = sum(person is not None and len(people) > 1 for _, person, people in tasks)
     if split:
         log(f"{split} people of {len({p for p, person, _ in tasks if person is not None})} keypoint file(s) "

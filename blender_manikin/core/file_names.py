@@ -36,6 +36,9 @@ _FORBIDDEN = re.compile(r'[<>:"/\\|?*\x00-\x1f\x7f]')
 #: included: a path may hold 259 characters where long paths are not enabled
 MAX_PATH = 260
 
+#: whether the limits of Windows apply here (the ``windows`` argument's default)
+ON_WINDOWS = os.name == "nt"
+
 #: the shortest stem :func:`fit_stem` cuts to: a few characters of the name, ``-`` and 8 hex digits
 MIN_STEM = 12
 
@@ -73,7 +76,7 @@ def stem_room(folder: str, tail: int, windows: bool | None = None):
     units (the extension, a temporary suffix) stays under :data:`MAX_PATH`; ``None`` where the
     limit does not apply (``windows``: default, whether this is Windows).  ``folder`` is made
     absolute first, as Windows counts it."""
-    if not (os.name == "nt" if windows is None else windows):
+    if not (ON_WINDOWS if windows is None else windows):
         return None
     folder = os.path.abspath(folder)
     sep = 0 if folder.endswith(("/", "\\")) else 1
@@ -89,6 +92,20 @@ def check_folder(folder: str, tail: int, windows: bool | None = None):
                          f"({_units(os.path.abspath(folder))} characters; a file in it may have at most "
                          f"{MAX_PATH - 1} in all): choose a folder with a shorter path")
     return room
+
+
+def check_path(path: str, tail: int = 0, windows: bool | None = None) -> str:
+    """``path`` (a file the user chose to write: Export FBX's, Save Map's) made absolute, as
+    Windows counts it; ``ValueError`` naming it when, with ``tail`` more characters (a temporary
+    suffix), it is longer than Windows' :data:`MAX_PATH` allows (259 characters; ``windows``:
+    default, whether this is Windows; elsewhere any length passes), said before anything is
+    written instead of the exporter's or the system's own failure."""
+    full = os.path.abspath(os.fspath(path))
+    if (ON_WINDOWS if windows is None else windows) and _units(full) + int(tail) > MAX_PATH - 1:
+        raise ValueError(f"{full}: the path is too long for Windows ({_units(full)} characters; a file may have "
+                         f"at most {MAX_PATH - 1 - int(tail)} here): choose a shorter name or a folder "
+                         "nearer the drive's top")
+    return full
 
 
 def fit_stem(stem: str, key: str, folder: str, tail: int, windows: bool | None = None) -> str:
@@ -152,8 +169,13 @@ def person_stems(stem: str, labels, key: str = "", folder: str | None = None, ta
     side by side): :func:`file_stem` makes a label a file name, :func:`unique_stems` keeps two
     labels that come out alike apart, and with ``folder`` each is :func:`fit_stem` cut to fit it
     under Windows' 260 characters with ``tail`` more (the hash of ``key``, the input's absolute
-    path, and the label, so two people cut alike stay apart)."""
-    stems = unique_stems([f"{stem}_p{file_stem(lab, 'x')}" for lab in labels])
+    path, and the label, so two people cut alike stay apart).  A ``stem`` that
+    :func:`windows_safe` gave a ``_`` for a device name (``con`` -> ``con_``) loses it: the
+    suffix already makes the name one Windows accepts (``con_p1``, as Blender names the take
+    of ``con.csv``'s person 1, not ``con__p1``)."""
+    if stem.endswith("_") and windows_safe(stem[:-1]) == stem:
+        stem = stem[:-1]
+    stems = unique_stems([windows_safe(f"{stem}_p{file_stem(lab, 'x')}") for lab in labels])
     if folder is None:
         return stems
     return [fit_stem(s, f"{key}#person={lab}", folder, tail, windows) for s, lab in zip(stems, labels)]

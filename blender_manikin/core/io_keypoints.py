@@ -139,6 +139,36 @@ def is_keypoint_input(path) -> bool:
     return False
 
 
+def one_person_file(path) -> bool:
+    """True when the keypoint file (or FreeMoCap folder) at ``path`` surely holds one person, told
+    without reading its samples (a large file lists its people in a moment): a ``.npy`` whose
+    array is not 4-D (its shape from the header, ``np.load(mmap_mode="r")``), a ``.trc``, a CSV
+    whose header row (the first row neither blank nor a ``#`` comment, in the first 64 KiB) has
+    no person column (:data:`PERSON_COLUMNS`).  False when it may hold several (a 4-D array, a
+    person column, a ``.npz``) or cannot be told (unreadable, missing): read it to know."""
+    p = os.fspath(path)
+    p = freemocap_body_file(p) or p
+    ext = os.path.splitext(p)[1].lower()
+    try:
+        if ext == ".npy":
+            return np.ndim(np.load(p, mmap_mode="r", allow_pickle=False)) != 4
+        if ext == ".trc":
+            return os.path.isfile(p)
+        if ext == ".csv":
+            with open(p, "rb") as f:
+                chunk = f.read(65536)
+                whole = not f.read(1)
+            lines = decode_head(chunk).splitlines()
+            if not whole:
+                lines = lines[:-1]                  # the last line may be cut off by the chunk
+            for row in csv.reader(lines):
+                if row and any(c.strip() for c in row) and not row[0].lstrip().startswith("#"):
+                    return not any(c.strip().lower() in PERSON_COLUMNS for c in row)
+    except (OSError, ValueError, EOFError):
+        pass
+    return False
+
+
 # --------------------------------------------------------------------------
 def read_keypoints(path, layout=None, units=None, up=None, rate=None, mapping=None,
                    handed=None, subject_params=None, person=None, person_axis=None) -> KeypointRecording:

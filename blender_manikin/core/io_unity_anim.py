@@ -78,6 +78,8 @@ class _Seq(list):
     line = 0
 
 
+#: a character that makes a flow mapping more than ``{x: 0, y: 1}`` (nested, quoted)
+_NESTED = re.compile(r"[{}\[\]'\"]")
 _KEY = re.compile(r"^([^\s'\"{\[#,][^:{}\[\],]*?|'[^']*'|\"[^\"]*\"):(?:\s+(.*))?$")
 
 
@@ -101,7 +103,7 @@ def _flow(text, path, line):
     if text[:1] not in "{['\"":
         return text
     inner = text[1:-1]
-    if text[0] == "{" and text[-1] == "}" and not any(c in inner for c in "{}[]'\""):   # a key's {x: .., y: ..}
+    if text[0] == "{" and text[-1] == "}" and not _NESTED.search(inner):   # a key's {x: .., y: ..}
         out = _Map()
         out.line = line
         for part in inner.split(","):
@@ -218,22 +220,28 @@ def parse_unity_yaml(text, path="<text>"):
                 raise RecordingError(f"unexpected indentation of {shown(lines[i][2])}", path=path, line=ln)
             docs.append((header[0], header[1], node))
 
+    add = lines.append
     for n, raw in enumerate(text.splitlines(), 1):
         s = raw.rstrip()
-        stripped = s.lstrip(" ")
-        if not stripped or stripped.startswith("#"):
+        if not s:
             continue
-        if "\t" in s[:len(s) - len(stripped) + 1]:
+        stripped = s.lstrip(" ")                 # not empty: s ends in a character that is no space
+        if stripped[0] == "#":
+            continue
+        ind = len(s) - len(stripped)
+        if "\t" in s[:ind + 1]:
             raise RecordingError("a tab in the indentation (YAML indents with spaces)", path=path, line=n)
-        if s.startswith("%") and not lines:
+        c = s[0]
+        if c == "%" and not lines:
             continue
-        if s.startswith("---"):
+        if c == "-" and s.startswith("---"):
             finish()
             lines = []
+            add = lines.append
             parts = s.split()
             header = (parts[1] if len(parts) > 1 else "", parts[2].lstrip("&") if len(parts) > 2 else "")
             continue
-        lines.append((n, len(s) - len(stripped), stripped))
+        add((n, ind, stripped))
     finish()
     return docs
 
@@ -275,17 +283,30 @@ def _open(text):
 def _mapping(lines, i, indent, path):
     out = _Map()
     out.line = lines[i][0]
-    while i < len(lines):
+    n = len(lines)
+    match = _KEY.match
+    while i < n:
         ln, ind, text = lines[i]
-        if ind < indent or (ind == indent and (text == "-" or text.startswith("- "))):
+        if ind < indent or (ind == indent and text[0] == "-" and text[1:2] in ("", " ")):
             break
         if ind > indent:
             raise RecordingError(f"unexpected indentation of {shown(text)}", path=path, line=ln)
-        m = _KEY.match(text)
+        m = match(text)
         if not m:
             raise RecordingError(f"expected 'key: value', found {shown(text)}", path=path, line=ln)
-        key = _unquote(m.group(1), path, ln)
-        out[key], i = _value_after(lines, i + 1, indent, path, (m.group(2) or "").strip(), ln)
+        key, rest = m.group(1, 2)
+        # a plain key (its first character no quote, by _KEY) is _unquote's strip
+        key = _unquote(key, path, ln) if key[0] in "'\"" else key.strip()
+        rest = rest.strip() if rest else ""
+        if rest and rest[0] not in "{['\"":       # a plain scalar: _value_after's _flow returns it as it is
+            out[key] = rest
+            i += 1
+            continue
+        if rest and (rest[0] not in "{[" or rest[-1] in "}]"):     # one line: _value_after's _flow of it
+            out[key] = _flow(rest, path, ln)
+            i += 1
+            continue
+        out[key], i = _value_after(lines, i + 1, indent, path, rest, ln)
     return out, i
 
 
@@ -372,6 +393,9 @@ def _keys(curve_item, components, path, where):
     comps = components or ("",)
     cols = {c: ([], [], [], []) for c in comps}
     times = []
+    fields = [(field, n, [(c, cols[c][n].append) for c in comps]) for field, n in
+              (("value", 1), ("inSlope", 2), ("outSlope", 3))]
+    nan, isfinite = np.nan, np.isfinite
     for key in keys:
         line = getattr(key, "line", curve.line)
         if not isinstance(key, dict):
@@ -379,25 +403,30 @@ def _keys(curve_item, components, path, where):
         if "time" not in key:
             raise RecordingError(f"{where}: a key without time", path=path, line=line)
         t = _number(key["time"], "time", path, line)
-        if not np.isfinite(t):
+        if not isfinite(t):
             raise RecordingError(f"{where}: key time {shown(key['time'])} is not finite", path=path, line=line)
         times.append(t)
-        for field, n in (("value", 1), ("inSlope", 2), ("outSlope", 3)):
+        for field, n, adds in fields:
             v = key.get(field)
-            if v is None and field != "value":
-                for c in comps:
-                    cols[c][n].append(np.nan)
-                continue
             if v is None:
-                raise RecordingError(f"{where}: a key without value", path=path, line=line)
-            for c in comps:
+                if field == "value":
+                    raise RecordingError(f"{where}: a key without value", path=path, line=line)
+                for _, add in adds:
+                    add(nan)
+                continue
+            is_map = isinstance(v, dict)
+            for c, add in adds:
                 if components is None:
                     x = v
-                elif isinstance(v, dict) and c in v:
+                elif is_map and c in v:
                     x = v[c]
                 else:
                     raise RecordingError(f"{where}: {field} {shown(v)} has no {c}", path=path, line=line)
-                cols[c][n].append(_number(x, f"{field}{'.' + c if c else ''}", path, line))
+                try:
+                    add(float(x))
+                except (TypeError, ValueError):
+                    _number(x, f"{field}{'.' + c if c else ''}", path, line)     # raises, naming it
+                    raise
     if not times:
         return {}
     t = np.asarray(times)

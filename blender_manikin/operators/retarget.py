@@ -157,9 +157,11 @@ class MANIKIN_OT_save_bone_map(Operator):
         import bpy
         from ..blender import bone_map_list, retarget_apply
         from ..core import bone_maps
+        from ..core.file_names import check_path
         s = context.scene.manikin
         try:
             path = bpy.path.abspath(self.filepath) if self.filepath else self._default_path(context, create=True)
+            check_path(path)                   # too long for Windows: said, nothing written
             if len(s.retarget_bone_map):
                 bmap = bone_map_list.to_bone_map(s)
             else:
