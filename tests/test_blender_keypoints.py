@@ -267,3 +267,179 @@ def test_people_configs_reads_only_files_that_may_hold_several_people(tmp_path, 
     assert sj.people_configs(chosen) == [chosen] and reads == []
     everyone = sj.people_configs(sj.SolveConfig(source="KEYPOINTS", filepath=str(group), fps=30))
     assert [c.take for c in everyone] == ["group_p0", "group_p1", "group_p2"] and reads == ["group.npy"]
+
+
+def _solved_takes():
+    """Each armature's name → its action's name and keys (``{(data path, index): (n, 2) co}``)."""
+    out = {}
+    for obj in bpy.data.objects:
+        if obj.type == 'ARMATURE':
+            act = obj.animation_data.action
+            keys = {(fc.data_path, fc.array_index): np.array([k.co[:] for k in fc.keyframe_points])
+                    for fc in keying.action_fcurves(act, obj)}
+            out[obj.name] = (act.name, keys)
+    return out
+
+
+def _wipe_solves():
+    for coll in (bpy.data.objects, bpy.data.armatures, bpy.data.meshes, bpy.data.actions):
+        for block in list(coll):
+            coll.remove(block)
+    bpy.context.scene.timeline_markers.clear()
+
+
+def _modal_run(cls, monkeypatch, **props):
+    """Run operator ``cls`` modally (timer events, as Blender's event loop would send them) with
+    :func:`read_keypoint_people` recording the thread it runs on; returns (the stages the status
+    bar showed, the reading threads, the operator's last result)."""
+    import threading
+    import time
+    from types import SimpleNamespace
+    from blender_manikin.core import io_keypoints as ik
+    from blender_util import modal_operator
+    real, threads = ik.read_keypoint_people, []
+
+    def recorded(*a, **kw):
+        threads.append(threading.current_thread())
+        return real(*a, **kw)
+    monkeypatch.setattr(ik, "read_keypoint_people", recorded)
+    op = modal_operator(cls, **props)
+    queue = op.start_modal()
+    stages, seen, t_end = [queue.stage], [queue.progress], time.monotonic() + 300
+    while True:
+        res = op.modal(bpy.context, SimpleNamespace(type='TIMER', value='NOTHING'))
+        stages.append(queue.stage)
+        seen.append(queue.progress)
+        if res != {'RUNNING_MODAL'}:
+            break
+        assert time.monotonic() < t_end
+        time.sleep(0.02)
+    monkeypatch.setattr(ik, "read_keypoint_people", real)
+    assert all(b >= a for a, b in zip(seen, seen[1:])) and seen[-1] == 1.0      # progress only grows
+    return stages, threads, res
+
+
+def _assert_same_takes(a, b):
+    assert sorted(a) == sorted(b)
+    for name in a:
+        assert a[name][0] == b[name][0] and sorted(a[name][1]) == sorted(b[name][1])
+        for key in a[name][1]:
+            np.testing.assert_allclose(a[name][1][key], b[name][1][key], atol=1e-6)
+
+
+def test_modal_solve_full_body_reads_a_group_file_in_its_worker_thread(addon, tmp_path, motion, monkeypatch):
+    """Solve Full Body from the UI (modal) on a file with three people: the file is read (its
+    people listed) in the solve's worker thread, not on Blender's main thread (which froze the
+    window with no progress and no Esc); the status bar counts the people and the armatures,
+    actions and keys are those of the synchronous run (EXEC_DEFAULT), with the same report."""
+    import threading
+    from blender_manikin.operators import solve as solve_op
+    path = _group_npy(tmp_path, motion)
+    sc = bpy.context.scene
+    sc.render.fps, sc.render.fps_base = 30, 1.0
+    s = sc.manikin
+    s.source, s.keypoint_path, s.live_rig = 'KEYPOINTS', str(path), False
+    assert bpy.ops.manikin.solve_full_body('EXEC_DEFAULT') == {'FINISHED'}
+    sync, sync_report = _solved_takes(), s.last_report
+    assert sorted(sync) == ["MANIKIN_group_p0", "MANIKIN_group_p1", "MANIKIN_group_p2"]
+    _wipe_solves()
+    stages, threads, res = _modal_run(solve_op.MANIKIN_OT_solve_full_body, monkeypatch)
+    assert res == {'FINISHED'}
+    assert threads and all(t is not threading.main_thread() for t in threads), threads
+    assert any(st.startswith("person 2 of 3 (1): ") for st in stages), stages
+    _assert_same_takes(_solved_takes(), sync)
+    assert s.last_report == sync_report
+    assert solve_op._ACTIVE["job"] is None
+
+
+def test_modal_solve_several_files_reads_a_group_file_in_its_worker_thread(addon, tmp_path, motion, monkeypatch):
+    """Solve Several Files from the UI on a group file beside a one-person file: the group file
+    is read in the worker thread and split into one solve per person there, giving the
+    armatures, actions and keys of the synchronous run."""
+    import threading
+    from types import SimpleNamespace
+    from blender_manikin.core import keypoint_layouts as kl
+    from blender_manikin.operators import solve as solve_op
+    from fixtures_keypoints import to_y_up
+    _group_npy(tmp_path, motion)
+    body, pos, world = motion
+    np.save(tmp_path / "solo.npy", to_y_up(kl.keypoints_from_body22(pos, world, "coco17", body.stature)))
+    sc = bpy.context.scene
+    sc.render.fps, sc.render.fps_base = 30, 1.0
+    s = sc.manikin
+    s.source, s.live_rig = 'KEYPOINTS', False
+    names = ["solo.npy", "group.npy"]
+    res = bpy.ops.manikin.solve_files(directory=str(tmp_path), files=[{"name": n} for n in names])
+    assert res == {'FINISHED'}
+    sync, sync_report = _solved_takes(), s.last_report
+    assert len(sync) == 4 and sync_report.startswith("4 of 4 takes solved")
+    _wipe_solves()
+    stages, threads, res = _modal_run(solve_op.MANIKIN_OT_solve_files, monkeypatch, directory=str(tmp_path),
+                                      files=[SimpleNamespace(name=n) for n in names])
+    assert res == {'FINISHED'}
+    assert threads and all(t is not threading.main_thread() for t in threads), threads
+    assert any(st.startswith("file 4 of 4 (group.npy): ") for st in stages), stages
+    _assert_same_takes(_solved_takes(), sync)
+    assert s.last_report == sync_report
+
+
+def test_esc_while_a_group_file_is_read_writes_nothing(addon, tmp_path, motion, monkeypatch):
+    """Esc while the modal Solve Full Body is still reading a group file (in its worker thread;
+    the status bar says so): the solve stops, nothing is written, then or when the read ends."""
+    import threading
+    import time
+    from types import SimpleNamespace
+    from blender_manikin.blender import solve_job as sj
+    from blender_manikin.core import io_keypoints as ik
+    from blender_manikin.operators import solve as solve_op
+    from blender_util import modal_operator
+    path = _group_npy(tmp_path, motion)
+    sc = bpy.context.scene
+    sc.render.fps, sc.render.fps_base = 30, 1.0
+    s = sc.manikin
+    s.source, s.keypoint_path, s.live_rig = 'KEYPOINTS', str(path), False
+    real, started, release = ik.read_keypoint_people, threading.Event(), threading.Event()
+
+    def slow(*a, **kw):
+        started.set()
+        release.wait(10)
+        return real(*a, **kw)
+    monkeypatch.setattr(ik, "read_keypoint_people", slow)
+    op = modal_operator(solve_op.MANIKIN_OT_solve_full_body)
+    queue = op.start_modal()
+    assert started.wait(10)
+    job = queue.job
+    assert job is not None and queue.stage == "reading the file's people" and queue.progress == 0.0
+    assert op.modal(bpy.context, SimpleNamespace(type='ESC', value='PRESS')) == {'CANCELLED'}
+    release.set()
+    job.join(30)
+    assert isinstance(job.error, sj.SolveCancelled) and job.people is None
+    time.sleep(0.2)                                                       # no late write
+    assert not [o for o in bpy.data.objects if o.type == 'ARMATURE']
+    assert op.reports[-1] == ({'WARNING'}, "MANIKIN: solve cancelled, nothing was written")
+    assert solve_op._ACTIVE["job"] is None
+
+
+def test_solve_several_files_solves_a_group_file_with_one_person_seen_as_solve_full_body(addon, tmp_path, motion):
+    """A file with two people of whom one is seen in too few frames: *Solve Several Files* solves
+    the one seen, as *Solve Full Body* does (it refused the file before: "2 people in the file
+    (0, 1): choose one")."""
+    from blender_manikin.core import keypoint_layouts as kl
+    from fixtures_keypoints import to_y_up
+    body, pos, world = motion
+    clean = kl.keypoints_from_body22(pos, world, "coco17", body.stature)
+    X = np.stack([to_y_up(clean), to_y_up(clean + [1.5, 0.0, 0.0])])
+    X[1, 3:] = np.nan                            # person 1: three frames, left out
+    np.save(tmp_path / "pair.npy", X)
+    sc = bpy.context.scene
+    sc.render.fps, sc.render.fps_base = 30, 1.0
+    s = sc.manikin
+    s.source, s.keypoint_path, s.live_rig = 'KEYPOINTS', str(tmp_path / "pair.npy"), False
+    assert bpy.ops.manikin.solve_full_body() == {'FINISHED'}
+    full = _solved_takes()
+    assert sorted(full) == ["MANIKIN_body"]
+    _wipe_solves()
+    assert bpy.ops.manikin.solve_files(directory=str(tmp_path), files=[{"name": "pair.npy"}]) == {'FINISHED'}
+    several = _solved_takes()
+    assert sorted(several) == ["MANIKIN_pair"] and s.last_report.startswith("1 of 1 files solved")
+    _assert_same_takes({"pair": several["MANIKIN_pair"]}, {"pair": full["MANIKIN_body"]})

@@ -60,7 +60,7 @@ class SolveConfig(SolveSettings):
     keys only.  mark_problems: timeline markers where the solve is worth a look
     (:mod:`core.review_marks`).  set_scene_range, armature_name, reuse_armature: how the result is
     written.  take: the take's name when it is not the file's (one person of a keypoint file with
-    several: ``<file>_p<label>``, :func:`people_configs`).  keypoints: that person's
+    several: ``<file>_p<label>``, :func:`person_configs`).  keypoints: that person's
     :class:`core.io_keypoints.KeypointRecording`, already read (solved instead of the file).
     """
     fps: float | None = None
@@ -141,10 +141,19 @@ class SolveJob:
     (:class:`PoseResult`), ``output`` (:class:`.writer.WriteOutput`),
     ``error`` (exception of a failed background run), ``timings`` (seconds
     per stage), ``progress`` (0-1) and ``stage`` (text).
+
+    split_people: the config's keypoint file may hold several people (:func:`may_hold_people`):
+    :meth:`compute` first reads it and lists them (:func:`person_configs`), in whichever thread
+    runs it (the worker's in the modal operator, so a large group file never freezes Blender's
+    window).  With several people it solves none of them: ``people`` is then one
+    :class:`SolveConfig` per person (each with its recording), for :class:`SolveQueue` to solve
+    one after another; with one, that person is solved (``config`` becomes theirs).
     """
 
-    def __init__(self, config: SolveConfig):
+    def __init__(self, config: SolveConfig, split_people: bool = False):
         self.config = config
+        self.split_people = bool(split_people)
+        self.people = None
         self.recording = None
         self.report = None
         self.targets = None
@@ -238,7 +247,19 @@ class SolveJob:
     def compute(self):
         """:func:`core.solve.solve_recording` on the file or the gathered scene recording.
         Sets ``self.result`` (and ``recording``, ``report``, ``targets``, ``body``, ``offsets``,
-        ``info``, ``timings``)."""
+        ``info``, ``timings``); with ``split_people`` and several people in the file, sets
+        ``self.people`` instead, solves nothing and returns None."""
+        if self.split_people:
+            self.split_people = False
+            self._set(0.0, "reading the file's people")
+            people = person_configs(self.config)
+            _check_cancel(self._cancel)
+            if people is not None and len(people) > 1:
+                self.people = people
+                self.stage = f"{len(people)} people found"
+                return None
+            if people:                               # one person: solved here, the file read once
+                self.config = people[0]
         cfg = self.config
         source = self.recording if self.recording is not None else cfg.filepath
         if self.recording is None and cfg.keypoints is not None:      # one person of a group file, read
@@ -322,9 +343,12 @@ class SolveJob:
 
     # -- synchronous
     def run(self, context):
-        """All stages in this thread (command line, ``EXEC_DEFAULT``)."""
+        """All stages in this thread (command line, ``EXEC_DEFAULT``).  None (nothing written)
+        when the file was split into several people (``people``)."""
         self.gather(context)
         self.compute()
+        if self.people is not None:
+            return None
         return self.write(context)
 
     # -- background (modal operator)
@@ -359,7 +383,11 @@ class SolveQueue:
     """Solves one after another, as the solve operators run them: one (*Solve Full Body*) or
     one per file (*Solve Several Files*).
 
-    configs: the :class:`SolveConfig` of each solve.  on_done(job) is called after a job was
+    configs: the :class:`SolveConfig` of each solve.  A keypoint file that may hold several
+    people (:func:`may_hold_people`) is read by its job (in the worker thread when modal); when
+    it holds several, the queue replaces that configuration by one per person (``configs`` and
+    ``len`` grow; each person is a job of its own, failing or written on its own, and shares the
+    file's part of ``progress``).  on_done(job) is called after a job was
     written, on_failed(job, exc) when one failed (its file unreadable, its solve or its writing
     raising); both on the main thread.  A failed job leaves nothing behind and the queue goes on
     with the next.
@@ -375,6 +403,7 @@ class SolveQueue:
 
     def __init__(self, configs, on_done=None, on_failed=None):
         self.configs = list(configs)
+        self._weights = [1.0] * len(self.configs)     # each one's part of the progress (a person: a share)
         self.on_done = on_done or (lambda job: None)
         self.on_failed = on_failed or (lambda job, exc: None)
         self.index = -1
@@ -387,9 +416,13 @@ class SolveQueue:
 
     @property
     def progress(self) -> float:
-        n = max(len(self.configs), 1)
+        total = sum(self._weights)
+        if not total:
+            return 1.0
+        i = max(self.index, 0)
         part = self.job.progress if self.job is not None else 1.0
-        return min(max((max(self.index, 0) + part) / n, 0.0), 1.0)
+        done = sum(self._weights[:i]) + (self._weights[i] if i < len(self._weights) else 0.0) * part
+        return min(max(done / total, 0.0), 1.0)
 
     @property
     def stage(self) -> str:
@@ -402,14 +435,30 @@ class SolveQueue:
         name = os.path.basename(cfg.filepath or "") or "take"
         return f"file {max(self.index, 0) + 1} of {len(self.configs)} ({name}): {stage}"
 
+    def _job(self, index):
+        cfg = self.configs[index]
+        return SolveJob(cfg, split_people=may_hold_people(cfg))
+
     def _attempt(self, job, step, context):
-        """``step(context)`` (the job's ``write`` or ``run``), then the job is done or failed."""
+        """``step(context)`` (the job's ``write`` or ``run``), then the job is done, failed, or
+        split into its people."""
         try:
             step(context)
         except Exception as exc:
             self._fail(job, exc)
         else:
-            self._done(job)
+            if job.people is not None:
+                self._split(job)
+            else:
+                self._done(job)
+
+    def _split(self, job):
+        """The job's file holds several people: its configuration is replaced by theirs, the
+        first of them solved next."""
+        i, n = self.index, len(job.people)
+        self.configs[i:i + 1] = job.people
+        self._weights[i:i + 1] = [self._weights[i] / n] * n
+        self.index = i - 1
 
     def _done(self, job):
         self.solved.append(job)
@@ -424,7 +473,7 @@ class SolveQueue:
         self.job = None
         while not self.cancelled and self.index + 1 < len(self.configs):
             self.index += 1
-            job = SolveJob(self.configs[self.index])
+            job = self._job(self.index)
             try:
                 job.gather(context)
             except Exception as exc:
@@ -448,6 +497,8 @@ class SolveQueue:
             return True
         if job.error is not None:
             self._fail(job, job.error)
+        elif job.people is not None:
+            self._split(job)
         else:
             self._attempt(job, job.write, context)
         return self._next(context)
@@ -463,52 +514,70 @@ class SolveQueue:
 
     def run(self, context):
         """Every job in this thread, one after another (scripts, background mode)."""
-        for i, cfg in enumerate(self.configs):
-            self.index = i
-            job = SolveJob(cfg)
+        self.index = -1
+        while self.index + 1 < len(self.configs):
+            self.index += 1
+            job = self._job(self.index)
             self._attempt(job, job.run, context)
         self.job = None
         return self
 
 
-def people_configs(config: SolveConfig) -> list:
-    """The solves of ``config``: a keypoint file (``source`` KEYPOINTS, a ``filepath``) read once
-    (:func:`core.io_keypoints.read_keypoint_people`), each solve handed its recording
-    (``keypoints``).  With ``person`` ``"all"`` and several people in the file, one configuration
-    per person, as the command line's outputs: take ``<file>_p<label>``
-    (:func:`core.file_names.person_stems`), a new armature ``MANIKIN_<take>`` (never the reused
-    one: each person is a body of its own), timeline markers of its own, no scene range (the
-    operator sets one over them all).  Otherwise ``[config]``: a one-person file read here is handed
-    over (read once); see below for those not read here.  A file that cannot be read gives
-    ``[config]``: its solve says why.
-
-    Only a file that may hold several people is read here (on the caller's thread: the operator's,
-    before its status bar starts): with a person chosen, or a file that surely holds one
+def may_hold_people(config: SolveConfig) -> bool:
+    """True when ``config`` solves a keypoint file (``source`` KEYPOINTS, a ``filepath``, not read
+    yet) with Person ``"all"`` that may hold several people: to be read to list them
+    (:func:`person_configs`).  False for a file that surely holds one
     (:func:`core.io_keypoints.one_person_file`: a 3-D ``.npy`` by its header, a ``.trc``, a CSV
-    without a person column), ``[config]`` is returned unread and the solve reads the file in its
-    background job, so a large one-person file never freezes Blender's window."""
+    without a person column; a moment, whatever the file's size) and for a chosen person: the
+    solve reads those itself."""
+    from ..core.io_keypoints import one_person_file
+    cfg = config
+    if (cfg.source.upper() != "KEYPOINTS" or not cfg.filepath or cfg.keypoint_armature
+            or cfg.keypoint_collection or cfg.keypoints is not None):
+        return False
+    if str(cfg.person or "all").strip().lower() != "all":
+        return False
+    return not one_person_file(cfg.filepath)
+
+
+def person_configs(config: SolveConfig):
+    """The people of ``config``'s keypoint file, read once
+    (:func:`core.io_keypoints.read_keypoint_people`): one configuration each, handed its
+    recording (``keypoints``).  Several people: as the command line's outputs, take
+    ``<file>_p<label>`` (:func:`core.file_names.person_stems`), a new armature ``MANIKIN_<take>``
+    (never the reused one: each person is a body of their own), timeline markers of its own, no
+    scene range (the operator sets one over them all).  One person: ``[config]`` with that
+    recording.  None when the file cannot be read (its solve reads it again and says why).
+    Reads the whole file, on the caller's thread: :class:`SolveQueue` calls it from its job's
+    :meth:`SolveJob.compute` (the worker thread of a modal run)."""
     import dataclasses
     from ..core.file_names import person_stems
-    from ..core.io_keypoints import one_person_file, read_keypoint_people
+    from ..core.io_keypoints import read_keypoint_people
     from ..core.recording import RecordingError
     cfg = config
-    if cfg.source.upper() != "KEYPOINTS" or not cfg.filepath or cfg.keypoint_armature or cfg.keypoint_collection:
-        return [cfg]
     s = cfg.settings()
-    if str(s.person or "all").strip().lower() != "all" or one_person_file(cfg.filepath):
-        return [cfg]              # one solve: its job reads the file (and picks the person) off the UI
     try:
         people = read_keypoint_people(cfg.filepath, layout=s.keypoint_layout, units=s.units, up=s.up, rate=s.rate,
                                       mapping=s.mapping, subject_params=s.subject_params,
                                       person=s.person or "all", person_axis=s.person_axis)
     except (RecordingError, OSError, ValueError):
-        return [cfg]
-    if len(people) == 1:          # one person (chosen, alone in the file, or the only one seen)
+        return None
+    if len(people) == 1:          # one person (alone in the file, or the only one seen)
         return [dataclasses.replace(cfg, keypoints=people[0][1])]
     takes = person_stems(cfg.take_name(), [lab for lab, _ in people])
     return [dataclasses.replace(cfg, person=lab, keypoints=rec, take=take, armature_name=f"MANIKIN_{take}",
                                 reuse_armature=None, set_scene_range=False, marker_take=take)
             for (lab, rec), take in zip(people, takes)]
+
+
+def people_configs(config: SolveConfig) -> list:
+    """The solves of ``config`` listed at once, on the caller's thread: :func:`person_configs`
+    of a file that :func:`may_hold_people` (read here), else (and for a file that cannot be read)
+    ``[config]`` unread.  The operators do not call it: their :class:`SolveQueue` reads a group
+    file in its job (off Blender's main thread when modal) and gives the same solves."""
+    if not may_hold_people(config):
+        return [config]
+    return person_configs(config) or [config]
 
 
 def find_tpose_time(config: SolveConfig, context=None):

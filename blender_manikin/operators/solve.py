@@ -11,8 +11,10 @@ Ctrl+Z removes the whole solve.  Several files are solved one after another
 being solved (nothing of it is written) and the rest, and the files solved
 before stay, in the operator's undo step.  *Solve Full Body* on a keypoint file with several
 people (Person ``all``) solves each person the same way, onto an armature of their own
-(:func:`~blender_manikin.blender.solve_job.people_configs`), and so does *Solve Several Files* for
-each such file among its files.  Run with ``EXEC_DEFAULT`` (scripts,
+(:func:`~blender_manikin.blender.solve_job.person_configs`), and so does *Solve Several Files* for
+each such file among its files; the file is read by its job, in the worker thread (the queue
+then puts one solve per person in its place), so a large group file never freezes the window.
+Run with ``EXEC_DEFAULT`` (scripts,
 background mode) both run synchronously.  Errors are shown with
 ``self.report({'ERROR'}, ...)``.
 """
@@ -54,6 +56,13 @@ def abort_active(context):
     for win in wm.windows:
         with context.temp_override(window=win):
             win.workspace.status_text_set(None)
+
+
+def _people(op) -> bool:
+    """*Solve Full Body* solving a keypoint file's people (its one configuration was split into
+    one per person by the queue, :class:`~..blender.solve_job.SolveQueue`)."""
+    q = getattr(op, "_queue", None)
+    return q is not None and len(q) > 1
 
 
 def _finish_report(op, context, job):
@@ -226,11 +235,9 @@ class MANIKIN_OT_solve_full_body(_ModalSolves, Operator):
     def _configs(self, context):
         from ..blender.properties import config_from_settings
         base = config_from_settings(context)
-        configs = sj.people_configs(base)       # a keypoint file read once; with several people, one each
         self._base = base
-        self._people = len(configs) > 1
         self._written = []
-        return configs
+        return [base]        # a keypoint file with several people: split by the queue, read in its job
 
     def execute(self, context):
         return self._start(context, modal=False)
@@ -239,7 +246,7 @@ class MANIKIN_OT_solve_full_body(_ModalSolves, Operator):
         return self._start(context, modal=not bpy.app.background and context.window is not None)
 
     def _queue_done(self, context, job):
-        if not getattr(self, "_people", False):
+        if not _people(self):
             _finish_report(self, context, job)
             return
         _written_one(self, context, job, f"person {job.config.person}")
@@ -247,7 +254,7 @@ class MANIKIN_OT_solve_full_body(_ModalSolves, Operator):
     def _queue_failed(self, context, job, exc):
         if isinstance(exc, sj.SolveCancelled):
             return                                   # said once, by _queue_finish
-        if getattr(self, "_people", False):          # the others go on; said with them at the end
+        if _people(self):                            # the others go on; said with them at the end
             self.report({'WARNING'}, f"MANIKIN: person {job.config.person}: {sj.error_message(exc)}")
             return
         context.scene.manikin.last_report = f"{FAILED}{sj.error_message(exc)}"
@@ -255,7 +262,7 @@ class MANIKIN_OT_solve_full_body(_ModalSolves, Operator):
 
     def _queue_finish(self, context):
         q = self._queue
-        if getattr(self, "_people", False):
+        if _people(self):
             name = os.path.basename(self._base.filepath)
             return _finish_several(self, context, f"people of {name}", "person(s)",
                                    lambda j: f"person {j.config.person}")
@@ -311,10 +318,9 @@ class MANIKIN_OT_solve_files(_ModalSolves, Operator):
                 base, source=source, filepath=path, keypoint_collection=None, keypoint_armature=None,
                 reuse_armature=None,
                 armature_name=f"MANIKIN_{take}", set_scene_range=False, create_trackers=False, marker_take=take)
-            # a keypoint file with several people (Person all): one solve each, as Solve Full Body does
-            # (a one-person file is read when solved, not kept read meanwhile)
-            people = sj.people_configs(cfg)
-            configs.extend(people if len(people) > 1 else [cfg])
+            # a keypoint file with several people (Person all): read by its job when its turn comes
+            # (in the worker thread when modal), then one solve each, as Solve Full Body does
+            configs.append(cfg)
         return configs
 
     def execute(self, context):
