@@ -11,7 +11,7 @@ from blender_manikin.core import keypoint_layouts as kl
 from blender_manikin.core import rotations as rot
 from blender_manikin.core import skeleton as sk
 from blender_manikin.core.io_keypoints import keypoints_from_points
-from blender_manikin.core.solve import SolveError, SolveSettings, solve_recording
+from blender_manikin.core.solve import SolveSettings, solve_recording
 
 from fixtures_keypoints import hinge_motion
 from test_marker_sets import anatomical_markers, write_marker_trc
@@ -123,13 +123,12 @@ def test_lower_body_coco_keypoints_are_solved(motion):
     _check_upright_trunk(lower)
     assert "lower body only" in lower.summary()
     assert abs(lower.body.stature - body.stature) < 0.03 * body.stature, (lower.body.stature, body.stature)
-    # shoulders seen, arms never: not a lower-body take; refused as before, naming what is missing
+    # shoulders seen, arms never: not a lower-body take (the arms hang at rest:
+    # test_arms_never_seen_hang_at_rest)
     arms = clean.copy()
     lay = kl.LAYOUTS["coco17"]
     arms[:, [lay.index(f"{s}_{j}") for s in ("left", "right") for j in ("elbow", "wrist")]] = np.nan
     assert not kl.lower_body_only(arms, "coco17")
-    with pytest.raises(SolveError, match=r"left_elbow, right_elbow, left_wrist, right_wrist cannot be placed"):
-        solve_recording(keypoints_from_points(t, arms, "coco17", "arms"), SolveSettings(fps=30.0))
 
 
 def test_cli_solve_and_convert_a_lower_body_trc(tmp_path, motion, capsys):
@@ -200,3 +199,103 @@ def test_feet_never_seen_lie_flat_facing_the_hips(motion, layout):
     hip_left = b22.positions[:, sk.J["left_hip"]] - b22.positions[:, sk.J["right_hip"]]
     facing = rot.normalize(np.cross(hip_left, np.broadcast_to([0.0, 0.0, 1.0], hip_left.shape)))
     assert np.all(np.sum(fwd * facing, -1) > 0.7) and np.abs(fwd[:, 2]).max() < 0.75
+
+
+def _angle_deg(A, B):
+    """``(T,)`` degrees between rotations ``A`` and ``B`` ``(T, 3, 3)``."""
+    rel = np.swapaxes(A, -1, -2) @ B
+    return np.degrees(np.arccos(np.clip((np.trace(rel, axis1=-2, axis2=-1) - 1.0) / 2.0, -1.0, 1.0)))
+
+
+def test_pelvis_markers_tilt_a_lower_body_take(tmp_path, motion):
+    """Plug-in Gait's ASIS and PSIS show the pelvis's forward tilt, which two hip centres cannot: a
+    lower-body take whose pelvis tilts by a known angle over time (from 6° back to 14° forwards
+    about the hip line; the ASIS-PSIS line at its neutral 12° on the upright pelvis) is solved with
+    the pelvis following it within 2° and the trunk leaning with it (upright on the pelvis).
+    Before: the pelvis stood upright on the world's up (off by the whole tilt)."""
+    body, pos, world = motion
+    t = np.arange(len(pos)) / 60.0
+    tilt = np.radians(4.0 + 10.0 * np.sin(2.0 * np.pi * 0.8 * t))
+    hip_line = pos[:, sk.J["left_hip"]] - pos[:, sk.J["right_hip"]]
+    tilted = world.copy()            # the pelvis turned about the hip line: the hips and legs stay
+    tilted[:, sk.J["pelvis"]] = rot.axis_angle_rotation(hip_line, tilt) @ world[:, sk.J["pelvis"]]
+    path = _pig_trc(tmp_path / "tilt.trc", (body, pos, tilted), True)
+    out = solve_recording(str(path), SolveSettings(fps=60.0))
+    assert "tilted forwards and back with the pelvis markers (ASIS, PSIS), 12° of anterior tilt taken as " \
+           "upright" in out.summary(), out.summary()
+    P, W = out.result.fk()
+    n = min(len(P), len(pos))
+    err = _angle_deg(W[:n, sk.J["pelvis"]], tilted[:n, sk.J["pelvis"]])
+    assert err.max() < 2.0, err.max()
+    # the trunk leans with the pelvis: the neck where the tilted pelvis carries the rest body's
+    rest = out.body.rest_positions()
+    want = np.einsum("tij,j->ti", tilted[:n, sk.J["pelvis"]], rest[sk.J["neck"]] - rest[sk.J["pelvis"]])
+    got = P[:n, sk.J["neck"]] - P[:n, sk.J["pelvis"]]
+    lean = np.degrees(np.arccos(np.clip(np.sum(rot.normalize(want) * rot.normalize(got), -1), -1.0, 1.0)))
+    assert lean.max() < 2.0, lean.max()
+    for j in ("spine1", "spine2", "spine3", "neck", "head"):        # still upright on the pelvis
+        assert _angle_deg(W[:, sk.J["pelvis"]], W[:, sk.J[j]]).max() < 1.0, j
+    assert max(_leg_errors(P, pos).values()) < 0.02
+
+
+def test_keypoint_lower_body_takes_without_pelvis_markers_stay_upright(motion):
+    """Keypoints (no pelvis markers): the lower-body pelvis stands upright as before."""
+    body, pos, world = motion
+    clean = kl.keypoints_from_body22(pos, world, "coco17", body.stature)
+    legs_only = clean.copy()
+    legs_only[:, [kl.LAYOUTS["coco17"].index(p) for p in UPPER_COCO]] = np.nan
+    b22 = kl.body22_from_keypoints(legs_only, "coco17")
+    assert b22.lower_body and not b22.pelvis_tilt and sk.J["pelvis"] not in b22.end_rot
+
+
+@pytest.mark.parametrize("layout, sides", [("coco17", ("left", "right")), ("mediapipe33", ("left",))])
+def test_arms_never_seen_hang_at_rest(motion, layout, sides):
+    """Video keypoints with the hands cut off all take (shoulders, trunk and head seen, an arm's
+    elbow and wrist never): the arm hangs at rest from its shoulder (70° below the shoulder line,
+    elbow straight), said so; the rest of the body as the full take solves it.
+    Before: refused ("joint(s) left_elbow, ... cannot be placed")."""
+    body, pos, world = motion
+    lay = kl.LAYOUTS[layout]
+    clean = kl.keypoints_from_body22(pos, world, layout, body.stature)
+    t = np.arange(len(clean)) / 30.0
+    cut = clean.copy()
+    arm = {f"{s}_{w}" for s in sides for w in ("elbow", "wrist", "index", "pinky", "thumb")}
+    cut[:, [k for k, p in enumerate(lay.points) if p in arm]] = np.nan
+    assert not kl.lower_body_only(cut, layout)
+    full = solve_recording(keypoints_from_points(t, clean, layout, "full"), SolveSettings(fps=30.0))
+    out = solve_recording(keypoints_from_points(t, cut, layout, "cut"), SolveSettings(fps=30.0))
+    summary = out.summary()
+    assert f"arm(s) never seen: the {' and '.join(sides)} arm(s) hang at rest from the shoulder (70° below " \
+           "horizontal, elbow straight)" in summary, summary
+    assert "lower body only" not in summary
+    P, W = out.result.fk()
+    Pf = full.result.positions
+    seen = [j for j in sk.JOINT_NAMES if not any(j == f"{s}_{a}" for s in sides for a in ("elbow", "wrist"))]
+    for j in seen:
+        d = np.linalg.norm(P[:, sk.J[j]] - Pf[:, sk.J[j]], axis=-1)
+        assert np.median(d) < 0.01, (j, np.median(d))
+    for s in sides:
+        sh, el, wr = (P[:, sk.J[f"{s}_{a}"]] for a in ("shoulder", "elbow", "wrist"))
+        upper, fore = rot.normalize(el - sh), rot.normalize(wr - el)
+        assert np.sum(upper * fore, -1).min() > 0.98                        # elbow straight
+        line = rot.normalize(P[:, sk.J["left_shoulder"]] - P[:, sk.J["right_shoulder"]])
+        drop = np.degrees(np.arccos(np.clip(np.abs(np.sum(upper * line, -1)), 0.0, 1.0)))
+        assert np.abs(drop - kl.ARM_DROP_DEG).max() < 3.0, (drop.min(), drop.max())
+        assert (wr[:, 2] < sh[:, 2] - 0.3).all()
+
+
+@pytest.mark.parametrize("layout", ["opencap", "plugingait"])
+def test_pelvis_from_marker_points_round_trip(motion, layout):
+    """The mid-ASIS / mid-PSIS points :func:`keypoint_layouts.keypoints_from_body22` places on a
+    tilted pelvis give that pelvis back in a lower-body take (:func:`keypoint_layouts.pelvis_from_markers`)."""
+    body, pos, world = motion
+    lay = kl.LAYOUTS[layout]
+    hip_line = pos[:, sk.J["left_hip"]] - pos[:, sk.J["right_hip"]]
+    tilted = world.copy()
+    tilted[:, sk.J["pelvis"]] = rot.axis_angle_rotation(hip_line, np.linspace(-0.2, 0.3, len(pos))) \
+        @ world[:, sk.J["pelvis"]]
+    kp = kl.keypoints_from_body22(pos, tilted, layout, body.stature)
+    kp[:, [k for k, p in enumerate(lay.points) if p not in kl.LOWER_BODY_POINTS]] = np.nan
+    b = kl.body22_from_keypoints(kp, layout)
+    assert b.lower_body and b.pelvis_tilt
+    assert _angle_deg(b.end_rot[sk.J["pelvis"]], tilted[:, sk.J["pelvis"]]).max() < 1e-4

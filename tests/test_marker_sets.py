@@ -10,6 +10,7 @@ import pytest
 
 from blender_manikin.core import keypoint_layouts as kl
 from blender_manikin.core import marker_sets as ms
+from blender_manikin.core import rotations as rot
 from blender_manikin.core import skeleton as sk
 from blender_manikin.core.io_keypoints import read_keypoints
 from blender_manikin.core.recording import RecordingError
@@ -32,9 +33,12 @@ def motion():
 
 def _pelvis_markers(pos, world):
     """ASIS and PSIS placed from the skeleton's hip centres so that Harrington 2007 gives them back:
-    PW from the hips' spacing (lateral = 0.33 PW + 7.3 mm), PD = :data:`PD`; the pelvis frame is
-    the pelvis joint's (rest: right -X, anterior -Y, up +Z)."""
-    Rp = world[:, sk.J["pelvis"]]
+    PW from the hips' spacing (lateral = 0.33 PW + 7.3 mm), PD = :data:`PD`; the markers' pelvis
+    frame is the pelvis joint's (rest: right -X, anterior -Y, up +Z) tilted
+    :data:`keypoint_layouts.PELVIS_NEUTRAL_TILT_DEG` forwards about its left (the ASIS below the
+    PSIS, as on a standing adult's pelvis)."""
+    tilt = rot.axis_angle_rotation([1.0, 0.0, 0.0], np.radians(kl.PELVIS_NEUTRAL_TILT_DEG))
+    Rp = world[:, sk.J["pelvis"]] @ tilt
     right, ant, up = Rp @ [-1.0, 0, 0], Rp @ [0, -1.0, 0], Rp @ [0, 0, 1.0]
     lh, rh = pos[:, sk.J["left_hip"]], pos[:, sk.J["right_hip"]]
     half = np.median(np.linalg.norm(lh - rh, axis=-1)) / 2 * 1000.0

@@ -21,10 +21,15 @@ names its K points in file order.  :func:`body22_from_keypoints` places the 22 b
   hips face;
 * a lower-body take (:func:`lower_body_only`: the legs seen, no upper-body point seen but on a
   few stray frames, which are dropped):
-  the pelvis stands on the world's up made square to the hip line, and the spine, neck, head,
+  the pelvis stands on the world's up made square to the hip line (a marker layout's pelvis
+  points, the mid-ASIS and mid-PSIS, where seen: tilted forwards and back with them,
+  :func:`pelvis_from_markers`, also given as the pelvis's orientation), and the spine, neck, head,
   collars and arms (:data:`UPPER_BODY_JOINTS`) are the rest body's about it (arms lowered
   :data:`ARM_DROP_DEG` from the T-pose), sized by the stature the legs give
-  (:func:`stature_from_legs`); ``Body22.lower_body`` says so.
+  (:func:`stature_from_legs`); ``Body22.lower_body`` says so;
+* an arm whose elbow and wrist are never seen, in a take that shows the shoulders (hands cut off
+  all take): it hangs from its shoulder as a lower-body take's arms, in the chest's frame (the
+  shoulder line and the trunk's up); ``Body22.resting_arms`` names the sides.
 
 Twist (rotation about a bone) cannot be seen from one point per joint.  Where a layout has the
 points for it, :func:`body22_from_keypoints` also returns world orientations: the head from the
@@ -82,20 +87,29 @@ _BODY25 = (
 )
 
 _LIMBS = tuple(f"{s}_{j}" for s in ("left", "right") for j in ("hip", "knee", "ankle", "shoulder", "elbow", "wrist"))
+#: the pelvis markers' midpoints a marker layout carries besides its joint centres: the mid-ASIS
+#: and the mid-PSIS (Plug-in Gait's SACR where it has no PSIS markers), which show the pelvis's
+#: forward tilt the hips cannot (:func:`pelvis_from_markers`)
+PELVIS_MARKER_POINTS = ("mid_asis", "mid_psis")
 #: joint centres made from anatomical markers (:mod:`.marker_sets`): OpenCap's (no head markers)
-_OPENCAP = _LIMBS + ("left_heel", "right_heel", "left_big_toe", "right_big_toe", "left_small_toe", "right_small_toe")
+_OPENCAP = _LIMBS + ("left_heel", "right_heel", "left_big_toe", "right_big_toe", "left_small_toe",
+                     "right_small_toe") + PELVIS_MARKER_POINTS
 #: and Vicon Plug-in Gait's (the head band's markers as the ears and nose; one toe marker)
 _PLUGINGAIT = _LIMBS + ("left_heel", "right_heel", "left_foot_index", "right_foot_index", "left_ear", "right_ear",
-                        "nose")
+                        "nose") + PELVIS_MARKER_POINTS
 
 #: the points of a lower-body take (Plug-in Gait's lower-body marker set, a crop to the legs):
 #: every other point of a layout is the upper body's (:func:`lower_body_only`)
 LOWER_BODY_POINTS = frozenset(
     [f"{s}_{j}" for s in ("left", "right") for j in ("hip", "knee", "ankle", "heel", "foot_index", "big_toe",
-                                                     "small_toe")] + ["pelvis", "mid_hip"])
+                                                     "small_toe")] + ["pelvis", "mid_hip", *PELVIS_MARKER_POINTS])
 #: degrees below horizontal the arms of a lower-body take hang (a relaxed A-pose, elbows straight,
 #: palms down as in the rest T-pose)
 ARM_DROP_DEG = 70.0
+#: degrees the line from the mid-PSIS to the mid-ASIS points below horizontal (anterior tilt) on the
+#: rest body's neutral, untilted pelvis: a typical standing adult's (about 10-15° are reported; a
+#: subject's own differs by several degrees, and that much shows as a lean of the trunk)
+PELVIS_NEUTRAL_TILT_DEG = 12.0
 #: the joints a lower-body take's pelvis carries as the rest body puts them
 UPPER_BODY_JOINTS = ("spine1", "spine2", "spine3", "neck", "left_collar", "right_collar", "head",
                      "left_shoulder", "right_shoulder", "left_elbow", "right_elbow", "left_wrist", "right_wrist")
@@ -199,11 +213,17 @@ class Body22:
     no_twist: names of the joints whose twist the layout cannot show (rest twist used).
     lower_body: no upper-body point was ever seen (:func:`lower_body_only`): the trunk, collars,
     head and arms (:data:`UPPER_BODY_JOINTS`) are the rest body's on the pelvis, sized from the legs.
+    pelvis_tilt: a lower-body take whose pelvis (and the trunk on it) tilts forwards and back with
+    the pelvis markers (:func:`pelvis_from_markers`); False: upright on the world's up.
+    resting_arms: the sides (``"left"``, ``"right"``) whose arm (elbow and wrist) was never seen
+    in a take that shows the shoulders: it hangs at rest from the shoulder (:data:`ARM_DROP_DEG`).
     """
     positions: np.ndarray
     end_rot: dict
     no_twist: tuple
     lower_body: bool = False
+    pelvis_tilt: bool = False
+    resting_arms: tuple = ()
 
 
 #: an upper-body point seen on at most this share of the frames the legs are seen on is a
@@ -264,6 +284,33 @@ def stature_from_legs(P):
     return float(np.nanmedian(legs)) / (PROPORTIONS["thigh"] + PROPORTIONS["shank"])
 
 
+def pelvis_from_markers(hip_left, mid_asis, mid_psis):
+    """``(T, 3, 3)`` world orientation of the pelvis joint (body convention: +X its left, +Y its
+    back, +Z up) from the pelvis markers: +X along ``hip_left`` (the right hip to the left one),
+    the anterior direction (mid-PSIS to mid-ASIS, made square to it) as -Y, then turned back about
+    +X by :data:`PELVIS_NEUTRAL_TILT_DEG`, so a pelvis whose ASIS stand that much below its PSIS
+    is the rest body's upright one and each degree more anterior tilt leans it (and the trunk on
+    it) a degree forwards.  All ``(T, 3)`` metres, Blender axes; NaN where a point is missing."""
+    R = rot.frame_from_axes(hip_left, -(np.asarray(mid_asis, np.float64) - mid_psis), "xy")
+    return R @ rot.axis_angle_rotation([1.0, 0.0, 0.0], -np.radians(PELVIS_NEUTRAL_TILT_DEG))
+
+
+def _hanging_arms(H):
+    """``{(side, joint): (3,)}``: the elbows' and wrists' offsets (metres) from their shoulder in
+    the rest frame of a body of stature ``H`` metres (:func:`.skeleton.make_body`), the arms
+    lowered :data:`ARM_DROP_DEG` from the T-pose about the shoulders' forward axis, elbows straight."""
+    from .skeleton import make_body
+    rest = make_body(H).rest_positions()
+    a = np.radians(ARM_DROP_DEG)
+    out = {}
+    for side in ("left", "right"):
+        sh = rest[J[f"{side}_shoulder"]]
+        for j in ("elbow", "wrist"):
+            along = rest[J[f"{side}_{j}"], 0] - sh[0]            # along ±X in the T-pose
+            out[(side, j)] = np.array([along * np.cos(a), 0.0, -abs(along) * np.sin(a)])
+    return out
+
+
 def _upper_body_at_rest(pelvis, hip_left, up, H):
     """``{joint: (T, 3)}`` of :data:`UPPER_BODY_JOINTS` placed as a rest body of stature ``H``
     metres (:func:`.skeleton.make_body`) puts them about its pelvis, turned into the pelvis's frame
@@ -273,12 +320,8 @@ def _upper_body_at_rest(pelvis, hip_left, up, H):
     from .skeleton import make_body
     rest = make_body(H).rest_positions()
     rel = rest - rest[J["pelvis"]]
-    a = np.radians(ARM_DROP_DEG)
-    for side, sx in (("left", 1.0), ("right", -1.0)):
-        sh = rel[J[f"{side}_shoulder"]]
-        for j in ("elbow", "wrist"):
-            out = rel[J[f"{side}_{j}"], 0] - sh[0]            # along ±X in the T-pose
-            rel[J[f"{side}_{j}"]] = sh + [out * np.cos(a), 0.0, -abs(out) * np.sin(a)]
+    for (side, j), off in _hanging_arms(H).items():
+        rel[J[f"{side}_{j}"]] = rel[J[f"{side}_shoulder"]] + off
     R = rot.frame_from_axes(hip_left, up, "xz")                       # (T, 3, 3), columns the axes
     return {n: pelvis + np.einsum("tij,j->ti", R, rel[J[n]]) for n in UPPER_BODY_JOINTS}
 
@@ -324,6 +367,7 @@ def body22_from_keypoints(points, layout) -> Body22:
 
     P = np.full((T, NUM_JOINTS, 3), np.nan)
     end_rot = {}
+    pelvis_tilt = False
     if lay.name in ("smpl22", "smpl24"):
         P[:] = X[:, :NUM_JOINTS]
         return Body22(P, end_rot, ("left_wrist", "right_wrist", "head", "left_foot", "right_foot"))
@@ -343,6 +387,16 @@ def body22_from_keypoints(points, layout) -> Body22:
         # so the pelvis keeps the hips' heading and sideways tilt), the body sized from the legs
         H = stature_from_legs(P)
         up = np.broadcast_to([0.0, 0.0, 1.0], up.shape)
+        # pelvis markers (a marker layout's mid-ASIS and mid-PSIS): the pelvis's forward tilt too,
+        # on the frames they are seen
+        if all(p in lay for p in PELVIS_MARKER_POINTS):
+            Rpel = pelvis_from_markers(P[:, J["left_hip"]] - P[:, J["right_hip"]], pt("mid_asis"), pt("mid_psis"))
+            ok = np.isfinite(Rpel).all((-1, -2))
+            if ok.any():
+                up = np.where(ok[:, None], Rpel[..., 2], up)
+                pelvis_tilt = True
+            if ok.all():
+                end_rot[J["pelvis"]] = Rpel
     else:
         # a stature estimate per take, only for the small fixed offsets below (pelvis above the
         # hips, neck above the shoulders): the median shoulder-to-hip distance / its rest fraction
@@ -382,6 +436,20 @@ def body22_from_keypoints(points, layout) -> Body22:
     above_sh = mid_sh + neck_above * up_sh
     for side in ("left", "right"):
         P[:, J[f"{side}_collar"]] = above_sh + a * (P[:, J[f"{side}_shoulder"]] - above_sh) + b * up_sh
+    # an arm never seen (elbow and wrist: hands cut off or hidden all take) with the shoulders
+    # seen: it hangs at rest from its shoulder in the chest's frame, as a lower-body take's arms
+    resting_arms = []
+    if not lower:
+        chest = None
+        for side in ("left", "right"):
+            if np.isfinite(P[:, [J[f"{side}_elbow"], J[f"{side}_wrist"]]]).all(-1).any():
+                continue
+            if chest is None:
+                chest = rot.frame_from_axes(P[:, J["left_shoulder"]] - P[:, J["right_shoulder"]], up_sh, "xz")
+                hanging = _hanging_arms(H)
+            for j in ("elbow", "wrist"):
+                P[:, J[f"{side}_{j}"]] = P[:, J[f"{side}_shoulder"]] + chest @ hanging[(side, j)]
+            resting_arms.append(side)
 
     no_twist = []
     # head: below the skull base between the ears, oriented by the face; from the head top where
@@ -415,7 +483,7 @@ def body22_from_keypoints(points, layout) -> Body22:
         no_twist.append("head")
     # hands: the palm's plane from the index and pinky knuckles (T-pose: palms down, thumbs forward)
     for side, sign in (("left", 1.0), ("right", -1.0)):
-        if f"{side}_index" in lay and f"{side}_pinky" in lay:
+        if f"{side}_index" in lay and f"{side}_pinky" in lay and side not in resting_arms:
             w = pt(f"{side}_wrist")
             idx, pky = pt(f"{side}_index"), pt(f"{side}_pinky")
             end_rot[J[f"{side}_wrist"]] = rot.frame_from_axes(sign * (0.5 * (idx + pky) - w), -(idx - pky), "xy")
@@ -446,7 +514,7 @@ def body22_from_keypoints(points, layout) -> Body22:
         if not twist or not ever(R):
             no_twist.append(f"{side}_foot")
         P[:, J[f"{side}_foot"]] = ankle + R @ _rest_foot(H)
-    return Body22(P, end_rot, tuple(no_twist), lower)
+    return Body22(P, end_rot, tuple(no_twist), lower, pelvis_tilt, tuple(resting_arms))
 
 
 def _rest_foot(H):
@@ -496,6 +564,12 @@ def keypoints_from_body22(positions, world_rot, layout, body_stature=1.7):
         pts[f"{side}_small_toe"] = at(f"{side}_ankle", [sx * 0.015, -0.10, -0.027])
         pts[f"{side}_hand"] = at(f"{side}_wrist", [sx * 0.05, 0.0, 0.0])
     pts["nose"] = at("head", [0.0, -0.06, e])
+    # the pelvis markers' midpoints: the mid-ASIS 0.09 statures ahead of the mid-PSIS, the line
+    # between them tilted PELVIS_NEUTRAL_TILT_DEG forwards in the pelvis's frame (its neutral)
+    tilt = np.radians(PELVIS_NEUTRAL_TILT_DEG)
+    psis = np.array([0.0, 0.045, 0.02])
+    pts["mid_psis"] = at("pelvis", psis)
+    pts["mid_asis"] = at("pelvis", psis + 0.09 * np.array([0.0, -np.cos(tilt), -np.sin(tilt)]))
     pts["head_top"] = P[:, J["neck"]] + (P[:, J["head"]] - P[:, J["neck"]]) / _HEAD_ALONG_NECK
     pts["thorax"] = P[:, J["neck"]]
     pts["spine"] = P[:, J["spine2"]]

@@ -528,12 +528,19 @@ def solve_keypoints(source, settings: SolveSettings | None = None, progress=None
         sized = ("the stature given" if height else
                  f"the stature estimated from the legs' length (hip to ankle taken as {100 * legs:.0f}% of it: "
                  f"long or short legs for the body's height make it off: --height, or a .mp / .vsk Height, sets it)")
+        upright = (f"tilted forwards and back with the pelvis markers (ASIS, PSIS), "
+                   f"{kl.PELVIS_NEUTRAL_TILT_DEG:.0f}\N{DEGREE SIGN} of anterior tilt taken as upright"
+                   if b22.pelvis_tilt else "upright")
         out.info.append(f"lower body only: the trunk, arms and head follow the pelvis at rest (the trunk "
-                        f"upright on the pelvis, turned and tilted sideways with the hips; the arms hanging "
+                        f"square to the pelvis, turned and tilted sideways with the hips, {upright}; the arms hanging "
                         f"{kl.ARM_DROP_DEG:.0f}\N{DEGREE SIGN} below horizontal), {sized}"
                         + (f"; {prep.stray_upper} stray upper-body sample(s) left out (seen on at most "
                            f"{100 * kl.STRAY_UPPER_SHARE:.0f}% of the frames: a detector's false positives)"
                            if prep.stray_upper else ""))
+    if b22.resting_arms:
+        out.info.append(f"arm(s) never seen: the {' and '.join(b22.resting_arms)} arm(s) hang at rest from the "
+                        f"shoulder ({kl.ARM_DROP_DEG:.0f}\N{DEGREE SIGN} below horizontal, elbow straight), "
+                        f"following the chest")
     if b22.no_twist:
         out.info.append(f"no twist information: {', '.join(b22.no_twist)} (rest twist)")
     if never:

@@ -54,6 +54,10 @@ handedness; lengths in the file's unit, ``metres_per_unit`` converting the const
   any layout (:func:`.keypoint_layouts.body22_from_keypoints`).  Plug-in Gait's head markers sit
   on a band about the temples, a few centimetres above the ears: the head joint comes out that
   much high.  OpenCap has no head markers: the head follows the trunk (no twist);
+* pelvis: the mid-ASIS and mid-PSIS (``SACR`` where there are no PSIS markers) as the points
+  ``mid_asis`` and ``mid_psis``: a lower-body take's pelvis and trunk tilt forwards and back
+  with them (:func:`.keypoint_layouts.pelvis_from_markers`, relative to
+  :data:`.keypoint_layouts.PELVIS_NEUTRAL_TILT_DEG` of anterior tilt taken as upright);
 * ``C7``, ``CLAV``, ``STRN``, ``T10`` and the thigh / shank clusters are not used (the neck
   and spine come from the hips and shoulders as for every layout).
 """
@@ -183,7 +187,8 @@ def joint_centres(names, markers, metres_per_unit=1.0, set_name=None, offsets=No
     marker's radius (:meth:`.subject_params.SubjectParams.offset`), replacing
     :data:`HALF_WIDTH` where given and the medial marker is missing.  Returns ``(set name,
     {point: (T, 3)})`` with the points of the layout of that name (``left_hip``, ``left_knee``,
-    ..., the feet's points and, for Plug-in Gait, ``left_ear``, ``right_ear``, ``nose``), in the
+    ..., the feet's points, ``mid_asis``, ``mid_psis`` and, for Plug-in Gait, ``left_ear``,
+    ``right_ear``, ``nose``), in the
     file's unit and axes.  Raises ``ValueError`` naming the markers a set lacks."""
     M = np.asarray(markers, np.float64)
     keys = [marker_key(n) for n in names]
@@ -219,6 +224,9 @@ def joint_centres(names, markers, metres_per_unit=1.0, set_name=None, offsets=No
     ant = (h["anterior"][0] * PD + h["anterior"][1]) * mm
     sup = (h["superior"][0] * PW + h["superior"][1]) * mm
     lat = (h["lateral"][0] * PW + h["lateral"][1]) * mm
+    # the pelvis markers' midpoints: the keypoint solve reads the pelvis's forward tilt from them
+    # (:func:`.keypoint_layouts.pelvis_from_markers`)
+    out["mid_asis"], out["mid_psis"] = mid_asis, mid_psis
     for side, sign in (("left", -1.0), ("right", 1.0)):
         hjc = m(side, "hjc")
         out[f"{side}_hip"] = hjc if hjc is not None else mid_asis + ant * anterior + sup * up + sign * lat * right
