@@ -3,6 +3,7 @@ float-curve form, keyed parents composed (a Camera Offset height), Euler curves 
 order, Hermite / stepped curves between keys, controllers keyed over part of the clip, refused
 compressed clips and errors naming the line; one solve end to end."""
 import os
+import re
 
 import numpy as np
 import pytest
@@ -296,3 +297,127 @@ def test_rig_names_pick_their_devices(tmp_path):
         assert rec.devices == ("head", "left_hand", "right_hand", "pelvis"), (names, rec.devices)
         assert rec.metadata["device_paths"] == dict(zip(rec.devices, names))
         assert np.abs(rec.streams["left_hand"].pos - unity_to_blender_pos(left[0])).max() < 1e-5
+
+
+def _key_lists(docs):
+    """Every curve's ``m_Curve`` node of a parsed clip, in the file's order."""
+    clip = docs[0][2]["AnimationClip"]
+    return [item["curve"]["m_Curve"] for name in ("m_RotationCurves", "m_EulerCurves", "m_PositionCurves",
+                                                   "m_FloatCurves") for item in clip.get(name) or ()]
+
+
+def _curve_arrays(text):
+    """Each curve's arrays as read with the fast key path and by the general parser alone, and the
+    number of key lists the fast path read."""
+    from blender_manikin.core import io_unity_anim as u
+    out = []
+    for fast in (True, False):
+        docs = u.parse_unity_yaml(text, "clip.anim", fast=fast)
+        found, orders = u._collect(docs[0][2]["AnimationClip"], "clip.anim")
+        out.append(({(o, ch, c, f): getattr(cv, f) for o, chans in found.items() for ch, comps in chans.items()
+                     for c, cv in comps.items() for f in ("time", "value", "in_slope", "out_slope")}, orders,
+                    sum(isinstance(k, u._KeyBlock) for k in _key_lists(docs)), _lines(docs)))
+    return out
+
+
+def _lines(docs):
+    """The lines of the clip's curve lists, curves and key lists, with their paths."""
+    clip = docs[0][2]["AnimationClip"]
+    return [(name, clip[name].line if clip.get(name) else None) + tuple(
+        (item.line, item["curve"].line, item["curve"]["m_Curve"].line, item.get("path"), item.get("attribute"))
+        for item in clip.get(name) or ()) for name in ("m_RotationCurves", "m_EulerCurves", "m_PositionCurves",
+                                                       "m_FloatCurves", "m_PPtrCurves", "m_Events")]
+
+
+def _assert_same(fast, general):
+    assert fast[0].keys() == general[0].keys() and fast[1] == general[1] and fast[3] == general[3]
+    for k, a in fast[0].items():
+        b = general[0][k]
+        assert a.dtype == b.dtype and a.shape == b.shape and a.tobytes() == b.tobytes(), k   # bit for bit
+
+
+def test_fast_key_reader_is_the_general_parser_bit_for_bit(tmp_path, monkeypatch):
+    """The fast path (one regular expression over each ``m_Curve:`` key list in Unity's form, its
+    numbers converted at once) gives every curve's times, values and slopes bit for bit as the
+    general parser, for vector and float curves with ``Infinity`` / ``-Infinity`` tangents, exponent
+    numbers, ``inWeight`` / ``outWeight`` lines and Windows line ends; and the whole recording alike.
+    Before: ``parse_unity_yaml`` had no fast path (its general parser took 5-7x as long)."""
+    from blender_manikin.core import io_unity_anim as u
+    t, m = motion(200, rate=90.0)
+    objs = {p: {"time": t, "pos": pos, "quat": q} for p, (pos, q) in m.items()}
+    objs[HEAD]["pos"] = objs[HEAD]["pos"] * [1e-7, 1.0, -3e-9]                  # 1.1e-09, -1.4e-10 ...
+    for style, sl, w in (("vector", "{x: 0.0, y: 0.0, z: 0.0}", "{x: 0.33333334, y: 0.33333334, z: 0.33333334}"),
+                         ("float", "0.0", "0.33333334")):
+        text = anim_text(objs, style)
+        text = text.replace(f"inSlope: {sl}", f"inSlope: {sl.replace('0.0', 'Infinity')}", 7)
+        text = text.replace(f"outSlope: {sl}", f"outSlope: {sl.replace('0.0', '-Infinity')}", 3)
+        text = text.replace(f"outSlope: {sl}", f"outSlope: {sl.replace('0.0', '-2.5e-08')}", 4)
+        assert re.search(r"value: [^\n]*\de-\d", text) and "Infinity" in text and "e-08" in text
+        curves = text.count("m_Curve:")
+        weighted = text.replace("weightedMode: 0\n", f"weightedMode: 0\n        inWeight: {w}\n"
+                                                      f"        outWeight: {w}\n")
+        for variant in (text, weighted, text.replace("\n", "\r\n")):
+            fast, general = _curve_arrays(variant)
+            assert fast[2] == curves and general[2] == 0                          # every list read fast
+            _assert_same(fast, general)
+        path = write(tmp_path, f"fast_{style}.anim", text)
+        rec = formats.load_recording(path)
+        general = u.parse_unity_yaml
+        monkeypatch.setattr(u, "parse_unity_yaml", lambda text, path: general(text, path, fast=False))
+        ref = formats.load_recording(path)
+        monkeypatch.undo()
+        assert rec.devices == ref.devices and rec.metadata["detected"] == ref.metadata["detected"]
+        for d in rec.devices:
+            for f in ("time", "pos", "quat", "valid"):
+                assert getattr(rec.streams[d], f).tobytes() == getattr(ref.streams[d], f).tobytes(), (style, d, f)
+
+
+def test_key_lists_in_another_form_are_left_to_the_general_parser(tmp_path):
+    """A key list the fast path does not fully match is read by the general parser, counted by its
+    node (a list of mappings, not a block of numbers), with the same results; the others stay fast.
+    A list that is fast but not of its curve list's form (an x, y, z rotation) is read again by the
+    general parser, which names the key's line; a file with an error gives the general parser's."""
+    from blender_manikin.core import io_unity_anim as u
+    t, m = motion(6)
+    objs = {p: {"time": t, "pos": pos, "quat": q} for p, (pos, q) in m.items()}
+    text = anim_text(objs)
+    curves = text.count("m_Curve:")
+    first = "      - serializedVersion: 3\n        time: 0.016666666666666666\n"     # the head's rotation, key 2
+    assert text.count(first) == curves
+    odd = {"comment": first + "        # a comment\n",
+           "blank line": first + "\n",
+           "blank line between keys": "\n" + first,
+           "comment between keys": "      # a comment\n" + first,
+           "order": first.replace("serializedVersion: 3\n        time:", "time:") + "        serializedVersion: 3\n",
+           "extra field": first + "        m_Extra: 1\n",
+           "number form": None, "underscore": None, "deeper": None, "tab": None}
+    for why, new in odd.items():
+        if why == "number form":
+            odd_text = text.replace("value: {x: 0.0, y: 0.0", "value: {x: +0.0, y: 0.0", 1)
+        elif why == "underscore":
+            odd_text = text.replace("time: 0.016666666666666666", "time: 1_0", 1)
+        elif why == "deeper":
+            head, _, rest = text.partition("      m_Curve:\n")
+            keys, sep, tail = rest.partition("      m_PreInfinity")
+            odd_text = head + "      m_Curve:\n" + keys.replace("\n      ", "\n        ").replace(
+                "      - ", "        - ", 1) + sep + tail
+        elif why == "tab":
+            odd_text = text.replace("inSlope: {x: 0.0, y: 0.0, z: 0.0}\n", "inSlope: {x: 0.0, y: 0.0, z: 0.0}\t\n", 1)
+        else:
+            odd_text = text.replace(first, new, 1)
+        assert odd_text != text, why
+        fast, general = _curve_arrays(odd_text)
+        assert fast[2] == curves - 1 and general[2] == 0, why                  # that one list fell back
+        _assert_same(fast, general)
+    # a head's rotation written x, y, z: fast, then read again in full, naming the key as before
+    no_w = re.sub(r", w: [^}]*\}", "}", text)
+    docs = u.parse_unity_yaml(no_w, "clip.anim")
+    assert all(isinstance(k, u._KeyBlock) for k in _key_lists(docs))
+    lines = text.splitlines()
+    n = next(i for i, ln in enumerate(lines) if "- serializedVersion: 3" in ln)      # the key's first line
+    with pytest.raises(RecordingError, match=rf"now\.anim, line {n + 1}: m_RotationCurves\[0\]: value .* has no w"):
+        formats.load_recording(write(tmp_path, "now.anim", no_w))
+    # an infinite key time: the general parser's error and line
+    with pytest.raises(RecordingError, match=rf"inf\.anim, line {n + 1}: m_RotationCurves\[0\]: key time "
+                                             r"'Infinity' is not finite"):
+        formats.load_recording(write(tmp_path, "inf.anim", text.replace("time: 0.0\n", "time: Infinity\n", 1)))
