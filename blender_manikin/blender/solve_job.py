@@ -422,7 +422,8 @@ class SolveQueue:
         i = max(self.index, 0)
         part = self.job.progress if self.job is not None else 1.0
         done = sum(self._weights[:i]) + (self._weights[i] if i < len(self._weights) else 0.0) * part
-        return min(max(done / total, 0.0), 1.0)
+        r = done / total
+        return 1.0 if r > 1.0 - 1e-9 else max(r, 0.0)     # all done is 1 (people's shares may sum just below)
 
     @property
     def stage(self) -> str:
