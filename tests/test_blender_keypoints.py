@@ -443,3 +443,35 @@ def test_solve_several_files_solves_a_group_file_with_one_person_seen_as_solve_f
     several = _solved_takes()
     assert sorted(several) == ["MANIKIN_pair"] and s.last_report.startswith("1 of 1 files solved")
     _assert_same_takes({"pair": several["MANIKIN_pair"]}, {"pair": full["MANIKIN_body"]})
+
+
+def test_a_group_file_that_cannot_be_read_fails_with_the_readers_error(addon, tmp_path, motion):
+    """Solve Several Files (and Solve Full Body) on a group file whose people cannot be read (one
+    person's legs never seen: the units cannot be told): that file fails with the reader's
+    reason, the other file is solved.  Before: the file was solved whole, which only said "3 people
+    in the file (0, 1, 2): choose one", though Person was already "all"."""
+    from blender_manikin.core import keypoint_layouts as kl
+    from fixtures_keypoints import to_y_up
+    body, pos, world = motion
+    clean = kl.keypoints_from_body22(pos, world, "coco17", body.stature)
+    X = np.stack([to_y_up(clean + [1.5 * k, 0.0, 0.0]) for k in range(3)])
+    lay = kl.LAYOUTS["coco17"]
+    X[1][:, [lay.index(p) for p in lay.points if p.endswith(("_hip", "_knee", "_ankle"))]] = np.nan
+    np.save(tmp_path / "group.npy", X)
+    np.save(tmp_path / "solo.npy", to_y_up(clean))
+    sc = bpy.context.scene
+    sc.render.fps, sc.render.fps_base = 30, 1.0
+    s = sc.manikin
+    s.source, s.live_rig = 'KEYPOINTS', False
+    assert bpy.ops.manikin.solve_files(directory=str(tmp_path), files=[{"name": "solo.npy"}, {"name": "group.npy"}]) \
+        == {'FINISHED'}
+    assert sorted(_solved_takes()) == ["MANIKIN_solo"]
+    assert s.last_report.startswith("1 of 2 files solved") and "cannot tell the units" in s.last_report, \
+        s.last_report
+    assert "choose one" not in s.last_report
+    _wipe_solves()
+    s.keypoint_path = str(tmp_path / "group.npy")
+    with pytest.raises(RuntimeError, match="group.npy: cannot tell the units"):
+        bpy.ops.manikin.solve_full_body('EXEC_DEFAULT')
+    assert "cannot tell the units" in s.last_report and "choose one" not in s.last_report, s.last_report
+    assert not _solved_takes()

@@ -299,3 +299,31 @@ def test_pelvis_from_marker_points_round_trip(motion, layout):
     b = kl.body22_from_keypoints(kp, layout)
     assert b.lower_body and b.pelvis_tilt
     assert _angle_deg(b.end_rot[sk.J["pelvis"]], tilted[:, sk.J["pelvis"]]).max() < 1e-4
+
+
+def test_psis_missing_at_the_start_keeps_the_trunk_upright(tmp_path, motion):
+    """A lower-body Plug-in Gait take whose PSIS markers are not seen on its first 30 frames (the
+    ASIS are): the mid-ASIS and mid-PSIS are held together over that start, so the pelvis keeps its
+    first seen tilt and the trunk stands up on it.  Before: the mid-PSIS was held while the mid-ASIS
+    walked on past it, turning the pelvis over (158° off) and the trunk upside down."""
+    body, pos, world = motion
+    names, pts = anatomical_markers(pos, world, body.stature, "plugingait", medial=False)
+    pts = pts.copy()
+    for k, n in enumerate(names):
+        if n[1:] in UPPER_MARKERS:
+            pts[:, k] = np.nan
+        if n in ("LPSI", "RPSI"):
+            pts[:30, k] = np.nan
+    assert np.linalg.norm(pos[30, sk.J["pelvis"]] - pos[0, sk.J["pelvis"]]) > 0.3     # it walks meanwhile
+    path = tmp_path / "late_psis.trc"
+    write_marker_trc(path, names, pts)
+    text = path.read_text(encoding="utf-8")
+    path.write_text("\n".join("\t".join("" if c.strip() == "nan" else c for c in line.split("\t"))
+                              for line in text.split("\n")), encoding="utf-8")
+    out = solve_recording(str(path), SolveSettings(fps=60.0))
+    assert "tilted forwards and back with the pelvis markers" in out.summary()
+    P, W = out.result.fk()
+    n = min(len(P), len(pos))
+    trunk = P[:n, sk.J["neck"]] - P[:n, sk.J["pelvis"]]
+    assert (trunk[:, 2] > 0.8 * np.linalg.norm(trunk, axis=-1)).all(), trunk[:5]
+    assert _angle_deg(W[:n, sk.J["pelvis"]], world[:n, sk.J["pelvis"]])[30:].max() < 2.0

@@ -548,20 +548,22 @@ def person_configs(config: SolveConfig):
     ``<file>_p<label>`` (:func:`core.file_names.person_stems`), a new armature ``MANIKIN_<take>``
     (never the reused one: each person is a body of their own), timeline markers of its own, no
     scene range (the operator sets one over them all).  One person: ``[config]`` with that
-    recording.  None when the file cannot be read (its solve reads it again and says why).
-    Reads the whole file, on the caller's thread: :class:`SolveQueue` calls it from its job's
+    recording.  None when the file cannot be opened (its solve tries again and says why); a file
+    that opens but cannot be read raises the reader's :class:`core.recording.RecordingError` (or
+    ``ValueError``), which names the problem: solving it whole would only say that it holds several
+    people, hiding why they could not be read (e.g. the units not told from a person never seen
+    standing).  Reads the whole file, on the caller's thread: :class:`SolveQueue` calls it from its job's
     :meth:`SolveJob.compute` (the worker thread of a modal run)."""
     import dataclasses
     from ..core.file_names import person_stems
     from ..core.io_keypoints import read_keypoint_people
-    from ..core.recording import RecordingError
     cfg = config
     s = cfg.settings()
     try:
         people = read_keypoint_people(cfg.filepath, layout=s.keypoint_layout, units=s.units, up=s.up, rate=s.rate,
                                       mapping=s.mapping, subject_params=s.subject_params,
                                       person=s.person or "all", person_axis=s.person_axis)
-    except (RecordingError, OSError, ValueError):
+    except OSError:
         return None
     if len(people) == 1:          # one person (alone in the file, or the only one seen)
         return [dataclasses.replace(cfg, keypoints=people[0][1])]
@@ -575,10 +577,15 @@ def people_configs(config: SolveConfig) -> list:
     """The solves of ``config`` listed at once, on the caller's thread: :func:`person_configs`
     of a file that :func:`may_hold_people` (read here), else (and for a file that cannot be read)
     ``[config]`` unread.  The operators do not call it: their :class:`SolveQueue` reads a group
-    file in its job (off Blender's main thread when modal) and gives the same solves."""
+    file in its job (off Blender's main thread when modal) and gives the same solves (a file that
+    cannot be read failing with the reader's error)."""
+    from ..core.recording import RecordingError
     if not may_hold_people(config):
         return [config]
-    return person_configs(config) or [config]
+    try:
+        return person_configs(config) or [config]
+    except (RecordingError, ValueError):
+        return [config]
 
 
 def find_tpose_time(config: SolveConfig, context=None):

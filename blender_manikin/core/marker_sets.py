@@ -225,8 +225,11 @@ def joint_centres(names, markers, metres_per_unit=1.0, set_name=None, offsets=No
     sup = (h["superior"][0] * PW + h["superior"][1]) * mm
     lat = (h["lateral"][0] * PW + h["lateral"][1]) * mm
     # the pelvis markers' midpoints: the keypoint solve reads the pelvis's forward tilt from them
-    # (:func:`.keypoint_layouts.pelvis_from_markers`)
-    out["mid_asis"], out["mid_psis"] = mid_asis, mid_psis
+    # (:func:`.keypoint_layouts.pelvis_from_markers`); each is left out (NaN) where the other is, so
+    # a gap's filling (held at the take's ends, interpolated between) keeps them a pair: one held
+    # while the other moves on would turn the pelvis, and the trunk on it, over
+    pair = (np.isfinite(mid_asis).all(-1) & np.isfinite(mid_psis).all(-1))[:, None]
+    out["mid_asis"], out["mid_psis"] = np.where(pair, mid_asis, np.nan), np.where(pair, mid_psis, np.nan)
     for side, sign in (("left", -1.0), ("right", 1.0)):
         hjc = m(side, "hjc")
         out[f"{side}_hip"] = hjc if hjc is not None else mid_asis + ant * anterior + sup * up + sign * lat * right
