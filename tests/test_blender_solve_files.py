@@ -66,7 +66,8 @@ def test_files_are_solved_one_after_another_with_progress(addon, tmp_path):
     assert {"file 1 of 3 (walk.csv)", "file 3 of 3 (again.csv)"} <= stages
     assert _armatures() == ["MANIKIN_again", "MANIKIN_walk"]
     report = sc.manikin.last_report
-    assert report.startswith("2 of 3 files solved") and "failed: broken.csv:" in report
+    assert report.startswith("2 of 3 files solved") and "failed: broken.csv, line 1: header is missing" in report
+    assert report.count("broken.csv") == 1, report         # the reader's own "path: ..." not led by it again
     assert (sc.frame_start, sc.frame_end) == (1, 210)
     assert solve_op._ACTIVE["job"] is None and solve_op.MANIKIN_OT_solve_full_body.poll(bpy.context)
     assert sc.manikin.armature.name == "MANIKIN_again"                   # the swivel panel's: the last

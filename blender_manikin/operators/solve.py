@@ -95,6 +95,13 @@ def _written_one(op, context, job, who=None):
     op.report({'INFO'}, f"MANIKIN: {who + ': ' if who else ''}{name}: {job.summary(timings=False)}")
 
 
+def _named(tag, message) -> str:
+    """``message`` led by ``tag`` (a file's name, a person), unless it already starts with the
+    file (a reader's error names its path: ``group.npy: group.npy: ...`` said it twice)."""
+    head = message.split(": ", 1)[0].split(", line ", 1)[0].split(", byte offset ", 1)[0]
+    return message if head == tag or head.endswith(os.sep + tag) or head.endswith("/" + tag) else f"{tag}: {message}"
+
+
 def _finish_several(op, context, what, unit, who):
     """The end of several solves in one operator run (one undo step): the scene range over them
     all (when the settings ask for one), the panel's box saying ``N of M <what> solved: <armature /
@@ -105,7 +112,7 @@ def _finish_several(op, context, what, unit, who):
         scene.frame_start = int(min(a for _, a, _ in op._written))
         scene.frame_end = max(int(max(b for _, _, b in op._written) + 0.999), scene.frame_start)
     solved = [name for name, _, _ in op._written]
-    failed = [f"{who(j)}: {sj.error_message(e)}" for j, e in q.failed]
+    failed = [_named(who(j), sj.error_message(e)) for j, e in q.failed]
     report = f"{len(solved)} of {len(q)} {what} solved: " + ", ".join(solved)
     if failed:
         report += f"; failed: {'; '.join(failed)}"
@@ -331,7 +338,7 @@ class MANIKIN_OT_solve_files(_ModalSolves, Operator):
         _written_one(self, context, job)
 
     def _queue_failed(self, context, job, exc):
-        self.report({'WARNING'}, f"MANIKIN: {_file_who(job)}: {sj.error_message(exc)}")
+        self.report({'WARNING'}, f"MANIKIN: {_named(_file_who(job), sj.error_message(exc))}")
 
     def _queue_finish(self, context):
         return _finish_several(self, context, "takes" if any(c.take for c in self._queue.configs) else "files",
