@@ -398,22 +398,35 @@ class JointMap:
         return "\n".join(f"{n:15s} {self.positions[n].describe()}" for n in JN)
 
 
-def _bandai() -> JointMap:
-    spine = ("Hips", "Spine", "Chest", "Neck")
+def _body_positions(spine, name, collar_t=None) -> dict:
+    """The 22 joints' positions of a rig whose trunk is ``Hips`` .. ``spine`` .. ``Neck``,
+    ``Head`` (spine1-3 the quarters of the arc ``spine``, Hips to the neck base) and whose limb
+    joints are ``name(side, part)`` (side ``"left"`` / ``"right"``; part ``hip``, ``knee``,
+    ``ankle``, ``toe`` (the ball of the foot), ``collar``, ``shoulder``, ``elbow``, ``wrist``);
+    ``collar_t``: the collar ``collar_t`` of the way from the collar joint to the shoulder (None:
+    the collar joint itself)."""
     pos = {
         "pelvis": joint("Hips"),
         "spine1": chain(spine, 0.25), "spine2": chain(spine, 0.5), "spine3": chain(spine, 0.75),
         "neck": joint("Neck"), "head": joint("Head"),
     }
-    for side, s in (("left", "L"), ("right", "R")):
-        pos[f"{side}_hip"] = joint(f"UpperLeg_{s}")
-        pos[f"{side}_knee"] = joint(f"LowerLeg_{s}")
-        pos[f"{side}_ankle"] = joint(f"Foot_{s}")
-        pos[f"{side}_foot"] = joint(f"Toes_{s}")
-        pos[f"{side}_collar"] = joint(f"Shoulder_{s}")
-        pos[f"{side}_shoulder"] = joint(f"UpperArm_{s}")
-        pos[f"{side}_elbow"] = joint(f"LowerArm_{s}")
-        pos[f"{side}_wrist"] = joint(f"Hand_{s}")
+    for side in ("left", "right"):
+        pos[f"{side}_hip"] = joint(name(side, "hip"))
+        pos[f"{side}_knee"] = joint(name(side, "knee"))
+        pos[f"{side}_ankle"] = joint(name(side, "ankle"))
+        pos[f"{side}_foot"] = joint(name(side, "toe"))
+        pos[f"{side}_collar"] = (joint(name(side, "collar")) if collar_t is None
+                                 else lerp(name(side, "collar"), name(side, "shoulder"), collar_t))
+        pos[f"{side}_shoulder"] = joint(name(side, "shoulder"))
+        pos[f"{side}_elbow"] = joint(name(side, "elbow"))
+        pos[f"{side}_wrist"] = joint(name(side, "wrist"))
+    return pos
+
+
+def _bandai() -> JointMap:
+    parts = {"hip": "UpperLeg", "knee": "LowerLeg", "ankle": "Foot", "toe": "Toes", "collar": "Shoulder",
+             "shoulder": "UpperArm", "elbow": "LowerArm", "wrist": "Hand"}
+    pos = _body_positions(("Hips", "Spine", "Chest", "Neck"), lambda side, part: f"{parts[part]}_{side[0].upper()}")
     ori = {
         "pelvis": OrientationSpec("Hips", bone("Hips", "Spine"), bone("UpperLeg_R", "UpperLeg_L")),
         "head": OrientationSpec("Head", local(1, 0, 0), local(0, 1, 0)),
@@ -439,21 +452,7 @@ def _tpose_style(name, spine, limbs, unit_scale, parents, description) -> JointM
     ``collar``, ``shoulder``, ``elbow``, ``wrist``); ``spine``: the joints from Hips to the neck
     base whose arc spine1-3 split in quarters; ``parents``: the hierarchy checks that tell it from
     other rigs with the same names."""
-    pos = {
-        "pelvis": joint("Hips"),
-        "spine1": chain(spine, 0.25), "spine2": chain(spine, 0.5), "spine3": chain(spine, 0.75),
-        "neck": joint("Neck"), "head": joint("Head"),
-    }
-    for side, S in (("left", "Left"), ("right", "Right")):
-        n = {part: f"{S}{limb}" for part, limb in limbs.items()}
-        pos[f"{side}_hip"] = joint(n["hip"])
-        pos[f"{side}_knee"] = joint(n["knee"])
-        pos[f"{side}_ankle"] = joint(n["ankle"])
-        pos[f"{side}_foot"] = joint(n["toe"])
-        pos[f"{side}_collar"] = lerp(n["collar"], n["shoulder"], 0.4)
-        pos[f"{side}_shoulder"] = joint(n["shoulder"])
-        pos[f"{side}_elbow"] = joint(n["elbow"])
-        pos[f"{side}_wrist"] = joint(n["wrist"])
+    pos = _body_positions(spine, lambda side, part: f"{side.capitalize()}{limbs[part]}", 0.4)
     ori = {"pelvis": OrientationSpec("Hips", rest(), rest()), "head": OrientationSpec("Head", rest(), rest())}
     for side, S in (("left", "Left"), ("right", "Right")):
         ori[f"{side}_wrist"] = OrientationSpec(f"{S}{limbs['wrist']}", rest(), rest())
@@ -494,21 +493,9 @@ def _lafan1() -> JointMap:
     (a T-pose): Hips/Head +X up, +Y forward, +Z left; LeftHand +X along the hand, +Z back of
     the hand; RightHand +X along the hand, -Z back of the hand; LeftFoot/RightFoot +X towards
     the toe, -Z to the performer's left."""
-    spine = ("Hips", "Spine", "Spine1", "Spine2", "Neck")
-    pos = {
-        "pelvis": joint("Hips"),
-        "spine1": chain(spine, 0.25), "spine2": chain(spine, 0.5), "spine3": chain(spine, 0.75),
-        "neck": joint("Neck"), "head": joint("Head"),
-    }
-    for side, S in (("left", "Left"), ("right", "Right")):
-        pos[f"{side}_hip"] = joint(f"{S}UpLeg")
-        pos[f"{side}_knee"] = joint(f"{S}Leg")
-        pos[f"{side}_ankle"] = joint(f"{S}Foot")
-        pos[f"{side}_foot"] = joint(f"{S}Toe")
-        pos[f"{side}_collar"] = joint(f"{S}Shoulder")
-        pos[f"{side}_shoulder"] = joint(f"{S}Arm")
-        pos[f"{side}_elbow"] = joint(f"{S}ForeArm")
-        pos[f"{side}_wrist"] = joint(f"{S}Hand")
+    parts = dict(_CGSPEED_LIMBS, toe="Toe")
+    pos = _body_positions(("Hips", "Spine", "Spine1", "Spine2", "Neck"),
+                          lambda side, part: f"{side.capitalize()}{parts[part]}")
     ori = {
         "pelvis": OrientationSpec("Hips", local(1, 0, 0), bone("RightUpLeg", "LeftUpLeg")),
         "head": OrientationSpec("Head", local(1, 0, 0), local(0, 1, 0)),
