@@ -11,9 +11,9 @@ motion, ``examples/make_example_recording.py``, walking in place for the whole t
 read and solved with :func:`blender_manikin.core.solve.solve_recording` and written in
 ``--formats``, in a fresh process of its own.  Each stage's function is wrapped: the table gives
 its seconds and the peak resident memory it added over the memory at its start (MB; a thread
-samples ``/proc/self/statm`` every 10 ms, so stages under ~20 ms show ~0).  The last columns
-give the growth from the shortest to the longest take divided by the growth in length: about 1
-is linear, 2 or more is quadratic.  Measured, never asserted.
+samples ``/proc/self/statm`` every 10 ms, so stages under ~20 ms show ~0).  The last column
+(``growth/length``) gives the seconds' growth from the shortest to the longest take divided by the
+growth in length: about 1 is linear, 2 or more is quadratic.  Measured, never asserted.
 """
 from __future__ import annotations
 

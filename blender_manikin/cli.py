@@ -665,7 +665,7 @@ def main(argv=None):
         return 2
     from .core import output_guard
     from .core.convert import output_stems
-    from .core.file_names import check_folder, keep_people_apart
+    from .core.file_names import check_folder, keep_people_apart, person_stems
     try:
         check_folder(args.out, output_tail(formats))      # too deep for Windows' 260 characters
     except ValueError as exc:
@@ -732,13 +732,16 @@ def keypoint_people(path, args):
     """``[(label, KeypointRecording), ...]``: the people a keypoint file at ``path`` holds with
     ``--person all`` (the default), read once (:func:`.core.io_keypoints.read_keypoint_people`;
     each is solved from its recording, not read again), or None: not a keypoint file, one
-    chosen with ``--person``, or a file that cannot be read (its solve then says why)."""
-    from .core.io_keypoints import is_keypoint_input, read_keypoint_people
+    chosen with ``--person``, a file that surely holds one person
+    (:func:`.core.io_keypoints.one_person_file`, told from its header: its solve reads it when its
+    turn comes, so a batch never holds every file's recording at once), or a file that cannot be
+    read (its solve then says why)."""
+    from .core.io_keypoints import is_keypoint_input, one_person_file, read_keypoint_people
     from .core.recording import RecordingError
     if str(getattr(args, "person", "all") or "all").strip().lower() != "all":
         return None
     try:
-        if not is_keypoint_input(path):
+        if not is_keypoint_input(path) or one_person_file(path):
             return None
         layout = str(getattr(args, "layout", None) or "").strip().lower()
         people = read_keypoint_people(path, layout=layout if layout in _keypoint_layouts() else None,
@@ -749,13 +752,6 @@ def keypoint_people(path, args):
     except (RecordingError, OSError, ValueError):
         return None
     return people
-
-
-def person_stems(stem, labels, key="", folder=None, tail=0):
-    """``<stem>_p<label>`` for each person's ``labels``, fit for ``folder`` under Windows' 260
-    characters with ``tail`` more (:func:`.core.file_names.person_stems`, as ``convert``)."""
-    from .core.file_names import person_stems as stems_of
-    return stems_of(stem, labels, key, folder, tail)
 
 
 def _people_said(path, jobs):

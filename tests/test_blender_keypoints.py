@@ -153,7 +153,7 @@ def test_panel_person_all_solves_each_person_onto_their_own_armature_in_one_undo
     assert s.keypoint_person == "all"
     from blender_manikin.blender import solve_job as sj
     from blender_manikin.blender.properties import config_from_settings
-    q = sj.SolveQueue(sj.people_configs(config_from_settings(bpy.context)))
+    q = sj.SolveQueue(sj.person_configs(config_from_settings(bpy.context)))
     q.index = 1                                  # the modal operator's status bar, on the second person
     assert len(q) == 3 and q.stage == "person 2 of 3 (1): done"
     bpy.ops.ed.undo_push(message="before solve")
@@ -245,7 +245,7 @@ def test_panel_solves_a_lower_body_plugin_gait_trc(addon, tmp_path):
     np.testing.assert_allclose(got, ref[40, [sk.J[n] for n in names]], atol=1e-3)
 
 
-def test_people_configs_reads_only_files_that_may_hold_several_people(tmp_path, motion, monkeypatch):
+def test_only_files_that_may_hold_several_people_are_read_to_list_them(tmp_path, motion, monkeypatch):
     """Solve Full Body / Solve Several Files list a keypoint file's people on Blender's own thread:
     a file surely holding one person (a 3-D ``.npy``, told by its header) and a chosen person
     are not read there (the solve's background job reads them, so a big file leaves the window
@@ -262,10 +262,12 @@ def test_people_configs_reads_only_files_that_may_hold_several_people(tmp_path, 
         return real(path, **kw)
     monkeypatch.setattr(ik, "read_keypoint_people", counted)
     one = sj.SolveConfig(source="KEYPOINTS", filepath=str(single), fps=30)
-    assert sj.people_configs(one) == [one] and reads == []
+    assert not sj.may_hold_people(one) and reads == []
     chosen = sj.SolveConfig(source="KEYPOINTS", filepath=str(group), fps=30, person="1")
-    assert sj.people_configs(chosen) == [chosen] and reads == []
-    everyone = sj.people_configs(sj.SolveConfig(source="KEYPOINTS", filepath=str(group), fps=30))
+    assert not sj.may_hold_people(chosen) and reads == []
+    everyone = sj.SolveConfig(source="KEYPOINTS", filepath=str(group), fps=30)
+    assert sj.may_hold_people(everyone) and reads == []
+    everyone = sj.person_configs(everyone)
     assert [c.take for c in everyone] == ["group_p0", "group_p1", "group_p2"] and reads == ["group.npy"]
 
 

@@ -92,7 +92,7 @@ def test_several_files_are_solved_each_onto_its_own_armature(addon, tmp_path):
         act = bpy.data.objects[f"MANIKIN_{take}"].animation_data.action
         assert act.name == f"MANIKIN_live_{take}" and act["manikin_source"].endswith(f"{take}.csv")
     report = sc.manikin.last_report
-    assert report.startswith("2 of 3 files solved") and "failed: broken.csv:" in report
+    assert report.startswith("2 of 3 files solved") and "failed: broken.csv, line 1:" in report
     names = {m.name for m in sc.timeline_markers}
     assert "MANIKIN thrown: right hand out of reach" in names and "MANIKIN: from an earlier solve" in names
     assert (sc.frame_start, sc.frame_end) == (1, 210)

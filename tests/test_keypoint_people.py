@@ -206,7 +206,7 @@ def test_person_stems_fit_windows_260_characters(tmp_path):
     assert all(s.startswith(long[:10]) and len(s.rsplit("-", 1)[1]) == 8 for s in got)
     assert person_stems("take", ["0", "1"], key="k", folder=deep, tail=20, windows=True) == ["take_p0", "take_p1"]
     assert person_stems(long, ["0", "a b"], folder=str(tmp_path), windows=False) == [f"{long}_p0", f"{long}_pa_b"]
-    assert cli.person_stems("take", ["x", "X"]) == ["take_px", "take_pX_2"]
+    assert person_stems("take", ["x", "X"]) == ["take_px", "take_pX_2"]
 
 
 def test_one_person_csv_with_a_row_id_or_a_one_value_subject_column_reads_as_before(tmp_path, people):
@@ -331,3 +331,32 @@ def test_a_device_named_group_files_people_are_named_alike_everywhere_and_old_ou
     before = (conv / "con__p1.json").stat().st_mtime_ns
     assert run() == ["con__p0.json", "con__p1.json"]            # converted again, into the same files
     assert (conv / "con__p1.json").stat().st_mtime_ns != before
+
+
+def test_cli_reads_one_person_files_in_turn_not_all_before_the_solves(tmp_path, people, monkeypatch):
+    """``solve --person all`` over several one-person keypoint files: each is read by its own
+    solve when its turn comes (told one person's from its header, :func:`one_person_file`), so
+    the batch never holds every file's recording at once; a group file is still read first."""
+    from blender_manikin.core import io_keypoints
+    from blender_manikin.core import solve as core_solve
+    d = tmp_path / "in"
+    d.mkdir()
+    for k in (0, 1):
+        np.save(d / f"solo{k}.npy", to_y_up(people[k][3][_seen(k)]))
+    log = []
+    real_load, real_solve = io_keypoints._load_input, core_solve.solve_recording
+
+    def load(p, *a, **kw):
+        log.append(f"read {os.path.basename(str(p))}")
+        return real_load(p, *a, **kw)
+
+    def solve(source, *a, **kw):
+        log.append("solve")
+        return real_solve(source, *a, **kw)
+
+    monkeypatch.setattr(io_keypoints, "_load_input", load)
+    monkeypatch.setattr(core_solve, "solve_recording", solve)
+    out = tmp_path / "out"
+    assert cli.main(["solve", str(d), "--out", str(out), "--format", "json", "--fps", "30"]) == 0
+    assert log == ["solve", "read solo0.npy", "solve", "read solo1.npy"]
+    assert sorted(p.name for p in out.iterdir() if p.suffix == ".json") == ["solo0.json", "solo1.json"]

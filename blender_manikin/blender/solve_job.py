@@ -573,21 +573,6 @@ def person_configs(config: SolveConfig):
             for (lab, rec), take in zip(people, takes)]
 
 
-def people_configs(config: SolveConfig) -> list:
-    """The solves of ``config`` listed at once, on the caller's thread: :func:`person_configs`
-    of a file that :func:`may_hold_people` (read here), else (and for a file that cannot be read)
-    ``[config]`` unread.  The operators do not call it: their :class:`SolveQueue` reads a group
-    file in its job (off Blender's main thread when modal) and gives the same solves (a file that
-    cannot be read failing with the reader's error)."""
-    from ..core.recording import RecordingError
-    if not may_hold_people(config):
-        return [config]
-    try:
-        return person_configs(config) or [config]
-    except (RecordingError, ValueError):
-        return [config]
-
-
 def find_tpose_time(config: SolveConfig, context=None):
     """Propose the T-pose moment of the source of ``config``.
 

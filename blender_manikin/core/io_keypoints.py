@@ -802,14 +802,19 @@ def _csv_people(path, data, cols, pcol, tcol, tv, X):
     grid = np.unique(tv)
     P, G = len(labels), len(grid)
     X4 = np.full((P, G, X.shape[1] // 3, 3), np.nan)
-    filled = np.zeros((P, G), bool)
     col = np.searchsorted(grid, tv)
-    row = np.array([labels.index(v) for v in ids])
-    for k, (ln, _) in enumerate(data):
-        if filled[row[k], col[k]]:
-            raise RecordingError(f"person {ids[k]} has two rows at {tcol} {shown(float(tv[k]))}", path=path, line=ln)
-        filled[row[k], col[k]] = True
-        X4[row[k], col[k]] = X[k].reshape(-1, 3)
+    number = {lab: n for n, lab in enumerate(labels)}
+    row = np.fromiter((number[v] for v in ids), np.int64, len(ids))
+    # a person's second row at one time: the first such row in the file is named
+    cell = row * G + col
+    _, first = np.unique(cell, return_index=True)
+    if len(first) < len(cell):
+        repeat = np.ones(len(cell), bool)
+        repeat[first] = False
+        k = int(np.argmax(repeat))
+        raise RecordingError(f"person {ids[k]} has two rows at {tcol} {shown(float(tv[k]))}", path=path,
+                             line=data[k][0])
+    X4[row, col] = X.reshape(len(X), -1, 3)
     if tcol == "frame":
         return labels, X4, None, grid - grid[0]
     return labels, X4, grid, np.arange(G, dtype=np.float64)

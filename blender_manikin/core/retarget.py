@@ -400,7 +400,8 @@ PALM_TURN_MIN_DEG = 5.0
 
 def rest_palm_turn(target: TargetRig, hand, side: str, align_hand, F):
     """The twist (radians, about the hand's aligned direction) that turns a rig's rest palm, as
-    its fingers show it, onto the body's rest palm, or ``None`` without two knuckle bones apart.
+    its fingers show it, onto the body's rest palm (returned as ``(angle, bones)``, below), or
+    ``(None, reason)`` without two knuckle bones apart.
 
     hand: the hand bone (index or name); side: ``"left"`` or ``"right"``; align_hand ``(3, 3)``:
     the hand bone's world orientation posed into the body's rest (``RetargetPlan.align``, before

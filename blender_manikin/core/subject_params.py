@@ -14,10 +14,13 @@ Vicon Nexus keeps each subject's measurements, in millimetres, in two files besi
   values (marker offsets, segment lengths; a *FullBody Ai* skeleton's ``WristWidth`` of 32 mm is
   not the subject's wrist), read into :attr:`SubjectParams.raw` but not used as measurements.
 
-Names match case-insensitively.  Used here (:data:`WIDTHS`): ``{Left,Right}{Knee,Ankle,Elbow,
-Wrist}Width`` (an unsided ``KneeWidth`` ... applies to both sides, a sided one wins),
+Names match case-insensitively.  Read as measurements (:data:`WIDTHS`): ``{Left,Right}{Knee,Ankle,
+Elbow,Wrist}Width`` (an unsided ``KneeWidth`` ... applies to both sides, a sided one wins),
 ``MarkerDiameter`` (default :data:`MARKER_DIAMETER_MM` when a width is given without it) and
-``Height`` (the subject's stature).  A value of 0 is "not measured" (Nexus writes 0 for the
+``Height`` (the subject's stature).  The knee, ankle and elbow widths place lateral-only joint
+centres (:func:`.marker_sets.joint_centres`); the wrist's is read and said in
+:meth:`SubjectParams.summary` but not used (Plug-in Gait's wrist is the midpoint of its two wrist
+markers).  A value of 0 is "not measured" (Nexus writes 0 for the
 measurements left empty); a negative width or height, a value that is not a number, or a line
 with no ``=`` is refused with the file and line.  Other parameters (``Bodymass``,
 ``InterAsisDistance``, ``LeftLegLength``, ``LeftAsisTrocDistance`` ...) are read into
@@ -32,7 +35,7 @@ from dataclasses import dataclass, field
 from .plain import shown
 from .recording import RecordingError, read_text
 
-#: joint -> the parameter's name between the side and ``Width`` (``LeftKneeWidth``)
+#: the joints whose ``<Side><Joint>Width`` is read (``LeftKneeWidth``); the wrist's is not used
 WIDTHS = ("knee", "ankle", "elbow", "wrist")
 #: Plug-in Gait's default marker diameter, millimetres (used when a file gives widths without one)
 MARKER_DIAMETER_MM = 14.0
