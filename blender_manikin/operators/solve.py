@@ -95,11 +95,17 @@ def _written_one(op, context, job, who=None):
     op.report({'INFO'}, f"MANIKIN: {who + ': ' if who else ''}{name}: {job.summary(timings=False)}")
 
 
-def _named(tag, message) -> str:
-    """``message`` led by ``tag`` (a file's name, a person), unless it already starts with the
-    file (a reader's error names its path: ``group.npy: group.npy: ...`` said it twice)."""
-    head = message.split(": ", 1)[0].split(", line ", 1)[0].split(", byte offset ", 1)[0]
-    return message if head == tag or head.endswith(os.sep + tag) or head.endswith("/" + tag) else f"{tag}: {message}"
+def _named(tag, exc) -> str:
+    """The message of ``exc`` led by ``tag`` (a file's name, or ``group.npy person 1``) once: a
+    reader's error already starts with its file (:class:`core.recording.RecordingError`:
+    ``broken.csv, line 1: ...``), which the tag then replaces (``group.npy person 1, line 1:
+    ...``) instead of leading it (``broken.csv: broken.csv, line 1: ...`` said it twice)."""
+    message = sj.error_message(exc)
+    path = getattr(exc, "path", None)
+    name = os.path.basename(str(path)) if path else ""
+    if name and message.startswith(name) and tag.startswith(name):
+        return tag + message[len(name):]
+    return f"{tag}: {message}"
 
 
 def _finish_several(op, context, what, unit, who):
@@ -112,7 +118,7 @@ def _finish_several(op, context, what, unit, who):
         scene.frame_start = int(min(a for _, a, _ in op._written))
         scene.frame_end = max(int(max(b for _, _, b in op._written) + 0.999), scene.frame_start)
     solved = [name for name, _, _ in op._written]
-    failed = [_named(who(j), sj.error_message(e)) for j, e in q.failed]
+    failed = [_named(who(j), e) for j, e in q.failed]
     report = f"{len(solved)} of {len(q)} {what} solved: " + ", ".join(solved)
     if failed:
         report += f"; failed: {'; '.join(failed)}"
@@ -338,7 +344,7 @@ class MANIKIN_OT_solve_files(_ModalSolves, Operator):
         _written_one(self, context, job)
 
     def _queue_failed(self, context, job, exc):
-        self.report({'WARNING'}, f"MANIKIN: {_named(_file_who(job), sj.error_message(exc))}")
+        self.report({'WARNING'}, f"MANIKIN: {_named(_file_who(job), exc)}")
 
     def _queue_finish(self, context):
         return _finish_several(self, context, "takes" if any(c.take for c in self._queue.configs) else "files",
