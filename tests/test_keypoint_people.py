@@ -360,3 +360,28 @@ def test_cli_reads_one_person_files_in_turn_not_all_before_the_solves(tmp_path, 
     assert cli.main(["solve", str(d), "--out", str(out), "--format", "json", "--fps", "30"]) == 0
     assert log == ["solve", "read solo0.npy", "solve", "read solo1.npy"]
     assert sorted(p.name for p in out.iterdir() if p.suffix == ".json") == ["solo0.json", "solo1.json"]
+
+
+@pytest.mark.parametrize("shape", [(2, 60, 20, 3), (2, 60, 21, 3)])
+def test_a_marker_sets_joint_count_is_no_array_layout(tmp_path, shape):
+    """OpenCap's 20 and Plug-in Gait's 21 points are joint centres and pelvis midpoints computed
+    from named markers, never an array's points: a 4-D array of that many points is refused, and
+    the message lists only the layouts an array can hold."""
+    path = tmp_path / "group.npy"
+    np.save(path, np.zeros(shape, np.float32))
+    with pytest.raises(RecordingError) as err:
+        read_keypoint_people(str(path))
+    text = str(err.value)
+    assert "no layout's point count" in text and "20" not in text.split("(")[-1]
+    assert set(kl.array_layouts()) == set(kl.LAYOUTS) - set(kl.MARKER_LAYOUTS)
+
+
+def test_an_unnamed_array_of_a_marker_sets_count_names_the_array_layouts(tmp_path):
+    """The refusal of an unnamed (T, 21, 3) array lists the array layouts' counts, not the
+    marker sets' (which a user cannot give as an array)."""
+    path = tmp_path / "points.npy"
+    np.save(path, np.zeros((60, 21, 3), np.float32))
+    with pytest.raises(RecordingError) as err:
+        read_keypoints(str(path))
+    assert "match no keypoint layout" in str(err.value)
+    assert "plugingait" not in str(err.value) and "opencap" not in str(err.value)

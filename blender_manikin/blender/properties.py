@@ -106,7 +106,16 @@ class MANIKIN_BoneMapItem(PropertyGroup):
 def _layout_items():
     from ..core.keypoint_layouts import LAYOUTS
     return [('AUTO', "Detect", "Told from the file: its layout field, the point count or the column names")] + \
-        [(n.upper(), f.description, f"{len(f.points)} points") for n, f in LAYOUTS.items()]
+        [(n.upper(), f.description, _layout_tip(n, f)) for n, f in LAYOUTS.items()]
+
+
+def _layout_tip(name, layout):
+    """The layout menu's tooltip: a video layout's point count; a marker set is read by its
+    marker names (its joint centres and the two pelvis midpoints are computed from them)."""
+    from ..core.keypoint_layouts import MARKER_LAYOUTS
+    if name in MARKER_LAYOUTS:
+        return "Marker names (C3D / TRC); the joint centres are computed from the markers"
+    return f"{len(layout.points)} points"
 
 
 _UP_ITEMS = [('AUTO', "Detect", "Told from the body: the shoulders stand above the ankles")] + \

@@ -387,7 +387,7 @@ def people_axis(shape, person_axis=None, path="", point_counts=None):
     if len(shape) != 4 or shape[3] not in (3, 4):
         raise RecordingError(f"a 4-D keypoint array must be (people, frames, points, 3|4) or (frames, people, "
                              f"points, 3|4); found shape {tuple(shape)}", path=src)
-    counts = point_counts or sorted({len(lay.points) for lay in kl.LAYOUTS.values()})
+    counts = point_counts or sorted({len(lay.points) for lay in kl.array_layouts().values()})
     if shape[2] not in counts:
         raise RecordingError(f"shape {tuple(shape)}: its third axis ({shape[2]}) is no layout's point count "
                              f"({', '.join(map(str, counts))})", path=src)
@@ -659,7 +659,7 @@ def _layout_from_count(X, path):
     names = kl.layouts_with(K)
     if not names:
         raise RecordingError(f"{K} points per frame match no keypoint layout "
-                             f"({', '.join(f'{n}: {len(f.points)}' for n, f in kl.LAYOUTS.items())}); "
+                             f"({', '.join(f'{n}: {len(f.points)}' for n, f in kl.array_layouts().items())}); "
                              f"set the layout", path=path)
     if len(names) == 1:
         return names[0], "told from the point count"
@@ -697,8 +697,8 @@ def _layout_from_columns(cols):
     """The layout whose points all have ``_x/_y/_z`` columns in ``cols`` (most points wins)."""
     have = _point_prefixes(cols)
     best = None
-    for name, lay in kl.LAYOUTS.items():
-        if name not in kl.MARKER_LAYOUTS and all(p in have for p in lay.points) and (
+    for name, lay in kl.array_layouts().items():
+        if all(p in have for p in lay.points) and (
                 best is None or len(lay.points) > len(kl.LAYOUTS[best].points)):
             best = name
     return best
@@ -879,7 +879,7 @@ def _load_trc(path, rate, subject_params=None):
     if marker_set is not None and set_missing:
         marker_set = None                       # video keypoints with an incomplete marker set: the keypoints
     # the layout whose points the markers cover most; of equals, the one with the fewest points
-    video = [n for n in kl.LAYOUTS if n not in kl.MARKER_LAYOUTS]
+    video = list(kl.array_layouts())
     best = marker_set or max(video, key=lambda n: (sum(p in points for p in kl.LAYOUTS[n].points),
                                                    -len(kl.LAYOUTS[n].points)))
     lay = kl.LAYOUTS[best]

@@ -189,8 +189,8 @@ def layout_from_names(names):
     for n in names:
         by_key.setdefault(point_key(n), n)
     best = None
-    for lay_name, lay in LAYOUTS.items():
-        if lay_name not in MARKER_LAYOUTS and all(p in by_key for p in lay.points) and (
+    for lay_name, lay in array_layouts().items():
+        if all(p in by_key for p in lay.points) and (
                 best is None or len(lay.points) > len(LAYOUTS[best].points)):
             best = lay_name
     if best is None:
@@ -198,9 +198,15 @@ def layout_from_names(names):
     return best, {p: by_key[p] for p in LAYOUTS[best].points}
 
 
+def array_layouts() -> dict:
+    """``{name: layout}`` of the layouts a keypoint array or table holds as points (every layout
+    but the marker sets, whose joint centres and pelvis midpoints are computed from markers)."""
+    return {n: f for n, f in LAYOUTS.items() if n not in MARKER_LAYOUTS}
+
+
 def layouts_with(count: int) -> list:
     """Names of the layouts with ``count`` points (what an unnamed ``(T, count, 3)`` array may be)."""
-    return [n for n, f in LAYOUTS.items() if len(f.points) == count and n not in MARKER_LAYOUTS]
+    return [n for n, f in array_layouts().items() if len(f.points) == count]
 
 
 @dataclass
