@@ -265,7 +265,7 @@ def test_floor_settings_are_checked():
             cs.parse_floor(bad)
     with pytest.raises(cs.SolveError, match="floor"):               # before the file is read
         cs.solve_recording("no_such_file.csv", cs.SolveSettings(floor="ground"))
-    with pytest.raises(cs.SolveError, match="needs the height"):
+    with pytest.raises(cs.SolveError, match=r"needs their height: give --height METRES"):
         cs.solve_recording(EXAMPLE, cs.SolveSettings(fps=30.0, floor="height"))
     from blender_manikin import cli
     p = cli.build_parser()

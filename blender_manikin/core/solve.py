@@ -417,7 +417,8 @@ def floor_height(settings: SolveSettings, targets: TrackerTargets) -> float:
     if floor != FLOOR_FROM_HEIGHT:
         return floor
     if not settings.height or settings.height <= 0:
-        raise SolveError("the floor from the performer's height needs the height (metres)")
+        raise SolveError("the floor under the performer (--floor height; the panel's Floor: Under Performer) "
+                         "needs their height: give --height METRES (the panel's Height)")
     return standing_head_height(targets) - head_height_for(settings.height, settings.sole)
 
 
