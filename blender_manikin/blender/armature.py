@@ -245,8 +245,10 @@ def rest_matrices(obj):
     return heads, mats
 
 
-def armature_matches_body(obj, body: sk.Body, tol: float = 1e-5) -> bool:
-    """True when ``obj`` is a MANIKIN armature built for a body equal to ``body`` (within ``tol`` m)."""
+def armature_matches_body(obj, body: sk.Body, tol: float = 1e-4) -> bool:
+    """True when ``obj`` is a MANIKIN armature built for a body equal to ``body`` (every bone offset
+    and rest head within ``tol`` m; 0.1 mm by default: the same take solved again at another scene
+    frame rate is calibrated on resampled frames, its body a few hundredths of a millimetre off)."""
     if obj is None or getattr(obj, "type", None) != 'ARMATURE' or PROP_BODY not in obj.keys():
         return False
     try:
@@ -257,4 +259,4 @@ def armature_matches_body(obj, body: sk.Body, tol: float = 1e-5) -> bool:
         heads, _ = rest_matrices(obj)
     except (KeyError, TypeError, ValueError):
         return False
-    return bool(np.max(np.abs(heads - body.rest_positions())) < max(tol, 1e-4))
+    return bool(np.max(np.abs(heads - body.rest_positions())) < tol)

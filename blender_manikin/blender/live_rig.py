@@ -95,6 +95,7 @@ import numpy as np
 import bpy
 
 from ..core import limb_solver as ls
+from ..core import plain
 from ..core import rotations as rot
 from ..core import skeleton as sk
 from ..core.pose_result import PoseResult
@@ -655,11 +656,16 @@ def result_from_fk_action(obj, fps: float, action=None):
     ``rotation_quaternion``, pelvis ``location``, swivel properties) from
     ``action`` (default: the assigned one), evaluated at the key frames of
     the pelvis rotation.  Missing swivel curves are computed from the joint
-    positions.  Raises ``ValueError`` when the action has no MANIKIN keys.
+    positions.  Raises ``ValueError`` when the action has no MANIKIN keys, or is a live rig's
+    (:func:`build_live_rig`: its arms and legs follow the controls, not keys of their own).
     """
     action = action or (obj.animation_data.action if obj.animation_data else None)
     if action is None:
         raise ValueError(f"{obj.name!r} has no action to read")
+    if action.get(PROP_LIVE):
+        raise ValueError(f"action {action.name!r} is a live rig's (its arms and legs follow the hand and foot "
+                         f"controls, they have no keys of their own): {obj.name!r} is live already (Make Live Rig "
+                         f"reads the keys of a plain FK solve's action)")
     fcs = {(fc.data_path, fc.array_index): fc for fc in keying.action_fcurves(action, obj)}
     key = ('pose.bones["pelvis"].rotation_quaternion', 0)
     if key not in fcs or not len(fcs[key].keyframe_points):
@@ -715,10 +721,21 @@ def evaluated_pose_matrices(obj_eval, order):
     return np.swapaxes(buf.reshape(len(pbs), 4, 4), -1, -2)[order].astype(np.float64)
 
 
+def check_pose_evaluated(obj):
+    """``ValueError`` when the armature ``obj`` is in Edit Mode: Blender does not evaluate its pose
+    there (its pose bones read the rest pose on every frame), so a bake or retarget sampling it
+    would key the rest pose."""
+    if obj.mode == 'EDIT':
+        raise ValueError(f"armature {obj.name!r} is in Edit Mode, where Blender does not evaluate its "
+                         f"pose (every frame would read as the rest pose): go to Object or Pose Mode first")
+
+
 def sample_pose_matrices(obj, names, frames, context=None):
     """``(len(frames), len(names), 4, 4)`` armature-space pose matrices of bones ``names`` of
     ``obj`` as Blender evaluates them (constraints, drivers, IK) on each scene frame of
-    ``frames`` (integers; ``scene.frame_set``, the current frame restored afterwards)."""
+    ``frames`` (integers; ``scene.frame_set``, the current frame restored afterwards).
+    ``ValueError`` when ``obj`` is in Edit Mode (:func:`check_pose_evaluated`)."""
+    check_pose_evaluated(obj)
     context = context or bpy.context
     scene = context.scene
     order = [obj.pose.bones.find(n) for n in names]
@@ -872,7 +889,8 @@ def swivel_fcurve(obj, limb: str, solved: bool = False, create: bool = False):
     Slotted actions (Blender 4.4+): the curve of the slot ``obj`` is animated by; ``ValueError``
     when it has none assigned (an action assigned whose slots other objects use), as that
     object's keys would animate nothing, and a slot found by ``obj``'s name may be another
-    object's (a linked duplicate's)."""
+    object's (a linked duplicate's).  ``ValueError`` too when the action is linked from a library
+    (an armature linked into a shot file): its keys would change in memory and be lost on save."""
     ad = obj.animation_data
     if ad is None or ad.action is None:
         return None
@@ -880,6 +898,11 @@ def swivel_fcurve(obj, limb: str, solved: bool = False, create: bool = False):
         raise ValueError(f"{obj.name!r} has action {ad.action.name!r} but no slot of it assigned, so its swivel "
                          f"keys would animate nothing (or another object using that action): choose its slot "
                          f"under the action (Object properties > Animation, or the Action editor)")
+    if not ad.action.is_editable:
+        raise ValueError(f"{obj.name!r} is animated by action {ad.action.name!r}, linked from "
+                         f"{plain.shown(ad.action.library.filepath if ad.action.library else 'a library')}: its swivel "
+                         f"keys cannot be edited in this file (an edit would not be saved); edit them in that "
+                         f"file, or make the action local")
     path = f'["{(SOLVED_PROPS if solved else writer.SWIVEL_PROPS)[limb]}"]'
     for fc in keying.action_fcurves(ad.action, obj):
         if fc.data_path == path and fc.array_index == 0:

@@ -159,7 +159,8 @@ def sample_source(obj, context=None, frames=None, progress=None):
             pos, wr = res.fk()                  # armature space: into the world, as evaluated below
             return frames, Rw @ wr, pos @ W[:3, :3].T + W[:3, 3], res.swivel, body
     # the live rig: Blender evaluates it frame by frame (constraints, drivers); the matrices are
-    # read in bulk and converted all at once
+    # read in bulk and converted all at once (not in Edit Mode, where it is not evaluated)
+    live_rig.check_pose_evaluated(obj)
     _, rest = arm_mod.rest_matrices(obj)
     scene = context.scene
     keep = scene.frame_current, scene.frame_subframe

@@ -197,8 +197,12 @@ def _remove_ids(ids):
 
 def can_take_a_solve(obj, context) -> bool:
     """Whether the armature ``obj`` of an earlier solve can be given a new action and rig: in the
-    view layer (not in an excluded collection: the live rig is built in edit mode) and not in NLA
-    tweak mode (its action cannot be changed while a strip's is being edited)."""
+    view layer (not in an excluded collection: the live rig is built in edit mode), not in NLA
+    tweak mode (its action cannot be changed while a strip's is being edited), and the object and
+    its armature data editable in this file (not linked from a library, nor a library override,
+    whose bones cannot be edited and whose changes would not be saved)."""
+    if not (obj.is_editable and obj.data.is_editable):
+        return False
     ad = obj.animation_data
     if ad is not None and ad.use_tweak_mode:
         return False

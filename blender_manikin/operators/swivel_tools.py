@@ -84,6 +84,10 @@ class MANIKIN_OT_make_live_rig(Operator):
         if obj.animation_data is None or obj.animation_data.action is None:
             cls.poll_message_set("the armature has no solve action")
             return False
+        if not (obj.is_editable and obj.data.is_editable):     # its rig bones are added in edit mode
+            cls.poll_message_set("the armature is linked from a library (or a library override): "
+                                 "its bones cannot be edited in this file")
+            return False
         return True
 
     def execute(self, context):
