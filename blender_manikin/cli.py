@@ -16,9 +16,10 @@ folders, are told apart as ``convert`` does: ``take-<hash>.<ext>``); a file alre
 replaced only when it is this tool's unchanged output of an earlier run, else the input stops
 with an error naming it (``--overwrite`` replaces it; :mod:`.core.output_guard`).  One line per
 converted input on stdout (``OK INPUT -> outputs (summary)``); problems on stderr as ``ERROR INPUT: message``; a bad
-file does not stop the others.  Exit status 0 only when every input converted, 1 when any
-failed, 2 for usage errors, 130 when Ctrl-C stopped the batch (the inputs after it not started, no
-output left half-written under its name).
+file does not stop the others; the last stderr line counts converted and failed inputs.  Exit
+status 0 only when every input converted, 1 when any failed, 2 for usage errors, 130 when Ctrl-C
+stopped the batch, 143 for SIGTERM (the inputs after it not started, no output or temporary file
+left half-written).
 
 Options of ``solve`` (they mirror the panel; ``--help`` has them all):
 
@@ -151,7 +152,7 @@ def _add_solve_options(s):
                         "defaults for its version and controllers (beat_saber, beat_saber_xr_touch, ...), "
                         "openxr_generic for other .xror, else none, or openxr_generic where the take shows a "
                         "headset: its T-pose, or a head named hmd, Main Camera, ...)")
-    s.add_argument("--bvh-units", choices=("cm", "m"), default="cm")
+    s.add_argument("--bvh-units", choices=("cm", "m"), default="cm", help="BVH length unit (default cm)")
     s.add_argument("--model", default="auto", metavar="auto|head_hands|pelvis|six|FILE.onnx",
                    help="the pose network: auto (default: the shipped model for the recording's trackers, "
                         "head and hands / + pelvis / + pelvis and feet, per stretch when a tracker is lost "
@@ -269,6 +270,17 @@ def _seconds_arg(text):
     return v
 
 
+def _workers_arg(text):
+    """argparse type of ``--workers``: a whole number >= 1."""
+    try:
+        v = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a whole number") from None
+    if v < 1:
+        raise argparse.ArgumentTypeError(f"{text!r}: expected 1 or more workers")
+    return v
+
+
 def _smoothing_arg(text):
     """argparse type of ``--smoothing``: ``auto`` or seconds >= 0."""
     from .core.smoothing import parse_smoothing
@@ -349,7 +361,8 @@ def build_parser():
                    help="comma-separated: " + ",".join(n for n in FORMATS if n not in BLENDER_FORMATS))
     c.add_argument("--scheduler", default="local", metavar="local|ADDRESS",
                    help="a Dask scheduler address (tcp://host:8786), or local (default: a LocalCluster)")
-    c.add_argument("--workers", type=int, default=None, help="LocalCluster workers (default: one per core)")
+    c.add_argument("--workers", type=_workers_arg, default=None, metavar="N",
+                   help="LocalCluster worker processes, 1 or more (default: one per core)")
     c.add_argument("--no-progress", dest="progress", action="store_false", help="no progress bar on stderr")
     c.add_argument("--overwrite", action="store_true", help=OVERWRITE_HELP)
     return p
@@ -363,26 +376,34 @@ def parse_formats(text):
     return tuple(dict.fromkeys(fmts))
 
 
-def expand_inputs(inputs):
+def expand_inputs(inputs, out=None):
     """Files of ``inputs`` with folders expanded to their recordings (sorted), except FreeMoCap
     recording folders, which are one input each.  Order kept; a file given twice (again, in a
-    folder also given, or through a symbolic link) is solved once, under its first name."""
+    folder also given, or through a symbolic link) is solved once, under its first name.  A
+    folder's sub-folders are not searched: they are named on stderr (but not ``out``, the output
+    folder), so a nested take is not passed over unseen."""
     from .core.io_keypoints import freemocap_body_file
-    out = []
+    files = []
     for item in inputs:
         if os.path.isdir(item) and freemocap_body_file(item):     # a FreeMoCap recording: one input
-            out.append(item.rstrip("/\\") or item)
+            files.append(item.rstrip("/\\") or item)
         elif os.path.isdir(item):
             found = sorted(os.path.join(item, n) for n in os.listdir(item)
                            if os.path.isfile(os.path.join(item, n))
                            and _formats.is_recording_file(os.path.join(item, n)))
+            subs = sorted(n for n in os.listdir(item) if not n.startswith(".") and os.path.isdir(os.path.join(item, n))
+                          and not (out and os.path.realpath(os.path.join(item, n)) == os.path.realpath(out)))
+            if subs:
+                named = ", ".join(subs[:5]) + (", ..." if len(subs) > 5 else "")
+                print(f"blender_manikin: {item}: {len(subs)} sub-folder(s) not searched ({named}): "
+                      "give them as inputs too, or use convert, which searches sub-folders", file=sys.stderr)
             if not found:               # said, so a folder given by mistake is not passed over unseen
                 print(f"blender_manikin: {item}: no recordings in this folder", file=sys.stderr)
-            out.extend(found)
+            files.extend(found)
         else:
-            out.append(item)
+            files.append(item)
     first = {}
-    for p in out:
+    for p in files:
         first.setdefault(os.path.realpath(p), p)
     return list(first.values())
 
@@ -553,25 +574,28 @@ def _write_fbx(dst, output, preset):
 
 @contextlib.contextmanager
 def _ctrl_c():
-    """Ctrl-C stops the batch: yields a list that holds the signal once one came.  Blender's
-    operators turn the ``KeyboardInterrupt`` into a ``RuntimeError`` (which would only fail the
-    file being written), and a Blender binary's own handler ignores the first Ctrl-C."""
+    """Ctrl-C (SIGINT) or SIGTERM (``kill``, a job scheduler's stop) stops the batch: yields a
+    list that holds the signal once one came; the file being written is not left half-written.
+    Blender's operators turn the ``KeyboardInterrupt`` into a ``RuntimeError`` (which would only
+    fail the file being written), and a Blender binary's own handler ignores the first Ctrl-C."""
     got = []
 
     def handler(signum, frame):
         got.append(signum)
         raise KeyboardInterrupt
 
+    olds = {}
     try:
-        old = signal.signal(signal.SIGINT, handler)
-    except ValueError:            # not the main thread: leave the handler as it is
-        yield got
-        return
+        for sig in (signal.SIGINT, signal.SIGTERM):
+            olds[sig] = signal.signal(sig, handler)
+    except ValueError:            # not the main thread: leave the handlers as they are
+        pass
     try:
         yield got
     finally:
-        if old is not None:       # None: a handler not set from Python (Blender's own)
-            signal.signal(signal.SIGINT, old)
+        for sig, old in olds.items():
+            if old is not None:   # None: a handler not set from Python (Blender's own)
+                signal.signal(sig, old)
 
 
 @contextlib.contextmanager
@@ -639,8 +663,11 @@ def main(argv=None):
     except ValueError as exc:
         print(f"blender_manikin: error: {exc}", file=sys.stderr)
         return 2
-    if not (args.fps > 0):
-        print("blender_manikin: error: --fps must be positive", file=sys.stderr)
+    if not (0 < args.fps < float("inf")):
+        print("blender_manikin: error: --fps must be a positive number", file=sys.stderr)
+        return 2
+    if os.path.exists(args.out) and not os.path.isdir(args.out):
+        print(f"blender_manikin: error: --out {args.out} is a file, not a folder", file=sys.stderr)
         return 2
     if args.command == "convert":
         return convert_main(args, formats)
@@ -659,10 +686,6 @@ def main(argv=None):
     from .core.io_keypoints import is_keypoint_input
     from .core.solve import error_message
     convert = convert_one if needs_blender else convert_one_core
-
-    if os.path.exists(args.out) and not os.path.isdir(args.out):
-        print(f"blender_manikin: error: --out {args.out} is a file, not a folder", file=sys.stderr)
-        return 2
     from .core import output_guard
     from .core.convert import output_stems
     from .core.file_names import check_folder, keep_people_apart, person_stems
@@ -672,7 +695,7 @@ def main(argv=None):
         print(f"blender_manikin: error: {exc}", file=sys.stderr)
         return 2
     os.makedirs(args.out, exist_ok=True)
-    inputs = expand_inputs(args.inputs)
+    inputs = expand_inputs(args.inputs, args.out)
     if not inputs:
         print("blender_manikin: error: no recordings found in the inputs", file=sys.stderr)
         return 1
@@ -724,7 +747,9 @@ def main(argv=None):
         except KeyboardInterrupt:
             print(f"blender_manikin: interrupted during {path}: {done - failed} input(s) converted, "
                   f"{len(inputs) - done} not", file=sys.stderr, flush=True)
-            return 130
+            return 128 + (interrupted[0] if interrupted else signal.SIGINT)   # 130 Ctrl-C, 143 SIGTERM
+    print(f"blender_manikin: {done - failed} converted, {failed} error(s) of {len(jobs)} input(s); "
+          f"outputs in {args.out}", file=sys.stderr, flush=True)
     return 1 if failed else 0
 
 
@@ -803,8 +828,8 @@ def convert_main(args, fmts):
     try:
         code, records = convert.run(inputs, args.out, fmts, settings, scheduler=args.scheduler,
                                     workers=args.workers, options=args, progress=args.progress, report=report)
-    except ValueError as exc:         # a format it cannot write, a scheduler that does not answer
-        print(f"blender_manikin: error: {exc}", file=sys.stderr)
+    except (ValueError, OSError) as exc:   # a format it cannot write, a scheduler that does not answer,
+        print(f"blender_manikin: error: {exc}", file=sys.stderr)   # an --out it cannot write into
         return 2
     except KeyboardInterrupt:         # Ctrl-C: run() said how far it got; the manifest holds it
         return 130

@@ -44,7 +44,8 @@ def test_folder_with_one_broken_file(folder, tmp_path, capsys, monkeypatch):
     assert len(cap.out.splitlines()) == 2          # nothing but one line per converted input
     assert sorted(os.path.basename(ln.split()[1]) for ln in ok_lines) == ["walk.csv", "wave.csv"]
     err = [ln for ln in cap.err.splitlines() if ln.strip()]
-    assert len(err) == 1 and err[0].startswith("ERROR ") and "broken.csv" in err[0]
+    assert len(err) == 2 and err[0].startswith("ERROR ") and "broken.csv" in err[0]
+    assert err[1] == f"blender_manikin: 2 converted, 1 error(s) of 3 input(s); outputs in {out}"   # the summary
     assert "walk.csv" not in cap.err and "wave.csv" not in cap.err
     for stem, frames in (("walk", 30), ("wave", 20)):
         for ext in ("blend", "fbx", "bvh", "json"):

@@ -26,12 +26,12 @@ OFFSET is added to them; with a zero OFFSET both readings agree).
 from __future__ import annotations
 
 import io
-import os
 
 import numpy as np
 
 from . import rotations as rot
 from . import skeleton as sk
+from .file_names import written_whole
 from .plain import shown
 
 #: change of basis Blender (Z-up, -Y forward) → BVH (Y-up, +Z forward)
@@ -173,8 +173,6 @@ class _Unwrap:
 def write_bvh(path, result, units: str = "cm", decimals: int = 6):
     """Write a :class:`~blender_manikin.core.pose_result.PoseResult` as BVH to ``path`` (under a
     temporary name, then renamed); returns ``path``."""
-    tmp = os.fspath(path) + ".tmp"
-    with open(tmp, "w", encoding="utf-8", newline="\n") as f:
+    with written_whole(path) as tmp, open(tmp, "w", encoding="utf-8", newline="\n") as f:
         bvh_string(result.local_rot, result.root_pos, result.body, result.fps, units, decimals, out=f)
-    os.replace(tmp, path)
     return path

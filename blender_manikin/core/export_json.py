@@ -37,13 +37,13 @@ Numbers are rounded to ``decimals`` (default 6: micrometres, microradians).
 from __future__ import annotations
 
 import json
-import os
 import math
 
 import numpy as np
 
 from . import rotations as rot
 from . import skeleton as sk
+from .file_names import written_whole
 from .plain import shown
 from .pose_result import DEVICES
 
@@ -245,8 +245,7 @@ def write_json(path, result, source: str = "", decimals: int = 6, indent=None, g
         small["trackers"] = "{" + ",".join(f"{json.dumps(d)}:{_fast_array(targets.pos[d], decimals)}"
                                            for d in doc["trackers"]) + "}"
     sep = ",\n" if indent else ","
-    tmp = os.fspath(path) + ".tmp"
-    with open(tmp, "w", encoding="utf-8", newline="\n") as f:
+    with written_whole(path) as tmp, open(tmp, "w", encoding="utf-8", newline="\n") as f:
         f.write("{")
         for i, (k, v) in enumerate(doc.items()):
             if i:
@@ -260,7 +259,6 @@ def write_json(path, result, source: str = "", decimals: int = 6, indent=None, g
             else:
                 f.write(small[k] if k in small else json.dumps(v, indent=indent, allow_nan=False))
         f.write("}\n")
-    os.replace(tmp, path)
     return path
 
 

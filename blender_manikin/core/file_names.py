@@ -14,6 +14,7 @@ spaces), and :func:`fit_stem` keeps a whole path under Windows' classic 260-char
 """
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import os
 import re
@@ -203,3 +204,18 @@ def keep_people_apart(names: dict, people, taken=(), folder: str | None = None, 
                 s = fit_stem(s, key, folder, tail, windows)
         out[k] = s
     return out
+
+
+@contextlib.contextmanager
+def written_whole(path, suffix: str = ".tmp"):
+    """Yield the temporary name ``path + suffix`` to write ``path`` under; renamed to ``path``
+    when the block ends, removed when it raises (an error, Ctrl-C): an interrupted write leaves
+    neither a half-written ``path`` nor its temporary behind."""
+    tmp = os.fspath(path) + suffix
+    try:
+        yield tmp
+        os.replace(tmp, path)
+    except BaseException:
+        with contextlib.suppress(OSError):
+            os.remove(tmp)
+        raise

@@ -277,16 +277,16 @@ def _write_npz(path, result, source="", options=None):
     quats = np.empty((T, NUM_JOINTS, 4), np.float32)
     for f, pos, world in result.fk_chunks():      # no (T, 22, 3, 3) float64 copy of a long take
         positions[f], quats[f] = pos, rot.matrix_to_quat(world)
-    tmp = os.fspath(path) + ".tmp.npz"
-    np.savez_compressed(tmp, positions=positions,
-                        local_rot=result.local_rot.astype(np.float32),
-                        rotations=quats,
-                        swivel=result.swivel.astype(np.float32),
-                        contacts=(result.contacts if result.contacts is not None
-                                  else np.zeros((result.num_frames, 2), bool)),
-                        fps=np.float64(result.fps), joints=np.array(JOINT_NAMES), parents=PARENTS,
-                        source=np.array(str(source)))
-    os.replace(tmp, path)
+    from .file_names import written_whole
+    with written_whole(path, ".tmp.npz") as tmp:
+        np.savez_compressed(tmp, positions=positions,
+                            local_rot=result.local_rot.astype(np.float32),
+                            rotations=quats,
+                            swivel=result.swivel.astype(np.float32),
+                            contacts=(result.contacts if result.contacts is not None
+                                      else np.zeros((result.num_frames, 2), bool)),
+                            fps=np.float64(result.fps), joints=np.array(JOINT_NAMES), parents=PARENTS,
+                            source=np.array(str(source)))
     return path
 
 
