@@ -325,11 +325,10 @@ def load_layout(path):
 def save_layout(path, layout):
     """Write a layout dict (``Recording.metadata["layout"]``) as a JSON layout file."""
     import json
-    tmp = os.fspath(path) + ".tmp"
-    with open(tmp, "w", encoding="utf-8", newline="\n") as f:
+    from .file_names import written_whole
+    with written_whole(path) as tmp, open(tmp, "w", encoding="utf-8", newline="\n") as f:
         json.dump(layout, f, indent=2)
         f.write("\n")
-    os.replace(tmp, path)
     return path
 
 

@@ -14,6 +14,8 @@ from __future__ import annotations
 import json
 import os
 
+from .file_names import written_whole
+
 #: the record of outputs written into a folder, in that folder
 RECORD = ".blender_manikin_outputs"      # JSON; no .json: not taken for an output
 #: a record entry of an output claimed and not yet recorded complete
@@ -93,7 +95,5 @@ def _update(paths, entry):
                 rec[name] = entry(p)
             except OSError:
                 rec.pop(name, None)
-        tmp = os.path.join(folder, RECORD + ".tmp")
-        with open(tmp, "w", encoding="utf-8", newline="\n") as f:
+        with written_whole(os.path.join(folder, RECORD)) as tmp, open(tmp, "w", encoding="utf-8", newline="\n") as f:
             json.dump(rec, f, indent=0, sort_keys=True)
-        os.replace(tmp, os.path.join(folder, RECORD))
