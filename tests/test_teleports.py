@@ -305,3 +305,79 @@ def test_jumps_cost_no_pass_over_the_take_each(monkeypatch):
     few, many = _jump_work(rec, 3, monkeypatch), _jump_work(rec, 60, monkeypatch)
     samples = sum(len(s) for s in rec.streams.values())
     assert many < 1.5 * few, (few, many, samples)
+
+
+def headset_picked_up_from_a_table(rec, seconds=3.0):
+    """``rec`` with ``seconds`` more at its start where only the headset is tracked: lying still
+    0.75 m up, tipped 90° (face down on a table), the controllers not yet on (no samples); from
+    the take's first sample on it is worn, so the head jumps about a metre in one sample."""
+    from blender_manikin.core.rotations import axis_angle_to_quat
+    rng = np.random.default_rng(5)
+    streams = dict(rec.streams)
+    s = rec.streams["head"]
+    rate = 1.0 / np.median(np.diff(s.time))
+    n = int(seconds * rate)
+    t = s.time[0] - (n - np.arange(n)) / rate
+    p = np.tile([0.6, -0.4, 0.75], (n, 1)) + rng.normal(0, 0.0002, (n, 3))
+    q = np.tile(axis_angle_to_quat(np.array([np.pi / 2, 0.0, 0.0])), (n, 1))
+    streams["head"] = TrackerStream("head", np.concatenate([t, s.time]), np.concatenate([p, s.pos]),
+                                    np.concatenate([q, s.quat]))
+    return Recording(streams=streams, source="headset picked up", metadata=dict(rec.metadata))
+
+
+def without_hands_between(rec, t0, t1, devices=("left_hand", "right_hand")):
+    """``rec`` with ``devices``' samples from ``t0`` to ``t1`` s left out (not tracked)."""
+    streams = dict(rec.streams)
+    for d in devices:
+        s = rec.streams[d]
+        m = (s.time < t0) | (s.time > t1)
+        streams[d] = TrackerStream(d, s.time[m], s.pos[m], s.quat[m], s.valid[m])
+    return Recording(streams=streams, source=rec.source, metadata=dict(rec.metadata))
+
+
+def test_a_headset_picked_up_with_the_controllers_off_is_no_teleport(example):
+    """A recording started with the headset on a table and the controllers off: the head's jump
+    onto the performer has no hand to confirm it, so it is no teleport (taken for one, it moved the
+    whole worn take down onto the table: stature 1.00 m, no T-pose found).  It is left as recorded
+    and the headset pointed out; a trim at it gives the example's own solve."""
+    rec, base = example
+    table = headset_picked_up_from_a_table(rec)
+    assert find_rig_jumps(table) == []
+    whole = cs.solve_recording(table, cs.SolveSettings(fps=30.0))
+    s = whole.summary()
+    assert "teleport" not in s and "calibrated on a T-pose at 3." in s and "stature 1.75 m" in s, s
+    assert "the headset lay still (0.8 m up, tipped 90°) for the first 3.0 s (not yet worn?)" in s, s
+    for start in (3.0, 3.2):
+        trimmed = cs.solve_recording(table, cs.SolveSettings(fps=30.0, start=start))
+        s = trimmed.summary()
+        assert "teleport" not in s and "stature 1.75 m" in s, s
+        skip = int(round((start - 3.0) * 30))
+        assert trimmed.result.num_frames == base.result.num_frames - skip
+        err = np.linalg.norm(trimmed.result.positions - base.result.positions[skip:], axis=-1)
+        assert np.median(err) < 0.002 and err.max() < 0.05, (start, np.median(err), err.max())
+
+
+def test_a_jump_no_hand_can_confirm_is_no_teleport(example):
+    """Both controllers untracked around the jump (no samples within half a second of it on
+    either side): the head alone cannot tell the space moving from its own tracking."""
+    rec, _ = example
+    jumped, _ = moved(rec, [(3.5, 0.0, (2.0, -1.0, 0.0))])
+    assert find_rig_jumps(without_hands_between(jumped, 2.9, 4.1)) == []
+    # a turn, the same
+    turned, _ = moved(rec, [(3.5, 45.0, (0, 0, 0))])
+    assert find_rig_jumps(without_hands_between(turned, 2.9, 4.1)) == []
+
+
+def test_a_real_teleport_with_a_hand_tracked_is_still_found(example):
+    """After a headset picked up from a table: the app's teleport at 3.5 s, the hands moving with
+    it, is found (and only it), with both hands tracked around it or only the right one."""
+    rec, _ = example
+    jumped, _ = moved(rec, [(3.5, 0.0, (2.0, -1.0, 0.0))])
+    for take in (jumped, without_hands_between(jumped, 3.0, 4.0, ("left_hand",))):
+        table = headset_picked_up_from_a_table(take)
+        found = find_rig_jumps(table)
+        assert [j.kind for j in found] == ["teleport"] and found[0].time == pytest.approx(3.5, abs=0.015)
+        assert found[0].trans == pytest.approx([2.0, -1.0, 0.0], abs=0.03)
+    out = cs.solve_recording(table, cs.SolveSettings(fps=30.0, start=3.0))
+    s = out.summary()
+    assert "1 teleport (first at 3.50 s) solved as one motion and put back" in s and "stature 1.75 m" in s, s

@@ -768,8 +768,8 @@ def device_targets(out: SolveOutcome, settings: SolveSettings, teleports="keep")
     from .resample import seconds_from_time_units
     out.recording = seconds_from_time_units(out.recording)      # before anything measures speeds
     jumps, continuous = [], out.recording
-    if teleports != "ignore":
-        jumps = find_rig_jumps(out.recording)
+    if teleports != "ignore":      # over the whole take, trim or not: the calibration and the floor
+        jumps = find_rig_jumps(out.recording)   # are measured on all of it, and a part is the whole's
         continuous = remove_rig_jumps(out.recording, jumps)
     eye_level = eye_level_origin(continuous, settings)       # no floor at 0: found below
     times, pos, quat, valid, out.report = resample_recording(

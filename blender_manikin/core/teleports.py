@@ -29,8 +29,13 @@ and it is kept when the head stays where it jumped (the next sample is nearer th
 than the old: a tracking glitch of one sample comes back, and :mod:`.resample` removes it), and
 the hands jumped with it: each tracked hand's first sample after the jump is nearer where the
 jump would take its last sample before it than where it was (within :data:`HAND_TOLERANCE_M`
-plus what a hand moves in that time).  A head that jumps alone is a tracking error, not the
-space moving; with no hand tracked around the jump the head decides alone.
+plus what a hand moves in that time), and at least one hand has a say: it has samples within
+:data:`MAX_STEP_S` before and after the jump.  A head that jumps alone is a tracking error,
+not the space moving; so is one that no hand can confirm: a headset picked up from a table (or
+its tracking found again) while the controllers are still off jumps in one sample, and taken for
+a teleport it would move the whole worn take onto the table (``tests/test_teleports.py``).  Such
+a jump is left as recorded (a headset that lay still before it is pointed out by
+:mod:`.headset_off`, with the trim that leaves it out).
 
 A *smaller shift* (a recentre or a floor reset of :data:`SMALL_JUMP_MIN_M` to
 :data:`TELEPORT_MIN_M`, slower than any head speed test can tell from motion) is found from what
@@ -259,7 +264,8 @@ def _small_jumps(t, p, hands, big):
 
 def find_rig_jumps(recording: Recording) -> list:
     """The teleports and snap turns of ``recording`` (see the module docstring), in time order:
-    a list of :class:`RigJump`.  Empty without a head stream."""
+    a list of :class:`RigJump`.  Empty without a head stream, or without a hand stream (every
+    jump needs a tracked hand moving with it)."""
     head = recording.streams.get("head")
     if head is None or len(head) < 3:
         return []
@@ -297,7 +303,7 @@ def find_rig_jumps(recording: Recording) -> list:
             if (teleport and back_p) or (turned and not teleport and back_r):
                 continue
         checks = [_hand_check(s, t[a], t[b], rot, trans, hs) for s, hs in zip(hands, hand_samples)]
-        if any(check is False for check in checks):
+        if False in checks or True not in checks:      # a hand moved against it, or none can tell
             continue
         kind = "teleport and turn" if teleport and turned else ("teleport" if teleport else "snap turn")
         jumps.append(RigJump(float(t[b]), float(t[a]), rot, trans, kind))
