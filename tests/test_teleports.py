@@ -4,6 +4,7 @@ The bundled example recording, with jumps of the tracking space put in by hand: 
 moved (a teleport) or turned about the headset's vertical (a snap turn) from a given time on.
 """
 import os
+import re
 
 import numpy as np
 import pytest
@@ -12,7 +13,7 @@ from blender_manikin.core import solve as cs
 from blender_manikin.core.formats import load_recording
 from blender_manikin.core.recording import Recording, TrackerStream
 from blender_manikin.core.rotations import axis_angle_rotation, matrix_to_quat, quat_to_matrix
-from blender_manikin.core.teleports import find_rig_jumps, remove_rig_jumps
+from blender_manikin.core.teleports import find_rig_jumps, remove_rig_jumps, unconfirmed_jumps_note
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 EXAMPLE = os.path.join(ROOT, "examples", "example_recording.csv")
@@ -345,12 +346,14 @@ def test_a_headset_picked_up_with_the_controllers_off_is_no_teleport(example):
     assert find_rig_jumps(table) == []
     whole = cs.solve_recording(table, cs.SolveSettings(fps=30.0))
     s = whole.summary()
-    assert "teleport" not in s and "calibrated on a T-pose at 3." in s and "stature 1.75 m" in s, s
+    assert "put back" not in s and "calibrated on a T-pose at 3." in s and "stature 1.75 m" in s, s
+    assert re.search(r"the head jumped 1\.\d\d m at (2\.99|3\.00) s with no controller tracked around it, so it "
+                     r"is left as recorded, not taken for a teleport", s), s
     assert "the headset lay still (0.8 m up, tipped 90°) for the first 3.0 s (not yet worn?)" in s, s
     for start in (3.0, 3.2):
         trimmed = cs.solve_recording(table, cs.SolveSettings(fps=30.0, start=start))
         s = trimmed.summary()
-        assert "teleport" not in s and "stature 1.75 m" in s, s
+        assert "put back" not in s and "stature 1.75 m" in s, s
         skip = int(round((start - 3.0) * 30))
         assert trimmed.result.num_frames == base.result.num_frames - skip
         err = np.linalg.norm(trimmed.result.positions - base.result.positions[skip:], axis=-1)
@@ -362,10 +365,16 @@ def test_a_jump_no_hand_can_confirm_is_no_teleport(example):
     either side): the head alone cannot tell the space moving from its own tracking."""
     rec, _ = example
     jumped, _ = moved(rec, [(3.5, 0.0, (2.0, -1.0, 0.0))])
-    assert find_rig_jumps(without_hands_between(jumped, 2.9, 4.1)) == []
+    unconfirmed = []
+    assert find_rig_jumps(without_hands_between(jumped, 2.9, 4.1), unconfirmed) == []
+    assert [j.kind for j in unconfirmed] == ["teleport"] and unconfirmed[0].time == pytest.approx(3.5, abs=0.015)
+    assert unconfirmed_jumps_note(unconfirmed).startswith("the head jumped 2.2")
     # a turn, the same
     turned, _ = moved(rec, [(3.5, 45.0, (0, 0, 0))])
-    assert find_rig_jumps(without_hands_between(turned, 2.9, 4.1)) == []
+    unconfirmed = []
+    assert find_rig_jumps(without_hands_between(turned, 2.9, 4.1), unconfirmed) == []
+    assert [j.kind for j in unconfirmed] == ["snap turn"]
+    assert unconfirmed_jumps_note(unconfirmed).startswith("the head jumped 45° at 3.5")
 
 
 def test_a_real_teleport_with_a_hand_tracked_is_still_found(example):
@@ -380,4 +389,6 @@ def test_a_real_teleport_with_a_hand_tracked_is_still_found(example):
         assert found[0].trans == pytest.approx([2.0, -1.0, 0.0], abs=0.03)
     out = cs.solve_recording(table, cs.SolveSettings(fps=30.0, start=3.0))
     s = out.summary()
-    assert "1 teleport (first at 3.50 s) solved as one motion and put back" in s and "stature 1.75 m" in s, s
+    # the times from the take's start, as the T-pose's: 3 s of table, then the teleport at 3.5 s
+    assert re.search(r"1 teleport \(first at 6\.(49|50) s\) solved as one motion and put back", s), s
+    assert "stature 1.75 m" in s, s

@@ -31,7 +31,8 @@ from .lost_hands import relax_lost_hands
 from .plain import shown
 from .seated import POSTURES, SEATED_HEAD_HEIGHT, seat_legs, stature_from_seated_head
 from .pose_result import PoseResult, TrackerTargets
-from .teleports import TELEPORT_CHOICES, find_rig_jumps, remove_rig_jumps, restore_rig_jumps, rig_jumps_note
+from .teleports import (TELEPORT_CHOICES, find_rig_jumps, remove_rig_jumps, restore_rig_jumps, rig_jumps_note,
+                        unconfirmed_jumps_note)
 from .tracker_slips import FOOT_DEVICES, correct_tracker_slips, find_tracker_slips, tracker_slip_notes
 
 
@@ -767,9 +768,9 @@ def device_targets(out: SolveOutcome, settings: SolveSettings, teleports="keep")
     and the teleports (:class:`.teleports.RigJump`)."""
     from .resample import seconds_from_time_units
     out.recording = seconds_from_time_units(out.recording)      # before anything measures speeds
-    jumps, continuous = [], out.recording
+    jumps, continuous, unconfirmed = [], out.recording, []
     if teleports != "ignore":      # over the whole take, trim or not: the calibration and the floor
-        jumps = find_rig_jumps(out.recording)   # are measured on all of it, and a part is the whole's
+        jumps = find_rig_jumps(out.recording, unconfirmed)   # are measured on all of it, and a part is the whole's
         continuous = remove_rig_jumps(out.recording, jumps)
     eye_level = eye_level_origin(continuous, settings)       # no floor at 0: found below
     times, pos, quat, valid, out.report = resample_recording(
@@ -816,7 +817,7 @@ def device_targets(out: SolveOutcome, settings: SolveSettings, teleports="keep")
     if settings.end is not None and settings.end <= (T - last) / fps + 0.05:
         last = 0
     off_notes = headset_off_note(first, last, T, fps, out.targets.pos["head"], out.targets.rot["head"])
-    notes = [n for n in (note, *sides, *off_notes) if n]
+    notes = [n for n in (note, *sides, *off_notes, unconfirmed_jumps_note(unconfirmed, float(times[0]))) if n]
     return times, pos, quat, valid, offsets, notes, smoothed, jumps
 
 
@@ -975,7 +976,7 @@ def solve_recording(source, settings: SolveSettings | None = None, solver=None, 
         out.targets, solve_times = out.targets.frames(solved), times[solved]
         out.info.append(f"trimmed to {times[span[0]] - times[0]:.2f}-{times[span[1] - 1] - times[0]:.2f} s")
     if jumps:
-        out.info.append(rig_jumps_note(jumps, mode))
+        out.info.append(rig_jumps_note(jumps, mode, float(times[0])))
         out.jumps = list(jumps)
     out.timings["calibrate"] = _time.perf_counter() - t
     report(STAGES["solving"], "solving")

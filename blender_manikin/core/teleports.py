@@ -262,10 +262,12 @@ def _small_jumps(t, p, hands, big):
     return out
 
 
-def find_rig_jumps(recording: Recording) -> list:
+def find_rig_jumps(recording: Recording, unconfirmed=None) -> list:
     """The teleports and snap turns of ``recording`` (see the module docstring), in time order:
     a list of :class:`RigJump`.  Empty without a head stream, or without a hand stream (every
-    jump needs a tracked hand moving with it)."""
+    jump needs a tracked hand moving with it).  ``unconfirmed``: a list that is given the
+    :class:`RigJump` s of the head that no hand could confirm or refute (no hand samples on both
+    sides), left as recorded (:func:`unconfirmed_jumps_note`)."""
     head = recording.streams.get("head")
     if head is None or len(head) < 3:
         return []
@@ -303,9 +305,11 @@ def find_rig_jumps(recording: Recording) -> list:
             if (teleport and back_p) or (turned and not teleport and back_r):
                 continue
         checks = [_hand_check(s, t[a], t[b], rot, trans, hs) for s, hs in zip(hands, hand_samples)]
-        if False in checks or True not in checks:      # a hand moved against it, or none can tell
-            continue
         kind = "teleport and turn" if teleport and turned else ("teleport" if teleport else "snap turn")
+        if False in checks or True not in checks:      # a hand moved against it, or none can tell
+            if unconfirmed is not None and False not in checks:
+                unconfirmed.append(RigJump(float(t[b]), float(t[a]), rot, trans, kind))
+            continue
         jumps.append(RigJump(float(t[b]), float(t[a]), rot, trans, kind))
         after = b
     small = [RigJump(float(t[a + 1]), float(t[a]), np.eye(3), d, "teleport")
@@ -412,9 +416,26 @@ def restore_rig_jumps(result, jumps):
     return out
 
 
-def rig_jumps_note(jumps, mode="keep"):
+def unconfirmed_jumps_note(jumps, t0=0.0):
+    """The summary's note on the head's jumps no tracked hand could confirm (:func:`find_rig_jumps`'s
+    ``unconfirmed``), left as recorded: ``"the head jumped 0.92 m at 3.00 s with no controller
+    tracked around it, so it is left as recorded, not taken for a teleport (a headset picked up,
+    its tracking found again)"``, the time in seconds from ``t0`` (the take's start on the
+    recording clock); ``None`` without any."""
+    if not jumps:
+        return None
+    j = jumps[0]
+    size = (f"{np.linalg.norm(j.trans):.2f} m" if "teleport" in j.kind
+            else f"{abs(np.degrees(np.arctan2(j.rot[1, 0], j.rot[0, 0]))):.0f}°")
+    more = f" (and {len(jumps) - 1} more)" if len(jumps) > 1 else ""
+    return (f"the head jumped {size} at {j.time - t0:.2f} s{more} with no controller tracked around it, so it is left "
+            f"as recorded, not taken for a teleport (a headset picked up, its tracking found again)")
+
+
+def rig_jumps_note(jumps, mode="keep", t0=0.0):
     """The summary's note: ``"2 teleports and 3 snap turns (first at 12.40 s) solved as one motion
-    and put back"``; ``None`` without jumps."""
+    and put back"``, the time in seconds from ``t0`` (the take's start on the recording clock, as
+    the summary's other times); ``None`` without jumps."""
     if not jumps:
         return None
     n_tel = sum(1 for j in jumps if "teleport" in j.kind)
@@ -426,4 +447,4 @@ def rig_jumps_note(jumps, mode="keep"):
         parts.append(f"{n_turn} snap turn{'s' if n_turn > 1 else ''}")
     what = " and ".join(parts)
     how = "solved as one motion and put back" if mode == "keep" else "taken out (the path is continuous)"
-    return f"{what} (first at {jumps[0].time:.2f} s) {how}"
+    return f"{what} (first at {jumps[0].time - t0:.2f} s) {how}"
