@@ -207,3 +207,82 @@ def test_time_stretching_reads_parented_and_keyed_sources_alike():
     np.testing.assert_allclose(slow["head"].pos, fast["head"].pos, atol=1e-5)
     np.testing.assert_allclose(rot.quat_to_matrix(slow["head"].quat), rot.quat_to_matrix(fast["head"].quat), atol=1e-5)
     assert sc.frame_current == 1
+
+
+def test_a_solve_that_starts_after_the_range_lines_up_with_the_objects(addon):
+    """Every tracker lost (keyed hidden) on the range's first 5 frames: the solve starts at
+    frame 6, where tracking starts, and each solved frame shows the pose of its own frame (it
+    was keyed from the range's first frame, 5 frames early: 11 cm off mid-take)."""
+    from blender_manikin.blender import writer
+    from blender_util import synthetic_result
+    sc = bpy.context.scene
+    sc.render.fps = 24
+    res = synthetic_result(T=40, fps=24.0)
+    src = writer.write_result(res, writer.WriteOptions(create_trackers=True))
+    for e in src.trackers.values():
+        keying.key_channels(e.animation_data.action, e, [1, 6], [("hide_viewport", 0, "", [1.0, 0.0])],
+                            interpolation='CONSTANT')
+    s = sc.manikin
+    s.source = 'SCENE'
+    for dev, e in src.trackers.items():
+        getattr(s, dev).object = e
+    s.calibration, s.height = 'MEASURE', 1.8
+    s.create_trackers, s.use_scene_range, s.reuse_armature = False, False, False
+    s.frame_start, s.frame_end = 1, 40
+    s.smoothing_mode, s.smoothing = 'WINDOW', 0.0
+    assert bpy.ops.manikin.solve_full_body() == {'FINISHED'}, s.last_report
+    out = s.armature
+    for f in (6, 12, 30, 40):
+        sc.frame_set(f)
+        head = np.array(out.matrix_world) @ np.append(np.array(out.pose.bones["head"].head), 1)
+        np.testing.assert_allclose(head[:3], res.targets.pos["head"][f - 1], atol=2e-3)
+
+
+def test_keyed_delta_transforms_are_read_as_blender_shows_them():
+    """An object whose delta location / rotation is keyed (zero on the current frame) moves by
+    it: its F-curves alone are not where Blender shows it (5 m off), so it is read by stepping
+    the scene."""
+    fresh_scene()
+    sc = bpy.context.scene
+    obj = _keyed_empty("src", 'XYZ', seed=11)
+    act = obj.animation_data.action
+    keying.key_channels(act, obj, [1, N], [("delta_location", 0, "", [0.0, 5.0]),
+                                           ("delta_rotation_euler", 2, "", [0.0, 1.0])], interpolation='LINEAR')
+    sc.frame_set(1)
+    rec = scene_trackers.sample_sources(sc, {"head": (obj, "")}, 1, N)
+    for k in (0, N // 2, N - 1):
+        sc.frame_set(1 + k)
+        m = np.array(obj.matrix_world)
+        np.testing.assert_allclose(rec["head"].pos[k], m[:3, 3], atol=1e-5)
+        np.testing.assert_allclose(rot.quat_to_matrix(rec["head"].quat[k]), rot.orthonormalize(m[:3, :3]), atol=1e-5)
+
+
+def test_an_action_without_a_slot_is_read_as_blender_shows_it():
+    """Blender 4.4+: an action assigned with no slot (an action made for another object picked
+    in the Object's Animation panel) does not move the object; it is read standing where it is,
+    not from the action's F-curves (3 m off)."""
+    fresh_scene()
+    sc = bpy.context.scene
+    obj = _keyed_empty("src", 'XYZ', seed=12)
+    ad = obj.animation_data
+    if not keying.is_slotted(ad.action):
+        pytest.skip("no action slots before Blender 4.4")
+    ad.action_slot = None
+    obj.location, obj.rotation_euler = (0.1, 0.2, 0.3), (0.0, 0.0, 0.5)
+    sc.frame_set(1)
+    rec = scene_trackers.sample_sources(sc, {"head": (obj, "")}, 1, N)
+    m = np.array(obj.matrix_world)
+    np.testing.assert_allclose(rec["head"].pos, np.broadcast_to(m[:3, 3], (N, 3)), atol=1e-6)
+
+
+def test_one_object_mapped_to_two_devices_is_refused():
+    """The same empty picked for both hands (a slip in the N-panel) is said, naming the devices
+    and the object: it was solved, both hands reaching for one point ("out of reach")."""
+    fresh_scene()
+    sc = bpy.context.scene
+    obj = _keyed_empty("LeftController", 'XYZ', seed=13)
+    head = _keyed_empty("HMD", 'XYZ', seed=14)
+    with pytest.raises(scene_trackers.SceneSourceError,
+                       match="left_hand and right_hand: both are mapped to object 'LeftController'"):
+        scene_trackers.sample_sources(sc, {"head": (head, ""), "left_hand": (obj, ""), "right_hand": (obj, "")},
+                                      1, N)

@@ -7,8 +7,8 @@ resampling / offsets / calibration / solve path as a file.
 
 Sampling, per source:
 
-* **plain keyed object** (no parent, no constraints, no drivers, no NLA, zero
-  delta transforms, its action's F-curves drive ``location`` /
+* **plain keyed object** (no parent, no constraints, no drivers, no NLA, zero and unkeyed
+  delta transforms, an action with a slot for it, its action's F-curves drive ``location`` /
   ``rotation_*``): the F-curves are evaluated directly (no scene
   re-evaluation), vectorised into numpy; unkeyed channels use the current
   property value;
@@ -60,6 +60,11 @@ def _is_plain_keyed(obj):
         return False
     if len(ad.drivers) or len(ad.nla_tracks):
         return False
+    slotted = keying.is_slotted(ad.action)
+    if slotted and getattr(ad, "action_slot", None) is None:     # Blender animates nothing then
+        return False
+    if any(fc.data_path.startswith("delta_") for fc in keying.action_fcurves(ad.action, obj if slotted else None)):
+        return False                     # keyed delta transforms move it too
     if getattr(ad, "action_influence", 1.0) != 1.0 or getattr(ad, "action_blend_type", "REPLACE") != "REPLACE":
         return False
     if any(abs(v) > 0 for v in obj.delta_location) or any(abs(v) > 0 for v in obj.delta_rotation_euler):
@@ -185,7 +190,8 @@ def sample_sources(scene, sources, frame_start, frame_end, depsgraph=None, progr
     """Sample the mapped sources over scene frames ``frame_start..frame_end`` (inclusive).
 
     sources: ``{device: (object, bone_name)}`` with ``bone_name`` ``""`` / None
-    for the object itself (``object`` may be an object or its name).
+    for the object itself (``object`` may be an object or its name); one object (or bone) mapped
+    to two devices is an error.
     progress: optional ``callable(fraction)``, may raise to cancel (the
     current frame is restored).  Returns a :class:`Recording` whose
     ``source`` is ``"scene"``; ``metadata`` records frames, fps and the
@@ -211,6 +217,11 @@ def sample_sources(scene, sources, frame_start, frame_end, depsgraph=None, progr
         if bone:
             if obj.type != 'ARMATURE' or obj.pose is None or bone not in obj.pose.bones:
                 raise SceneSourceError(f"{dev}: object {obj.name!r} has no bone {bone!r}")
+        for other, (o, b) in resolved.items():
+            if o == obj and b == bone:          # two devices are never in one place
+                what = f"bone {bone!r} of object {obj.name!r}" if bone else f"object {obj.name!r}"
+                raise SceneSourceError(f"{other} and {dev}: both are mapped to {what}; map each device "
+                                       f"to its own object")
         resolved[dev] = (obj, bone)
     if not resolved:
         raise SceneSourceError("no scene objects are mapped to devices")

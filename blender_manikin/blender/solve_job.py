@@ -53,7 +53,8 @@ class SolveConfig(SolveSettings):
     ``"KEYPOINTS"`` (``filepath``: 3D keypoints, :mod:`core.keypoint_solve`) or ``"SCENE"``
     (``scene_sources``: device → ``(object name, bone name or "")``, sampled over
     ``scene_frames`` = (first, last) scene frame).
-    frame_start: scene frame of the first solved frame.  create_trackers: also key tracker
+    frame_start: scene frame of the first solved frame (scene sources: where the solve starts,
+    :meth:`SolveJob.first_frame`).  create_trackers: also key tracker
     empties.  body_mesh: give the armature the mannequin mesh (:mod:`.body_mesh`).  live_rig:
     convert the solved armature to the live swivel rig (:mod:`.live_rig`):
     elbows/knees follow the swivel properties and the hand/foot controls; False keeps plain FK
@@ -167,6 +168,7 @@ class SolveJob:
         self.stage = "starting"
         self.timings = {}
         self.outcome = None
+        self.scene_fps = None        # scene sources: the fps they were sampled at (first_frame)
         self._cancel = threading.Event()
         self._thread = None
 
@@ -208,6 +210,7 @@ class SolveJob:
         if cfg.fps is None:
             cfg.fps = self.recording.metadata["fps"]
         cfg.frame_start = int(start)
+        self.scene_fps = float(self.recording.metadata["fps"])
         self.timings["read"] = _time.perf_counter() - t
 
     def _gather_keypoints(self, context):
@@ -241,6 +244,7 @@ class SolveJob:
         if cfg.fps is None:
             cfg.fps = float(scene.render.fps) / float(scene.render.fps_base)
         cfg.frame_start = int(start)
+        self.scene_fps = float(scene.render.fps) / float(scene.render.fps_base)
         self.timings["read"] = _time.perf_counter() - t
 
     # -- stage 2 (any thread)
@@ -292,6 +296,16 @@ class SolveJob:
         return self.result
 
     # -- stage 3 (main thread)
+    def first_frame(self):
+        """The scene frame the result's first frame is keyed on: ``config.frame_start``; for
+        scene sources, the frame of the result's first time (``result.t0``, seconds, sampled
+        frame ``f`` at ``f / fps``), so the solve lines up with the objects when it starts later
+        than the range (every source hidden, tracking lost, on the range's first frames)."""
+        if self.scene_fps is None or self.result is None:
+            return self.config.frame_start
+        frame = float(self.result.t0) * self.scene_fps
+        return int(round(frame)) if abs(frame - round(frame)) < 1e-4 else frame
+
     def write(self, context):
         """Create the armature, action and empties (all or nothing).  Sets ``self.output``."""
         from . import writer
@@ -303,7 +317,7 @@ class SolveJob:
         # overridden by its constraints, and a plain FK action is one Bake away (a 60-minute take
         # at 60 fps holds 216,000 keys per F-curve: a second action would double the memory).
         take = cfg.take_name()
-        opts = writer.WriteOptions(frame_start=cfg.frame_start, armature=cfg.reuse_armature,
+        opts = writer.WriteOptions(frame_start=self.first_frame(), armature=cfg.reuse_armature,
                                    armature_name=cfg.armature_name, action_name=f"MANIKIN_solve_{take}",
                                    create_trackers=cfg.create_trackers, body_mesh=cfg.body_mesh,
                                    set_scene_range=cfg.set_scene_range, key_pose=not cfg.live_rig)
