@@ -114,7 +114,7 @@ def _layout_tip(name, layout):
     marker names (its joint centres and the two pelvis midpoints are computed from them)."""
     from ..core.keypoint_layouts import MARKER_LAYOUTS
     if name in MARKER_LAYOUTS:
-        return "Marker names (C3D / TRC); the joint centres are computed from the markers"
+        return "Marker names (TRC); the joint centres are computed from the markers"
     return f"{len(layout.points)} points"
 
 
