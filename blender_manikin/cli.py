@@ -123,6 +123,7 @@ if __package__:   # run as a plain script (blender --python cli.py), _script_mai
 
 def _add_solve_options(s):
     """The options every solve takes (the panel's settings)."""
+    from .core.skeleton import LENGTH_RANGES
     s.add_argument("--axes", choices=("openxr", "unity", "blender"), default=None,
                    help="axes of the input (default: the file's metadata; OpenXR for CSV, Unity for .bsor)")
     s.add_argument("--units", choices=("m", "cm", "mm"), default=None,
@@ -135,12 +136,13 @@ def _add_solve_options(s):
                    help="trackers: calibrate on the T-pose of this recording (the session's calibration take: "
                         "the same performer and trackers) instead of the input's own; --calibration-time is "
                         "then a time in it")
-    s.add_argument("--height", type=float, default=None, metavar="METRES", help="performer's stature")
-    s.add_argument("--arm-span", type=float, default=None, metavar="METRES",
-                   help="wrist-to-wrist distance in a T-pose")
-    s.add_argument("--sole", type=float, default=None, metavar="METRES",
+    s.add_argument("--height", type=_metres_arg(*LENGTH_RANGES["height"]), default=None, metavar="METRES",
+                   help="performer's stature (0.5-2.8)")
+    s.add_argument("--arm-span", type=_metres_arg(*LENGTH_RANGES["arm_span"]), default=None, metavar="METRES",
+                   help="wrist-to-wrist distance in a T-pose (0-3; 0: from proportions)")
+    s.add_argument("--sole", type=_metres_arg(*LENGTH_RANGES["sole"]), default=None, metavar="METRES",
                    help="thickness of the performer's shoe soles: the feet stand this far above the floor "
-                        "(default 0.03; 0 barefoot)")
+                        "(0-0.2, default 0.03; 0 barefoot)")
     s.add_argument("--floor", type=_floor_arg, default=0.0, metavar="METRES|height",
                    help="trackers: where the recording's floor is, metres on its vertical axis (default 0; a "
                         "head standing within 0.5 m of 0, an origin at eye level, gets its floor under the "
@@ -257,6 +259,22 @@ def append_character(spec):
         else:
             bpy.data.objects.remove(o)
     return arm
+
+
+def _metres_arg(lo, hi):
+    """argparse type of a length option: metres from ``lo`` to ``hi``; a value over ``hi`` that
+    would fit in centimetres is refused with the metres it means (``--height 175``: 1.75)."""
+    def parse(text):
+        try:
+            v = float(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{text!r} is not a number of metres") from None
+        if not lo <= v <= hi:
+            hint = f" (metres: {v / 100:g} for {v:g} cm?)" if lo <= v / 100 <= hi and v > hi else ""
+            raise argparse.ArgumentTypeError(f"{text!r}: expected metres from {lo:g} to {hi:g}{hint}")
+        return v
+    parse.__name__ = "metres"
+    return parse
 
 
 def _seconds_arg(text):

@@ -34,6 +34,26 @@ def test_every_option_has_help(name):
     assert missing == []
 
 
+@pytest.mark.parametrize("option, value, said", [
+    ("--height", "-2", "expected metres from 0.5 to 2.8"),
+    ("--height", "175", "(metres: 1.75 for 175 cm?)"),
+    ("--height", "nan", "expected metres from 0.5 to 2.8"),
+    ("--arm-span", "-0.1", "expected metres from 0 to 3"),
+    ("--sole", "3", "expected metres from 0 to 0.2"),
+    ("--height", "tall", "is not a number of metres"),
+])
+@pytest.mark.parametrize("command", ["solve", "convert"])
+def test_a_length_out_of_range_is_a_usage_error(command, option, value, said, capsys):
+    """--height -2 failed each file ("calibration by measurements needs a height") and 175 (typed
+    in centimetres) each file too ("stature 175.0 m is not a plausible human height"); refused up
+    front now, in the panel's ranges."""
+    with pytest.raises(SystemExit) as exc:
+        cli.build_parser().parse_args([command, "a.csv", "--out", "o", option, value])
+    assert exc.value.code == 2
+    assert said in capsys.readouterr().err
+    assert cli.build_parser().parse_args([command, "a.csv", "--out", "o", "--height", "1.62"]).height == 1.62
+
+
 def test_infinite_fps_is_a_usage_error(tmp_path, capsys):
     code = cli.main(["solve", EXAMPLE, "--out", str(tmp_path / "o"), "--format", "json", "--fps", "inf"])
     assert code == 2

@@ -8,6 +8,7 @@ from bpy.props import (BoolProperty, CollectionProperty, EnumProperty, FloatProp
 from bpy.types import PropertyGroup
 
 from ..core import formats
+from ..core.skeleton import LENGTH_RANGES
 from ..core.solve import FLOOR_FROM_HEIGHT
 from ..core.devices import DEVICES, LABELS as DEVICE_LABELS  # noqa: F401  (labels: the panel)
 from .units import length_property
@@ -244,18 +245,21 @@ class MANIKIN_Settings(PropertyGroup):
     tpose_time: FloatProperty(name="T-Pose Time", default=0.0, min=0.0, unit='TIME_ABSOLUTE',
                               description="Seconds after the first tracker sample")
     # lengths are kept in metres (the *_m properties) and shown in the scene's unit (units.py)
-    height_m: FloatProperty(default=1.75, min=0.5, max=2.8, options={'HIDDEN'})
-    height: length_property("height_m", "Height", "Performer's stature (barefoot)", 0.5, 2.8)
+    height_m: FloatProperty(default=1.75, min=LENGTH_RANGES["height"][0], max=LENGTH_RANGES["height"][1],
+                            options={'HIDDEN'})
+    height: length_property("height_m", "Height", "Performer's stature (barefoot)", *LENGTH_RANGES["height"])
     use_height: BoolProperty(name="Override Height", default=False,
                              description="Use the typed height instead of the measured stature")
-    arm_span_m: FloatProperty(default=0.0, min=0.0, max=3.0, options={'HIDDEN'})
+    arm_span_m: FloatProperty(default=0.0, min=LENGTH_RANGES["arm_span"][0], max=LENGTH_RANGES["arm_span"][1],
+                              options={'HIDDEN'})
     arm_span: length_property("arm_span_m", "Arm Span",
-                              "Wrist-to-wrist distance in a T-pose (0 = from proportions)", 0.0, 3.0)
-    sole_m: FloatProperty(default=0.03, min=0.0, max=0.2, options={'HIDDEN'})
+                              "Wrist-to-wrist distance in a T-pose (0 = from proportions)", *LENGTH_RANGES["arm_span"])
+    sole_m: FloatProperty(default=0.03, min=LENGTH_RANGES["sole"][0], max=LENGTH_RANGES["sole"][1],
+                          options={'HIDDEN'})
     sole: length_property("sole_m", "Shoe Soles",
                           "Thickness of the performer's shoe soles: the feet stand this far above the "
                           "floor, and the height measured from the headset is the barefoot one (0 = barefoot)",
-                          0.0, 0.2)
+                          *LENGTH_RANGES["sole"])
     floor_mode: EnumProperty(
         name="Floor", default='ZERO',
         items=[('ZERO', "At Zero", "The recording's height 0 is the floor (room-scale VR: OpenXR stage, "

@@ -90,6 +90,11 @@ NUM_JOINTS = 22
 J = {name: i for i, name in enumerate(JOINT_NAMES)}
 
 
+#: the ranges the performer's lengths are taken in, metres: by the panel (Height, Arm Span: 0 from
+#: the proportions, Shoe Soles) and the command line (--height, --arm-span, --sole)
+LENGTH_RANGES = {"height": (0.5, 2.8), "arm_span": (0.0, 3.0), "sole": (0.0, 0.2)}
+
+
 def mirror_name(name: str) -> str:
     """The left/right mirror image of a joint or device name ("left_knee" -> "right_knee")."""
     return name.replace("left_", "\0").replace("right_", "left_").replace("\0", "right_")
@@ -259,7 +264,7 @@ def make_body(measurements: BodyMeasurements | float | None = None) -> Body:
         if not np.isfinite(v) or v <= 0:
             raise ValueError(f"{name} must be a positive length in metres, got {v!r}")
     sole = m.sole_height
-    if not np.isfinite(sole) or not 0.0 <= sole <= 0.2:
+    if not np.isfinite(sole) or not LENGTH_RANGES["sole"][0] <= sole <= LENGTH_RANGES["sole"][1]:
         raise ValueError(f"sole must be 0-0.2 m (the shoe soles' thickness; 0 barefoot), got {m.sole!r}")
 
     ankle_h = P["ankle_height"]
