@@ -222,3 +222,17 @@ def test_a_retarget_that_fails_gives_the_character_its_action_and_slot_back(addo
     if slot is not None:
         assert len(mine.slots) == 1
     assert len(bpy.data.actions) == n_actions
+
+
+def test_a_narrowed_swivel_slider_range_survives_a_re_solve(addon, recording):  # noqa: F811
+    """The animator narrowed a swivel slider (Edit Property: soft range ±90°, 1 decimal) on the
+    solved armature; solving again onto it kept resetting the range to ±180°."""
+    arm = _solve_once(recording)
+    name = writer.SWIVEL_PROPS["left_arm"]
+    arm.id_properties_ui(name).update(soft_min=-1.5708, soft_max=1.5708, precision=1)
+    assert _solve_once(recording) == arm
+    ui = arm.id_properties_ui(name).as_dict()
+    assert ui["soft_min"] == pytest.approx(-1.5708) and ui["soft_max"] == pytest.approx(1.5708)
+    assert ui["precision"] == 1 and ui["subtype"] == 'ANGLE'
+    other = arm.id_properties_ui(writer.SWIVEL_PROPS["right_arm"]).as_dict()
+    assert other["soft_max"] == pytest.approx(np.pi)                  # the others as made

@@ -103,25 +103,20 @@ def ensure_swivel_properties(obj):
     """Create (if missing) the four swivel custom properties on ``obj`` with their UI data.
 
     Float, radians, subtype ANGLE, soft range [-π, π], hard range
-    ±``SWIVEL_HARD_LIMIT``.  Existing values are kept.
+    ±``SWIVEL_HARD_LIMIT``.  Existing properties are kept as they are, value and UI data (a slider
+    range the user narrowed survives a re-solve onto the armature).
     """
     for limb, name in SWIVEL_PROPS.items():
-        if name not in obj.keys():
-            obj[name] = 0.0
+        if name in obj.keys():
+            continue
+        obj[name] = 0.0
         desc = (f"MANIKIN swivel angle of the {limb.replace('_', ' ')} (radians): rotation of the "
                 f"{'elbow' if 'arm' in limb else 'knee'} about the "
                 f"{'shoulder-wrist' if 'arm' in limb else 'hip-ankle'} axis; 0 = "
                 f"{'elbow out, back and down' if 'arm' in limb else 'knee forward'}")
-        try:
-            ui = obj.id_properties_ui(name)
-            ui.update(subtype='ANGLE', min=-SWIVEL_HARD_LIMIT, max=SWIVEL_HARD_LIMIT,
-                      soft_min=-math.pi, soft_max=math.pi, default=0.0, precision=3,
-                      description=desc)
-        except (AttributeError, TypeError):      # very old API: rna_idprop_ui
-            from rna_prop_ui import rna_idprop_ui_create
-            rna_idprop_ui_create(obj, name, default=0.0, min=-SWIVEL_HARD_LIMIT,
-                                 max=SWIVEL_HARD_LIMIT, soft_min=-math.pi, soft_max=math.pi,
-                                 description=desc, subtype='ANGLE')
+        obj.id_properties_ui(name).update(subtype='ANGLE', min=-SWIVEL_HARD_LIMIT, max=SWIVEL_HARD_LIMIT,
+                                          soft_min=-math.pi, soft_max=math.pi, default=0.0, precision=3,
+                                          description=desc)
 
 
 def ensure_contact_properties(obj):
