@@ -286,3 +286,29 @@ def test_one_object_mapped_to_two_devices_is_refused():
                        match="left_hand and right_hand: both are mapped to object 'LeftController'"):
         scene_trackers.sample_sources(sc, {"head": (head, ""), "left_hand": (obj, ""), "right_hand": (obj, "")},
                                       1, N)
+
+
+@pytest.mark.parametrize("how", ["own scale", "parent's scale", "keyed scale"])
+def test_a_mirrored_source_is_refused(how):
+    """A reflection is no rotation: the F-curve reading gave the object's own rotation and the
+    scene stepping the nearest rotation, one axis flipped (they disagreed by up to 180°).  A
+    source mirrored on any frame is refused, naming the frame."""
+    fresh_scene()
+    sc = bpy.context.scene
+    obj = _keyed_empty("HMD", 'XYZ', seed=15)
+    if how == "own scale":
+        obj.scale = (1.0, 1.0, -1.0)
+        at = 1
+    elif how == "parent's scale":
+        parent = bpy.data.objects.new("Rig", None)
+        sc.collection.objects.link(parent)
+        parent.scale = (-1.0, 1.0, 1.0)
+        obj.parent = parent
+        at = 1
+    else:
+        keying.key_channels(obj.animation_data.action, obj, [1, 9, 10],
+                            [("scale", 0, "", [1.0, 1.0, -1.0])], interpolation='CONSTANT')
+        at = 10
+    with pytest.raises(scene_trackers.SceneSourceError,
+                       match=f"head: object 'HMD' is mirrored .* at frame {at}: a tracker's orientation is a rotation"):
+        scene_trackers.sample_sources(sc, {"head": (obj, "")}, 1, N)

@@ -63,8 +63,11 @@ def _is_plain_keyed(obj):
     slotted = keying.is_slotted(ad.action)
     if slotted and getattr(ad, "action_slot", None) is None:     # Blender animates nothing then
         return False
-    if any(fc.data_path.startswith("delta_") for fc in keying.action_fcurves(ad.action, obj if slotted else None)):
-        return False                     # keyed delta transforms move it too
+    if any(fc.data_path.startswith("delta_") or fc.data_path == "scale"
+           for fc in keying.action_fcurves(ad.action, obj if slotted else None)):
+        return False                     # keyed delta transforms move it too; a keyed scale may mirror it
+    if any(v < 0 for v in obj.scale) or any(v < 0 for v in obj.delta_scale):
+        return False                     # mirrored: read as drawn, and refused (sample_sources)
     if getattr(ad, "action_influence", 1.0) != 1.0 or getattr(ad, "action_blend_type", "REPLACE") != "REPLACE":
         return False
     if any(abs(v) > 0 for v in obj.delta_location) or any(abs(v) > 0 for v in obj.delta_rotation_euler):
@@ -227,6 +230,13 @@ def sample_sources(scene, sources, frame_start, frame_end, depsgraph=None, progr
         raise SceneSourceError("no scene objects are mapped to devices")
 
     pos, rotm, method, valid = _sample(scene, resolved, frames, depsgraph, progress, force_frame_set)
+    for dev, (obj, bone) in resolved.items():
+        mirrored = np.nonzero(valid[dev] & (np.linalg.det(rotm[dev]) < 0))[0]
+        if mirrored.size:                # a reflection is no rotation: no device is drawn so
+            raise SceneSourceError(
+                f"{dev}: {'bone ' + repr(bone) + ' of ' if bone else ''}object {obj.name!r} is mirrored (a negative "
+                f"scale, its own or a parent's) at frame {int(frames[mirrored[0]])}: a tracker's orientation is a "
+                f"rotation; unmirror it (or apply the scale, Ctrl+A)")
     times = frames / fps
     metres = metres_per_unit(scene)          # scene units → the core's metres
     streams = {}
