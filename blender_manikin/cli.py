@@ -702,6 +702,7 @@ def main(argv=None):
                   "(json and bvh are written without it)", file=sys.stderr)
             return 2
     from .core.io_keypoints import is_keypoint_input
+    from .core.recording import missing_file
     from .core.solve import error_message
     convert = convert_one if needs_blender else convert_one_core
     from .core import output_guard
@@ -741,7 +742,7 @@ def main(argv=None):
             for path, stem, person, keypoints in jobs:
                 try:
                     if not os.path.isfile(path) and not is_keypoint_input(path):
-                        raise FileNotFoundError("no such file")
+                        raise FileNotFoundError(missing_file(path))
                     # nothing the user made or changed is replaced (core/output_guard.py)
                     dsts = [os.path.join(args.out, stem + _formats.WRITERS[f].extension) for f in formats]
                     output_guard.check_free(dsts, getattr(args, "overwrite", False))

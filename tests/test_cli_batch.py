@@ -149,3 +149,18 @@ def test_sub_folders_solve_does_not_search_are_named(tmp_path, capsys):
     err = capsys.readouterr().err
     assert err == (f"blender_manikin: {takes}: 1 sub-folder(s) not searched (day2): give them as inputs too, "
                    "or use convert, which searches sub-folders\n")
+
+
+def test_a_link_that_leads_nowhere_is_said_so(tmp_path, capsys):
+    """A symbolic link that loops, or whose target is gone, was reported as 'no such file' while
+    the user could see it in the folder."""
+    os.symlink(tmp_path / "b.csv", tmp_path / "a.csv")
+    os.symlink(tmp_path / "a.csv", tmp_path / "b.csv")
+    os.symlink(tmp_path / "moved away.csv", tmp_path / "c.csv")
+    code = cli.main(["solve", str(tmp_path / "a.csv"), str(tmp_path / "c.csv"), str(tmp_path / "d.csv"),
+                     "--out", str(tmp_path / "o"), "--format", "json"])
+    err = capsys.readouterr().err
+    assert code == 1
+    assert "a.csv: a symbolic link that loops" in err
+    assert "c.csv: a symbolic link to " in err and "moved away.csv', which does not exist" in err
+    assert "d.csv: no such file" in err

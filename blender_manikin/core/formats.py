@@ -15,7 +15,7 @@ from typing import Callable, Optional
 
 import numpy as np
 
-from .recording import Recording, RecordingError, decode_head, not_data
+from .recording import Recording, RecordingError, decode_head, missing_file, not_data
 
 
 @dataclass(frozen=True)
@@ -125,7 +125,7 @@ def load_recording(path, axes=None, units=None, layout=None, rate=None) -> Recor
     :class:`RecordingError` naming the file, line / byte offset and problem."""
     path = os.fspath(path)
     if not os.path.isfile(path):
-        raise RecordingError("no such file", path=path)
+        raise RecordingError(missing_file(path), path=path)
     fmt = reader_for(path)
     if fmt.kind != "trackers":
         raise RecordingError(f"{fmt.description}, not a tracker recording: solve it as keypoints "

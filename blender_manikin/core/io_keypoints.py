@@ -68,7 +68,8 @@ from . import marker_sets
 from . import subject_params as sp
 from . import rotations as rot
 from .plain import shown
-from .recording import RecordingError, UNITS, canonical_units, decode_head, load_json_file, read_text, time_unit_of_step
+from .recording import (RecordingError, UNITS, canonical_units, decode_head, load_json_file, missing_file, read_text,
+                        time_unit_of_step)
 
 #: points with a confidence below this are treated as missing
 MIN_CONFIDENCE = 0.3
@@ -327,7 +328,7 @@ def _load_input(path, rate, mapping, subject_params, person_axis, layout):
     else:
         raw["src"] = p
         if not os.path.exists(p):
-            raise RecordingError("no such file", path=p)
+            raise RecordingError(missing_file(p), path=p)
         ext = os.path.splitext(p)[1].lower()
         if ext == ".npy":
             raw["X"] = _load_npy(p)

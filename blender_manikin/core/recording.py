@@ -39,6 +39,7 @@ continuity and deliberate sign flips survive the conversion).
 """
 from __future__ import annotations
 
+import errno
 import os
 from dataclasses import dataclass, field
 
@@ -96,6 +97,21 @@ class RecordingError(ValueError):
             where.append(f"byte offset {offset}")
         msg = (", ".join(where) + ": " + self.problem) if where else self.problem
         super().__init__(msg)
+
+
+def missing_file(path) -> str:
+    """Why ``path`` is no file to read, in words for an error: ``"no such file"``, a folder, or a
+    symbolic link that leads nowhere (its target gone, or links that loop)."""
+    if os.path.islink(path):
+        try:
+            os.stat(path)
+        except OSError as exc:
+            if exc.errno == errno.ELOOP:
+                return "a symbolic link that loops (it leads back to itself through other links)"
+            return f"a symbolic link to {os.readlink(path)!r}, which does not exist"
+    if os.path.isdir(path):
+        return "a folder, not a file"
+    return "no such file"
 
 
 def read_file_bytes(path) -> bytes:
