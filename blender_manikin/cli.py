@@ -8,7 +8,7 @@ Two ways to run it (the same code)::
 
 INPUT is a recording (any format of :mod:`blender_manikin.core.formats`: ``.csv`` native
 or wide layout, ``.bsor`` Beat Saber replay, ``.xror`` XROR), 3D keypoints (a FreeMoCap
-recording folder, ``.npy`` / ``.npz`` arrays, a keypoint CSV; solved by HybrIK IK, see
+recording folder, ``.npy`` / ``.npz`` arrays, a keypoint CSV, a ``.trc`` / ``.c3d`` of markers; solved by HybrIK IK, see
 :mod:`blender_manikin.core.keypoint_solve`) or a folder (its recordings, sorted).  For every
 input the scene is reset to an empty factory scene, the recording is solved and
 ``DIR/STEM.<ext>`` is written for each format (inputs that share a name, ``take.csv`` in two
@@ -72,8 +72,8 @@ Options of ``solve`` (they mirror the panel; ``--help`` has them all):
 --keypoint-floor feet|keep    keypoints: feet (default) stands the body on the floor
                               found under the feet, at z = 0; keep leaves the heights as given
 --subject-params FILE|none    keypoints: a Vicon subject parameter file (.mp / .vsk) for a
-                              Plug-in Gait .trc: knee, ankle, elbow widths and height
-                              (default: <Subject>.mp / .vsk beside the .trc, or the folder's
+                              Plug-in Gait .trc / .c3d: knee, ankle, elbow widths, height
+                              (default: <Subject>.mp / .vsk beside the file, or the folder's
                               only .mp; none: use none)
 --person all|N|LABEL          keypoints with several people: all (default: each to its
                               own outputs, <name>_p<label>) or one person's label or index
@@ -203,10 +203,10 @@ def _add_solve_options(s):
                         "on its --sole; keep leaves the joints at the heights given (a source whose floor "
                         "is the scene's)")
     s.add_argument("--subject-params", default=None, metavar="FILE",
-                   help="keypoints: a Vicon subject parameter file (.mp or .vsk) for a Plug-in Gait .trc: the "
+                   help="keypoints: a Vicon subject parameter file (.mp or .vsk) for a Plug-in Gait .trc / .c3d: the "
                         "subject's knee, ankle and elbow widths place the joint centres from lateral markers, "
                         "its Height is the stature unless --height is given (default: <Subject>.mp / .vsk "
-                        "beside the .trc, or the folder's only .mp; 'none': none)")
+                        "beside the file, or the folder's only .mp; 'none': none)")
     s.add_argument("--person", default="all", metavar="all|N|LABEL",
                    help="keypoints with several people (a 4-D array, a CSV with a person column): all "
                         "(default: each solved to its own outputs, <name>_p<label>) or one person's label "

@@ -115,7 +115,7 @@ def _layout_tip(name, layout):
     marker names (its joint centres and the two pelvis midpoints are computed from them)."""
     from ..core.keypoint_layouts import MARKER_LAYOUTS
     if name in MARKER_LAYOUTS:
-        return "Marker names (TRC); the joint centres are computed from the markers"
+        return "Marker names (TRC / C3D); the joint centres are computed from the markers"
     return f"{len(layout.points)} points"
 
 
@@ -132,13 +132,14 @@ class MANIKIN_Settings(PropertyGroup):
                             for f in formats.READERS.values() if f.kind == "trackers")),
                ('SCENE', "Scene", "Animated objects or bones in this scene, mapped to devices"),
                ('KEYPOINTS', "Keypoints", "3D keypoints from markerless or marker capture: a FreeMoCap "
-                "folder's mediapipe_body_3d_xyz.npy, an .npy / .npz array, a keypoint CSV or an OpenSim .trc "
-                "(Pose2Sim); solved by HybrIK twist-and-swing IK")])
+                "folder's mediapipe_body_3d_xyz.npy, an .npy / .npz array, a keypoint CSV, an OpenSim .trc "
+                "(Pose2Sim) or a marker capture .c3d (Vicon, Qualisys); solved by HybrIK twist-and-swing IK")])
     keypoint_path: StringProperty(
         name="Keypoints", subtype='FILE_PATH', default="",
         description="Keypoint file: FreeMoCap output_data/mediapipe_body_3d_xyz.npy (or the recording "
                     "folder), .npy / .npz array (frames x points x 3), CSV with time and <point>_x/_y/_z, or "
-                    "an OpenSim .trc of markers named as points (Pose2Sim, Sports2D)")
+                    "an OpenSim .trc of markers named as points (Pose2Sim, Sports2D), or a .trc / .c3d of anatomical "
+                    "markers (Plug-in Gait, OpenCap; C3D from Vicon, Qualisys, OptiTrack, Cortex)")
     keypoint_from: EnumProperty(name="From", default='FILE',
                                 items=[('FILE', "File", "A keypoint file or FreeMoCap folder"),
                                        ('OBJECTS', "Scene Objects", "Animated objects (empties) named after "
@@ -175,8 +176,8 @@ class MANIKIN_Settings(PropertyGroup):
     keypoint_up: EnumProperty(name="Up Axis", items=_UP_ITEMS, default='AUTO')
     keypoint_subject_file: StringProperty(
         name="Subject File", subtype='FILE_PATH', default="",
-        description="A Vicon subject parameter file (.mp or .vsk) for a Plug-in Gait .trc: the subject's knee, "
-                    "ankle and elbow widths and height (empty: a <Subject>.mp / .vsk beside the .trc, or the "
+        description="A Vicon subject parameter file (.mp or .vsk) for a Plug-in Gait .trc / .c3d: the subject's "
+                    "knee, ankle and elbow widths and height (empty: a <Subject>.mp / .vsk beside the file, or the "
                     "folder's only .mp, is used when there is one)")
     keypoint_person: StringProperty(
         name="Person", default="all",

@@ -542,7 +542,7 @@ def may_hold_people(config: SolveConfig) -> bool:
     """True when ``config`` solves a keypoint file (``source`` KEYPOINTS, a ``filepath``, not read
     yet) with Person ``"all"`` that may hold several people: to be read to list them
     (:func:`person_configs`).  False for a file that surely holds one
-    (:func:`core.io_keypoints.one_person_file`: a 3-D ``.npy`` by its header, a ``.trc``, a CSV
+    (:func:`core.io_keypoints.one_person_file`: a 3-D ``.npy`` by its header, a ``.trc`` / ``.c3d``, a CSV
     without a person column; a moment, whatever the file's size) and for a chosen person: the
     solve reads those itself."""
     from ..core.io_keypoints import one_person_file

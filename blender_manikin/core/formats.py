@@ -236,7 +236,8 @@ def _read_keypoints(path, axes=None, units=None):
 
 
 # 3D keypoints; keypoint CSVs and FreeMoCap folders are recognised by io_keypoints.is_keypoint_input
-register_reader(ReaderFormat("keypoints", "3D keypoints", (".npy", ".npz", ".trc"), _read_keypoints, kind="keypoints"))
+register_reader(ReaderFormat("keypoints", "3D keypoints", (".npy", ".npz", ".trc", ".c3d"), _read_keypoints,
+                             kind="keypoints"))
 
 
 def _read_unity_anim(path, axes=None, units=None):

@@ -24,7 +24,11 @@ Inputs:
   (OpenCap's, Vicon Plug-in Gait's) become joint centres (:mod:`.marker_sets`); for Plug-in Gait a
   Vicon subject parameter file (``.mp`` / ``.vsk``, :mod:`.subject_params`) given, or found
   beside the TRC (:func:`.subject_params.find_subject_params`), gives the subject's joint widths
-  and stature (``metadata["subject_height"]``, metres).
+  and stature (``metadata["subject_height"]``, metres).  Markers of one ``Subject:`` prefix only
+  (several subjects in one file are refused, naming them);
+* ``.c3d`` (Vicon, Qualisys, OptiTrack / Motive, Cortex marker capture, :mod:`.io_c3d`): its
+  ``POINT:LABELS`` markers read as a TRC's (the same step, :func:`_markers_to_points`), units
+  from ``POINT:UNITS``, times from ``POINT:RATE`` and the first frame.
 
 Several people in one file (:func:`read_keypoint_people`): a 4-D ``.npy`` / ``.npz``,
 ``(P, T, K, 3|4)`` or ``(T, P, K, 3|4)`` (the people axis: the option, the ``.npz``'s
@@ -122,13 +126,13 @@ def freemocap_body_file(path):
 
 
 def is_keypoint_input(path) -> bool:
-    """True for what :func:`read_keypoints` reads: a FreeMoCap folder, a ``.npy`` / ``.npz`` / ``.trc``,
+    """True for what :func:`read_keypoints` reads: a FreeMoCap folder, a ``.npy`` / ``.npz`` / ``.trc`` / ``.c3d``,
     or a CSV whose columns are ``<point>_x/_y/_z`` of a keypoint layout (no tracker devices)."""
     p = os.fspath(path)
     if freemocap_body_file(p):
         return True
     ext = os.path.splitext(p)[1].lower()
-    if ext in (".npy", ".npz", ".trc"):
+    if ext in (".npy", ".npz", ".trc", ".c3d"):
         return os.path.isfile(p)
     if ext == ".csv" and os.path.isfile(p):
         try:
@@ -143,7 +147,7 @@ def is_keypoint_input(path) -> bool:
 def one_person_file(path) -> bool:
     """True when the keypoint file (or FreeMoCap folder) at ``path`` surely holds one person, told
     without reading its samples (a large file lists its people in a moment): a ``.npy`` whose
-    array is not 4-D (its shape from the header, ``np.load(mmap_mode="r")``), a ``.trc``, a CSV
+    array is not 4-D (its shape from the header, ``np.load(mmap_mode="r")``), a ``.trc`` / ``.c3d``, a CSV
     whose header row (the first row neither blank nor a ``#`` comment, in the first 64 KiB) has
     no person column (:data:`PERSON_COLUMNS`).  False when it may hold several (a 4-D array, a
     person column, a ``.npz``) or cannot be told (unreadable, missing): read it to know."""
@@ -153,7 +157,7 @@ def one_person_file(path) -> bool:
     try:
         if ext == ".npy":
             return np.ndim(np.load(p, mmap_mode="r", allow_pickle=False)) != 4
-        if ext == ".trc":
+        if ext in (".trc", ".c3d"):             # one subject a file (several are refused)
             return os.path.isfile(p)
         if ext == ".csv":
             with open(p, "rb") as f:
@@ -181,7 +185,7 @@ def read_keypoints(path, layout=None, units=None, up=None, rate=None, mapping=No
     :data:`DEFAULT_RATE`, said in the report).  mapping: a mapping file's path or dict for a CSV.
     handed: ``right``/``left`` (default: told from the face or feet).  subject_params: a TRC's
     Vicon subject parameter file (``.mp`` / ``.vsk``), ``"none"`` for none, or None / ``"auto"``
-    (default): the one found beside a Plug-in Gait TRC (:func:`.subject_params.find_subject_params`).
+    (default): the one found beside a Plug-in Gait TRC / C3D (:func:`.subject_params.find_subject_params`).
     person: in a file with several people, the one to read (a label or a 0-based index,
     :func:`read_keypoint_people`); None or ``"all"`` reads a one-person file (a CSV whose person
     column holds one person too) and refuses a file with several, naming them.  person_axis: a
@@ -345,13 +349,14 @@ def _load_input(path, rate, mapping, subject_params, person_axis, layout):
                 raw["decided"].append(f"{len(labels)} {'person' if len(labels) == 1 else 'people'} "
                                       "(the CSV's person column)")
                 return raw
-        elif ext == ".trc":
-            X, time, file_layout, rate, trc_units, rules, subject = _load_trc(p, rate, subject_params)
+        elif ext in (".trc", ".c3d"):
+            load = _load_trc if ext == ".trc" else _load_c3d
+            X, time, file_layout, rate, trc_units, rules, subject = load(p, rate, subject_params)
             raw.update(X=X, time=time, file_layout=file_layout, rate=rate, units=trc_units, subject=subject)
             raw["decided"] += [rules] if rules else []
         else:
-            raise RecordingError(f"not a keypoint file: expected a FreeMoCap folder, .npy, .npz, .csv or "
-                                 f".trc, got {ext or '(no extension)'!r}", path=p)
+            raise RecordingError(f"not a keypoint file: expected a FreeMoCap folder, .npy, .npz, .csv, "
+                                 f".trc or .c3d, got {ext or '(no extension)'!r}", path=p)
     if np.ndim(raw["X"]) == 4:
         K = raw["X"].shape[2]
         n_points = [len(kl.LAYOUTS[kl.canonical_layout(layout)].points)] if layout is not None else None
@@ -841,10 +846,8 @@ def trc_point(marker) -> str:
 
 def _load_trc(path, rate, subject_params=None):
     """``(X (T, K, 3), time (T,) s or None, layout, rate, units, rules, subject)`` of an OpenSim
-    ``.trc`` file (``rules``: how anatomical markers became joint centres,
-    :func:`.marker_sets.rules_used`, and the subject parameter file used, or None; ``subject``: the
-    :class:`.subject_params.SubjectParams` used, or None).  subject_params: as
-    :func:`read_keypoints` takes it."""
+    ``.trc`` file: its table read here, its markers made a layout's points by
+    :func:`_markers_to_points`.  subject_params: as :func:`read_keypoints` takes it."""
     lines = read_text(path).splitlines()
 
     def cells(line):
@@ -864,26 +867,7 @@ def _load_trc(path, rate, subject_params=None):
         file_rate = float(header.get("DataRate", "nan"))
     except ValueError:
         raise RecordingError(f"DataRate {shown(header.get('DataRate'))} is not a number", path=path, line=3) from None
-    points = [trc_point(n) for n in names]
-    missing = [p for p in TRC_NEEDED if p not in points]
-    # anatomical markers (OpenCap's r.ASIS_study ..., Plug-in Gait's LASI ...): their joint centres
-    # (also where the file has video keypoints too, as OpenCap's have: the markers place the hips
-    # better than a detector's hip points)
-    marker_set, set_missing = marker_sets.detect_marker_set(names)
-    if marker_set is not None and set_missing and missing:
-        raise RecordingError(f"the TRC's markers look like {marker_set}'s but lack "
-                             f"{', '.join(set_missing)} (found: {', '.join(names)})", path=path, line=4)
-    if missing and marker_set is None:
-        raise RecordingError(f"the TRC's markers ({', '.join(names)}) lack {', '.join(missing)}: name them "
-                             "as a layout's points (RHip, LKnee, ...) or use OpenCap's or Plug-in Gait's "
-                             "anatomical markers (r.ASIS_study, LASI, ...)", path=path, line=4)
-    if marker_set is not None and set_missing:
-        marker_set = None                       # video keypoints with an incomplete marker set: the keypoints
-    # the layout whose points the markers cover most; of equals, the one with the fewest points
-    video = list(kl.array_layouts())
-    best = marker_set or max(video, key=lambda n: (sum(p in points for p in kl.LAYOUTS[n].points),
-                                                   -len(kl.LAYOUTS[n].points)))
-    lay = kl.LAYOUTS[best]
+    _marker_layout(names, path, "TRC", dict(line=4))      # names refused before the table is read
     width = 2 + 3 * len(names)
     rows, lines_no = [], []
     for i, line in enumerate(lines[5:], start=6):
@@ -904,7 +888,68 @@ def _load_trc(path, rate, subject_params=None):
                     raise RecordingError(f"{shown(v)} is not a number", path=path, line=i) from None
         raise
     M = data[:, 2:].reshape(len(rows), len(names), 3)
-    X = np.full((len(rows), len(lay.points), 3), np.nan)
+    time, rate = _trc_time(data, rate, file_rate)
+    return _markers_to_points(path, names, M, units, rate, time, subject_params, "TRC", dict(line=4))
+
+
+def _load_c3d(path, rate, subject_params=None):
+    """As :func:`_load_trc`, of a C3D file (:func:`.io_c3d.read_c3d`): its frames' times from
+    ``POINT:RATE`` (the take's first frame at ``(first - 1) / rate`` s), or ``rate`` when given."""
+    from . import io_c3d
+    c = io_c3d.read_c3d(path)
+    where = dict(offset=c.labels_offset)
+    _marker_layout(c.names, path, "C3D", where)
+    time = None if rate else c.time
+    return _markers_to_points(path, c.names, c.points, c.units, rate or c.rate, time, subject_params, "C3D",
+                              where)
+
+
+def _marker_layout(names, path, kind, where):
+    """``(layout name, marker set or None)`` for a marker file's ``names`` (:func:`_markers_to_points`),
+    or :class:`RecordingError` naming the file (``kind``: ``"TRC"`` / ``"C3D"``) and ``where``
+    (``line=`` / ``offset=``): markers of several ``Subject:`` prefixes, too few joints."""
+    subjects = sorted({str(n).strip().rsplit(":", 1)[0].strip() for n in names if ":" in str(n)})
+    if len(subjects) > 1:
+        raise RecordingError(f"the {kind}'s markers belong to {len(subjects)} subjects ({', '.join(subjects)}): "
+                             "one subject a file is read; export each subject's markers on their own",
+                             path=path, **where)
+    points = [trc_point(n) for n in names]
+    missing = [p for p in TRC_NEEDED if p not in points]
+    # anatomical markers (OpenCap's r.ASIS_study ..., Plug-in Gait's LASI ...): their joint centres
+    # (also where the file has video keypoints too, as OpenCap's have: the markers place the hips
+    # better than a detector's hip points)
+    marker_set, set_missing = marker_sets.detect_marker_set(names)
+    if marker_set is not None and set_missing and missing:
+        raise RecordingError(f"the {kind}'s markers look like {marker_set}'s but lack "
+                             f"{', '.join(set_missing)} (found: {', '.join(names)})", path=path, **where)
+    if missing and marker_set is None:
+        raise RecordingError(f"the {kind}'s markers ({', '.join(names)}) lack {', '.join(missing)}: name them "
+                             "as a layout's points (RHip, LKnee, ...) or use OpenCap's or Plug-in Gait's "
+                             "anatomical markers (r.ASIS_study, LASI, ...)", path=path, **where)
+    if marker_set is not None and set_missing:
+        marker_set = None                       # video keypoints with an incomplete marker set: the keypoints
+    # the layout whose points the markers cover most; of equals, the one with the fewest points
+    video = list(kl.array_layouts())
+    best = marker_set or max(video, key=lambda n: (sum(p in points for p in kl.LAYOUTS[n].points),
+                                                   -len(kl.LAYOUTS[n].points)))
+    return best, marker_set
+
+
+def _markers_to_points(path, names, M, units, rate, time, subject_params, kind, where):
+    """The shared step of marker files (TRC, C3D): ``(X (T, K, 3), time, layout, rate, units,
+    rules, subject)`` from the file's marker ``names`` (K0, ``Subject:`` prefixes allowed, one
+    subject) and ``M`` ``(T, K0, 3)`` in the file's ``units`` (``"m"`` / ``"cm"`` / ``"mm"``, or
+    None: told from the ASIS markers' spacing for an anatomical set), NaN where lost; ``time``
+    ``(T,)`` s or None, ``rate`` Hz or None.  Markers named as a layout's points
+    (:func:`trc_point`) fill that layout; anatomical markers become joint centres
+    (:func:`.marker_sets.joint_centres`; ``rules``: how, :func:`.marker_sets.rules_used`, and
+    the subject parameter file used, or None; ``subject``: the
+    :class:`.subject_params.SubjectParams` used, or None).  subject_params: as
+    :func:`read_keypoints` takes it; ``kind`` and ``where`` (``line=`` / ``offset=``) name the
+    file's format and the names' place in messages."""
+    best, marker_set = _marker_layout(names, path, kind, where)
+    lay = kl.LAYOUTS[best]
+    X = np.full((len(M), len(lay.points), 3), np.nan)
     if marker_set is not None:
         if units is None:                       # the ASIS markers' distance (about 0.25 m) tells the unit
             k = [marker_sets.marker_key(n) for n in names]
@@ -917,22 +962,21 @@ def _load_trc(path, rate, subject_params=None):
         elif marker_set == "plugingait" and str(subject_params or "auto").strip().lower() == "auto":
             found = sp.find_subject_params(path, names)
             if found:
-                subject, how = sp.read_subject_params(found), "found beside the TRC"
+                subject, how = sp.read_subject_params(found), f"found beside the {kind}"
         offsets = {} if subject is None else {
             (s, j): subject.offset(s, j) for s in ("left", "right") for j in marker_sets.HALF_WIDTH
             if subject.offset(s, j) is not None}
         _, centres = marker_sets.joint_centres(names, M, UNITS[units], marker_set, offsets=offsets)
         for k, p in enumerate(lay.points):
             X[:, k] = centres[p]
-        time, rate = _trc_time(data, rate, file_rate)
         rules = marker_sets.rules_used(names, marker_set, offsets)
         if subject is not None:
             rules += f"; {subject.summary()} ({how})"
         return X, time, best, rate, units, rules, subject
+    points = [trc_point(n) for n in names]
     for k, p in enumerate(lay.points):
         if p in points:
             X[:, k] = M[:, points.index(p)]
-    time, rate = _trc_time(data, rate, file_rate)
     return X, time, best, rate, units, None, None
 
 

@@ -199,7 +199,7 @@ def read_subject_params(path) -> SubjectParams:
 
 
 def find_subject_params(trc_path, marker_names):
-    """The subject parameter file for a TRC, or None: ``<Subject>.mp`` (else ``.vsk``) beside it
+    """The subject parameter file for a marker file (TRC, C3D), or None: ``<Subject>.mp`` (else ``.vsk``) beside it
     when its marker names carry a ``Subject:`` prefix, else the folder's only ``.mp`` (else its
     only ``.vsk``).  File names match case-insensitively."""
     folder = os.path.dirname(os.path.abspath(os.fspath(trc_path)))

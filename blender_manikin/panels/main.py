@@ -56,7 +56,7 @@ class MANIKIN_PT_solve(_Base, Panel):
                 col.prop(s, "keypoint_layout")
                 col.prop(s, "keypoint_units")
                 col.prop(s, "keypoint_up")
-                if s.keypoint_path.lower().endswith(".trc"):     # Vicon's widths: for marker files only
+                if s.keypoint_path.lower().endswith((".trc", ".c3d")):   # Vicon's widths: marker files only
                     col.prop(s, "keypoint_subject_file")
                 col.prop(s, "keypoint_person")
                 toggled_row(col, s, "use_keypoint_rate", "keypoint_rate", "Rate")
