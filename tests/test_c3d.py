@@ -94,6 +94,23 @@ def test_two_subjects_in_one_file_are_named(tmp_path, motion, ext):
         read_keypoints(path)
 
 
+@pytest.mark.parametrize("ext", [".c3d", ".trc"])
+def test_a_prop_labelled_as_a_subject_is_left_out(tmp_path, motion, ext):
+    """A Vicon session labels a prop as a subject of its own (``Sword:Tip``, ``Sword:Hilt``)
+    beside the performer: the performer's markers are read, as without the prop, and the
+    summary names what was left out (two subjects of markers were refused, one body is not)."""
+    names, pts = _pig(motion, "Bob:")
+    alone = read_keypoints(write_c3d(tmp_path / "alone.c3d", names, to_y_up(pts, 1000.0)) if ext == ".c3d"
+                           else write_marker_trc(tmp_path / "alone.trc", names, pts))
+    sword = pts[:, :2] + np.array([0.3, 0.0, 0.1])
+    names2, pts2 = names + ["Sword:Tip", "Sword:Hilt"], np.concatenate([pts, sword], axis=1)
+    path = (write_c3d(tmp_path / "prop.c3d", names2, to_y_up(pts2, 1000.0)) if ext == ".c3d"
+            else write_marker_trc(tmp_path / "prop.trc", names2, pts2))
+    rec = read_keypoints(path)
+    np.testing.assert_array_equal(rec.points, alone.points)
+    assert "markers of Bob read; Sword left out (not a body)" in rec.metadata["detected"]
+
+
 def _py_c3d_dec_to_ieee(raw):
     """py-c3d's ``DEC_to_IEEE_BYTES`` (EmbodiedCognition/py-c3d, c3d/utils.py), restated: bytes
     2, 3, 0, 1 of each value, the exponent's high byte decremented (exponent - 2), as IEEE."""

@@ -904,15 +904,48 @@ def _load_c3d(path, rate, subject_params=None):
                               where)
 
 
+def _subject_of(name) -> str:
+    """The ``Subject:`` prefix of a marker's name (``"Bob"`` of ``"Bob:LASI"``), ``""`` without one."""
+    name = str(name).strip()
+    return name.rsplit(":", 1)[0].strip() if ":" in name else ""
+
+
+def _is_body(names) -> bool:
+    """Whether marker ``names`` (one subject's) make a body: a whole anatomical marker set, or
+    points named for a layout's limbs (:data:`TRC_NEEDED`)."""
+    marker_set, set_missing = marker_sets.detect_marker_set(names)
+    if marker_set is not None and not set_missing:
+        return True
+    points = {trc_point(n) for n in names}
+    return all(p in points for p in TRC_NEEDED)
+
+
+def _one_subject(names, M, path, kind, where):
+    """``(names, M, note)``: a file's markers narrowed to its one body where they carry several
+    ``Subject:`` prefixes (a prop, a second labelled object: left out, ``note`` names them, else
+    None); markers of two or more bodies are refused, naming them (one subject a file)."""
+    groups = {}
+    for k, n in enumerate(names):
+        groups.setdefault(_subject_of(n), []).append(k)
+    if len([g for g in groups if g]) < 2:
+        return names, M, None
+    bodies = [g for g in groups if _is_body([names[k] for k in groups[g]])]
+    if len(bodies) > 1:
+        said = ", ".join(sorted(g or "markers without a prefix" for g in bodies))
+        raise RecordingError(f"the {kind}'s markers belong to {len(bodies)} subjects ({said}): one subject a "
+                             "file is read; export each subject's markers on their own", path=path, **where)
+    if not bodies:
+        return names, M, None               # the layout step says what is missing
+    keep = groups[bodies[0]]
+    others = sorted(g or "markers without a prefix" for g in groups if g != bodies[0])
+    note = f"markers of {bodies[0] or 'no prefix'} read; {', '.join(others)} left out (not a body)"
+    return [names[k] for k in keep], M[:, keep], note
+
+
 def _marker_layout(names, path, kind, where):
     """``(layout name, marker set or None)`` for a marker file's ``names`` (:func:`_markers_to_points`),
     or :class:`RecordingError` naming the file (``kind``: ``"TRC"`` / ``"C3D"``) and ``where``
     (``line=`` / ``offset=``): markers of several ``Subject:`` prefixes, too few joints."""
-    subjects = sorted({str(n).strip().rsplit(":", 1)[0].strip() for n in names if ":" in str(n)})
-    if len(subjects) > 1:
-        raise RecordingError(f"the {kind}'s markers belong to {len(subjects)} subjects ({', '.join(subjects)}): "
-                             "one subject a file is read; export each subject's markers on their own",
-                             path=path, **where)
     points = [trc_point(n) for n in names]
     missing = [p for p in TRC_NEEDED if p not in points]
     # anatomical markers (OpenCap's r.ASIS_study ..., Plug-in Gait's LASI ...): their joint centres
@@ -947,6 +980,7 @@ def _markers_to_points(path, names, M, units, rate, time, subject_params, kind, 
     :class:`.subject_params.SubjectParams` used, or None).  subject_params: as
     :func:`read_keypoints` takes it; ``kind`` and ``where`` (``line=`` / ``offset=``) name the
     file's format and the names' place in messages."""
+    names, M, left_out = _one_subject(names, M, path, kind, where)
     best, marker_set = _marker_layout(names, path, kind, where)
     lay = kl.LAYOUTS[best]
     X = np.full((len(M), len(lay.points), 3), np.nan)
@@ -972,12 +1006,12 @@ def _markers_to_points(path, names, M, units, rate, time, subject_params, kind, 
         rules = marker_sets.rules_used(names, marker_set, offsets)
         if subject is not None:
             rules += f"; {subject.summary()} ({how})"
-        return X, time, best, rate, units, rules, subject
+        return X, time, best, rate, units, "; ".join(filter(None, (rules, left_out))), subject
     points = [trc_point(n) for n in names]
     for k, p in enumerate(lay.points):
         if p in points:
             X[:, k] = M[:, points.index(p)]
-    return X, time, best, rate, units, None, None
+    return X, time, best, rate, units, left_out, None
 
 
 def _trc_time(data, rate, file_rate):
