@@ -1,4 +1,4 @@
-"""Headless batch conversion: tracker recordings → .blend / .fbx / .bvh / .json.
+"""Headless batch conversion: tracker recordings → .blend / .fbx / .glb / .bvh / .json / .npz.
 
 Two ways to run it (the same code)::
 
@@ -80,20 +80,22 @@ Options of ``solve`` (they mirror the panel; ``--help`` has them all):
 --person-axis 0|1             keypoints: a 4-D array's people axis (default: told)
 --mapping FILE.json           keypoints: a CSV's column names for the layout's points
 --save-layout FILE.json       write the layout detected in the first wide CSV or JSON
---format blend,fbx,bvh,json,npz  one or several (default blend,fbx,json); without blend
-                              and fbx, the numpy core writes them without Blender
+--format blend,fbx,glb,bvh,json,npz  one or several (default blend,fbx,json); without
+                              blend, fbx and glb, the numpy core writes them without Blender
 --bvh-units cm|m              BVH length unit (default cm)
 --fbx-preset blender|unity|unreal  FBX axes, units and bones for the engine that reads it
                               (default blender: as before; see blender/fbx_presets.py)
+                              (glb, glTF binary, has no preset: Y up, metres, deforming
+                              bones, every frame from 0 s; see blender/gltf_export.py)
 --trackers                    also create (and export) keyed tracker empties
 --retarget FILE.blend[:OBJECT]  also put the motion onto this character (appended); blend and
-                              fbx then carry it (--bone-map auto|PRESET|FILE.json,
+                              fbx / glb then carry it (--bone-map auto|PRESET|FILE.json,
                               --root-motion scaled|in_place|as_is, --keep-ends,
                               --live-swivel|--no-live-swivel: swivel rig on the
                               character, default with --keep-ends)
 --no-live-rig                 plain FK keys only (no live swivel rig)
 --no-marks                    no timeline markers where the solve is worth a look (.blend)
---no-mannequin                no mannequin mesh on the solved armature (.blend, .fbx)
+--no-mannequin                no mannequin mesh on the solved armature (.blend, .fbx, .glb)
 
 ``convert INPUT... --out DIR`` converts many recordings on Dask (the same solve options, plus
 ``--scheduler`` and ``--workers``; :mod:`blender_manikin.core.convert`).
@@ -347,7 +349,7 @@ def build_parser():
     s.add_argument("--trackers", action="store_true", help="create keyed tracker empties")
     s.add_argument("--retarget", default=None, metavar="FILE.blend[:OBJECT]",
                    help="also put the motion onto this character (an armature appended from a .blend; "
-                        "OBJECT: its name when the file holds several); blend/fbx then carry it")
+                        "OBJECT: its name when the file holds several); blend/fbx/glb then carry it")
     s.add_argument("--bone-map", default="auto", metavar="PRESET|FILE.json",
                    help="the character's bone map: auto (guessed), a preset (" + ",".join(_bone_map_presets())
                         + ") or a saved map")
@@ -364,7 +366,7 @@ def build_parser():
     s.add_argument("--no-marks", dest="marks", action="store_false",
                    help="no timeline markers ('MANIKIN: ...') where the solve is worth a look")
     s.add_argument("--no-mannequin", dest="mannequin", action="store_false",
-                   help="no mannequin mesh on the solved armature (blend, fbx)")
+                   help="no mannequin mesh on the solved armature (blend, fbx, glb)")
     s.add_argument("--no-live-rig", dest="live_rig", action="store_false",
                    help="write plain FK keys only (default: the live swivel rig, whose elbows and knees "
                         "follow the swivel properties)")
@@ -490,6 +492,13 @@ def reset_scene(fps):
     return scene
 
 
+def export_glb(path, output):
+    """glTF binary of the armature (with its meshes, and the tracker empties), animation baked
+    (:mod:`.blender.gltf_export`)."""
+    from .blender import gltf_export
+    gltf_export.export_glb(path, output.armature, extra_objects=list(output.trackers.values()))
+
+
 def export_fbx(path, output, preset="blender"):
     """FBX of the armature (with its meshes, and the tracker empties), animation baked, with the
     FBX preset ``preset`` (:mod:`.blender.fbx_presets`)."""
@@ -516,8 +525,8 @@ def _stem(path):
 
 def output_tail(formats) -> int:
     """The most characters written after a stem in ``--out`` for ``formats``: the longest
-    extension, and the longer of a writer's own ``.tmp.npz`` and the FBX exporter's temporary
-    folder ``.manikin-fbx-XXXXXXXX/`` (:func:`_write_fbx`)."""
+    extension, and the longer of a writer's own ``.tmp.npz`` and the FBX / glTF exporters'
+    temporary folder ``.manikin-fbx-XXXXXXXX/`` or ``.manikin-glb-XXXXXXXX/`` (:func:`_write_whole`)."""
     ext = max((len(_formats.WRITERS[f].extension) for f in formats if f in _formats.WRITERS), default=0)
     return ext + max(len(".tmp.npz"), len(".manikin-fbx-XXXXXXXX") + 1)
 
@@ -562,7 +571,8 @@ def convert_one(path, out_dir, args, formats, stem=None, keypoints=None):
         export = SimpleNamespace(armature=char, trackers={})          # the character is what is exported
     stem = stem or _stem(path)
     preset = getattr(args, "fbx_preset", "blender")
-    blender_writers = {"fbx": lambda dst: _write_fbx(dst, export, preset),
+    blender_writers = {"fbx": lambda dst: _write_whole(dst, lambda tmp: export_fbx(tmp, export, preset), "fbx"),
+                       "glb": lambda dst: _write_whole(dst, lambda tmp: export_glb(tmp, export), "glb"),
                        "blend": lambda dst: bpy.ops.wm.save_as_mainfile(filepath=dst, copy=True, compress=True)}
     written = []
     for fmt in formats:
@@ -578,13 +588,14 @@ def convert_one(path, out_dir, args, formats, stem=None, keypoints=None):
     return written, job
 
 
-def _write_fbx(dst, output, preset):
-    """:func:`export_fbx` to ``dst`` through a temporary folder beside it, renamed when complete
-    (the exporter writes as it goes: an error or Ctrl-C would leave a truncated file at ``dst``)."""
-    tmp_dir = tempfile.mkdtemp(prefix=".manikin-fbx-", dir=os.path.dirname(dst))
+def _write_whole(dst, write, kind):
+    """``write(path)`` (:func:`export_fbx`, :func:`export_glb`) to ``dst`` through a temporary
+    folder ``.manikin-<kind>-XXXXXXXX`` beside it, renamed when complete (the exporters write as
+    they go: an error or Ctrl-C would leave a truncated file at ``dst``)."""
+    tmp_dir = tempfile.mkdtemp(prefix=f".manikin-{kind}-", dir=os.path.dirname(dst))
     try:
         tmp = os.path.join(tmp_dir, os.path.basename(dst))
-        export_fbx(tmp, output, preset)
+        write(tmp)
         os.replace(tmp, dst)
     finally:
         shutil.rmtree(tmp_dir, ignore_errors=True)

@@ -162,6 +162,16 @@ def test_convert_refuses_blender_formats(tmp_path):
         convert.run([EXAMPLE], str(tmp_path), ["blend"], SolveSettings(), progress=False, log=lambda m: None)
 
 
+def test_convert_refuses_glb_as_a_blender_format(tmp_path, capsys):
+    """``convert --format glb``: glTF binary is written by Blender's exporter, so convert (no
+    Blender) refuses it by name, nothing written.  Before: 'unknown format(s) glb'."""
+    from blender_manikin import cli
+    assert cli.main(["convert", EXAMPLE, "--out", str(tmp_path / "out"), "--format", "glb"]) == 2
+    err = capsys.readouterr().err
+    assert "(without Blender); not glb" in err and "unknown format" not in err
+    assert not os.path.exists(tmp_path / "out")
+
+
 def test_partial_outputs_of_a_killed_run_are_removed_and_nothing_else(tmp_path):
     out = tmp_path / "out"
     out.mkdir()

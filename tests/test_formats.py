@@ -63,7 +63,7 @@ def test_npz_writer(tmp_path):
 
 def test_cli_choices_come_from_the_registry(tmp_path):
     from blender_manikin import cli
-    assert cli.FORMATS == tuple(formats.WRITERS) and set(cli.BLENDER_FORMATS) == {"blend", "fbx"}
+    assert cli.FORMATS == tuple(formats.WRITERS) and set(cli.BLENDER_FORMATS) == {"blend", "fbx", "glb"}
     # a folder gives every file with a reader's extension (shared ones only when they look like
     # recordings: tests/test_json_recording.py), and nothing else
     own = [e for e in formats.input_extensions() if e not in formats.SHARED_EXTENSIONS]

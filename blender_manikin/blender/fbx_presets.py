@@ -1,4 +1,5 @@
-"""FBX export presets for Blender, Unity and Unreal, and the one FBX export of the add-on.
+"""FBX export presets for Blender, Unity and Unreal, and the one FBX export of the add-on (and
+Export Each Take, in FBX or glTF binary: :func:`export_fbx_takes`).
 
 Every FBX the add-on writes (``cli.py solve --format fbx``, the panel's **Export FBX**,
 ``manikin.export_fbx``) goes through :func:`export_fbx` with one of :data:`PRESETS`: plain dicts
@@ -36,6 +37,8 @@ All three write one take (the scene's frame range, every frame, every bone keyed
 bones, the armature as a plain node, Blender's bone axes, no NLA and no other actions.
 """
 from __future__ import annotations
+
+import contextlib
 
 #: one take baked from the active action: the same in every preset
 _ANIMATION = {
@@ -139,16 +142,17 @@ def preset_kwargs(name: str) -> dict:
     return dict(PRESETS[key])
 
 
-def accepted_keywords() -> set:
-    """The keyword names of this Blender's ``bpy.ops.export_scene.fbx`` (enabling the bundled
-    exporter add-on for this session when it is off)."""
+def accepted_keywords(operator: str = "fbx", addon: str = "io_scene_fbx") -> set:
+    """The keyword names of this Blender's ``bpy.ops.export_scene.<operator>`` (enabling the
+    bundled exporter add-on ``addon`` for this session when it is off); the glTF export asks for
+    ``("gltf", "io_scene_gltf2")``."""
     import bpy
     try:
-        rna = bpy.ops.export_scene.fbx.get_rna_type()
+        rna = getattr(bpy.ops.export_scene, operator).get_rna_type()
     except (KeyError, AttributeError):
         import addon_utils
-        addon_utils.enable("io_scene_fbx", default_set=False)
-        rna = bpy.ops.export_scene.fbx.get_rna_type()
+        addon_utils.enable(addon, default_set=False)
+        rna = getattr(bpy.ops.export_scene, operator).get_rna_type()
     return {p.identifier for p in rna.properties if p.identifier != "rna_type"}
 
 
@@ -183,48 +187,68 @@ def export_fbx(filepath, armature, preset: str = DEFAULT, extra_objects=(), cont
     context = context or bpy.context
     key = str(preset or DEFAULT).lower()
     kwargs = exporter_kwargs(key)
+    meshes, extra = export_objects(filepath, armature, extra_objects, context)
+    types = {'ARMATURE'} | ({'MESH'} if meshes else set()) | {o.type for o in extra}
+    view_layer = context.view_layer
+    factor = units_to_centimetres(context.scene)
+    stand_in = key in RIG_IN_CENTIMETRES and abs(factor - 1.0) > 1e-9
+    made, renamed = [], []
+    with selection_kept(context):
+        try:
+            arm, mesh_objs = armature, meshes
+            if stand_in:
+                arm, mesh_objs = _centimetre_stand_in(armature, meshes, factor, context, made, renamed)
+            objs = [arm] + mesh_objs + extra
+            for o in view_layer.objects:
+                o.select_set(o in objs)
+            view_layer.objects.active = arm
+            res = bpy.ops.export_scene.fbx(filepath=str(filepath), use_selection=True, object_types=types,
+                                           **kwargs)
+            if 'FINISHED' not in res:
+                raise RuntimeError(f"FBX export failed ({res})")
+            names = [o.name for o in objs]
+        finally:
+            for o in reversed(made):
+                data = o.data if o.type == 'ARMATURE' else None
+                bpy.data.objects.remove(o)
+                if data is not None and data.users == 0:
+                    bpy.data.armatures.remove(data)
+            for obj, name in renamed:
+                obj.name = name
+            view_layer.update()
+    return {"preset": key, "kwargs": kwargs, "objects": names, "stand_in": stand_in}
+
+
+def export_objects(filepath, armature, extra_objects, context):
+    """Checks shared by the FBX and glTF exports, before anything is written: ``armature`` is an
+    armature (else ``ValueError``), ``filepath`` not too long for Windows
+    (:func:`..core.file_names.check_path`, ``ValueError`` naming it); edit or pose mode left for
+    object mode (edits flushed to the data, as the exporters do).  Returns ``(child meshes of
+    armature, extra_objects less None)``."""
+    import bpy
     if armature is None or armature.type != 'ARMATURE':
         raise ValueError("choose an armature to export")
     from ..core.file_names import check_path
     check_path(bpy.path.abspath(str(filepath)))     # too long for Windows: said, nothing written
-    meshes = [o for o in armature.children if o.type == 'MESH']
-    extra = [o for o in extra_objects if o is not None]
-    types = {'ARMATURE'} | ({'MESH'} if meshes else set()) | {o.type for o in extra}
     if context.mode != 'OBJECT' and bpy.ops.object.mode_set.poll():
-        bpy.ops.object.mode_set(mode='OBJECT')    # edits flushed to the data (the exporter does it too)
+        bpy.ops.object.mode_set(mode='OBJECT')
+    return [o for o in armature.children if o.type == 'MESH'], [o for o in extra_objects if o is not None]
+
+
+@contextlib.contextmanager
+def selection_kept(context):
+    """The view layer's selection and active object as they were when the block is left, however
+    it is left (an export selects what it writes)."""
     view_layer = context.view_layer
     selected = [o for o in view_layer.objects if o.select_get()]
     active = view_layer.objects.active
-    factor = units_to_centimetres(context.scene)
-    stand_in = key in RIG_IN_CENTIMETRES and abs(factor - 1.0) > 1e-9
-    made, renamed = [], []
     try:
-        arm, mesh_objs = armature, meshes
-        if stand_in:
-            arm, mesh_objs = _centimetre_stand_in(armature, meshes, factor, context, made, renamed)
-        objs = [arm] + mesh_objs + extra
-        for o in view_layer.objects:
-            o.select_set(o in objs)
-        view_layer.objects.active = arm
-        res = bpy.ops.export_scene.fbx(filepath=str(filepath), use_selection=True, object_types=types,
-                                       **kwargs)
-        if 'FINISHED' not in res:
-            raise RuntimeError(f"FBX export failed ({res})")
-        names = [o.name for o in objs]
+        yield
     finally:
-        for o in reversed(made):
-            data = o.data if o.type == 'ARMATURE' else None
-            bpy.data.objects.remove(o)
-            if data is not None and data.users == 0:
-                bpy.data.armatures.remove(data)
-        for obj, name in renamed:
-            obj.name = name
-        view_layer.update()
         for o in view_layer.objects:
             if o is not None:
                 o.select_set(o in selected)
         view_layer.objects.active = active
-    return {"preset": key, "kwargs": kwargs, "objects": names, "stand_in": stand_in}
 
 
 def _centimetre_stand_in(armature, meshes, factor, context, made, renamed):
@@ -292,15 +316,18 @@ def take_actions(obj):
 
 
 def export_fbx_takes(directory, armature, preset: str = DEFAULT, context=None, actions=None,
-                     overwrite: bool = False) -> list:
+                     overwrite: bool = False, file_format: str = "fbx") -> list:
     """One FBX per take (:func:`take_actions`, or ``actions``) of the character ``armature`` in ``directory`` (``//``
-    relative to the .blend): ``<armature>_<take>.fbx`` (:func:`..core.file_names.file_stem`: letters of any script
+    relative to the .blend), or with ``file_format="glb"`` one glTF binary per take
+    (:func:`.gltf_export.export_glb`, ``preset`` unused, the animation named after the take's action):
+    ``<armature>_<take>.fbx`` / ``.glb`` (:func:`..core.file_names.file_stem`: letters of any script
     kept; takes whose names would be one file on Windows or macOS, ``Walk`` and ``walk``, ``Walk.001`` and
     ``Walk_001``, made unique with ``_2``...; on Windows cut, with a hash, so the path stays under 260
     characters), each with its action assigned and the scene's frame range set to the
-    action's keys while it is written (:func:`export_fbx`), the armature's NLA tracks not evaluated meanwhile: each
-    file holds its take alone, a bone channel the take does not key at its rest value when the action shown, an NLA
-    strip or another take animates it (it would otherwise carry that animation's last value) and as posed otherwise.
+    action's keys while it is written (:func:`export_fbx`, :func:`.gltf_export.export_glb`), the
+    armature's NLA tracks not evaluated meanwhile: each file holds its take alone, a bone channel the take
+    does not key at its rest value when the action shown, an NLA strip or another take animates it (it would
+    otherwise carry that animation's last value) and as posed otherwise.
     The armature's action, its NLA evaluation, its pose and the frame range are as before afterwards.
     ``ValueError`` when an NLA strip of the armature is in tweak mode (its action cannot be changed), nothing
     written. Returns the paths written.  A file already there is replaced only when it is an unchanged export of an
@@ -314,6 +341,9 @@ def export_fbx_takes(directory, armature, preset: str = DEFAULT, context=None, a
     from . import character_swivel
     context = context or bpy.context
     scene = context.scene
+    fmt = str(file_format or "fbx").lower()
+    if fmt not in ("fbx", "glb"):
+        raise ValueError(f"unknown export format {file_format!r}; formats: fbx, glb")
     if armature is None or armature.type != 'ARMATURE':
         raise ValueError("choose the character (an armature) whose takes to export")
     if character_swivel.has_rig_parts(armature):
@@ -326,8 +356,8 @@ def export_fbx_takes(directory, armature, preset: str = DEFAULT, context=None, a
     stems = unique_stems(file_stem(f"{armature.name}_{t}") for t in takes)   # never one file on Windows, macOS
     folder = bpy.path.abspath(directory)
     # on Windows the whole path stays under 260 characters (a long take name cut, with a hash)
-    stems = [fit_stem(s, f"{armature.name}_{t}", folder, len(".fbx")) for s, t in zip(stems, takes)]
-    paths = [os.path.join(folder, s + ".fbx") for s in stems]
+    stems = [fit_stem(s, f"{armature.name}_{t}", folder, len("." + fmt)) for s, t in zip(stems, takes)]
+    paths = [os.path.join(folder, s + "." + fmt) for s in stems]
     ad = armature.animation_data
     if ad is not None and ad.use_tweak_mode:
         raise ValueError(f"{armature.name!r} has an NLA strip in tweak mode (Tab in the NLA editor), so its "
@@ -350,7 +380,11 @@ def export_fbx_takes(directory, armature, preset: str = DEFAULT, context=None, a
             _rest_channels(armature, animated - _bone_channels(armature, [act]))
             a, b = act.frame_range
             scene.frame_start, scene.frame_end = int(round(a)), max(int(round(b)), int(round(a)))
-            export_fbx(path, armature, preset, context=context)
+            if fmt == "glb":
+                from .gltf_export import export_glb
+                export_glb(path, armature, context=context)
+            else:
+                export_fbx(path, armature, preset, context=context)
             written.append(path)
             output_guard.record([path])
     finally:

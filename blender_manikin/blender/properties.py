@@ -72,6 +72,14 @@ def fbx_preset_items():
     return [(n.upper(), n.title(), DESCRIPTIONS[n]) for n in PRESET_NAMES]
 
 
+def export_format_items():
+    """Enum items of the export formats: FBX (with its presets, :mod:`.fbx_presets`) and glTF
+    binary (:mod:`.gltf_export`)."""
+    return [('FBX', "FBX", "FBX with the preset's axes, units and bones (Blender, Unity, Unreal)"),
+            ('GLB', "glTF Binary", "glTF binary (.glb): Y up, metres, deforming bones, the take sampled at every "
+                                   "frame (Godot, three.js, Babylon.js, Unity with glTFast)")]
+
+
 def _retarget_inputs_changed(self, context):
     """The character, the map choice or the map file changed: refill the bone map list unless it
     holds edits (:func:`.bone_map_list.auto_fill`)."""
@@ -376,6 +384,8 @@ class MANIKIN_Settings(PropertyGroup):
     export_fbx_preset: EnumProperty(name="FBX Preset", items=fbx_preset_items(), default='BLENDER',
                                     description="Axes, units and bones of the exported FBX, for the "
                                                 "application that reads it")
+    export_format: EnumProperty(name="Format", items=export_format_items(), default='FBX',
+                                description="The file Export and Export Each Take write")
     retarget_root: EnumProperty(
         name="Root Motion", default='SCALED',
         items=[('SCALED', "Scaled", "The hips travel as the performer's, scaled by the ratio of leg lengths"),

@@ -4,7 +4,7 @@ Readers turn a file into a :class:`~.recording.Recording` (Blender axes, metres)
 solved :class:`~.pose_result.PoseResult` into a file.  The command line's accepted inputs and
 ``--format`` choices, the panel's texts and the per-format device-offset defaults all come from
 here, so adding a format is one registration (see ``docs/FORMATS.md``).  No bpy: the formats
-Blender writes (``blend``, ``fbx``) are registered here by name with ``needs_blender`` and
+Blender writes (``blend``, ``fbx``, ``glb``) are registered here by name with ``needs_blender`` and
 written by the Blender side.
 """
 from __future__ import annotations
@@ -293,6 +293,7 @@ def _write_npz(path, result, source="", options=None):
 
 register_writer(WriterFormat("blend", "Blender file with the armature and its action", ".blend", needs_blender=True))
 register_writer(WriterFormat("fbx", "FBX of the armature, animation baked", ".fbx", needs_blender=True))
+register_writer(WriterFormat("glb", "glTF binary of the armature, animation baked", ".glb", needs_blender=True))
 register_writer(WriterFormat("bvh", "BVH motion (the 22-joint skeleton)", ".bvh", _write_bvh))
 register_writer(WriterFormat("json", "JSON document (export_json.JSON_SCHEMA)", ".json", _write_json))
 register_writer(WriterFormat("npz", "numpy arrays (positions, rotations, swivel, contacts)", ".npz", _write_npz))

@@ -1,5 +1,7 @@
 """Export the character (or the solved armature) with its animation as FBX for Blender, Unity or
-Unreal (``manikin.export_fbx``; the settings are :mod:`..blender.fbx_presets`)."""
+Unreal (``manikin.export_fbx``; the settings are :mod:`..blender.fbx_presets`) or as glTF binary
+(``manikin.export_gltf``; :mod:`..blender.gltf_export`), and each retargeted take as a file of its
+own in either format (``manikin.export_fbx_takes``)."""
 from __future__ import annotations
 
 import bpy
@@ -7,11 +9,11 @@ from bpy.props import EnumProperty, StringProperty
 from bpy.types import Operator
 from bpy_extras.io_utils import ExportHelper
 
-from ..blender.properties import fbx_preset_items
+from ..blender.properties import export_format_items, fbx_preset_items
 
 
 def export_object(context):
-    """What Export FBX writes: the retarget's character when one is chosen, else the solved
+    """What Export FBX / glTF writes: the retarget's character when one is chosen, else the solved
     MANIKIN armature (the active one, else the last solve's); None when there is neither."""
     from .retarget import _source
     s = getattr(context.scene, "manikin", None)
@@ -23,9 +25,12 @@ def export_object(context):
 
 
 def _preset_from_panel(op, context):
-    """The panel's FBX preset for an export operator whose preset was not given."""
+    """The panel's FBX preset (and format, for Export Each Take) for an export operator whose
+    preset (format) was not given."""
     if not op.properties.is_property_set("preset"):
         op.preset = context.scene.manikin.export_fbx_preset
+    if hasattr(op.properties, "file_format") and not op.properties.is_property_set("file_format"):
+        op.file_format = context.scene.manikin.export_format
 
 
 class MANIKIN_OT_export_fbx(Operator, ExportHelper):
@@ -60,9 +65,35 @@ class MANIKIN_OT_export_fbx(Operator, ExportHelper):
         return {'FINISHED'}
 
 
+class MANIKIN_OT_export_gltf(Operator, ExportHelper):
+    """Export the character (or, with none chosen, the solved armature) and its animation as glTF
+    binary (.glb): Y up, metres, deforming bones, the scene's frame range sampled at every frame"""
+    bl_idname = "manikin.export_gltf"
+    bl_label = "Export glTF"
+    bl_options = {'REGISTER', 'UNDO'}
+    filename_ext = ".glb"
+    filter_glob: StringProperty(default="*.glb", options={'HIDDEN'})
+
+    @classmethod
+    def poll(cls, context):
+        return export_object(context) is not None
+
+    def execute(self, context):
+        from ..blender import gltf_export
+        obj = export_object(context)
+        try:
+            info = gltf_export.export_glb(self.filepath, obj, context=context)
+        except (ValueError, RuntimeError, OSError) as exc:
+            self.report({'ERROR'}, f"export glTF: {exc}")
+            return {'CANCELLED'}
+        self.report({'INFO'}, f"{obj.name} written to {self.filepath} (animation {info['animation']!r}, frames "
+                              f"{context.scene.frame_start}-{context.scene.frame_end})")
+        return {'FINISHED'}
+
+
 class MANIKIN_OT_export_fbx_takes(Operator):
-    """Export each take retargeted onto the character as an FBX of its own (<character>_<take>.fbx),
-    with the chosen preset"""
+    """Export each take retargeted onto the character as a file of its own (<character>_<take>.fbx
+    or .glb), in the chosen format (and FBX preset)"""
     bl_idname = "manikin.export_fbx_takes"
     bl_label = "Export Each Take"
     bl_options = {'REGISTER'}
@@ -70,6 +101,8 @@ class MANIKIN_OT_export_fbx_takes(Operator):
     filter_folder: bpy.props.BoolProperty(default=True, options={'HIDDEN'})
     preset: EnumProperty(name="Preset", items=fbx_preset_items(), default='BLENDER',
                          description="Axes, units and bones of the files, for the application that reads them")
+    file_format: EnumProperty(name="Format", items=export_format_items(), default='FBX',
+                              description="FBX (with the preset) or glTF binary")
     overwrite: bpy.props.BoolProperty(
         name="Replace Files", default=False,
         description="Replace files of these names in the folder even when they are not this add-on's unchanged "
@@ -90,13 +123,13 @@ class MANIKIN_OT_export_fbx_takes(Operator):
         char = context.scene.manikin.retarget_target
         try:
             paths = fbx_presets.export_fbx_takes(self.directory, char, self.preset.lower(), context=context,
-                                                 overwrite=self.overwrite)
+                                                 overwrite=self.overwrite, file_format=self.file_format.lower())
         except (ValueError, RuntimeError, OSError) as exc:
             self.report({'ERROR'}, f"export takes: {exc}")
             return {'CANCELLED'}
-        self.report({'INFO'}, f"{len(paths)} take(s) of {char.name} written to {self.directory} "
-                              f"({self.preset.lower()} preset)")
+        how = "glTF binary" if self.file_format == 'GLB' else f"FBX, {self.preset.lower()} preset"
+        self.report({'INFO'}, f"{len(paths)} take(s) of {char.name} written to {self.directory} ({how})")
         return {'FINISHED'}
 
 
-CLASSES = (MANIKIN_OT_export_fbx, MANIKIN_OT_export_fbx_takes)
+CLASSES = (MANIKIN_OT_export_fbx, MANIKIN_OT_export_gltf, MANIKIN_OT_export_fbx_takes)

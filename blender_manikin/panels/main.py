@@ -350,8 +350,12 @@ class MANIKIN_PT_retarget(_Base, Panel):
         row.prop(s, "retarget_live_swivel")
         layout.operator("manikin.retarget", icon='ARMATURE_DATA')
         layout.separator()
-        layout.prop(s, "export_fbx_preset")
-        layout.operator("manikin.export_fbx", icon='EXPORT')
+        layout.prop(s, "export_format")
+        if s.export_format == 'GLB':
+            layout.operator("manikin.export_gltf", icon='EXPORT')
+        else:
+            layout.prop(s, "export_fbx_preset")
+            layout.operator("manikin.export_fbx", icon='EXPORT')
         if s.retarget_target is not None:
             layout.operator("manikin.export_fbx_takes", icon='EXPORT')
 
