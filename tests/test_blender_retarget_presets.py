@@ -254,13 +254,18 @@ def test_retarget_onto_an_engine_or_tool_rig(addon, style, tmp_path):
     Mk, _ = _evaluate(char)
     end_err, reached = {}, {}
     for j, (base, mid) in LIMB_OF_END.items():
-        target = expect["pelvis"] + k * (pos[:, sk.J[j]] - pos[:, 0]) @ spec["F"].T + feet.get(j, 0.0)
         got = _world_heads(char, Mk, preset.bones[j])
-        # reachable, judged from the character's own limb (base head to target, its two lengths)
         hb = _world_heads(char, Mk, preset.bones[base])
         hm = _world_heads(char, Mk, preset.bones[mid])
         l1 = np.linalg.norm(hm - hb, axis=-1)[0]
         l2 = np.linalg.norm(got - hm, axis=-1)[0]
+        if j.endswith("wrist"):      # from the character's shoulder, by the ratio of arm lengths
+            js, je = sk.J[j.replace("wrist", "shoulder")], sk.J[j.replace("wrist", "elbow")]
+            arm = np.linalg.norm(pos[0, je] - pos[0, js]) + np.linalg.norm(pos[0, sk.J[j]] - pos[0, je])
+            target = hb + (l1 + l2) / arm * (pos[:, sk.J[j]] - pos[:, js]) @ spec["F"].T
+        else:
+            target = expect["pelvis"] + k * (pos[:, sk.J[j]] - pos[:, 0]) @ spec["F"].T + feet.get(j, 0.0)
+        # reachable, judged from the character's own limb (base head to target, its two lengths)
         ok = np.linalg.norm(target - hb, axis=-1) < l1 + l2 - 1e-3
         reached[j] = float(ok.mean())
         err = np.linalg.norm(got - target, axis=-1)

@@ -292,6 +292,30 @@ def test_keep_ends_scaled_targets_and_planted_foot():
                              + 1.1 * (anchor - body.root_rest))).max() < 1e-9
 
 
+def test_scaled_hands_follow_the_characters_own_arms():
+    """Keep-ends with scaled root motion on a character whose arms and legs have other ratios to
+    the performer's (legs 0.75, arms 1.25: short legs, long arms; Rigify's metarig is 15 cm off the
+    same way): the hands' targets were the pelvis plus the *leg* ratio times the performer's
+    pelvis-to-wrist offset, out of the long arms' reach or folded into them (the bundled example:
+    elbows bent 113° on average where the performer's bent 47°; Rigify's right arm straight on
+    every frame, 15 cm out of reach).  Now a hand goes to the character's shoulder plus its arm
+    ratio times the performer's shoulder-to-wrist offset: always reachable, and with the
+    performer's upper-arm : forearm proportion the elbow bends as the performer's."""
+    body, local, root, pos, wrot, sw = _hinge_source(T=30, seed=5)
+    rig, bmap, P = mixamo_rig(body, scales=_scales(arm=1.25, leg=0.75, torso=1.0))
+    res = rt.retarget(wrot, pos, body, rig, bmap, "scaled")
+    out = rt.keep_ends_on_targets(res, wrot, pos, sw, ends="scaled")
+    assert np.nanmax(out.reach_error[:, :2]) < 1e-6, np.nanmax(out.reach_error[:, :2])
+    hw = out.world_heads()
+    for side, S in (("left", "Left"), ("right", "Right")):
+        sh, el, wr = (hw[:, rig.index[f"mixamorig:{S}{n}"]] for n in ("Arm", "ForeArm", "Hand"))
+        js, je, jw = (J[f"{side}_{n}"] for n in ("shoulder", "elbow", "wrist"))
+        np.testing.assert_allclose(wr, sh + 1.25 * (pos[:, jw] - pos[:, js]), atol=1e-6)
+        bend_c = np.sum(rot.normalize(el - sh) * rot.normalize(wr - el), -1)
+        bend_s = np.sum(rot.normalize(pos[:, je] - pos[:, js]) * rot.normalize(pos[:, jw] - pos[:, je]), -1)
+        np.testing.assert_allclose(bend_c, bend_s, atol=1e-6)
+
+
 def test_scaled_feet_stand_on_the_legs_whatever_bone_starts_the_hips():
     """Blender's Human metarig (and the rig Rigify generates from it) starts its hips bone
     (``spine``) 6 cm *below* its thighs' heads; the body model's pelvis sits 5 cm above its hips.

@@ -776,7 +776,10 @@ def keep_ends_on_targets(res: RetargetResult, world_rot, positions, swivel, limb
     into the target's place and facing, not scaled: the character touches what the performer
     touched); ``"scaled"`` on the root bone's position plus the leg ratio times the source's
     pelvis-to-end offset (consistent with ``root_motion="scaled"``: a planted foot stays planted), for
-    the feet from the character's own hips (:func:`_feet_rest_offsets`).
+    the feet from the character's own hips (:func:`_feet_rest_offsets`); a hand goes to the
+    character's posed shoulder (its upper-arm bone's head) plus its arm ratio (upper arm + forearm,
+    head to head, over the performer's) times the performer's shoulder-to-wrist offset, so it is in
+    reach whatever the character's torso and legs are.
     end_positions: optional ``(T, L, 3)`` world targets for the ``limbs`` instead.
 
     Uses :func:`.limb_solver.solve_limbs` on the target's own upper / lower lengths with the
@@ -821,6 +824,18 @@ def keep_ends_on_targets(res: RetargetResult, world_rot, positions, swivel, limb
     elif ends == "scaled":
         off = (positions[:, je] - positions[:, :1]) @ F.T * plan.leg_ratio
         tgt_w = res.root_head_world[:, None] + off + _feet_rest_offsets(plan, ids)
+        # a hand from the character's own shoulder, by its own arm's ratio: the leg ratio from the
+        # hips put the hands of a rig whose arms or torso are proportioned otherwise than its legs
+        # out of its arms' reach (elbows locked straight) or into them (elbows folded)
+        arm = np.array([LIMB_NAMES[li].endswith("_arm") for li in ids])
+        if arm.any():
+            P = plan.body.rest_positions()
+            jm = np.array([LIMBS[i][2] for i in ids])
+            src_len = np.linalg.norm(P[jm] - P[jb], axis=-1) + np.linalg.norm(P[je] - P[jm], axis=-1)
+            ratio = lengths.sum(-1) / src_len
+            shoulder = plan.target.to_world(res.heads[:, kb])
+            hand = shoulder + ratio[:, None] * ((positions[:, je] - positions[:, jb]) @ F.T)
+            tgt_w[:, arm] = hand[:, arm]
     else:
         raise ValueError(f"ends must be 'source' or 'scaled', got {ends!r}")
     sol = solve_limbs(base_src, to_src(tgt_w), swivel[:, ids], lengths, world_rot[:, PARENTS[jb]],
