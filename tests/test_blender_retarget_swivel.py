@@ -440,3 +440,51 @@ def test_swivel_panel_on_the_character(addon):
         assert getattr(bpy.ops.manikin, idname.split(".")[1]).poll()
     bpy.context.view_layer.objects.active = src            # the body (FK solve): not a character rig
     assert not bpy.ops.manikin.bake_character_swivel.poll()
+
+
+def _socketed_character(name="Socketed"):
+    """A Mixamo-named character whose upper arms hang under unmapped socket bones that follow the
+    collars through Copy Transforms, as a generated Rigify rig's arms hang under ORG-shoulder
+    (copying the shoulder control): the retarget's own arithmetic keeps such a socket at rest
+    under the chest, Blender turns it with the collar."""
+    from blender_util import build_armature, humanoid_bones, humanoid_joints
+    P = humanoid_joints(1.95, 40.0)
+    names = bone_maps.preset("mixamo").bones
+    bones = humanoid_bones(P, names)
+    out = []
+    for b in bones:
+        for side, S in (("left", "Left"), ("right", "Right")):
+            if b[0] == f"mixamorig:{S}Arm":
+                col = next(x for x in bones if x[0] == f"mixamorig:{S}Shoulder")
+                out.append((f"{S}ArmSocket", "mixamorig:Spine2", col[2], col[3]))
+                b = (b[0], f"{S}ArmSocket", b[2], b[3])
+        out.append(b)
+    char = build_armature(name, out, seed=4)
+    for S in ("Left", "Right"):
+        c = char.pose.bones[f"{S}ArmSocket"].constraints.new('COPY_TRANSFORMS')
+        c.target, c.subtarget = char, f"mixamorig:{S}Shoulder"
+    return char
+
+
+def test_live_swivel_hands_on_an_arm_under_a_constrained_socket(addon):
+    """Keep-ends with the live swivel on a rig whose arms hang under bones following the collars
+    through constraints (a generated Rigify rig's ORG-shoulder): the hand controls were keyed
+    where the retarget's arithmetic put the shoulders (the sockets at rest), 12 cm off where
+    Blender turns them on Rigify, so the live IK stretched the arms straight or bent them
+    otherwise than the plain keys (Rigify on the bundled example: 108 and 129 frames straight
+    where the performer's elbows bent over 20°).  The controls are moved with the evaluated
+    shoulder: the live rig gives the plain keys' pose."""
+    src, _ = _take()
+    plain = _socketed_character("Plain")
+    retarget_apply.retarget_onto(src, plain, "mixamo", None, "scaled", True, live_swivel=False)
+    live = _socketed_character("Live")
+    retarget_apply.retarget_onto(src, live, "mixamo", None, "scaled", True, live_swivel=True)
+    sc = bpy.context.scene
+    worst = 0.0
+    arm = [n for b in LIMB_BONES[:2] for n in b]
+    for k in (0, 9, 19, 29):
+        sc.frame_set(1 + k)
+        hp, _ = _world_pose(plain, arm)
+        hl, _ = _world_pose(live, arm)
+        worst = max(worst, float(np.abs(hp - hl).max()))
+    assert worst < MM, worst

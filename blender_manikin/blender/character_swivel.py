@@ -309,11 +309,14 @@ def _setup_constraints(obj, limbs, plan, notes):
 
 
 def _parent_orientations(obj, res, parents, frames, context):
-    """``{bone index: (T, 3, 3)}`` armature-space orientation of each of ``parents`` on every
-    frame: the retarget's own where the bone and the bones up to the nearest keyed one carry no
-    constraints, else as Blender evaluates the rig (the retarget's action assigned)."""
+    """``({bone index: (T, 3, 3)}, {bone index: (T, 3)})``: armature-space orientation of each of
+    ``parents`` on every frame -- the retarget's own where the bone and the bones up to the
+    nearest keyed one carry no constraints, else as Blender evaluates the rig (the retarget's
+    action assigned) -- and, for those evaluated, how far (armature units) Blender puts the bone's
+    head from where the retarget's arithmetic does (zero where it agrees; a generated Rigify rig's
+    ORG-shoulder follows the shoulder control, which the arithmetic keeps at rest: 12 cm)."""
     tg = res.plan.target
-    out, evaluate = {}, []
+    out, shift, evaluate = {}, {}, []
     for p in set(parents):
         k, constrained = p, False
         while k >= 0:
@@ -331,16 +334,20 @@ def _parent_orientations(obj, res, parents, frames, context):
         scene = context.scene
         keep = scene.frame_current, scene.frame_subframe
         G = np.empty((len(frames), len(evaluate), 3, 3))
+        H = np.empty((len(frames), len(evaluate), 3))
         try:
             for t, f in enumerate(frames):
                 scene.frame_set(int(np.floor(f)), subframe=float(f - np.floor(f)))
                 for i, p in enumerate(evaluate):
-                    G[t, i] = rot.orthonormalize(np.array(obj.pose.bones[tg.names[p]].matrix)[:3, :3])
+                    M = np.array(obj.pose.bones[tg.names[p]].matrix)
+                    G[t, i] = rot.orthonormalize(M[:3, :3])
+                    H[t, i] = M[:3, 3]
         finally:
             scene.frame_set(keep[0], subframe=keep[1])
         for i, p in enumerate(evaluate):
             out[p] = G[:, i]
-    return out
+            shift[p] = H[:, i] - res.heads[:, p]
+    return out, shift
 
 
 def character_channels(obj, res, limbs, world_rot, swivel, context, frames):
@@ -351,7 +358,7 @@ def character_channels(obj, res, limbs, world_rot, swivel, context, frames):
     tg = plan.target
     W, F = tg.world_rot, plan.F
     bones = obj.data.bones
-    G_par = _parent_orientations(obj, res, [p for _, (_, _, _, _, p) in limbs], frames, context)
+    G_par, moved = _parent_orientations(obj, res, [p for _, (_, _, _, _, p) in limbs], frames, context)
     sw = writer.unwrap_swivel(swivel)
     ch = []
     for cl, (li, kb, km, ke, p) in limbs:
@@ -363,6 +370,13 @@ def character_channels(obj, res, limbs, world_rot, swivel, context, frames):
             target = tg.to_armature(res.end_targets[:, li])
         else:
             target = res.heads[:, ke]
+        if p in moved:
+            # the limb's base where Blender puts it (its parent following the rig's mechanism, not
+            # as the retarget's arithmetic has it): the plain keys' hand / foot is moved with it
+            Gp = G_par[p]
+            hb = tg.heads[kb] - tg.heads[p]
+            base = res.heads[:, p] + moved[p] + np.einsum("tij,j->ti", Gp, tg.rest_rot[p].T @ hb)
+            target = target + base - res.heads[:, kb]
         loc = (target - A[:3, 3]) @ B
         q = rot.quat_continuous(rot.matrix_to_quat(rot.orthonormalize(B.T @ res.orientations[:, ke])), axis=0)
         for i in range(3):
