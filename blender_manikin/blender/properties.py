@@ -394,7 +394,9 @@ class MANIKIN_Settings(PropertyGroup):
     retarget_keep_ends: BoolProperty(name="Keep Hands and Feet on Targets", default=False,
                                      description="Solve the character's arms and legs again on its own limb "
                                                  "lengths, keeping the swivel, so its hands and feet land where "
-                                                 "the performer's were (scaled with the root motion)")
+                                                 "the performer's were (with Scaled or In Place root motion: the "
+                                                 "feet scaled like the hips, the hands from the character's own "
+                                                 "shoulders by its arm length)")
     retarget_live_swivel: BoolProperty(name="Live Swivel on Character", default=True,
                                        description="With Keep Hands and Feet on Targets: the character gets the "
                                                    "keyed swivel properties and a live rig, so editing a swivel "
