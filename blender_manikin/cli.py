@@ -855,14 +855,16 @@ def convert_main(args, fmts):
             print(f"OK {convert.said(rec)} -> {', '.join(rec['outputs'])} ({rec['frames']} frames, "
                   f"{rec['seconds']:.2f} s)", flush=True)
 
-    try:
-        code, records = convert.run(inputs, args.out, fmts, settings, scheduler=args.scheduler,
-                                    workers=args.workers, options=args, progress=args.progress, report=report)
-    except (ValueError, OSError) as exc:   # a format it cannot write, a scheduler that does not answer,
-        print(f"blender_manikin: error: {exc}", file=sys.stderr)   # an --out it cannot write into
-        return 2
-    except KeyboardInterrupt:         # Ctrl-C: run() said how far it got; the manifest holds it
-        return 130
+    with _ctrl_c() as interrupted:    # SIGTERM (a job scheduler's stop) as Ctrl-C
+        try:
+            code, records = convert.run(inputs, args.out, fmts, settings, scheduler=args.scheduler,
+                                        workers=args.workers, options=args, progress=args.progress,
+                                        report=report)
+        except (ValueError, OSError) as exc:   # a format it cannot write, a scheduler that does not
+            print(f"blender_manikin: error: {exc}", file=sys.stderr)   # answer, an --out it cannot write into
+            return 2
+        except KeyboardInterrupt:     # run() said how far it got; the manifest holds it
+            return 128 + (interrupted[0] if interrupted else signal.SIGINT)   # 130 Ctrl-C, 143 SIGTERM
     return code
 
 

@@ -338,18 +338,24 @@ def test_an_unreachable_scheduler_is_a_clear_error_in_bounded_time(tmp_path):
     assert "cannot reach the Dask scheduler at tcp://127.0.0.1:9 within 2 s" in p.stderr
 
 
-def test_ctrl_c_stops_the_run_with_a_summary_and_exit_code_130(tmp_path):
+@pytest.mark.parametrize("sig, code", [(signal.SIGINT, 130), (signal.SIGTERM, 143)])
+def test_ctrl_c_or_sigterm_stops_the_run_with_a_summary_and_exit_code(tmp_path, sig, code):
+    """Ctrl-C in a terminal (the whole process group), or SIGTERM from a job scheduler (the main
+    process: it died at once, without a word and with its workers left to the OS)."""
     d = _copies_of_the_example(tmp_path / "in", 40)
     out = tmp_path / "out"
     proc = subprocess.Popen([sys.executable, "-m", "blender_manikin", "convert", str(d), "--out", str(out),
                              "--workers", "2", "--no-progress"], cwd=ROOT, env=dict(os.environ, PYTHONPATH=ROOT),
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True)
     man = _wait_for_records(proc, out, 2)
-    os.killpg(proc.pid, signal.SIGINT)                       # Ctrl-C in a terminal: the whole group
+    if sig == signal.SIGINT:
+        os.killpg(proc.pid, signal.SIGINT)                   # Ctrl-C in a terminal: the whole group
+    else:
+        os.kill(proc.pid, signal.SIGTERM)
     so, err = proc.communicate(timeout=60)
-    assert proc.returncode == 130, err
+    assert proc.returncode == code, err
     assert "Traceback" not in err, err
-    last = [ln for ln in err.splitlines() if ln.startswith("interrupted (Ctrl-C): ")][-1]
+    last = [ln for ln in err.splitlines() if ln.startswith("interrupted (Ctrl-C or a stop signal): ")][-1]
     assert last.endswith(f"manifest: {man}") and "not converted (interrupted)" in last
     ok = sorted(r["input"] for r in _manifest_lines(out) if r["status"] == "ok")
     assert ok and sorted(ln.split()[1] for ln in so.splitlines() if ln.startswith("OK ")) == ok   # as they finished

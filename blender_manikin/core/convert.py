@@ -516,7 +516,7 @@ def run(inputs, out_dir, fmts, settings: SolveSettings, scheduler=None, workers=
     except KeyboardInterrupt:
         if progress:
             sys.stderr.write("\n")
-        log("interrupted (Ctrl-C): " + summary(out_dir, len(records) - failed, failed, skipped,
+        log("interrupted (Ctrl-C or a stop signal): " + summary(out_dir, len(records) - failed, failed, skipped,
                                                len(tasks) - skipped - len(records)))
         raise
     finally:
