@@ -401,16 +401,20 @@ def expand_inputs(inputs, out=None):
     recording folders, which are one input each.  Order kept; a file given twice (again, in a
     folder also given, or through a symbolic link) is solved once, under its first name.  A
     folder's sub-folders are not searched: they are named on stderr (but not ``out``, the output
-    folder), so a nested take is not passed over unseen."""
+    folder), so a nested take is not passed over unseen; a symbolic link with a recording's
+    extension whose target is gone (or that loops) is listed, and its solve says so."""
     from .core.io_keypoints import freemocap_body_file
     files = []
     for item in inputs:
         if os.path.isdir(item) and freemocap_body_file(item):     # a FreeMoCap recording: one input
             files.append(item.rstrip("/\\") or item)
         elif os.path.isdir(item):
-            found = sorted(os.path.join(item, n) for n in os.listdir(item)
-                           if os.path.isfile(os.path.join(item, n))
-                           and _formats.is_recording_file(os.path.join(item, n)))
+            # a link with a recording's extension whose target is gone or that loops is kept, so
+            # the solve says so (recording.missing_file) instead of leaving the take out unseen
+            found = sorted(p for p in (os.path.join(item, n) for n in os.listdir(item))
+                           if (os.path.isfile(p) and _formats.is_recording_file(p))
+                           or (os.path.islink(p) and not os.path.exists(p)
+                               and os.path.splitext(p)[1].lower() in _formats.input_extensions()))
             subs = sorted(n for n in os.listdir(item) if not n.startswith(".") and os.path.isdir(os.path.join(item, n))
                           and not (out and os.path.realpath(os.path.join(item, n)) == os.path.realpath(out)))
             if subs:

@@ -50,11 +50,14 @@ def _chars(strings):
 
 def write_c3d(path, names, pts, rate=60.0, proc="intel", floats=False, scale=0.1, units="mm",
               analog_channels=0, analog_per_frame=0, invalid=None, labels_split=255, first_frame=1,
-              long_take=False, groups_after=False):
+              long_take=False, groups_after=False, data_start_param=None, long_frames=False):
     """Write ``pts`` ``(T, K, 3)`` (in ``units``, file axes) as a C3D.  invalid: ``(T, K)`` bool
     samples written with a residual of -1 (their coordinates junk).  labels_split: markers per
     ``LABELS`` parameter (255 in real files).  long_take: the header's last frame 65535 and the
-    frames in ``TRIAL:ACTUAL_*_FIELD``.  groups_after: parameters listed before their groups."""
+    frames in ``TRIAL:ACTUAL_*_FIELD`` (long_frames: in ``POINT:LONG_FRAMES``, a float, as QTM writes
+    it, with ``POINT:FRAMES`` capped at 65535 and no ``TRIAL`` fields).  groups_after: parameters
+    listed before their groups.  data_start_param: a ``POINT:DATA_START`` value to write (None: the
+    parameter left out; the header's word 9 always holds the true block)."""
     pts = np.asarray(pts, np.float64)
     T, K = pts.shape[:2]
     inv = np.zeros((T, K), bool) if invalid is None else np.asarray(invalid, bool)
@@ -80,7 +83,11 @@ def write_c3d(path, names, pts, rate=60.0, proc="intel", floats=False, scale=0.1
         _param("GEN_SCALE", A, 4, (), fl(1.0), proc),
     ]
     last = first_frame + T - 1
-    if long_take:
+    if data_start_param is not None:
+        params.append(_param("DATA_START", P, 2, (), int_bytes([data_start_param], proc), proc))
+    if long_frames:
+        params.append(_param("LONG_FRAMES", P, 4, (), fl(float(T)), proc))
+    if long_take and not long_frames:
         w = lambda f: int_bytes(np.array([f % 65536, f // 65536], np.uint16).view(np.int16), proc)  # noqa: E731
         params += [_param("ACTUAL_START_FIELD", TR, 2, (2,), w(first_frame), proc),
                    _param("ACTUAL_END_FIELD", TR, 2, (2,), w(last), proc)]
@@ -93,7 +100,7 @@ def write_c3d(path, names, pts, rate=60.0, proc="intel", floats=False, scale=0.1
     header = bytearray(512)
     header[0:2] = bytes([2, 0x50])
     header[2:12] = b"".join(word(v) for v in (K, n_analog, first_frame % 65536,
-                                              65535 if long_take else last % 65536, 10))
+                                              65535 if long_take or long_frames else last % 65536, 10))
     header[12:16] = fl(-1.0 if floats else scale)
     header[16:20] = word(data_start) + word(analog_per_frame)
     header[20:24] = fl(rate)

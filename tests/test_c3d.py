@@ -200,3 +200,26 @@ def test_c3d_is_a_keypoint_input_everywhere(tmp_path, motion):
     assert is_keypoint_input(path) and not is_keypoint_input(os.path.join(tmp_path, "none.c3d"))
     assert expand_inputs([str(tmp_path)]) == [str(path)]
     assert collect_inputs([str(tmp_path)]) == [os.path.abspath(path)]
+
+
+@pytest.mark.parametrize("stale", [2, 9])
+def test_the_headers_data_block_wins_over_a_stale_point_data_start(tmp_path, stale):
+    """POINT:DATA_START disagreeing with the header's word 9 (a parameter left stale by an editing
+    tool): the data are read where the header says, as py-c3d and ezc3d read them.  Before: block 2
+    (inside the parameter section) read as frames, values 2.8 m off; block 9 refused as outside the
+    file."""
+    from blender_manikin.core.io_c3d import read_c3d
+    pts = np.random.default_rng(2).uniform(-100, 100, (6, 3, 3))
+    c = read_c3d(write_c3d(tmp_path / "stale.c3d", ["A", "B", "C"], pts, data_start_param=stale))
+    np.testing.assert_allclose(c.points, pts, atol=0.051)
+
+
+def test_a_long_take_counted_in_point_long_frames(tmp_path):
+    """A take longer than 65535 frames whose count is in POINT:LONG_FRAMES (a float, as QTM writes
+    it; POINT:FRAMES capped at 65535, the header's last frame 65535, no TRIAL fields): all 70000
+    frames.  Before: 65535, the last 4465 dropped without a word."""
+    from blender_manikin.core.io_c3d import read_c3d
+    pts = np.random.default_rng(3).uniform(-100, 100, (70000, 2, 3))
+    c = read_c3d(write_c3d(tmp_path / "qtm.c3d", ["A", "B"], pts, rate=100.0, long_frames=True))
+    assert c.points.shape == (70000, 2, 3)
+    np.testing.assert_allclose(c.points[-1], pts[-1], atol=0.051)

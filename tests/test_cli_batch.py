@@ -164,3 +164,13 @@ def test_a_link_that_leads_nowhere_is_said_so(tmp_path, capsys):
     assert "a.csv: a symbolic link that loops" in err
     assert "c.csv: a symbolic link to " in err and "moved away.csv', which does not exist" in err
     assert "d.csv: no such file" in err
+
+
+def test_a_broken_link_in_a_solved_folder_is_named(tmp_path):
+    # solve FOLDER left out a take whose link's target was gone (or that looped) without a word:
+    # "1 converted, 0 error(s) of 1 input(s)"; now listed, and its solve says what the link is
+    (tmp_path / "walk.csv").write_text("")
+    os.symlink(tmp_path / "moved.csv", tmp_path / "gone.csv")
+    os.symlink("loop.csv", tmp_path / "loop.csv")
+    os.symlink(tmp_path / "moved.txt", tmp_path / "notes.txt")          # no recording's extension: left out
+    assert cli.expand_inputs([str(tmp_path)]) == [str(tmp_path / n) for n in ("gone.csv", "loop.csv", "walk.csv")]

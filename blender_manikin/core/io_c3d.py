@@ -12,7 +12,8 @@ Pure numpy + :mod:`struct`, no bpy.  What is read (the C3D user guide's layout, 
   big-endian IEEE), then groups and parameters (a name's length negative when locked; a negative
   id a group, a positive one a parameter of that group; a 16-bit offset to the next entry;
   a parameter's type -1 char, 1 byte, 2 int16, 4 float and its dimensions, first fastest);
-  ``POINT:USED``, ``SCALE``, ``RATE``, ``UNITS``, ``DATA_START``, ``FRAMES``, ``LABELS`` (then
+  ``POINT:USED``, ``SCALE``, ``RATE``, ``UNITS``, ``DATA_START`` (only where the header's word 9
+  is 0: the header's wins), ``FRAMES`` / ``LONG_FRAMES`` (the larger), ``LABELS`` (then
   ``LABELS2``, ``LABELS3`` ... past 255 markers), ``ANALOG:USED`` / ``RATE`` and
   ``TRIAL:ACTUAL_START_FIELD`` / ``ACTUAL_END_FIELD`` (two 16-bit words each, low first: takes
   longer than 65535 frames);
@@ -214,7 +215,9 @@ def read_c3d(path) -> C3DMarkers:
     if not np.isfinite(rate) or rate <= 0:
         raise RecordingError(f"frame rate {shown(rate)} (POINT:RATE) is not a positive number", path=path,
                              offset=params[("POINT", "RATE")].offset if ("POINT", "RATE") in params else 20)
-    data_start = int(first("POINT", "DATA_START", h_start))
+    # the header's word 9 places the data, as py-c3d and ezc3d read it (a POINT:DATA_START left stale
+    # by an editing tool read frames from the wrong block); the parameter only where the word is 0
+    data_start = h_start or int(first("POINT", "DATA_START", 0))
     s_field, e_field = num("TRIAL", "ACTUAL_START_FIELD"), num("TRIAL", "ACTUAL_END_FIELD")
     if s_field is not None and e_field is not None and s_field.size >= 2 and e_field.size >= 2:
         lo_hi = [(int(v[0]) % 65536) + 65536 * (int(v[1]) % 65536) for v in (s_field, e_field)]
@@ -222,7 +225,9 @@ def read_c3d(path) -> C3DMarkers:
     elif h_first <= h_last and h_last != 65535:
         first_frame, n = h_first, h_last - h_first + 1
     else:
-        first_frame, n = h_first, int(first("POINT", "FRAMES", 0))
+        # POINT:FRAMES (int16 capped at 65535, or a float) or POINT:LONG_FRAMES (a float, QTM):
+        # the larger, as py-c3d
+        first_frame, n = h_first, int(max(first("POINT", "FRAMES", 0), first("POINT", "LONG_FRAMES", 0)))
     if n <= 0:
         raise RecordingError(f"no frames (first {first_frame}, frame count {n})", path=path, offset=6)
     labels = []
@@ -245,8 +250,9 @@ def read_c3d(path) -> C3DMarkers:
     frame_bytes = (4 * used + n_analog) * word
     at = (data_start - 1) * BLOCK
     if data_start < 1 or at > len(data):
-        raise RecordingError(f"the data's first block ({data_start}, POINT:DATA_START) is outside the file "
-                             f"({len(data)} bytes)", path=path, offset=16)
+        said = "the header's word 9" if h_start else "POINT:DATA_START"
+        raise RecordingError(f"the data's first block ({data_start}, {said}) is outside the file ({len(data)} "
+                             "bytes)", path=path, offset=16)
     need = at + n * frame_bytes
     if need > len(data):
         raise RecordingError(f"truncated: {n} frames of {frame_bytes} bytes from byte {at} need {need} bytes, "
