@@ -577,7 +577,7 @@ def convert_one(path, out_dir, args, formats, stem=None, keypoints=None):
     preset = getattr(args, "fbx_preset", "blender")
     blender_writers = {"fbx": lambda dst: _write_whole(dst, lambda tmp: export_fbx(tmp, export, preset), "fbx"),
                        "glb": lambda dst: _write_whole(dst, lambda tmp: export_glb(tmp, export), "glb"),
-                       "blend": lambda dst: bpy.ops.wm.save_as_mainfile(filepath=dst, copy=True, compress=True)}
+                       "blend": _save_blend}
     written = []
     for fmt in formats:
         writer = _formats.WRITERS[fmt]
@@ -603,6 +603,20 @@ def _write_whole(dst, write, kind):
         os.replace(tmp, dst)
     finally:
         shutil.rmtree(tmp_dir, ignore_errors=True)
+
+
+def _save_blend(dst):
+    """Save the solve's scene as the ``.blend`` ``dst`` (compressed), without the ``.blend1``
+    backup Blender's *Save Versions* preference leaves beside a file saved over (a second run
+    into the same folder left one per take)."""
+    import bpy
+    paths = bpy.context.preferences.filepaths
+    keep = paths.save_version
+    paths.save_version = 0
+    try:
+        bpy.ops.wm.save_as_mainfile(filepath=dst, copy=True, compress=True)
+    finally:
+        paths.save_version = keep
 
 
 @contextlib.contextmanager

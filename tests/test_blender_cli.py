@@ -251,3 +251,16 @@ def test_blender_binary_writes_where_it_runs_whatever_pwd_says(tmp_path):
     assert p.returncode == 0, (p.stdout, p.stderr)
     assert sorted(n for n in os.listdir(job / "o") if n != RECORD) == ["take.blend", "take.fbx", "take.json"]
     assert os.listdir(stale / "o") == []
+
+
+def test_a_second_run_leaves_no_blend1_backup(folder, tmp_path, capsys, monkeypatch):
+    """Solving into the same folder again replaces the tool's own .blend; Blender's Save Versions
+    left a walk.blend1 beside it each time (and the user's preference is as it was)."""
+    monkeypatch.setattr(solve_job, "run_solver", stub_solver)
+    out = tmp_path / "out"
+    keep = bpy.context.preferences.filepaths.save_version
+    for _ in range(2):
+        cli.main(["solve", str(folder / "walk.csv"), "--out", str(out), "--format", "blend", "--height", "1.8"])
+    assert "OK " in capsys.readouterr().out
+    assert sorted(os.listdir(out)) == sorted(["walk.blend", RECORD])
+    assert bpy.context.preferences.filepaths.save_version == keep
