@@ -338,6 +338,7 @@ def read_csv(path, axes=None, units=None, block_bytes=None) -> Recording:
 
     # in place on the one (n, 7) array: scale, quaternion lengths, normalisation; then each
     # device's rows are copied out and turned to Blender axes (peak: about twice the result)
+    pq[np.isinf(pq)] = np.nan          # "inf", or past float64's range (1e309): a lost sample, as NaN
     scale = UNITS[units_used]
     if scale != 1.0:
         pq[:, :3] *= scale

@@ -63,9 +63,13 @@ from __future__ import annotations
 import csv
 import io
 import os
+import tokenize
+import zipfile
+import zlib
 from dataclasses import dataclass, field
 
 import numpy as np
+from numpy.lib import format as npformat
 
 from . import keypoint_layouts as kl
 from . import marker_sets
@@ -169,7 +173,7 @@ def one_person_file(path) -> bool:
             for row in csv.reader(lines):
                 if row and any(c.strip() for c in row) and not row[0].lstrip().startswith("#"):
                     return not any(c.strip().lower() in PERSON_COLUMNS for c in row)
-    except (OSError, ValueError, EOFError):
+    except _ARRAY_ERRORS:
         pass
     return False
 
@@ -586,10 +590,51 @@ def _stand_in(path):
     return "file is empty" if not head else not_data(head, text=False)
 
 
+#: what numpy raises on a damaged .npy / .npz: a header that does not parse (tokenize's error for
+#: an unclosed bracket), a damaged archive, an unknown compression
+_ARRAY_ERRORS = (OSError, ValueError, EOFError, SyntaxError, tokenize.TokenError, zipfile.BadZipFile, zlib.error,
+                 NotImplementedError)
+
+
+def _npy_fits(f, size, path, member=""):
+    """Refuse the ``.npy`` read from ``f`` (``size`` bytes, header included; ``member``: its name in
+    an ``.npz``) when its header's shape needs more bytes than follow it: numpy allocates the
+    whole array before it reads (a flipped digit in the shape asked for 56 TiB)."""
+    start = f.tell()
+    version = npformat.read_magic(f)
+    read_header = npformat.read_array_header_1_0 if version == (1, 0) else npformat.read_array_header_2_0
+    shape, _, dtype = read_header(f)
+    need = int(np.prod([int(n) for n in shape], dtype=object)) * dtype.itemsize     # Python ints: no overflow
+    left = size - (f.tell() - start)
+    if need > left or min(shape, default=0) < 0:
+        size_is = "a negative size" if min(shape) < 0 else f"{need} bytes"
+        raise RecordingError(f"{member + ': ' if member else ''}the array header says shape {shown(shape)} of "
+                             f"{dtype.str} ({size_is}), but {left} bytes follow the header: a damaged file",
+                             path=path, offset=None if member else f.tell() - start)
+
+
+def _np_load(path):
+    """``np.load(path)`` (no pickles) after :func:`_npy_fits` of the file or of each array of an archive."""
+    with open(path, "rb") as f:
+        archive = f.read(4) in (b"PK\x03\x04", b"PK\x05\x06")        # as np.load tells them
+    if archive:
+        with zipfile.ZipFile(path) as zf:
+            for info in zf.infolist():
+                if info.filename.endswith(".npy"):
+                    with zf.open(info) as f:
+                        _npy_fits(f, info.file_size, path, member=info.filename[:-4])
+    else:
+        with open(path, "rb") as f:
+            _npy_fits(f, os.fstat(f.fileno()).st_size, path)
+    return np.load(path, allow_pickle=False)
+
+
 def _load_npy(path):
     try:
-        return np.load(path, allow_pickle=False)
-    except (OSError, ValueError, EOFError) as exc:
+        return _np_load(path)
+    except RecordingError:
+        raise
+    except _ARRAY_ERRORS as exc:
         raise RecordingError(_stand_in(path) or f"not a readable .npy array ({exc})", path=path) from None
 
 
@@ -597,18 +642,20 @@ def _optional_npy(path):
     if not os.path.isfile(path):
         return None
     try:
-        a = np.asarray(np.load(path, allow_pickle=False), np.float64)
-    except (OSError, ValueError, EOFError):
+        a = np.asarray(_np_load(path), np.float64)
+    except (RecordingError, *_ARRAY_ERRORS):
         return None
     return a if a.ndim == 3 and a.shape[1:] == (21, 3) else None
 
 
 def _load_npz(path):
     try:
-        z = np.load(path, allow_pickle=False)
+        z = _np_load(path)
         keys = list(z.files)
         arrays = {k: z[k] for k in keys}
-    except (OSError, ValueError, EOFError) as exc:
+    except RecordingError:
+        raise
+    except _ARRAY_ERRORS as exc:
         raise RecordingError(_stand_in(path) or f"not a readable .npz archive ({exc})", path=path) from None
     key = next((k for k in _NPZ_KEYS if k in arrays), None)
     if key is None:
@@ -629,12 +676,17 @@ def _load_npz(path):
     return arrays[key], time, conf, layout, (float(fps) if fps is not None and np.size(fps) == 1 else None), axis
 
 
+#: a coordinate this large, in any unit, is a corrupt float (its square overflows float64): missing
+_CORRUPT = 1e100
+
+
 def _shape_points(X, conf, path):
     X = np.asarray(X)
     if X.dtype.kind not in "fiu":
         raise RecordingError(f"keypoints must be numbers, found dtype {X.dtype}", path=path)
     with np.errstate(invalid="ignore"):         # a corrupt float (a signalling NaN) counts as missing
         X = X.astype(np.float64)
+    X[~(np.abs(X) < _CORRUPT)] = np.nan         # and so do infinities and absurd magnitudes
     if X.ndim == 2 and X.shape[1] % 3 == 0 and X.shape[1] >= 3 * 17:
         X = X.reshape(X.shape[0], -1, 3)
     if X.ndim != 3 or X.shape[2] not in (3, 4):

@@ -545,7 +545,8 @@ def _keys(curve_item, components, path, where):
         raise RecordingError(f"{where}: no 'curve:' mapping", path=path, line=curve_item.line)
     keys = curve.get("m_Curve", _Seq())
     if isinstance(keys, _KeyBlock):
-        if (components is None) == (keys.comps == "") and set(components or "") <= set(keys.comps):
+        if (components is None) == (keys.comps == "") and set(components or "") <= set(keys.comps) \
+                and np.isfinite(keys.time).all() and np.isfinite(keys.value).all():
             cols = (keys.value, keys.in_slope, keys.out_slope)
             return {c: _Curve(keys.time, *(a[:, keys.comps.index(c) if c else 0] for a in cols), line=curve.line)
                     for c in components or ("",)}
@@ -587,10 +588,14 @@ def _keys(curve_item, components, path, where):
                 else:
                     raise RecordingError(f"{where}: {field} {shown(v)} has no {c}", path=path, line=line)
                 try:
-                    add(float(x))
+                    x = float(x)
                 except (TypeError, ValueError):
                     _number(x, f"{field}{'.' + c if c else ''}", path, line)     # raises, naming it
                     raise
+                if n == 1 and not isfinite(x):          # slopes may be Infinity (a stepped key)
+                    raise RecordingError(f"{where}: key value{'.' + c if c else ''} {shown(x)} is not finite",
+                                         path=path, line=line)
+                add(x)
     if not times:
         return {}
     t = np.asarray(times)

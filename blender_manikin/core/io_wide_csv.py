@@ -472,6 +472,7 @@ def read_wide_table(path, header, hline, table, axes=None, units=None, layout=No
                 except ValueError:
                     raise RecordingError(f"{shown(c)} is not a number", path=path, line=row_lines[k]) from None
         raise
+    values[np.isinf(values)] = np.nan      # "inf", or a number past float64's range (1e309): not a measurement
     if rate is None and layout is not None:
         rate = layout["time"].get("rate")
     if iso is not None:

@@ -186,7 +186,8 @@ def parse_xror(data: bytes, path="<bytes>", axes=None, units=None) -> Recording:
     arr = decompress_isolated(bytes(blob), path, limit=MAX_EXPANSION * max(len(data), 1))
     if arr.nbytes > MAX_EXPANSION * max(len(data), 1) or arr.ndim != 4:
         raise RecordingError(f"frames: an array of shape {arr.shape} is not plausible for this file", path=path)
-    frames = np.asarray(arr, dtype=np.float64).reshape(-1, arr.shape[-1])
+    with np.errstate(invalid="ignore"):         # a corrupt float (a signalling NaN) is a lost sample
+        frames = np.asarray(arr, dtype=np.float64).reshape(-1, arr.shape[-1])
     if frames.shape[1] != width:
         raise RecordingError(f"frames have {frames.shape[1]} numbers each; the {len(devices)} device(s) need "
                              f"{width} (time, then each device's axes)", path=path)
