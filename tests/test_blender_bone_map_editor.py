@@ -172,9 +172,9 @@ def test_retarget_panel_and_bone_map_list_draw(addon):
     panels.MANIKIN_PT_retarget.draw(SimpleNamespace(layout=PanelLayout(log)), bpy.context)
     for entry in (("template_list", "retarget_bone_map"), ("operator", "manikin.load_bone_map"),
                   ("operator", "manikin.save_bone_map"), ("operator", "manikin.retarget"),
-                  ("operator", "manikin.export_fbx"), ("prop", "export_fbx_preset"), ("prop", "retarget_map_file"),
-                  ("prop", "twist")):
+                  ("prop", "retarget_map_file"), ("prop", "twist")):
         assert entry in log, entry
+    assert ("operator", "manikin.export_fbx") not in log        # in the Export sub-panel
     # a row: the joint's label and a search among the character's bones; a missing bone is marked
     item = _row(s, "left_elbow")
     for bone, icon in (("mixamorig:LeftForeArm", 'BONE_DATA'), ("nope", 'ERROR')):

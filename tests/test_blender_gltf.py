@@ -166,8 +166,8 @@ def test_export_gltf_writes_the_character_and_leaves_the_scene_as_it_was(addon, 
     """The panel's Export glTF with the retargeted character: its deforming bones are the joints,
     its animation the active action's, and the mapped bones land where Blender has them (within
     1 mm, through the object's 0.01 scale and turn); afterwards no object or action more, the
-    selection, the active object and the current frame as they were.  The panel offers it when
-    the format is glTF Binary."""
+    selection, the active object and the current frame as they were.  The panel's Export
+    sub-panel offers it when the format is glTF Binary."""
     from blender_manikin.core import bone_maps
     from blender_manikin.panels import main as panels
     from test_blender_bone_map_editor import PanelLayout
@@ -189,7 +189,7 @@ def test_export_gltf_writes_the_character_and_leaves_the_scene_as_it_was(addon, 
               sorted(bpy.data.meshes.keys()), list(sc.keys()))
     s.export_format = 'GLB'
     log = []
-    panels.MANIKIN_PT_retarget.draw(SimpleNamespace(layout=PanelLayout(log)), bpy.context)
+    panels.MANIKIN_PT_export.draw(SimpleNamespace(layout=PanelLayout(log)), bpy.context)
     assert ("operator", "manikin.export_gltf") in log and ("operator", "manikin.export_fbx") not in log
     assert ("prop", "export_fbx_preset") not in log and ("operator", "manikin.export_fbx_takes") in log
     path = tmp_path / "hero.glb"

@@ -224,6 +224,9 @@ def _panel_states(s):
             s.retarget_map = bone_map
             s.retarget_bone_map_source = "Mixamo preset"
             yield panels.MANIKIN_PT_retarget, f"Retarget to Character ({target and target.name}, {bone_map})"
+        for fmt in ('FBX', 'GLB'):
+            s.export_format = fmt
+            yield panels.MANIKIN_PT_export, f"Export ({target and target.name}, {fmt})"
 
 
 def _bone_map_rows(s, sidebar=SIDEBAR):

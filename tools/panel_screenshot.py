@@ -4,8 +4,8 @@ Runs inside a windowed Blender (under Xvfb) in which the extension zip was insta
 
     blender --python tools/panel_screenshot.py -- --example examples/example_recording.csv \
             --ready /tmp/ready --done /tmp/done [--frame 60] [--keypoints examples/example_keypoints] \
-            [--open calibration,output] [--unit-scale 0.01] [--ui-scale 1.25]
-            [--source SCENE] [--character] [--report "Solve failed: ..."]
+            [--open calibration,output,retarget,export] [--unit-scale 0.01] [--ui-scale 1.25]
+            [--source SCENE] [--character] [--set export_format=GLB] [--report "Solve failed: ..."]
 
 It solves the example through the add-on's own operator (as a click on "Solve full body" does),
 opens the 3D Viewport sidebar, frames the solved body, and, once the window has redrawn, keeps
@@ -41,6 +41,8 @@ def parse_args():
                     help="after the solve, show this source tab (SCENE: the tracker empties mapped)")
     ap.add_argument("--character", action="store_true",
                     help="choose a character (a copy of the solved armature) in Retarget to Character")
+    ap.add_argument("--set", action="append", default=[], metavar="SETTING=VALUE",
+                    help="after the solve, set a panel setting (scene.manikin), e.g. export_format=GLB; repeatable")
     ap.add_argument("--report", default=None,
                     help="show this summary instead of the solve's (e.g. a failed solve's message)")
     return ap.parse_args(argv)
@@ -72,13 +74,7 @@ def prepare():
     for obj in list(bpy.data.objects):
         if obj.type == 'MESH':
             bpy.data.objects.remove(obj)
-    for name in filter(None, ARGS.open.split(",")):     # shown open: registered again without
-        cls = getattr(bpy.types, f"MANIKIN_PT_{name.strip()}", None)        # DEFAULT_CLOSED
-        if cls is None:
-            fail(f"no panel MANIKIN_PT_{name}")
-        bpy.utils.unregister_class(cls)
-        cls.bl_options = set(getattr(cls, "bl_options", set())) - {'DEFAULT_CLOSED'}
-        bpy.utils.register_class(cls)
+    open_panels(filter(None, (n.strip() for n in ARGS.open.split(","))))
     if ARGS.unit_scale:
         us = bpy.context.scene.unit_settings
         us.system, us.scale_length = 'METRIC', ARGS.unit_scale
@@ -112,6 +108,16 @@ def prepare():
         settings.source = ARGS.source
         if ARGS.source == 'SCENE':
             bpy.ops.manikin.map_devices()
+    for assignment in ARGS.set:
+        name, _, value = assignment.partition("=")
+        if not hasattr(settings, name):
+            fail(f"--set {assignment}: scene.manikin has no setting {name!r}")
+        current = getattr(settings, name)
+        if isinstance(current, bool):
+            value = value.lower() in ("1", "true", "on")
+        elif isinstance(current, (int, float)):
+            value = type(current)(float(value))
+        setattr(settings, name, value)              # an enum or a text as given
     if ARGS.report is not None:
         settings.last_report = ARGS.report
 
@@ -132,6 +138,27 @@ def prepare():
     r3d.view_distance = 4.2
     space.lens = 50
     area.tag_redraw()
+
+
+def open_panels(names):
+    """Show the sub-panels ``names`` (``calibration``, ``output``, ``retarget``, ``export``) open:
+    registered again without DEFAULT_CLOSED.  Blender puts a panel registered again last among
+    its siblings, so every sub-panel of Solve Full Body is registered again, in the add-on's order
+    (else an opened Calibration was drawn below Retarget to Character)."""
+    names = set(names)
+    if not names:
+        return
+    for name in names:
+        if getattr(bpy.types, f"MANIKIN_PT_{name}", None) is None:
+            fail(f"no panel MANIKIN_PT_{name}")
+    module = sys.modules[bpy.types.MANIKIN_PT_solve.__module__]       # panels/main.py, its CLASSES
+    children = [c for c in module.CLASSES if getattr(c, "bl_parent_id", "") == "MANIKIN_PT_solve"]
+    for cls in reversed(children):
+        bpy.utils.unregister_class(cls)
+    for cls in children:
+        if cls.__name__[len("MANIKIN_PT_"):] in names:
+            cls.bl_options = set(getattr(cls, "bl_options", set())) - {'DEFAULT_CLOSED'}
+        bpy.utils.register_class(cls)
 
 
 def sidebar_info():

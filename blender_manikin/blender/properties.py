@@ -262,7 +262,8 @@ class MANIKIN_Settings(PropertyGroup):
     arm_span_m: FloatProperty(default=0.0, min=LENGTH_RANGES["arm_span"][0], max=LENGTH_RANGES["arm_span"][1],
                               options={'HIDDEN'})
     arm_span: length_property("arm_span_m", "Arm Span",
-                              "Wrist-to-wrist distance in a T-pose (0 = from proportions)", *LENGTH_RANGES["arm_span"])
+                              "Wrist-to-wrist distance in a T-pose (0: measured on the T-pose with Automatic or "
+                              "T-Pose calibration, else from proportions)", *LENGTH_RANGES["arm_span"])
     sole_m: FloatProperty(default=0.03, min=LENGTH_RANGES["sole"][0], max=LENGTH_RANGES["sole"][1],
                           options={'HIDDEN'})
     sole: length_property("sole_m", "Shoe Soles",

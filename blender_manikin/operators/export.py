@@ -110,8 +110,20 @@ class MANIKIN_OT_export_fbx_takes(Operator):
 
     @classmethod
     def poll(cls, context):
+        """Greyed out, saying why, until there is a take to write: a character chosen (in this
+        scene) with at least one retargeted take (:func:`..blender.fbx_presets.take_actions`)."""
+        from ..blender.fbx_presets import take_actions
         s = getattr(context.scene, "manikin", None)
-        return s is not None and s.retarget_target is not None
+        if s is None:
+            return False
+        char = s.retarget_target
+        if char is None or char.name not in context.scene.objects:
+            cls.poll_message_set("choose the Character (Retarget to Character) first")
+            return False
+        if not take_actions(char):
+            cls.poll_message_set(f"{char.name} has no retargeted takes: press Retarget to Character first")
+            return False
+        return True
 
     def invoke(self, context, event):
         _preset_from_panel(self, context)

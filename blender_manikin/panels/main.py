@@ -223,22 +223,31 @@ class MANIKIN_PT_output(_Base, Panel):
         layout.use_property_decorate = False
         # scene objects (trackers or keypoints) are sampled from Start to End; files are read whole
         sampled = s.source == 'SCENE' or (s.source == 'KEYPOINTS' and s.keypoint_from in ('OBJECTS', 'ARMATURE'))
+        # From Scene: the scene's own rate and range, greyed (the add-on's FPS / Start / End, unused
+        # then, showed 60 fps and frames 1-250 beside a 24 fps scene of frames 1-168)
+        scene = context.scene
         if s.source in ('FILE', 'KEYPOINTS'):
             # headed rows: "Scene Frame Rate" and "Scene Frame Range" were both cut to "Scene Frame ..."
             layout.column(heading="Frame Rate").prop(s, "use_scene_fps", text="From Scene")
             sub = layout.column()
-            sub.active = not s.use_scene_fps
-            sub.prop(s, "fps")
+            if s.use_scene_fps:
+                sub.enabled = False
+                sub.prop(scene.render, "fps", text="FPS")
+                if scene.render.fps_base != 1.0:        # 23.976 fps: 24 / 1.001
+                    sub.prop(scene.render, "fps_base", text="Base")
+            else:
+                sub.prop(s, "fps")
         layout.column(heading="Frame Range").prop(s, "use_scene_range", text="From Scene")
         col = layout.column(align=True)
-        col.active = not s.use_scene_range
-        col.prop(s, "frame_start")
+        col.enabled = not s.use_scene_range
+        frames = scene if s.use_scene_range else s
+        col.prop(frames, "frame_start", text="Start")
         if not sampled:
             toggled_row(layout, s, "limit_frames", "frame_end", "Limit", "End")
             toggled_row(layout, s, "use_trim_start", "trim_start", "Trim Start", "From")
             toggled_row(layout, s, "use_trim_end", "trim_end", "Trim End", "To")
         else:
-            col.prop(s, "frame_end")
+            col.prop(frames, "frame_end", text="End")
         layout.separator()
         col = layout.column(heading="Create")
         col.prop(s, "create_trackers")
@@ -349,15 +358,30 @@ class MANIKIN_PT_retarget(_Base, Panel):
         row.active = s.retarget_keep_ends
         row.prop(s, "retarget_live_swivel")
         layout.operator("manikin.retarget", icon='ARMATURE_DATA')
-        layout.separator()
+
+
+class MANIKIN_PT_export(_Base, Panel):
+    """Export: the character (or, with none chosen, the solved armature) as FBX or glTF binary, and
+    each retargeted take.  A sub-panel of its own: under "Retarget to Character" an animator with
+    no character did not look for the export of the solved armature."""
+    bl_label = "Export"
+    bl_parent_id = "MANIKIN_PT_solve"
+    bl_options = {'DEFAULT_CLOSED'}
+
+    def draw(self, context):
+        layout = self.layout
+        s = context.scene.manikin
+        layout.use_property_split = True
+        layout.use_property_decorate = False
         layout.prop(s, "export_format")
         if s.export_format == 'GLB':
             layout.operator("manikin.export_gltf", icon='EXPORT')
         else:
             layout.prop(s, "export_fbx_preset")
             layout.operator("manikin.export_fbx", icon='EXPORT')
-        if s.retarget_target is not None:
-            layout.operator("manikin.export_fbx_takes", icon='EXPORT')
+        # greyed out (its poll says why) without a character or retargeted takes
+        layout.operator("manikin.export_fbx_takes", icon='EXPORT')
 
 
-CLASSES = (MANIKIN_PT_solve, MANIKIN_PT_calibration, MANIKIN_PT_output, MANIKIN_UL_bone_map, MANIKIN_PT_retarget)
+CLASSES = (MANIKIN_PT_solve, MANIKIN_PT_calibration, MANIKIN_PT_output, MANIKIN_UL_bone_map, MANIKIN_PT_retarget,
+           MANIKIN_PT_export)
