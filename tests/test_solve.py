@@ -64,6 +64,18 @@ def test_the_soles_lift_the_body_and_leave_the_barefoot_stature():
         cs.solve_recording(rec, cs.SolveSettings(fps=30.0, sole=0.5))
 
 
+def test_a_typed_arm_span_is_kept_with_a_t_pose_and_no_typed_height():
+    """The panel's Arm Span (or --arm-span) without a typed height: the T-pose gives the stature
+    and the typed span is the body's (it was dropped for the T-pose's 1.53 m unless a height was
+    typed too)."""
+    out = cs.solve_recording(EXAMPLE, cs.SolveSettings(fps=30.0, arm_span=1.80))
+    assert "calibrated on a T-pose at 0.53 s: stature 1.75 m, arm span 1.80 m" in out.summary()
+    with_height = cs.solve_recording(EXAMPLE, cs.SolveSettings(fps=30.0, arm_span=1.80, height=1.75))
+    assert "arm span 1.80 m" in with_height.summary()
+    # the body solved with (its reach margin on the typed span) is the same either way
+    assert out.body.measurements.arm_span == pytest.approx(with_height.body.measurements.arm_span)
+
+
 def test_settings_errors_are_solve_errors():
     with pytest.raises(cs.SolveError, match="no frame rate"):
         cs.solve_recording(EXAMPLE, cs.SolveSettings(fps=None))

@@ -575,8 +575,8 @@ def calibrate(settings: SolveSettings, targets: TrackerTargets, times, offsets):
         return body_from_head_height(targets, settings.height, settings.arm_span, settings.sole), offsets, info
     t0 = float(times[0])
     meas = {"stature": float(settings.height)} if settings.height else None
-    if settings.arm_span and meas is not None:
-        meas["arm_span"] = float(settings.arm_span)
+    if settings.arm_span:                     # typed: kept, with or without a typed height
+        meas = {**(meas or {}), "arm_span": float(settings.arm_span)}
     if settings.sole is not None:
         meas = {**(meas or {}), "sole": float(settings.sole)}
     if mode == "TPOSE":
