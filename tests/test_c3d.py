@@ -188,6 +188,64 @@ def test_zero_markers_are_named(tmp_path):
         read_keypoints(path)
 
 
+
+def _with_float_params(tmp_path, name, values, **kw):
+    """A C3D whose parameters ``values`` (``{(NAME, group id): float}``, group 1 POINT, 2 ANALOG) are
+    written as floats holding these values (type 4 parameters may hold NaN, inf, a fraction, any size)."""
+    import struct
+
+    import fixtures_c3d
+
+    plain = fixtures_c3d._param
+
+    def param(pname, gid, typ, dims, payload, proc, locked=False):
+        if (pname, gid) in values:
+            typ, dims, payload = 4, (), struct.pack("<f", values[(pname, gid)])
+        return plain(pname, gid, typ, dims, payload, proc, locked)
+
+    fixtures_c3d._param = param
+    try:
+        return write_c3d(tmp_path / name, ["A", "B"], np.ones((4, 2, 3)), **kw)
+    finally:
+        fixtures_c3d._param = plain
+
+
+@pytest.mark.parametrize("values, kw, message", [
+    ({("RATE", 2): float("nan")}, {"analog_channels": 2, "analog_per_frame": 2},
+     r"the analog rate \(ANALOG:RATE\) is nan, not a rate in Hz"),
+    ({("USED", 2): -1.0}, {"analog_channels": 1, "analog_per_frame": 2},
+     r"the analog channel count \(ANALOG:USED\) is -1.0, not a whole number of 0 or more"),
+    ({("USED", 1): float("nan")}, {}, r"the marker count \(POINT:USED\) is nan, not a whole number of 1 or more"),
+    ({("LONG_FRAMES", 1): float("inf")}, {"long_frames": True},
+     r"the frame count \(POINT:LONG_FRAMES\) is inf, not a whole number"),
+])
+def test_float_counts_that_are_no_counts_are_named(tmp_path, values, kw, message):
+    """A count or rate of a float parameter that is NaN, infinite or negative is refused naming the
+    parameter and its byte offset (it escaped as 'cannot convert float NaN to integer', an
+    OverflowError, or a reshape error from a negative analog channel count)."""
+    path = _with_float_params(tmp_path, "counts.c3d", values, **kw)
+    with pytest.raises(RecordingError, match=r"counts.c3d, byte offset \d+: " + message):
+        read_keypoints(path)
+
+
+@pytest.mark.skipif(not hasattr(os, "fork") or not os.path.exists("/proc/self"), reason="RLIMIT_AS: Linux")
+def test_a_huge_marker_count_is_refused_before_naming_every_marker(tmp_path):
+    """POINT:USED 3e9 (a float parameter) in a 2 KB file: the file is too short for it, said as
+    truncated; the reader made the 3e9 markers' names first (MemoryError, or the process killed
+    for memory).  Read in a child process whose address space is capped at 2 GB."""
+    import subprocess
+    import sys
+    path = _with_float_params(tmp_path, "huge.c3d", {("USED", 1): 3e9})
+    code = ("import resource; resource.setrlimit(resource.RLIMIT_AS, (2 << 30, 2 << 30))\n"
+            "from blender_manikin.core.io_c3d import read_c3d\n"
+            "from blender_manikin.core.recording import RecordingError\n"
+            "try:\n    read_c3d(%r)\nexcept RecordingError as exc:\n    print('REFUSED', exc)\n" % str(path))
+    root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+    run = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=root,
+                         env={**os.environ, "PYTHONPATH": root, "OPENBLAS_NUM_THREADS": "1"})
+    assert run.returncode == 0 and "REFUSED" in run.stdout and "truncated: 4 frames" in run.stdout, \
+        run.stdout + run.stderr
+
 def test_c3d_is_a_keypoint_input_everywhere(tmp_path, motion):
     """The CLI's and convert's folder discovery and the Blender file filter (``formats``' input
     extensions) take ``.c3d``."""

@@ -206,10 +206,21 @@ def read_c3d(path) -> C3DMarkers:
         x = float(v[0])
         return x + 65536 if not signed and params[(group, name)].type == 2 and x < 0 else x
 
-    used = int(first("POINT", "USED", h_points))
-    if used <= 0:
-        raise RecordingError("zero markers (POINT:USED is 0)", path=path,
-                             offset=params[("POINT", "USED")].offset if ("POINT", "USED") in params else 2)
+    def where(group, name, header_offset):
+        """The byte offset of a parameter for a message, the header's word where it is absent."""
+        return params[(group, name)].offset if (group, name) in params else header_offset
+
+    def count(value, what, offset, lowest=0):
+        """A count read from a parameter (a float parameter may hold NaN, inf or a fraction) as an int."""
+        if not (np.isfinite(value) and value == int(value) and value >= lowest):
+            raise RecordingError(f"{what} is {shown(value)}, not a whole number of {lowest} or more", path=path,
+                                 offset=offset)
+        return int(value)
+
+    used = first("POINT", "USED", h_points)
+    if used == 0:
+        raise RecordingError("zero markers (POINT:USED is 0)", path=path, offset=where("POINT", "USED", 2))
+    used = count(used, "the marker count (POINT:USED)", where("POINT", "USED", 2), lowest=1)
     scale = first("POINT", "SCALE", h_scale, signed=True)
     rate = first("POINT", "RATE", h_rate, signed=True)
     if not np.isfinite(rate) or rate <= 0:
@@ -217,17 +228,21 @@ def read_c3d(path) -> C3DMarkers:
                              offset=params[("POINT", "RATE")].offset if ("POINT", "RATE") in params else 20)
     # the header's word 9 places the data, as py-c3d and ezc3d read it (a POINT:DATA_START left stale
     # by an editing tool read frames from the wrong block); the parameter only where the word is 0
-    data_start = h_start or int(first("POINT", "DATA_START", 0))
+    data_start = h_start or count(first("POINT", "DATA_START", 0), "the data's first block (POINT:DATA_START)",
+                                  where("POINT", "DATA_START", 16))
     s_field, e_field = num("TRIAL", "ACTUAL_START_FIELD"), num("TRIAL", "ACTUAL_END_FIELD")
     if s_field is not None and e_field is not None and s_field.size >= 2 and e_field.size >= 2:
-        lo_hi = [(int(v[0]) % 65536) + 65536 * (int(v[1]) % 65536) for v in (s_field, e_field)]
+        lo_hi = [count(float(v[0]) % 65536 + 65536 * (float(v[1]) % 65536), f"the {k} frame (TRIAL:ACTUAL_{k.upper()}"
+                       "_FIELD)", where("TRIAL", f"ACTUAL_{k.upper()}_FIELD", 6))
+                 for v, k in ((s_field, "start"), (e_field, "end"))]
         first_frame, n = lo_hi[0], lo_hi[1] - lo_hi[0] + 1
     elif h_first <= h_last and h_last != 65535:
         first_frame, n = h_first, h_last - h_first + 1
     else:
         # POINT:FRAMES (int16 capped at 65535, or a float) or POINT:LONG_FRAMES (a float, QTM):
         # the larger, as py-c3d
-        first_frame, n = h_first, int(max(first("POINT", "FRAMES", 0), first("POINT", "LONG_FRAMES", 0)))
+        first_frame, n = h_first, max(count(first("POINT", k, 0), f"the frame count (POINT:{k})",
+                                            where("POINT", k, 6)) for k in ("FRAMES", "LONG_FRAMES"))
     if n <= 0:
         raise RecordingError(f"no frames (first {first_frame}, frame count {n})", path=path, offset=6)
     labels = []
@@ -235,7 +250,6 @@ def read_c3d(path) -> C3DMarkers:
         if ("POINT", key) not in params:
             break
         labels += _strings(params[("POINT", key)])
-    names = [(labels[k] if k < len(labels) else "") or f"*{k}" for k in range(used)]
     units = _UNITS.get((_strings(params[("POINT", "UNITS")]) or [""])[0].lower()) \
         if ("POINT", "UNITS") in params else None
     # the data: per frame 4 words a marker, then the analog samples
@@ -244,7 +258,12 @@ def read_c3d(path) -> C3DMarkers:
     channels = first("ANALOG", "USED", None)
     a_rate = first("ANALOG", "RATE", None, signed=True)
     if channels is not None and a_rate is not None:
-        n_analog = int(channels) * int(round(a_rate / rate))
+        channels = count(channels, "the analog channel count (ANALOG:USED)", where("ANALOG", "USED", 4))
+        per_frame = a_rate / rate
+        if not (np.isfinite(per_frame) and per_frame >= 0):
+            raise RecordingError(f"the analog rate (ANALOG:RATE) is {shown(a_rate)}, not a rate in Hz",
+                                 path=path, offset=where("ANALOG", "RATE", 4))
+        n_analog = channels * int(round(per_frame))
     else:
         n_analog = h_analog
     frame_bytes = (4 * used + n_analog) * word
@@ -258,6 +277,7 @@ def read_c3d(path) -> C3DMarkers:
         raise RecordingError(f"truncated: {n} frames of {frame_bytes} bytes from byte {at} need {need} bytes, "
                              f"the file has {len(data)} (frame {(len(data) - at) // frame_bytes + 1} is cut "
                              "short)", path=path, offset=len(data))
+    names = [(labels[k] if k < len(labels) else "") or f"*{k}" for k in range(used)]
     block = np.frombuffer(data, np.uint8, n * frame_bytes, at).reshape(n, frame_bytes)
     raw = block[:, :4 * used * word].tobytes()
     vals = (dec.floats(raw) if is_float else dec.ints(raw).astype(np.float64)).reshape(n, used, 4)
