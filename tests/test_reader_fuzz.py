@@ -469,6 +469,17 @@ def test_npy_whose_shape_asks_for_terabytes_is_refused_before_allocating(tmp_pat
         read_keypoints(path)
 
 
+
+def test_cut_npy_of_one_number_is_said_as_cut(tmp_path):
+    """A 0-d array (shape ``()``) whose 8 bytes are cut to 5: said as the header's shape and the
+    bytes that follow (before: 'not a readable .npy array (min() arg is an empty sequence)')."""
+    path = tmp_path / "one.npy"
+    path.write_bytes(_npy_bytes("{'descr': '<f8', 'fortran_order': False, 'shape': (), }", bytes(5)))
+    from blender_manikin.core.io_keypoints import read_keypoints
+    with pytest.raises(RecordingError, match=r"one\.npy, byte offset 128: the array header says shape \(\) of <f8 "
+                                             r"\(8 bytes\), but 5 bytes follow the header"):
+        read_keypoints(path)
+
 def test_npy_header_with_an_unclosed_bracket_is_refused(tmp_path):
     """Before: tokenize.TokenError ('EOF in multi-line statement') escaped np.load."""
     path = tmp_path / "cut.npy"

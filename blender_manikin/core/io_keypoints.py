@@ -607,7 +607,7 @@ def _npy_fits(f, size, path, member=""):
     need = int(np.prod([int(n) for n in shape], dtype=object)) * dtype.itemsize     # Python ints: no overflow
     left = size - (f.tell() - start)
     if need > left or min(shape, default=0) < 0:
-        size_is = "a negative size" if min(shape) < 0 else f"{need} bytes"
+        size_is = "a negative size" if min(shape, default=0) < 0 else f"{need} bytes"
         raise RecordingError(f"{member + ': ' if member else ''}the array header says shape {shown(shape)} of "
                              f"{dtype.str} ({size_is}), but {left} bytes follow the header: a damaged file",
                              path=path, offset=None if member else f.tell() - start)
