@@ -377,6 +377,19 @@ def test_a_jump_no_hand_can_confirm_is_no_teleport(example):
     assert unconfirmed_jumps_note(unconfirmed).startswith("the head jumped 45° at 3.5")
 
 
+
+def test_an_unconfirmed_jump_and_turn_is_said_as_far_as_the_head_moved(example):
+    """A take 5 m from the origin, the head stepping 0.5 m and turning 90° with no hand tracked:
+    the note says 0.50 m (before: 7.42 m, the space's shift, which holds the turn about the
+    origin) and the turn."""
+    rec, _ = example
+    far, _ = moved(rec, [(-1e9, 0.0, (5.0, 0.0, 0.0))])           # every sample moved: no jump
+    jumped, _ = moved(far, [(3.5, 90.0, (0.5, 0.0, 0.0))])
+    unconfirmed = []
+    assert find_rig_jumps(without_hands_between(jumped, 2.9, 4.1), unconfirmed) == []
+    assert [j.kind for j in unconfirmed] == ["teleport and turn"]
+    assert unconfirmed_jumps_note(unconfirmed).startswith("the head jumped 0.50 m (turning 90°) at 3.50 s")
+
 def test_a_real_teleport_with_a_hand_tracked_is_still_found(example):
     """After a headset picked up from a table: the app's teleport at 3.5 s, the hands moving with
     it, is found (and only it), with both hands tracked around it or only the right one."""

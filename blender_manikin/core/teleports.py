@@ -99,13 +99,16 @@ class RigJump:
     time: the first head sample after it (s, the recording clock); start: the last one before
     it.  rot: ``(3, 3)`` its turn about +Z; trans: ``(3,)`` metres; a point that stood still is
     at ``rot @ x + trans`` after it (Blender axes).  kind: ``"teleport"``, ``"snap turn"`` or
-    ``"teleport and turn"``.
+    ``"teleport and turn"``.  head_moved: metres the head moved in the jump, beyond its own motion
+    (None where not measured): ``trans`` is the whole space's shift, which for a turn depends on
+    how far the head is from the origin.
     """
     time: float
     start: float
     rot: np.ndarray
     trans: np.ndarray
     kind: str
+    head_moved: float | None = None
 
     @property
     def turn_deg(self) -> float:
@@ -308,7 +311,7 @@ def find_rig_jumps(recording: Recording, unconfirmed=None) -> list:
         kind = "teleport and turn" if teleport and turned else ("teleport" if teleport else "snap turn")
         if False in checks or True not in checks:      # a hand moved against it, or none can tell
             if unconfirmed is not None and False not in checks:
-                unconfirmed.append(RigJump(float(t[b]), float(t[a]), rot, trans, kind))
+                unconfirmed.append(RigJump(float(t[b]), float(t[a]), rot, trans, kind, float(moved)))
             continue
         jumps.append(RigJump(float(t[b]), float(t[a]), rot, trans, kind))
         after = b
@@ -420,13 +423,18 @@ def unconfirmed_jumps_note(jumps, t0=0.0):
     """The summary's note on the head's jumps no tracked hand could confirm (:func:`find_rig_jumps`'s
     ``unconfirmed``), left as recorded: ``"the head jumped 0.92 m at 3.00 s with no controller
     tracked around it, so it is left as recorded, not taken for a teleport (a headset picked up,
-    its tracking found again)"``, the time in seconds from ``t0`` (the take's start on the
+    its tracking found again)"`` (the distance the head's own, :attr:`RigJump.head_moved`; a turn
+    with it as ``"0.50 m (turning 90°)"``), the time in seconds from ``t0`` (the take's start on the
     recording clock); ``None`` without any."""
     if not jumps:
         return None
     j = jumps[0]
-    size = (f"{np.linalg.norm(j.trans):.2f} m" if "teleport" in j.kind
-            else f"{abs(np.degrees(np.arctan2(j.rot[1, 0], j.rot[0, 0]))):.0f}°")
+    turn = f"{abs(j.turn_deg):.0f}°"
+    if "teleport" in j.kind:           # the head's own jump: trans also holds the turn about the origin
+        size = f"{j.head_moved if j.head_moved is not None else np.linalg.norm(j.trans):.2f} m"
+        size += f" (turning {turn})" if j.kind == "teleport and turn" else ""
+    else:
+        size = turn
     more = f" (and {len(jumps) - 1} more)" if len(jumps) > 1 else ""
     return (f"the head jumped {size} at {j.time - t0:.2f} s{more} with no controller tracked around it, so it is left "
             f"as recorded, not taken for a teleport (a headset picked up, its tracking found again)")
