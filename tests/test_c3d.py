@@ -154,6 +154,26 @@ def test_a_take_longer_than_65535_frames(tmp_path):
     assert c.names == names and c.units == "mm"
 
 
+
+def test_the_header_frames_win_over_a_stale_trial_end_field(tmp_path):
+    """A 4-frame take whose header holds its frames (1-4) and whose TRIAL:ACTUAL_END_FIELD says 10
+    (left stale): 4 frames, as py-c3d reads it (before: 10, the zeros padding the data's last
+    512-byte block read as six frames of every marker at the origin)."""
+    import struct
+
+    from blender_manikin.core.io_c3d import read_c3d
+    pts = np.arange(24, dtype=float).reshape(4, 2, 3)
+    path = write_c3d(tmp_path / "stale.c3d", ["A", "B"], pts, long_take=True)
+    data = bytearray(path.read_bytes())
+    data[8:10] = struct.pack("<H", 4)                   # the header's last frame: 4
+    at = bytes(data).index(b"ACTUAL_END_FIELD") + len("ACTUAL_END_FIELD") + 5
+    assert struct.unpack_from("<hh", data, at) == (4, 0)
+    data[at:at + 4] = struct.pack("<hh", 10, 0)
+    path.write_bytes(bytes(data))
+    c = read_c3d(path)
+    assert c.points.shape == (4, 2, 3) and c.first_frame == 1
+    np.testing.assert_allclose(c.points, pts, atol=0.051)
+
 def _bad(tmp_path, name, change):
     path = write_c3d(tmp_path / name, ["A", "B"], np.ones((4, 2, 3)))
     data = bytearray(open(path, "rb").read())

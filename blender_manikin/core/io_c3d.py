@@ -16,7 +16,7 @@ Pure numpy + :mod:`struct`, no bpy.  What is read (the C3D user guide's layout, 
   is 0: the header's wins), ``FRAMES`` / ``LONG_FRAMES`` (the larger), ``LABELS`` (then
   ``LABELS2``, ``LABELS3`` ... past 255 markers), ``ANALOG:USED`` / ``RATE`` and
   ``TRIAL:ACTUAL_START_FIELD`` / ``ACTUAL_END_FIELD`` (two 16-bit words each, low first: takes
-  longer than 65535 frames);
+  longer than 65535 frames, read only when the header's last frame is 65535 or before its first);
 * the data: per frame each marker's x, y, z and a residual word (int16 × ``POINT:SCALE``, or
   float32 when the scale is negative); a negative residual marks the sample invalid (NaN here);
   the analog samples stored after each frame's markers are skipped.
@@ -231,13 +231,15 @@ def read_c3d(path) -> C3DMarkers:
     data_start = h_start or count(first("POINT", "DATA_START", 0), "the data's first block (POINT:DATA_START)",
                                   where("POINT", "DATA_START", 16))
     s_field, e_field = num("TRIAL", "ACTUAL_START_FIELD"), num("TRIAL", "ACTUAL_END_FIELD")
-    if s_field is not None and e_field is not None and s_field.size >= 2 and e_field.size >= 2:
+    if h_first <= h_last and h_last != 65535:
+        # the header's frames where they hold the take (as py-c3d): the TRIAL fields only past
+        # 65535 (a stale ACTUAL_END_FIELD read the zeros padding the last block as frames)
+        first_frame, n = h_first, h_last - h_first + 1
+    elif s_field is not None and e_field is not None and s_field.size >= 2 and e_field.size >= 2:
         lo_hi = [count(float(v[0]) % 65536 + 65536 * (float(v[1]) % 65536), f"the {k} frame (TRIAL:ACTUAL_{k.upper()}"
                        "_FIELD)", where("TRIAL", f"ACTUAL_{k.upper()}_FIELD", 6))
                  for v, k in ((s_field, "start"), (e_field, "end"))]
         first_frame, n = lo_hi[0], lo_hi[1] - lo_hi[0] + 1
-    elif h_first <= h_last and h_last != 65535:
-        first_frame, n = h_first, h_last - h_first + 1
     else:
         # POINT:FRAMES (int16 capped at 65535, or a float) or POINT:LONG_FRAMES (a float, QTM):
         # the larger, as py-c3d
