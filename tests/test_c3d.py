@@ -238,6 +238,9 @@ def _with_float_params(tmp_path, name, values, **kw):
     ({("USED", 1): float("nan")}, {}, r"the marker count \(POINT:USED\) is nan, not a whole number of 1 or more"),
     ({("LONG_FRAMES", 1): float("inf")}, {"long_frames": True},
      r"the frame count \(POINT:LONG_FRAMES\) is inf, not a whole number"),
+    # NaN read every sample as missing without a word; 0 put every marker at the origin
+    ({("SCALE", 1): float("nan")}, {}, r"the scale nan \(POINT:SCALE\) is not a nonzero number"),
+    ({("SCALE", 1): 0.0}, {}, r"the scale 0.0 \(POINT:SCALE\) is not a nonzero number"),
 ])
 def test_float_counts_that_are_no_counts_are_named(tmp_path, values, kw, message):
     """A count or rate of a float parameter that is NaN, infinite or negative is refused naming the

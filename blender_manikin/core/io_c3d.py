@@ -222,6 +222,9 @@ def read_c3d(path) -> C3DMarkers:
         raise RecordingError("zero markers (POINT:USED is 0)", path=path, offset=where("POINT", "USED", 2))
     used = count(used, "the marker count (POINT:USED)", where("POINT", "USED", 2), lowest=1)
     scale = first("POINT", "SCALE", h_scale, signed=True)
+    if not np.isfinite(scale) or scale == 0:     # NaN read every sample as missing, 0 every marker at the origin
+        raise RecordingError(f"the scale {shown(scale)} (POINT:SCALE) is not a nonzero number (negative: float "
+                             f"data)", path=path, offset=where("POINT", "SCALE", 12))
     rate = first("POINT", "RATE", h_rate, signed=True)
     if not np.isfinite(rate) or rate <= 0:
         raise RecordingError(f"frame rate {shown(rate)} (POINT:RATE) is not a positive number", path=path,
