@@ -12,7 +12,8 @@ recording folder, ``.npy`` / ``.npz`` arrays, a keypoint CSV, a ``.trc`` / ``.c3
 :mod:`blender_manikin.core.keypoint_solve`) or a folder (its recordings, sorted).  For every
 input the scene is reset to an empty factory scene, the recording is solved and
 ``DIR/STEM.<ext>`` is written for each format (inputs that share a name, ``take.csv`` in two
-folders, are told apart as ``convert`` does: ``take-<hash>.<ext>``); a file already there is
+folders, are told apart as ``convert`` does: ``take-<hash>.<ext>``; an input written into DIR
+by an earlier run keeps the name it had there, whatever else shares the batch); a file already there is
 replaced only when it is this tool's unchanged output of an earlier run, else the input stops
 with an error naming it (``--overwrite`` replaces it; :mod:`.core.output_guard`).  One line per
 converted input on stdout (``OK INPUT -> outputs (summary)``); problems on stderr as ``ERROR INPUT: message``; a bad
@@ -96,6 +97,8 @@ Options of ``solve`` (they mirror the panel; ``--help`` has them all):
 --no-live-rig                 plain FK keys only (no live swivel rig)
 --no-marks                    no timeline markers where the solve is worth a look (.blend)
 --no-mannequin                no mannequin mesh on the solved armature (.blend, .fbx, .glb)
+--overwrite                   replace files in DIR that are in the way (the user's, or edited)
+--dry-run                     print ``INPUT -> OUTPUTS`` per input and write nothing
 
 ``convert INPUT... --out DIR`` converts many recordings on Dask (the same solve options, plus
 ``--scheduler`` and ``--workers``; :mod:`blender_manikin.core.convert`).
@@ -328,6 +331,8 @@ def _keypoint_layouts():
 OVERWRITE_HELP = ("replace files in --out that are in the way (default: only this tool's own outputs of an "
                   "earlier run, unchanged since, are replaced; an input whose output would replace a file "
                   "made or edited since stops with an error naming it)")
+DRY_RUN_HELP = ("print INPUT -> OUTPUTS for each input (the names a run would write) and write nothing, not "
+                "even --out; an input the output guard would refuse is an ERROR line and the exit status 1")
 
 
 def build_parser():
@@ -371,6 +376,7 @@ def build_parser():
                    help="write plain FK keys only (default: the live swivel rig, whose elbows and knees "
                         "follow the swivel properties)")
     s.add_argument("--overwrite", action="store_true", help=OVERWRITE_HELP)
+    s.add_argument("--dry-run", action="store_true", help=DRY_RUN_HELP)
     c = sub.add_parser("convert", help="convert many recordings in parallel on Dask, without Blender")
     c.add_argument("inputs", nargs="+", metavar="INPUT",
                    help="recording files, folders (recursive), globs, or manifest files (.txt/.lst/.jsonl)")
@@ -385,6 +391,8 @@ def build_parser():
                    help="LocalCluster worker processes, 1 or more (default: one per core)")
     c.add_argument("--no-progress", dest="progress", action="store_false", help="no progress bar on stderr")
     c.add_argument("--overwrite", action="store_true", help=OVERWRITE_HELP)
+    c.add_argument("--dry-run", action="store_true", help=DRY_RUN_HELP.replace(
+        "INPUT -> OUTPUTS for each input", "INPUT -> OUTPUTS for each input (skipped: converted before)"))
     return p
 
 
@@ -735,35 +743,36 @@ def main(argv=None):
     from .core.solve import error_message
     convert = convert_one if needs_blender else convert_one_core
     from .core import output_guard
-    from .core.convert import output_stems
-    from .core.file_names import check_folder, keep_people_apart, person_stems
+    from .core.convert import folder_stems
+    from .core.file_names import check_folder
     try:
         check_folder(args.out, output_tail(formats))      # too deep for Windows' 260 characters
     except ValueError as exc:
         print(f"blender_manikin: error: {exc}", file=sys.stderr)
         return 2
-    os.makedirs(args.out, exist_ok=True)
+    if not args.dry_run:
+        os.makedirs(args.out, exist_ok=True)
     inputs = expand_inputs(args.inputs, args.out)
     if not inputs:
         print("blender_manikin: error: no recordings found in the inputs", file=sys.stderr)
         return 1
-    # two inputs named alike never write the same file; names Windows accepts, paths under 260
-    stems = output_stems(inputs, args.out, output_tail(formats))
-    # (input, stem, person or None, their recording or None): a keypoint file with several people,
-    # read once, one job each (stems <stem>_p<label>, fit for Windows as the file's own)
+    # (input, person or None, their recording or None): a keypoint file with several people, read
+    # once, one job each (stems <stem>_p<label>)
     jobs = []
     for path in inputs:
         people = keypoint_people(path, args)
         if people and len(people) > 1:
-            labels = [lab for lab, _ in people]
-            fitted = person_stems(stems[path], labels, os.path.abspath(path), args.out, output_tail(formats))
-            jobs.extend((path, s, lab, rec) for (lab, rec), s in zip(people, fitted))
+            jobs.extend((path, lab, rec) for lab, rec in people)
         else:                   # one person: the file's own name (its recording, when read, solved)
-            jobs.append((path, stems[path], None, people[0][1] if people else None))
-    # a person's <stem>_p<label> never the name of another input's outputs (group_p0.npy beside group.npy)
-    apart = keep_people_apart({(p, lab): s for p, s, lab, _ in jobs}, [(p, lab) for p, _, lab, _ in jobs if lab],
-                              folder=args.out, tail=output_tail(formats))
-    jobs = [(p, apart[(p, lab)], lab, rec) for p, _, lab, rec in jobs]
+            jobs.append((path, None, people[0][1] if people else None))
+    # names that do not depend on the batch: an input written here before keeps its outputs' names
+    # (the folder's record says which input each came from), a new one never takes another's;
+    # two inputs named alike never write the same file; names Windows accepts, paths under 260
+    names = folder_stems(inputs, {p: [lab for q, lab, _ in jobs if q == p] for p, lab, _ in jobs if lab is not None},
+                         args.out, output_tail(formats))
+    jobs = [(p, names[(p, None if lab is None else str(lab))], lab, rec) for p, lab, rec in jobs]
+    if args.dry_run:
+        return dry_run(jobs, args.out, formats, getattr(args, "overwrite", False))
     failed = done = 0
     path = inputs[0]
     with _ctrl_c() as interrupted:
@@ -775,11 +784,11 @@ def main(argv=None):
                     # nothing the user made or changed is replaced (core/output_guard.py)
                     dsts = [os.path.join(args.out, stem + _formats.WRITERS[f].extension) for f in formats]
                     output_guard.check_free(dsts, getattr(args, "overwrite", False))
-                    output_guard.claim(dsts)
+                    output_guard.claim(dsts, path, person)
                     run_args = args if person is None else argparse.Namespace(**{**vars(args), "person": person})
                     with quiet_stdout():
                         written, job = convert(path, args.out, run_args, formats, stem, keypoints)
-                    output_guard.record(written)
+                    output_guard.record(written, path, person)
                 except Exception as exc:      # one bad input does not stop the others
                     if interrupted:           # Ctrl-C, turned into an error by a Blender operator
                         raise KeyboardInterrupt from exc
@@ -798,6 +807,32 @@ def main(argv=None):
             return 128 + (interrupted[0] if interrupted else signal.SIGINT)   # 130 Ctrl-C, 143 SIGTERM
     print(f"blender_manikin: {done - failed} converted, {failed} error(s) of {len(jobs)} input(s); "
           f"outputs in {args.out}", file=sys.stderr, flush=True)
+    return 1 if failed else 0
+
+
+def dry_run(jobs, out_dir, formats, overwrite=False):
+    """``--dry-run``: print ``INPUT -> OUTPUTS`` for each of ``jobs`` (``(input, stem, person or
+    None, recording)``), writing nothing; an input whose outputs the output guard would refuse
+    (:func:`.core.output_guard.check_free`) or that is missing is an ``ERROR`` line on stderr.
+    Returns the exit status: 0, or 1 when any input would fail so."""
+    from .core import output_guard
+    from .core.io_keypoints import is_keypoint_input
+    from .core.recording import missing_file
+    failed = 0
+    for path, stem, person, _ in jobs:
+        who = "" if person is None else f" [person {person}]"
+        dsts = [os.path.join(out_dir, stem + _formats.WRITERS[f].extension) for f in formats]
+        try:
+            if not os.path.isfile(path) and not is_keypoint_input(path):
+                raise FileNotFoundError(missing_file(path))
+            output_guard.check_free(dsts, overwrite)
+        except (OSError, ValueError) as exc:
+            failed += 1
+            print(f"ERROR {path}{who}: {exc}", file=sys.stderr, flush=True)
+            continue
+        print(f"{path}{who} -> {', '.join(dsts)}", flush=True)
+    print(f"blender_manikin: dry run: {len(jobs) - failed} input(s) would be converted, {failed} error(s); "
+          f"nothing written", file=sys.stderr, flush=True)
     return 1 if failed else 0
 
 
@@ -855,7 +890,7 @@ def convert_main(args, fmts):
     try:
         inputs = convert.collect_inputs(args.inputs, exclude=[args.out])   # outputs are not inputs
         settings = solve_settings(args)
-        if args.save_layout:
+        if args.save_layout and not args.dry_run:      # a dry run writes nothing
             from .core.formats import load_recording
             for path in inputs:
                 if path.lower().endswith(".csv"):
@@ -877,7 +912,11 @@ def convert_main(args, fmts):
         try:
             code, records = convert.run(inputs, args.out, fmts, settings, scheduler=args.scheduler,
                                         workers=args.workers, options=args, progress=args.progress,
-                                        report=report)
+                                        report=report, dry_run=args.dry_run)
+            for rec in records if args.dry_run else ():
+                if rec["status"] in ("planned", "skipped"):
+                    note = " (converted before: skipped)" if rec["status"] == "skipped" else ""
+                    print(f"{convert.said(rec)} -> {', '.join(rec['outputs'])}{note}", flush=True)
         except (ValueError, OSError) as exc:   # a format it cannot write, a scheduler that does not
             print(f"blender_manikin: error: {exc}", file=sys.stderr)   # answer, an --out it cannot write into
             return 2

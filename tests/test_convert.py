@@ -411,3 +411,75 @@ def test_a_file_with_several_people_is_one_task_per_person_and_resumes_per_perso
     assert code == 0 and [(os.path.basename(r["input"]), r["person"]) for r in recs] == [("group.npy", "1")]
     assert (out / "group_p1.json").is_file()
     assert run()[1] == []
+
+
+
+def test_convert_dry_run_prints_the_names_and_writes_nothing(tmp_path, capsys):
+    """``convert --dry-run``: ``INPUT -> OUTPUTS`` per input (one converted before: its outputs,
+    skipped), an input the output guard would refuse an ERROR and exit 1; nothing written, not
+    even the folder, the manifest or the record."""
+    from blender_manikin import cli
+    from blender_manikin.core.file_names import short_hash
+    for sub in ("a", "b"):
+        (tmp_path / sub).mkdir()
+        shutil.copy(EXAMPLE, tmp_path / sub / "take.csv")
+    a, b = str(tmp_path / "a" / "take.csv"), str(tmp_path / "b" / "take.csv")
+    out = tmp_path / "out"
+    opts = ["--out", str(out), "--workers", "1", "--no-progress"]
+    assert cli.main(["convert", a, b, *opts, "--dry-run"]) == 0 and not out.exists()
+    hashed = {p: str(out / f"take-{short_hash(p)}.json") for p in (a, b)}
+    assert capsys.readouterr().out.splitlines() == [f"{a} -> {hashed[a]}", f"{b} -> {hashed[b]}"]
+    assert cli.main(["convert", a, *opts]) == 0                         # a alone: take.json
+    capsys.readouterr()
+
+    def folder():
+        return {n: (out / n).read_bytes() for n in os.listdir(out)}
+    seen = folder()
+    assert cli.main(["convert", a, b, *opts, "--dry-run"]) == 0
+    assert capsys.readouterr().out.splitlines() == [f"{a} -> {out / 'take.json'} (converted before: skipped)",
+                                                    f"{b} -> {hashed[b]}"]
+    assert folder() == seen
+    with open(hashed[b], "w") as f:                                     # a file of the user's own: in the way
+        f.write("mine")
+    seen = folder()
+    assert cli.main(["convert", a, b, *opts, "--dry-run"]) == 1
+    cap = capsys.readouterr()
+    assert f"ERROR {b}: {hashed[b]} already exists" in cap.err
+    assert cap.out.splitlines() == [f"{a} -> {out / 'take.json'} (converted before: skipped)"]
+    assert folder() == seen
+
+
+def test_convert_keeps_an_inputs_name_when_a_namesake_joins_the_batch(tmp_path):
+    """``a/take.csv`` converted alone writes ``take.json``; converted again with another format
+    beside ``b/take.csv`` it still writes ``take.json`` and ``take.bvh`` (it wrote
+    ``take-<hash>.*``, leaving a stale ``take.json``), and ``b`` gets ``take-<hash>``."""
+    from blender_manikin.core.file_names import short_hash
+    for sub in ("a", "b"):
+        (tmp_path / sub).mkdir()
+        shutil.copy(EXAMPLE, tmp_path / sub / "take.csv")
+    a, b = str(tmp_path / "a" / "take.csv"), str(tmp_path / "b" / "take.csv")
+    out = tmp_path / "out"
+    run = dict(workers=1, progress=False, log=lambda m: None)
+    assert convert.run([a], str(out), ["json"], SolveSettings(fps=30.0), **run)[0] == 0
+    assert convert.run([a, b], str(out), ["json", "bvh"], SolveSettings(fps=30.0), **run)[0] == 0
+    hb = f"take-{short_hash(b)}"
+    assert sorted(n for n in os.listdir(out) if n.endswith((".json", ".bvh"))) == sorted(
+        ["take.json", "take.bvh", f"{hb}.json", f"{hb}.bvh"])
+
+
+def test_solve_into_a_convert_folder_keeps_converts_names(tmp_path):
+    """The output record names each output's input, whichever command wrote it: ``solve a/take.csv``
+    into a folder ``convert`` wrote ``a`` and ``b``'s ``take-<hash>`` into writes ``take-<hash>``
+    again, not a ``take.json`` beside it."""
+    from blender_manikin import cli
+    from blender_manikin.core.file_names import short_hash
+    for sub in ("a", "b"):
+        (tmp_path / sub).mkdir()
+        shutil.copy(EXAMPLE, tmp_path / sub / "take.csv")
+    a, b = str(tmp_path / "a" / "take.csv"), str(tmp_path / "b" / "take.csv")
+    out = tmp_path / "out"
+    assert convert.run([a, b], str(out), ["json"], SolveSettings(fps=30.0), workers=1, progress=False,
+                       log=lambda m: None)[0] == 0
+    assert cli.main(["solve", a, "--out", str(out), "--format", "json"]) == 0
+    assert sorted(n for n in os.listdir(out) if n.endswith(".json")) == sorted(
+        [f"take-{short_hash(a)}.json", f"take-{short_hash(b)}.json"])

@@ -385,3 +385,25 @@ def test_an_unnamed_array_of_a_marker_sets_count_names_the_array_layouts(tmp_pat
         read_keypoints(str(path))
     assert "match no keypoint layout" in str(err.value)
     assert "plugingait" not in str(err.value) and "opencap" not in str(err.value)
+
+
+def test_a_group_files_people_keep_their_names_in_a_later_batch(tmp_path, people):
+    """``a/group.npy`` solved alone writes ``group_p0`` / ``group_p1``; solved again beside
+    ``b/group.npy`` its people keep those names (none left stale beside new ones) and ``b``'s
+    people get names of their own; and so alone again."""
+    from blender_manikin.core.file_names import short_hash
+    groups = []
+    for sub in "ab":
+        (tmp_path / sub).mkdir()
+        np.save(tmp_path / sub / "group.npy", _stack(people)[:2])
+        groups.append(tmp_path / sub / "group.npy")
+    a, b = groups
+    out = tmp_path / "o"
+
+    def solve(*inputs):
+        assert cli.main(["solve", *map(str, inputs), "--out", str(out), "--format", "json", "--fps", "30"]) == 0
+        return sorted(p.name for p in out.iterdir() if p.suffix == ".json")
+    assert solve(a) == ["group_p0.json", "group_p1.json"]
+    theirs = [f"group_p{k}-{short_hash(str(b) + f'#person={k}')}.json" for k in (0, 1)]
+    assert solve(a, b) == sorted(["group_p0.json", "group_p1.json"] + theirs)
+    assert solve(b) == solve(a) == sorted(["group_p0.json", "group_p1.json"] + theirs)

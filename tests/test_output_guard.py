@@ -1,4 +1,5 @@
 """Outputs never replace a file the user made or changed (core/output_guard.py)."""
+import json
 import os
 
 import pytest
@@ -28,3 +29,30 @@ def test_only_unchanged_or_claimed_outputs_may_be_replaced(tmp_path):
     # a record that cannot be read counts as none: everything present is in the way
     (tmp_path / og.RECORD).write_text("not json")
     assert og.in_the_way([ours, killed]) == [ours, killed]
+
+
+def test_the_record_names_each_outputs_input_and_older_entries_still_read(tmp_path):
+    """Entries name the input (and person) an output came from, for the next run's names
+    (``recorded_stems``); they guard their files as the older entries without it do, which
+    name no input."""
+    take, group, old = tmp_path / "take.json", tmp_path / "group_p1.bvh", tmp_path / "old.json"
+    og.claim([take, group], sources={take: ("in/take.csv", None), group: ("in/group.npy", 1)})
+    assert og.in_the_way([take, group]) == []                       # claimed, not yet written: replaceable
+    assert sorted(og.recorded_stems(tmp_path, [".json", ".bvh"])) == sorted([
+        (og.input_key("in/take.csv"), "take"), (og.input_key("in/group.npy", "1"), "group_p1")])
+    for p in (take, group, old):
+        p.write_text("{}")
+    og.record([take], "in/take.csv")
+    og.record([group], "in/group.npy", 1)
+    record = json.loads((tmp_path / og.RECORD).read_text())
+    assert record["take.json"]["input"] == os.path.abspath("in/take.csv") and "person" not in record["take.json"]
+    assert record["group_p1.bvh"]["person"] == "1"
+    st = os.stat(old)                                               # an older version's entries: no input
+    record["old.json"] = {"mtime_ns": st.st_mtime_ns, "size": st.st_size}
+    record["gone.json"] = og.PENDING
+    (tmp_path / og.RECORD).write_text(json.dumps(record))
+    assert og.in_the_way([take, group, old]) == []
+    assert sorted(s for _, s in og.recorded_stems(tmp_path, [".json", ".bvh"])) == ["group_p1", "take"]
+    take.write_text('{"edited": true}')                             # edited since: in the way, input or not
+    old.write_text('{"edited": true}')
+    assert og.in_the_way([take, old]) == [take, old]

@@ -120,7 +120,7 @@ def _read_manifest_file(path):
     return paths
 
 
-def output_stems(paths, out_dir=None, tail=0, windows=None):
+def output_stems(paths, out_dir=None, tail=0, windows=None, taken=()):
     """``{input: output stem}``: the file (or FreeMoCap folder) name without extension, made unique
     with a short hash of the input's absolute path when two inputs share a name (in different
     folders, or side by side with different extensions: ``take.csv`` and ``take.bsor``).  Names
@@ -134,10 +134,11 @@ def output_stems(paths, out_dir=None, tail=0, windows=None):
     (``windows``: default, whether this is Windows) a name is also cut, with the hash, so the
     whole path with ``tail`` more characters (extension, temporary suffix) stays under 260
     (:func:`.file_names.fit_stem`); ``ValueError`` naming ``out_dir`` when even a short name
-    cannot."""
+    cannot.  ``taken``: stems already used in ``out_dir`` (other inputs' outputs of earlier runs):
+    a name one of them takes is given the hash too."""
     stems = {p: windows_safe(os.path.splitext(os.path.basename(os.path.abspath(p)))[0]) for p in paths}
     counts = {}
-    for s in stems.values():
+    for s in list(stems.values()) + list(taken):
         counts[fold(s)] = counts.get(fold(s), 0) + 1
 
     def stem(p, s):
@@ -146,6 +147,49 @@ def output_stems(paths, out_dir=None, tail=0, windows=None):
             s = f"{short}-{short_hash(os.path.abspath(p))}"
         return s if out_dir is None else fit_stem(s, os.path.abspath(p), out_dir, tail, windows)
     return {p: stem(p, s) for p, s in stems.items()}
+
+
+def folder_stems(inputs, people, out_dir, tail=0, windows=None) -> dict:
+    """``{(input, person label or None): output stem}`` for ``inputs`` (paths) and ``people``
+    (``{input: [labels]}`` of the keypoint files with several people; the others are one key
+    each, ``(input, None)``), named so that they do not depend on which other inputs share the
+    batch: an input (a person) an earlier run wrote into ``out_dir`` keeps the stem its
+    outputs have there (:func:`.output_guard.recorded_stems`: the folder's record names the
+    input of each output), and a new one gets :func:`output_stems`' name, with the hash where it
+    is another input's of this batch or one the record holds for any input (people:
+    :func:`.file_names.person_stems` of the file's stem, :func:`.file_names.keep_people_apart`
+    so).  ``solve``'s names; ``tail`` and ``windows`` as :func:`output_stems`."""
+    exts = {w.extension for w in formats.WRITERS.values()}
+    recorded = output_guard.recorded_stems(out_dir, exts)
+    own = dict(recorded)                       # the latest stem of each recorded input (person)
+    taken = [s for _, s in recorded]
+
+    def kept(p, lab):
+        return own.get(output_guard.input_key(p, lab))
+    keys = [(p, None) if not people.get(p) else (p, str(lab)) for p in inputs for lab in (people.get(p) or [None])]
+    names, used = {}, set()
+    for k in keys:
+        s = kept(*k)
+        if s and fold(s) not in used:          # (two inputs recorded under one name: the first keeps it)
+            names[k] = s
+            used.add(fold(s))
+    bases = {p: kept(p, None) for p in inputs if kept(p, None) and fold(kept(p, None)) not in
+             {fold(s) for k, s in names.items() if k[0] != p}}
+    # a new name only for an input with a key (itself, a person) not kept: a file whose people all
+    # keep theirs is no other's namesake in this batch
+    new = [p for p in inputs if p not in bases and any(k not in names for k in keys if k[0] == p)]
+    bases.update(output_stems(new, out_dir, tail, windows, taken=taken + list(names.values())))
+    for p in inputs:
+        labels = [str(lab) for lab in (people.get(p) or [])]
+        if not labels:
+            names.setdefault((p, None), bases.get(p))
+            continue
+        if all((p, lab) in names for lab in labels):
+            continue
+        for lab, s in zip(labels, person_stems(bases[p], labels, os.path.abspath(p), out_dir, tail, windows)):
+            names.setdefault((p, lab), s)
+    fresh = [k for k in keys if k[1] is not None and kept(*k) != names[k]]
+    return keep_people_apart(names, fresh, [s for s in taken if fold(s) not in used], out_dir, tail, windows)
 
 
 def temp_tail(fmts) -> int:
@@ -400,14 +444,17 @@ def remove_partial_outputs(out_dir) -> int:
 
 
 def run(inputs, out_dir, fmts, settings: SolveSettings, scheduler=None, workers=None, model=None, options=None,
-        progress=True, log=None, connect_timeout=None, report=None):
+        progress=True, log=None, connect_timeout=None, report=None, dry_run=False):
     """Convert ``inputs`` (paths) into ``out_dir``; returns ``(exit code, records of this run)``
     and logs :func:`summary` last; ``report(record)``, when given, is called as each input finishes
     (the command line prints its ``OK`` lines so, before the summary).  An input whose worker died
     is an error in the manifest; Ctrl-C logs the summary so far and raises ``KeyboardInterrupt``
     (the manifest holds every input finished).  Raises :class:`SchedulerUnreachable` when
     ``scheduler`` (an address) does not answer within ``connect_timeout`` seconds (default:
-    Dask's connect timeout, 30 s)."""
+    Dask's connect timeout, 30 s).  ``dry_run``: nothing is written (not even ``out_dir``, the
+    manifest or a partial output removed) and no Dask started; the records returned are the blocked
+    inputs' errors, then ``{"input", "person", "status": "planned" or "skipped", "outputs"}`` for
+    each task (the outputs it would write, or a skipped one's), with exit code 1 when any is blocked."""
     import dataclasses
     from distributed import as_completed
     log = log or (lambda msg: print(msg, file=sys.stderr, flush=True))
@@ -417,8 +464,9 @@ def run(inputs, out_dir, fmts, settings: SolveSettings, scheduler=None, workers=
                          f" (without Blender); not {', '.join(bad)}")
     out_dir = os.path.abspath(out_dir)       # the manifest's outputs hold wherever a rerun starts
     check_folder(out_dir, temp_tail(fmts))   # a folder too deep for Windows' 260 characters: said first
-    os.makedirs(out_dir, exist_ok=True)
-    removed = remove_partial_outputs(out_dir)
+    if not dry_run:
+        os.makedirs(out_dir, exist_ok=True)
+    removed = 0 if dry_run else remove_partial_outputs(out_dir)
     if removed:
         log(f"removed {removed} partial output(s) a killed run left in {out_dir}")
     done = read_manifest(out_dir)
@@ -438,9 +486,10 @@ def run(inputs, out_dir, fmts, settings: SolveSettings, scheduler=None, workers=
     split_keys = [task_key(p, person) for p, person, people in tasks if person is not None and len(people) > 1]
     names = keep_people_apart(names, split_keys, [s for p, s in stems.items() if p not in inputs],
                               out_dir, temp_tail(fmts))
-    # a person's outputs an earlier run wrote keep their name (con__p1: device-named files' people
-    # had a doubled _ before), so a rerun adds a format to them or replaces them, never a second set
-    for key in split_keys:
+    # an input's (a person's) outputs an earlier run wrote keep their name (take.json, though a
+    # namesake joined the batch since; con__p1: device-named files' people had a doubled _ before),
+    # so a rerun adds a format to them or replaces them, never a second set beside stale ones
+    for key in [task_key(*t[:2]) for t in tasks]:
         old = recorded_stem(done.get(key), out_dir)
         if old and old != names[key] and all(fold(old) != fold(s) for k, s in names.items() if k != key):
             names[key] = old
@@ -466,9 +515,26 @@ def run(inputs, out_dir, fmts, settings: SolveSettings, scheduler=None, workers=
             rec = _error_record(p, str(exc), person, people)
             del rec["source"]
             blocked.append(rec)
+    gone = {task_key(r["input"], r.get("person")) for r in blocked}
+    todo = [t for t in todo if task_key(*t[:2]) not in gone]
+    if dry_run:
+        plan = []
+        for p, person, people in tasks:
+            key = task_key(p, person)
+            if key in gone:
+                continue
+            rec = {"input": p, "person": person}
+            if any(t[:2] == (p, person) for t in todo):
+                rec.update(status="planned",
+                           outputs=[os.path.join(out_dir, names[key] + formats.WRITERS[f].extension) for f in fmts])
+            else:
+                rec.update(status="skipped", outputs=list(done[key].get("outputs", [])))
+            plan.append(rec)
+        for rec in blocked:
+            log(f"ERROR {said(rec)}: {rec['error']}")
+        log(f"dry run: {len(todo)} to convert, {skipped} skipped, {len(blocked)} error(s); nothing written")
+        return (1 if blocked else 0), blocked + plan
     if blocked:
-        gone = {task_key(r["input"], r.get("person")) for r in blocked}
-        todo = [t for t in todo if task_key(*t[:2]) not in gone]
         with _open_manifest(out_dir) as man:
             for rec in blocked:
                 man.write(json.dumps(rec) + "\n")
@@ -478,8 +544,11 @@ def run(inputs, out_dir, fmts, settings: SolveSettings, scheduler=None, workers=
         return 0 if all(is_done(done.get(task_key(*t[:2])), fmts) for t in tasks) else 1, blocked
     client, cluster = _client(scheduler, workers, timeout=connect_timeout)
     # claimed before they are written: what a killed run leaves under these names is replaceable
-    output_guard.claim([os.path.join(out_dir, names[task_key(*t[:2])] + formats.WRITERS[f].extension)
-                        for t in todo for f in fmts])
+    # the record names each output's input, and its person where the file's people are written apart
+    # (one person alone is written under the file's own name, as solve writes it: no person)
+    claimed = {os.path.join(out_dir, names[task_key(*t[:2])] + formats.WRITERS[f].extension):
+               (t[0], t[1] if t[2] and len(t[2]) > 1 else None) for t in todo for f in fmts}
+    output_guard.claim(list(claimed), sources=claimed)     # with their inputs: solve names them alike
     records, failed = list(blocked), len(blocked)
     try:
         log(f"dask dashboard: {client.dashboard_link}")
@@ -497,7 +566,8 @@ def run(inputs, out_dir, fmts, settings: SolveSettings, scheduler=None, workers=
                     p, person, people = which[fut.key]
                     rec = _error_record(p, _lost_task_message(exc), person, people)
                 if rec["status"] == "ok":
-                    output_guard.record(rec["outputs"])
+                    output_guard.record(rec["outputs"], rec["input"],
+                                        rec.get("person") if len(rec.get("people") or ()) > 1 else None)
                 man.write(json.dumps(rec) + "\n")
                 man.flush()
                 os.fsync(man.fileno())

@@ -8,6 +8,12 @@ in and saved, or a file of the user's own that happens to share the name, stops 
 an error naming it (``--overwrite`` replaces them anyway).  Outputs are claimed in the record
 before they are written (:func:`claim`: the name, no size yet) and recorded when complete
 (:func:`record`), so what a killed run left under a claimed name is replaced by the rerun.
+
+An entry also names the input the output came from (``input``, its absolute path, and
+``person``, the label of one person of a keypoint file with several), so a later run names that
+input's outputs as before (:func:`recorded_stems`) whatever else shares its batch.  Entries of
+older records, without ``input`` (``{"size", "mtime_ns"}`` or the string :data:`PENDING`), still
+read: they guard their file as before and name no input.
 """
 from __future__ import annotations
 
@@ -18,7 +24,8 @@ from .file_names import written_whole
 
 #: the record of outputs written into a folder, in that folder
 RECORD = ".blender_manikin_outputs"      # JSON; no .json: not taken for an output
-#: a record entry of an output claimed and not yet recorded complete
+#: a record entry of an output claimed and not yet recorded complete (an entry naming its input:
+#: ``{"status": PENDING, "input": ...}``)
 PENDING = "being written"
 
 
@@ -40,6 +47,19 @@ def _read_record(folder) -> dict:
     return data if isinstance(data, dict) else {}
 
 
+def _replaceable(entry, path) -> bool:
+    """Whether the record ``entry`` of ``path`` says it is this tool's output, unchanged since
+    (same size and modification time) or claimed and never recorded complete."""
+    if entry == PENDING:
+        return True
+    if not isinstance(entry, dict):
+        return False
+    if entry.get("status") == PENDING:
+        return True
+    st = _stat(path)
+    return entry.get("size") == st["size"] and entry.get("mtime_ns") == st["mtime_ns"]
+
+
 def in_the_way(paths) -> list:
     """The ``paths`` that exist and are not outputs of an earlier run, unchanged since (their
     size and modification time as the folder's :data:`RECORD` has them)."""
@@ -50,7 +70,7 @@ def in_the_way(paths) -> list:
         folder, name = os.path.split(os.path.abspath(p))
         rec = records.setdefault(folder, _read_record(folder))
         try:
-            same = os.path.isfile(p) and (rec.get(name) == _stat(p) or rec.get(name) == PENDING)
+            same = os.path.isfile(p) and _replaceable(rec.get(name), p)
         except OSError:
             same = False
         if not same:
@@ -72,15 +92,60 @@ def check_free(paths, overwrite=False):
                              "or choose another --out")
 
 
-def claim(paths):
+def _source(source, person) -> dict:
+    """The record's fields naming the input ``source`` (made absolute) and ``person`` (a label)."""
+    out = {} if source is None else {"input": os.path.abspath(os.fspath(source))}
+    if source is not None and person is not None:
+        out["person"] = str(person)
+    return out
+
+
+def claim(paths, source=None, person=None, sources=None):
     """Note ``paths`` (about to be written; :func:`check_free` passed) in their folders'
-    :data:`RECORD` as being written: a run killed before :func:`record` leaves them replaceable."""
-    _update(paths, lambda p: PENDING)
+    :data:`RECORD` as being written: a run killed before :func:`record` leaves them replaceable.
+    ``source``: the input they are written from (``person``: its person's label), remembered so
+    a later run names them alike (:func:`recorded_stems`); ``sources``: ``{path: (input, person)}``
+    where the paths come from several inputs (one write of the record for a whole batch)."""
+    def entry(p):
+        named = _source(*sources[p]) if sources and p in sources else _source(source, person)
+        return {"status": PENDING, **named} if named else PENDING
+    _update(paths, entry)
 
 
-def record(paths):
-    """Note ``paths`` (just written) in their folders' :data:`RECORD`, as they are now."""
-    _update(paths, _stat)
+def record(paths, source=None, person=None):
+    """Note ``paths`` (just written) in their folders' :data:`RECORD`, as they are now, and
+    ``source`` / ``person`` as :func:`claim` does."""
+    named = _source(source, person)
+    _update(paths, lambda p: {**_stat(p), **named})
+
+
+def input_key(source, person=None):
+    """How :func:`recorded_stems` names an input: ``(its absolute path, as the system compares
+    paths, person label or None)``."""
+    return (os.path.normcase(os.path.abspath(os.fspath(source))), None if person is None else str(person))
+
+
+def recorded_stems(folder, extensions) -> list:
+    """``[(input key, stem), ...]`` of the outputs ``folder``'s :data:`RECORD` says were written
+    from a named input (:func:`input_key`; entries of older records name none and are left out),
+    oldest first (outputs being written last): ``DIR/take.json`` from ``/in/take.csv`` gives
+    ``(("/in/take.csv", None), "take")``.  ``extensions``: the outputs' extensions (``.json``,
+    ``.tar.gz``...), the longest that ends a name is taken off it; names ending in none are left
+    out.  An absent or unreadable record gives ``[]``."""
+    exts = sorted(extensions, key=len, reverse=True)
+    found = []
+    for name, entry in _read_record(folder).items():
+        if not (isinstance(entry, dict) and isinstance(entry.get("input"), str)):
+            continue
+        ext = next((e for e in exts if name.endswith(e) and len(name) > len(e)), None)
+        if ext is None:
+            continue
+        order = float("inf") if entry.get("status") == PENDING else entry.get("mtime_ns", 0)
+        person = entry.get("person")
+        found.append((order if isinstance(order, (int, float)) else 0,
+                      input_key(entry["input"], None if person is None else str(person)), name[:-len(ext)]))
+    found.sort(key=lambda t: t[0])
+    return [(key, stem) for _, key, stem in found]
 
 
 def _update(paths, entry):
