@@ -925,6 +925,19 @@ def convert_main(args, fmts):
     return code
 
 
+def exit_process(code):
+    """Leave with exit status ``code`` (stdout and stderr flushed): ``sys.exit``, or ``os._exit``
+    where the process would crash on its way out after a glTF export (Blender 4.2's ``bpy``
+    module: :func:`.blender.gltf_export.exit_crashes`; a batch that converted every file exited
+    139)."""
+    sys.stdout.flush()
+    sys.stderr.flush()
+    gltf = sys.modules.get(f"{__package__ or 'blender_manikin'}.blender.gltf_export")
+    if gltf is not None and gltf.exit_crashes():
+        os._exit(code)
+    sys.exit(code)
+
+
 def _script_main():
     """Entry when this file is run as a plain script (``blender -b --python cli.py -- ...``)."""
     here = os.path.dirname(os.path.abspath(__file__))
@@ -934,10 +947,7 @@ def _script_main():
     import importlib
     pkg = os.path.basename(here)
     cli = importlib.import_module(f"{pkg}.cli")
-    code = cli.main()
-    sys.stdout.flush()
-    sys.stderr.flush()
-    sys.exit(code)
+    cli.exit_process(cli.main())
 
 
 if __name__ == "__main__" and not __package__:

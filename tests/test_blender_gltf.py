@@ -253,3 +253,23 @@ def test_export_each_take_as_glb(addon, tmp_path):
         want = _heads(char, mapped, frames)
         for j, bone in enumerate(mapped):
             np.testing.assert_allclose(got[bone], want[:, j], atol=1e-3, err_msg=f"{name} {bone}")
+
+
+def test_a_glb_batch_exits_with_its_own_status(tmp_path):
+    """Blender 4.2's bpy module crashed on its way out after its glTF exporter ran: a batch that
+    wrote every .glb exited 139 (a job scheduler saw a failure).  The command line leaves with
+    its own status (cli.exit_process); a bad input still gives 1."""
+    import subprocess
+    import sys
+    root, example = ROOT, EXAMPLE
+    env = dict(os.environ, PYTHONPATH=root)
+    ok = subprocess.run([sys.executable, "-m", "blender_manikin", "solve", example, "--out", str(tmp_path / "o"),
+                         "--format", "glb"], cwd=root, env=env, capture_output=True, text=True, timeout=300)
+    assert ok.returncode == 0, (ok.returncode, ok.stderr[-2000:])
+    assert (tmp_path / "o" / "example_recording.glb").stat().st_size > 0
+    bad = tmp_path / "bad.csv"
+    bad.write_text("time,device,px,py,pz,qw,qx,qy,qz\n0.0,head,1,2\n")
+    failed = subprocess.run([sys.executable, "-m", "blender_manikin", "solve", example, str(bad), "--out",
+                             str(tmp_path / "o2"), "--format", "glb"], cwd=root, env=env, capture_output=True,
+                            text=True, timeout=300)
+    assert failed.returncode == 1, (failed.returncode, failed.stderr[-2000:])

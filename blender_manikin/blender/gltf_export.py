@@ -50,6 +50,24 @@ SETTINGS = {
 }
 
 
+#: set once this process has run the glTF exporter (:func:`exit_crashes`)
+_exported = False
+
+
+def exit_crashes() -> bool:
+    """Whether this process would crash on leaving Python: Blender 4.2's ``bpy`` module, once its
+    glTF exporter has run, ends with a segmentation fault (exit status 139) after every output is
+    written: its static ``SpaceType`` destructors free Python classes after the interpreter has
+    finished (``bpy_class_free`` → ``PyGILState_Ensure`` with no interpreter).  The entry points
+    (:func:`blender_manikin.cli.exit_process`, the tests' ``conftest.py``) then leave by
+    ``os._exit`` with their own status.  Blender binaries, and the module of 4.3 and later (5.0.1
+    and 5.2.3 tested), leave cleanly."""
+    if not _exported:
+        return False
+    import bpy
+    return not bpy.app.binary_path and tuple(bpy.app.version) < (4, 3, 0)
+
+
 def accepted_keywords() -> set:
     """The keyword names of this Blender's ``bpy.ops.export_scene.gltf`` (the bundled add-on
     enabled for this session when it is off)."""
@@ -108,6 +126,8 @@ def export_glb(filepath, armature, extra_objects=(), context=None, name=None) ->
                 o.select_set(o in objs)
             view_layer.objects.active = armature
             scene.render.fps_base = exporter_fps_base(base)
+            global _exported
+            _exported = True
             res = bpy.ops.export_scene.gltf(filepath=str(filepath), **kwargs)
             if 'FINISHED' not in res:
                 raise RuntimeError(f"glTF export failed ({res})")
