@@ -626,7 +626,7 @@ class PanelLayout:
         self.active, self.alert, self.scale_y = True, False, 1.0
 
     def _child(self, *a, **k):
-        child = PanelLayout(self.log)
+        child = type(self)(self.log)
         self.log.append(("child", child))
         return child
     row = column = box = split = _child

@@ -14,7 +14,7 @@ bpy = pytest.importorskip("bpy")
 
 from blender_manikin.operators import solve as solve_op  # noqa: E402
 
-from blender_util import modal_operator  # noqa: E402
+from blender_util import PanelLayout, modal_operator  # noqa: E402
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 EXAMPLE = os.path.join(ROOT, "examples", "example_recording.csv")
@@ -131,6 +131,44 @@ def test_every_file_failing_is_an_error(addon, tmp_path):
     assert _tick(op, lambda res: res != {'RUNNING_MODAL'}) == {'CANCELLED'}
     assert len(queue.failed) == 2 and _armatures() == []
     assert op.reports[-1][0] == {'ERROR'} and "broken2.csv" in op.reports[-1][1]
+
+
+class _IconLayout(PanelLayout):
+    """:class:`blender_util.PanelLayout` whose labels are logged with their icons."""
+
+    def label(self, **k):
+        self.log.append(("label", k.get("icon"), k.get("text")))
+
+
+def _summary_box(context):
+    """The solve panel's summary box as ``[(icon, first line of the item)]``."""
+    from blender_manikin.panels import main as panels
+    log = []
+    panels.MANIKIN_PT_solve.draw(SimpleNamespace(layout=_IconLayout(log)), context)
+    return [(icon, text) for kind, icon, text in (e for e in log if e[0] == "label") if icon != 'BLANK1']
+
+
+def test_every_file_failing_is_said_without_an_empty_list(addon, tmp_path):
+    """No file solved: the summary says so and goes on to the failures (it said "0 of 2 files
+    solved: ; failed: ...", the box's first item a dangling "0 of 2 files solved:")."""
+    op = modal_operator(CLS, **_takes(tmp_path, ["broken1.csv", "broken2.csv"]))
+    op.start_modal()
+    assert _tick(op, lambda res: res != {'RUNNING_MODAL'}) == {'CANCELLED'}
+    report = bpy.context.scene.manikin.last_report
+    assert report.startswith("0 of 2 files solved; failed: broken1.csv, line 1: "), report
+    assert op.reports[-1][1] == f"MANIKIN: {report}"
+
+
+def test_a_failed_file_is_flagged_in_the_summary_box(addon, tmp_path):
+    """Solve Several Files with two broken files: the box's items for them are marked with the
+    error icon, the solved files' with a bullet (they had bullets like the files solved)."""
+    names = ["walk.csv", "broken1.csv", "broken2.csv"]
+    t = _takes(tmp_path, names)
+    assert bpy.ops.manikin.solve_files(directory=t["directory"], files=[{"name": n} for n in names]) == {'FINISHED'}
+    box = _summary_box(bpy.context)
+    assert len(box) == 3 and box[0][0] == 'DOT' and box[0][1].startswith("1 of 3 files solved"), box
+    assert box[1][1].startswith("failed: broken1.csv") and box[2][1].startswith("broken2.csv"), box
+    assert [icon for icon, _ in box[1:]] == ['ERROR', 'ERROR'], box
 
 
 def test_scripts_get_the_files_solved_before_the_call_returns(addon, tmp_path):

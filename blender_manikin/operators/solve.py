@@ -111,7 +111,8 @@ def _named(tag, exc) -> str:
 def _finish_several(op, context, what, unit, who):
     """The end of several solves in one operator run (one undo step): the scene range over them
     all (when the settings ask for one), the panel's box saying ``N of M <what> solved: <armature /
-    action>, ...; failed: <who(job)>: <why>; ...`` (after Esc: how many ``unit`` were not solved)
+    action>, ...; failed: <who(job)>: <why>; ...`` (``0 of M <what> solved; failed: ...`` when none
+    was; after Esc: how many ``unit`` were not solved)
     and the operator's return value."""
     q, scene = op._queue, context.scene
     if op._written and op._base.set_scene_range:
@@ -119,7 +120,7 @@ def _finish_several(op, context, what, unit, who):
         scene.frame_end = max(int(max(b for _, _, b in op._written) + 0.999), scene.frame_start)
     solved = [name for name, _, _ in op._written]
     failed = [_named(who(j), e) for j, e in q.failed]
-    report = f"{len(solved)} of {len(q)} {what} solved: " + ", ".join(solved)
+    report = f"{len(solved)} of {len(q)} {what} solved" + (": " + ", ".join(solved) if solved else "")
     if failed:
         report += f"; failed: {'; '.join(failed)}"
     if q.cancelled:

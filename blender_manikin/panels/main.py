@@ -94,10 +94,14 @@ class MANIKIN_PT_solve(_Base, Panel):
         if s.last_report:
             box = layout.box().column(align=True)
             failed = s.last_report.startswith("Solve failed: ")
+            # Solve Several Files: its items from "failed: " on, up to an Esc's "cancelled", are the
+            # files that failed (one item each), flagged as errors, not bulleted as the ones solved
+            failing = False
             # one paragraph per item of the summary ("a; b; c"), not one run-on block
             for part in report_items(s.last_report):
+                failing = part.startswith("failed: ") or (failing and not part.startswith("cancelled (Esc)"))
                 for i, line in enumerate(wrapped(part, context)):
-                    icon = ('ERROR' if failed or "check" in part else 'DOT') if i == 0 else 'BLANK1'
+                    icon = ('ERROR' if failed or failing or "check" in part else 'DOT') if i == 0 else 'BLANK1'
                     box.label(text=line, icon=icon)
 
 
