@@ -275,7 +275,8 @@ def _metres_arg(lo, hi):
         except ValueError:
             raise argparse.ArgumentTypeError(f"{text!r} is not a number of metres") from None
         if not lo <= v <= hi:
-            hint = f" (metres: {v / 100:g} for {v:g} cm?)" if lo <= v / 100 <= hi and v > hi else ""
+            # a whole number of centimetres typed for metres (175, 3); 0.3 for a 0.2 m range is no such slip
+            hint = f" (metres: {v / 100:g} for {v:g} cm?)" if lo <= v / 100 <= hi and v > hi and v >= 1 else ""
             raise argparse.ArgumentTypeError(f"{text!r}: expected metres from {lo:g} to {hi:g}{hint}")
         return v
     parse.__name__ = "metres"

@@ -39,7 +39,8 @@ def test_every_option_has_help(name):
     ("--height", "175", "(metres: 1.75 for 175 cm?)"),
     ("--height", "nan", "expected metres from 0.5 to 2.8"),
     ("--arm-span", "-0.1", "expected metres from 0 to 3"),
-    ("--sole", "3", "expected metres from 0 to 0.2"),
+    ("--sole", "3", "expected metres from 0 to 0.2 (metres: 0.03 for 3 cm?)"),
+    ("--sole", "0.3", "expected metres from 0 to 0.2\n"),
     ("--height", "tall", "is not a number of metres"),
 ])
 @pytest.mark.parametrize("command", ["solve", "convert"])
