@@ -56,3 +56,35 @@ def test_the_record_names_each_outputs_input_and_older_entries_still_read(tmp_pa
     take.write_text('{"edited": true}')                             # edited since: in the way, input or not
     old.write_text('{"edited": true}')
     assert og.in_the_way([take, old]) == [take, old]
+
+
+_WRITER = """
+import os, sys
+from blender_manikin.core import output_guard as og
+folder, tag, n = sys.argv[1], sys.argv[2], int(sys.argv[3])
+for i in range(n):
+    p = os.path.join(folder, f"{tag}{i}.json")
+    with open(p, "w") as f:
+        f.write("{}")
+    og.claim([p], source=os.path.join(folder, "in", f"{tag}{i}.csv"))
+    og.record([p], source=os.path.join(folder, "in", f"{tag}{i}.csv"))
+"""
+
+
+def test_two_runs_writing_into_one_folder_at_once_lose_no_entry(tmp_path):
+    # two processes (two solves, a solve beside a convert) recording outputs into one --out: each
+    # record write reads, changes and writes the whole record; unlocked, one run's write dropped
+    # the other's entries (those outputs then read as the user's) or failed on the temporary file
+    import subprocess
+    import sys
+    root = os.path.dirname(os.path.dirname(os.path.abspath(og.__file__)))
+    env = {**os.environ, "PYTHONPATH": os.path.dirname(root)}
+    n = 150
+    runs = [subprocess.Popen([sys.executable, "-c", _WRITER, str(tmp_path), tag, str(n)], env=env,
+                             stderr=subprocess.PIPE, text=True) for tag in "ab"]
+    errors = [r.communicate()[1] for r in runs]
+    assert [r.returncode for r in runs] == [0, 0], errors
+    rec = json.loads((tmp_path / og.RECORD).read_text(encoding="utf-8"))
+    assert sorted(rec) == sorted(f"{t}{i}.json" for t in "ab" for i in range(n))
+    assert og.in_the_way([tmp_path / name for name in rec]) == []
+    assert sorted(os.listdir(tmp_path)) == sorted([*rec, og.RECORD])     # no lock or temporary file left

@@ -116,3 +116,18 @@ def test_dry_run_prints_the_names_and_writes_nothing(tmp_path, capsys):
     assert cap.out.splitlines() == [f"{b} -> {out / _hashed(b)}"]
     assert _outputs(out) == ["take.json"] and (out / RECORD).read_bytes() == record
     assert (out / "take.json").read_text() == "{}"
+
+
+def test_a_hand_edited_record_never_names_an_output_outside_out(tmp_path, capsys):
+    # the record's names are file names in --out; one edited by hand to hold a folder
+    # (../elsewhere.json, sub/take.json) named the input's outputs outside --out (or in a sub-folder)
+    a, _ = _takes(tmp_path)
+    out = tmp_path / "o"
+    out.mkdir()
+    entry = {"input": os.path.abspath(a), "size": 1, "mtime_ns": 1}
+    (out / RECORD).write_text(json.dumps({"../elsewhere.json": entry, "sub/take.json": entry,
+                                          "..\\\\win.json": entry}), encoding="utf-8")
+    assert _solve(out, a, extra=["--dry-run"]) == 0
+    assert capsys.readouterr().out.strip() == f"{a} -> {out / 'take.json'}"
+    assert _solve(out, a) == 0
+    assert _outputs(out) == ["take.json"] and not (tmp_path / "elsewhere.json").exists()

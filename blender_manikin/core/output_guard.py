@@ -17,6 +17,8 @@ read: they guard their file as before and name no input.
 """
 from __future__ import annotations
 
+import contextlib
+import errno
 import json
 import os
 
@@ -27,6 +29,9 @@ RECORD = ".blender_manikin_outputs"      # JSON; no .json: not taken for an outp
 #: a record entry of an output claimed and not yet recorded complete (an entry naming its input:
 #: ``{"status": PENDING, "input": ...}``)
 PENDING = "being written"
+#: Windows only: the file locked while a process rewrites the folder's :data:`RECORD` (elsewhere the
+#: folder itself is locked, and nothing is added to it)
+LOCK = RECORD + ".lock"
 
 
 class OutputInTheWay(ValueError):
@@ -131,11 +136,14 @@ def recorded_stems(folder, extensions) -> list:
     oldest first (outputs being written last): ``DIR/take.json`` from ``/in/take.csv`` gives
     ``(("/in/take.csv", None), "take")``.  ``extensions``: the outputs' extensions (``.json``,
     ``.tar.gz``...), the longest that ends a name is taken off it; names ending in none are left
-    out.  An absent or unreadable record gives ``[]``."""
+    out, and so are names with a folder in them (``../take.json``, a record edited by hand).
+    An absent or unreadable record gives ``[]``."""
     exts = sorted(extensions, key=len, reverse=True)
     found = []
     for name, entry in _read_record(folder).items():
         if not (isinstance(entry, dict) and isinstance(entry.get("input"), str)):
+            continue
+        if "/" in name or "\\" in name:       # a hand-edited name with a folder: never written outside
             continue
         ext = next((e for e in exts if name.endswith(e) and len(name) > len(e)), None)
         if ext is None:
@@ -148,17 +156,69 @@ def recorded_stems(folder, extensions) -> list:
     return [(key, stem) for _, key, stem in found]
 
 
+@contextlib.contextmanager
+def _locked(folder):
+    """Hold ``folder``'s :data:`RECORD` for one process at a time while it is read, changed and
+    written again: two runs writing into one folder at once (two ``solve``, or ``solve`` beside
+    ``convert``) otherwise lose each other's entries (their outputs then read as the user's) or
+    fail on the record's temporary file.  The folder is locked (``flock``; Windows: the file
+    :data:`LOCK` in it); where the file system cannot lock, the record is written unlocked, as
+    before."""
+    if os.name == "nt":
+        import msvcrt
+        try:
+            fd = os.open(os.path.join(folder, LOCK), os.O_RDWR | os.O_CREAT)
+        except OSError:
+            yield
+            return
+        try:
+            locked = True
+            while True:
+                try:
+                    msvcrt.locking(fd, msvcrt.LK_LOCK, 1)      # retries for 10 s, then raises
+                    break
+                except OSError as exc:
+                    if exc.errno != errno.EDEADLOCK:           # not another run's lock: unlocked
+                        locked = False
+                        break
+            try:
+                yield
+            finally:
+                if locked:
+                    os.lseek(fd, 0, os.SEEK_SET)
+                    msvcrt.locking(fd, msvcrt.LK_UNLCK, 1)
+        finally:
+            os.close(fd)
+        return
+    import fcntl
+    try:
+        fd = os.open(folder, os.O_RDONLY)
+    except OSError:
+        yield
+        return
+    try:
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX)
+        except OSError:                       # a file system without locks
+            pass
+        yield                                 # closing the folder lets the lock go
+    finally:
+        os.close(fd)
+
+
 def _update(paths, entry):
     by_folder = {}
     for p in paths:
         folder, name = os.path.split(os.path.abspath(p))
         by_folder.setdefault(folder, []).append((name, p))
     for folder, items in by_folder.items():
-        rec = _read_record(folder)
-        for name, p in items:
-            try:
-                rec[name] = entry(p)
-            except OSError:
-                rec.pop(name, None)
-        with written_whole(os.path.join(folder, RECORD)) as tmp, open(tmp, "w", encoding="utf-8", newline="\n") as f:
-            json.dump(rec, f, indent=0, sort_keys=True)
+        with _locked(folder):
+            rec = _read_record(folder)
+            for name, p in items:
+                try:
+                    rec[name] = entry(p)
+                except OSError:
+                    rec.pop(name, None)
+            with written_whole(os.path.join(folder, RECORD)) as tmp, \
+                    open(tmp, "w", encoding="utf-8", newline="\n") as f:
+                json.dump(rec, f, indent=0, sort_keys=True)
