@@ -33,7 +33,7 @@ Options of ``solve`` (they mirror the panel; ``--help`` has them all):
 --height METRES               performer's stature (with --calibration-time it
                               overrides the measured stature; alone it is the
                               body measurement)
---arm-span METRES             wrist-to-wrist span (with --height)
+--arm-span METRES             wrist-to-wrist span, kept as typed (default: the T-pose's)
 --sole METRES                 the performer's shoe soles (default 0.03; 0 barefoot)
 --floor METRES|height         trackers: the recording's floor height (default 0: a head
                               standing near 0, an origin at eye level, gets its floor
@@ -144,7 +144,8 @@ def _add_solve_options(s):
     s.add_argument("--height", type=_metres_arg(*LENGTH_RANGES["height"]), default=None, metavar="METRES",
                    help="performer's stature (0.5-2.8)")
     s.add_argument("--arm-span", type=_metres_arg(*LENGTH_RANGES["arm_span"]), default=None, metavar="METRES",
-                   help="wrist-to-wrist distance in a T-pose (0-3; 0: from proportions)")
+                   help="wrist-to-wrist distance in a T-pose (0-3; kept as typed; 0 or left out: measured on the "
+                        "take's T-pose, else from the proportions)")
     s.add_argument("--sole", type=_metres_arg(*LENGTH_RANGES["sole"]), default=None, metavar="METRES",
                    help="thickness of the performer's shoe soles: the feet stand this far above the floor "
                         "(0-0.2, default 0.03; 0 barefoot)")
