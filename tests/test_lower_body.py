@@ -327,3 +327,38 @@ def test_psis_missing_at_the_start_keeps_the_trunk_upright(tmp_path, motion):
     trunk = P[:n, sk.J["neck"]] - P[:n, sk.J["pelvis"]]
     assert (trunk[:, 2] > 0.8 * np.linalg.norm(trunk, axis=-1)).all(), trunk[:5]
     assert _angle_deg(W[:n, sk.J["pelvis"]], world[:n, sk.J["pelvis"]])[30:].max() < 2.0
+
+
+@pytest.mark.parametrize("layout, sides", [("coco17", ("left", "right")), ("mediapipe33", ("right",))])
+def test_a_wrist_never_seen_continues_its_upper_arm(motion, layout, sides):
+    """Hands cut off by the frame all take while the elbows are seen: the forearm continues the
+    upper arm, straight, its length the proportions' beside the measured upper arm; said so, the
+    rest of the body as the full take solves it.  Before: refused ("joint(s) left_wrist ... cannot
+    be placed")."""
+    body, pos, world = motion
+    lay = kl.LAYOUTS[layout]
+    clean = kl.keypoints_from_body22(pos, world, layout, body.stature)
+    t = np.arange(len(clean)) / 30.0
+    cut = clean.copy()
+    hand = {f"{s}_{w}" for s in sides for w in ("wrist", "index", "pinky", "thumb")}
+    cut[:, [k for k, p in enumerate(lay.points) if p in hand]] = np.nan
+    full = solve_recording(keypoints_from_points(t, clean, layout, "full"), SolveSettings(fps=30.0))
+    out = solve_recording(keypoints_from_points(t, cut, layout, "cut"), SolveSettings(fps=30.0))
+    summary = out.summary()
+    assert f"wrist(s) never seen: the {' and '.join(sides)} forearm(s) continue the upper arm, straight" in summary, \
+        summary.split("; ")
+    P = out.result.positions
+    Pf = full.result.positions
+    seen = [j for j in sk.JOINT_NAMES if not any(j == f"{s}_{a}" for s in sides for a in ("elbow", "wrist"))]
+    for j in seen:
+        d = np.linalg.norm(P[:, sk.J[j]] - Pf[:, sk.J[j]], axis=-1)
+        assert np.median(d) < 0.01, (j, np.median(d))
+    for s in sides:
+        sh, el, wr = (P[:, sk.J[f"{s}_{a}"]] for a in ("shoulder", "elbow", "wrist"))
+        upper, fore = el - sh, wr - el
+        cos = np.sum(rot.normalize(upper) * rot.normalize(fore), -1)
+        assert np.median(cos) > 0.97, np.median(cos)                # straight (within the joint limits)
+        ratio = np.linalg.norm(fore, axis=-1) / np.linalg.norm(upper, axis=-1)
+        assert np.median(ratio) == pytest.approx(sk.PROPORTIONS["forearm"] / sk.PROPORTIONS["upper_arm"], rel=0.1)
+        # the elbow where the keypoints put it (the upper arm is seen)
+        assert np.median(np.linalg.norm(el - Pf[:, sk.J[f"{s}_elbow"]], axis=-1)) < 0.05

@@ -29,7 +29,9 @@ names its K points in file order.  :func:`body22_from_keypoints` places the 22 b
   (:func:`stature_from_legs`); ``Body22.lower_body`` says so;
 * an arm whose elbow and wrist are never seen, in a take that shows the shoulders (hands cut off
   all take): it hangs from its shoulder as a lower-body take's arms, in the chest's frame (the
-  shoulder line and the trunk's up); ``Body22.resting_arms`` names the sides.
+  shoulder line and the trunk's up); ``Body22.resting_arms`` names the sides;
+* a wrist never seen while its elbow is: the forearm continues the upper arm, straight, its
+  length the proportions' beside the upper arm measured in the take; ``Body22.straight_forearms``.
 
 Twist (rotation about a bone) cannot be seen from one point per joint.  Where a layout has the
 points for it, :func:`body22_from_keypoints` also returns world orientations: the head from the
@@ -223,6 +225,8 @@ class Body22:
     the pelvis markers (:func:`pelvis_from_markers`); False: upright on the world's up.
     resting_arms: the sides (``"left"``, ``"right"``) whose arm (elbow and wrist) was never seen
     in a take that shows the shoulders: it hangs at rest from the shoulder (:data:`ARM_DROP_DEG`).
+    straight_forearms: the sides whose wrist was never seen while their elbow was: the forearm
+    continues the upper arm, straight (:func:`body22_from_keypoints`).
     """
     positions: np.ndarray
     end_rot: dict
@@ -230,6 +234,7 @@ class Body22:
     lower_body: bool = False
     pelvis_tilt: bool = False
     resting_arms: tuple = ()
+    straight_forearms: tuple = ()
 
 
 #: an upper-body point seen on at most this share of the frames the legs are seen on is a
@@ -456,6 +461,22 @@ def body22_from_keypoints(points, layout) -> Body22:
             for j in ("elbow", "wrist"):
                 P[:, J[f"{side}_{j}"]] = P[:, J[f"{side}_shoulder"]] + chest @ hanging[(side, j)]
             resting_arms.append(side)
+    # a wrist never seen with its elbow seen (hands cut off by the frame all take, a marker set
+    # without wrist markers): the forearm continues the upper arm, straight, as long as the
+    # proportions make it beside the upper arm measured in the take
+    straight_forearms = []
+    if not lower:
+        for side in ("left", "right"):
+            if side in resting_arms or np.isfinite(P[:, J[f"{side}_wrist"]]).all(-1).any():
+                continue
+            upper = P[:, J[f"{side}_elbow"]] - P[:, J[f"{side}_shoulder"]]
+            n = np.linalg.norm(upper, axis=-1)
+            if not np.isfinite(n).any():
+                continue
+            fore = float(np.nanmedian(n)) * PROPORTIONS["forearm"] / PROPORTIONS["upper_arm"]
+            with np.errstate(invalid="ignore", divide="ignore"):
+                P[:, J[f"{side}_wrist"]] = P[:, J[f"{side}_elbow"]] + upper / n[:, None] * fore
+            straight_forearms.append(side)
 
     no_twist = []
     # head: below the skull base between the ears, oriented by the face; from the head top where
@@ -489,7 +510,7 @@ def body22_from_keypoints(points, layout) -> Body22:
         no_twist.append("head")
     # hands: the palm's plane from the index and pinky knuckles (T-pose: palms down, thumbs forward)
     for side, sign in (("left", 1.0), ("right", -1.0)):
-        if f"{side}_index" in lay and f"{side}_pinky" in lay and side not in resting_arms:
+        if f"{side}_index" in lay and f"{side}_pinky" in lay and side not in resting_arms + straight_forearms:
             w = pt(f"{side}_wrist")
             idx, pky = pt(f"{side}_index"), pt(f"{side}_pinky")
             end_rot[J[f"{side}_wrist"]] = rot.frame_from_axes(sign * (0.5 * (idx + pky) - w), -(idx - pky), "xy")
@@ -520,7 +541,7 @@ def body22_from_keypoints(points, layout) -> Body22:
         if not twist or not ever(R):
             no_twist.append(f"{side}_foot")
         P[:, J[f"{side}_foot"]] = ankle + R @ _rest_foot(H)
-    return Body22(P, end_rot, tuple(no_twist), lower, pelvis_tilt, tuple(resting_arms))
+    return Body22(P, end_rot, tuple(no_twist), lower, pelvis_tilt, tuple(resting_arms), tuple(straight_forearms))
 
 
 def _rest_foot(H):

@@ -541,6 +541,9 @@ def solve_keypoints(source, settings: SolveSettings | None = None, progress=None
         out.info.append(f"arm(s) never seen: the {' and '.join(b22.resting_arms)} arm(s) hang at rest from the "
                         f"shoulder ({kl.ARM_DROP_DEG:.0f}\N{DEGREE SIGN} below horizontal, elbow straight), "
                         f"following the chest")
+    if b22.straight_forearms:
+        out.info.append(f"wrist(s) never seen: the {' and '.join(b22.straight_forearms)} forearm(s) continue the "
+                        f"upper arm, straight")
     if b22.no_twist:
         out.info.append(f"no twist information: {', '.join(b22.no_twist)} (rest twist)")
     if never:

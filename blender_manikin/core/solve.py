@@ -178,7 +178,7 @@ class SolveOutcome:
                                 "left and right foot trackers swapped back", "pelvis and left foot trackers",
                                 "the headset lay still",
                                 "pelvis and right foot trackers",
-                                "spikes removed", "lower body only", "arm(s) never seen",
+                                "spikes removed", "lower body only", "arm(s) never seen", "wrist(s) never seen",
                                 "no twist information",
                                 "point(s) never seen", "retarget:", "smoothing", "no smoothing", "no mannequin")) \
                     or " tracker offset" in note or " teleport" in note or " snap turn" in note \
