@@ -101,10 +101,10 @@ def test_presets_are_editable_copies_and_json_round_trip(tmp_path):
     assert b["name"] == "quest_touch" and b["devices"]["head"]["pos"][0] == 99.0
     np.testing.assert_allclose(b["devices"]["left_hand"]["rot"], a["devices"]["left_hand"]["rot"])
     (tmp_path / "bad.json").write_text('{"devices": {"tail": {"pos": [0, 0, 0]}}}')
-    with pytest.raises(ValueError, match="bad.json: unknown device 'tail'"):
+    with pytest.raises(ValueError, match="bad.json, line 1: unknown device 'tail'"):
         load_offsets(tmp_path / "bad.json")
     (tmp_path / "bad2.json").write_text('{"devices": {"head": {"pos": [0, 0]}}}')
-    with pytest.raises(ValueError, match="bad2.json: head: 'pos' must be 3 finite numbers"):
+    with pytest.raises(ValueError, match="bad2.json, line 1: head: 'pos' must be 3 finite numbers"):
         load_offsets(tmp_path / "bad2.json")
     (tmp_path / "bad3.json").write_text('{"devices": ')
     with pytest.raises(ValueError, match="bad3.json, line 1: not valid JSON"):

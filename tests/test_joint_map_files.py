@@ -166,7 +166,7 @@ def test_sources_file_accepts_a_joint_map_file(tmp_path):
     bad = _lafan1_file_dict()
     del bad["positions"]["head"]
     (tmp_path / "maps" / "lafan.json").write_text(json.dumps(bad))
-    with pytest.raises(ValueError, match=r"sources.json line 1: source 1: joint_map file: .*lafan.json: "
+    with pytest.raises(ValueError, match=r"sources.json line 1: source 1: joint_map file: .*lafan.json, line 1: "
                                          r"positions: missing body joint\(s\) head"):
         load_sources(src)
 

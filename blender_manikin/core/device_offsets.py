@@ -388,37 +388,50 @@ def validate_offsets(offsets, where="offsets") -> dict:
     (= ``none``).  Quaternions are normalised.  Raises ``ValueError`` naming
     the device and field.
     """
+    def fail(problem, *key):
+        raise ValueError(f"{where}: {problem}")
+    return _checked_offsets(offsets, fail)
+
+
+def _checked_offsets(offsets, fail):
+    """:func:`validate_offsets`'s work; ``fail(problem, *key_path)`` raises for a problem with
+    the value at ``key_path`` (the keys in the JSON document, e.g. ``("devices", "head", "pos")``)."""
     if offsets is None:
         return get_preset("none")
     if isinstance(offsets, str):
         return get_preset(offsets)
     if not isinstance(offsets, dict):
-        raise ValueError(f"{where}: expected a dict, got {type(offsets).__name__}")
+        fail(f"expected a dict, got {type(offsets).__name__}")
     if "devices" in offsets:
         devs = offsets["devices"]
         name = str(offsets.get("name", "custom"))
         desc = str(offsets.get("description", ""))
+        top = ("devices",)
     else:
         devs = offsets
         name, desc = "custom", ""
+        top = ()
     if not isinstance(devs, dict):
-        raise ValueError(f"{where}: 'devices' must be a dict of device -> {{pos, rot}}")
+        fail("'devices' must be a dict of device -> {pos, rot}", *top)
     out = {}
     for d, e in devs.items():
         if d not in DEVICES:
-            raise ValueError(f"{where}: unknown device {shown(d)} (expected one of {', '.join(DEVICES)})")
+            fail(f"unknown device {shown(d)} (expected one of {', '.join(DEVICES)})", *top, d)
         if not isinstance(e, dict):
-            raise ValueError(f"{where}: {d}: expected {{'pos': [x, y, z], 'rot': [w, x, y, z]}}")
+            fail(f"{d}: expected {{'pos': [x, y, z], 'rot': [w, x, y, z]}}", *top, d)
         try:
             pos = np.asarray(e.get("pos", [0.0, 0.0, 0.0]), dtype=np.float64)
+        except (TypeError, ValueError):
+            fail(f"{d}: pos/rot must be lists of numbers", *top, d, "pos")
+        try:
             rot = np.asarray(e.get("rot", [1.0, 0.0, 0.0, 0.0]), dtype=np.float64)
         except (TypeError, ValueError):
-            raise ValueError(f"{where}: {d}: pos/rot must be lists of numbers") from None
+            fail(f"{d}: pos/rot must be lists of numbers", *top, d, "rot")
         if pos.shape != (3,) or not np.all(np.isfinite(pos)):
-            raise ValueError(f"{where}: {d}: 'pos' must be 3 finite numbers (metres), got {shown(e.get('pos'))}")
+            fail(f"{d}: 'pos' must be 3 finite numbers (metres), got {shown(e.get('pos'))}", *top, d, "pos")
         if rot.shape != (4,) or not np.all(np.isfinite(rot)) or np.linalg.norm(rot) < 1e-6:
-            raise ValueError(f"{where}: {d}: 'rot' must be a non-zero quaternion [w, x, y, z], "
-                             f"got {shown(e.get('rot'))}")
+            fail(f"{d}: 'rot' must be a non-zero quaternion [w, x, y, z], got {shown(e.get('rot'))}",
+                 *top, d, "rot")
         rot = rot / np.linalg.norm(rot)
         out[d] = {"pos": [float(v) for v in pos], "rot": [float(v) for v in rot]}
     return {"name": name, "description": desc, "devices": out}
@@ -434,11 +447,16 @@ def save_offsets(path, offsets) -> None:
 
 
 def load_offsets(path) -> dict:
-    """Read offsets saved by :func:`save_offsets`; ``ValueError`` names the file and problem."""
-    from .recording import load_json_file
+    """Read offsets saved by :func:`save_offsets`; the ``ValueError``
+    (:class:`.recording.RecordingError`) names the file, the line of the key at fault
+    (:func:`.recording.json_key_line`) and the problem."""
+    from .recording import RecordingError, json_key_line, load_json_file, read_text
     path = os.fspath(path)
     data = load_json_file(path)
-    return validate_offsets(data, where=os.path.basename(path))
+
+    def fail(problem, *key):
+        raise RecordingError(problem, path=path, line=json_key_line(read_text(path), key) if key else None)
+    return _checked_offsets(data, fail)
 
 
 def offset_arrays(offsets, device):

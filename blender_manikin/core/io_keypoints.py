@@ -255,12 +255,14 @@ def read_keypoint_people(path, layout=None, units=None, up=None, rate=None, mapp
             raise RecordingError(why, path=src)
         people = [people[labels.index(all_labels[k])]]
     out = []
+    all_labels = [lab for lab, _ in raw["people"]]
     for lab, X, conf, first, sl in people:
         said = f"person {lab} of {len(raw['people'])} ({', '.join(lab2 for lab2, _ in raw['people'])}), " \
                f"frames {first + sl.start}-{first + sl.stop - 1}"
         one = dict(raw, X=X[sl], conf=None if conf is None else conf[sl],
                    time=None if raw["time"] is None else raw["time"][sl],
-                   frames=raw["frames"][sl], decided=list(raw["decided"]) + [said] + notes)
+                   frames=raw["frames"][sl], decided=list(raw["decided"]) + [said] + notes,
+                   lines=None if raw.get("lines") is None else raw["lines"][all_labels.index(lab)][sl])
         rec = _one_person(one, layout, units, up, handed, subject_params)
         rec.metadata["person"] = lab
         rec.metadata["people"] = labels
@@ -322,11 +324,13 @@ def _load_input(path, rate, mapping, subject_params, person_axis, layout):
     """The file read as it stands: a dict of ``X`` (its array), ``time``, ``conf``,
     ``file_layout``, ``hands``, ``src``, ``decided``, ``subject``, ``units``, ``rate`` and
     ``people`` (None for one person, else ``[(label, (X (T, K, 3|4), conf, first frame)), ...]``
-    on the file's clock, with ``frames`` (T,) the sample numbers for a rate)."""
+    on the file's clock, with ``frames`` (T,) the sample numbers for a rate), ``lines``: the
+    text file's line of each frame (``(T,)`` ints; with people ``(P, T)``, 0 where a person has
+    no row), None for binary files (.npy, .npz, FreeMoCap, C3D), whose errors name the frame."""
     p = os.fspath(path)
     body_file = freemocap_body_file(p)
     raw = dict(decided=[], subject=None, time=None, conf=None, file_layout=None, hands=None,
-               units=None, rate=rate, people=None, frames=None)
+               units=None, rate=rate, people=None, frames=None, lines=None)
     npz_axis = None
     if body_file:
         raw.update(X=_load_npy(body_file), file_layout="mediapipe33", src=body_file)
@@ -344,19 +348,20 @@ def _load_input(path, rate, mapping, subject_params, person_axis, layout):
             X, time, conf, file_layout, npz_rate, npz_axis = _load_npz(p)
             raw.update(X=X, time=time, conf=conf, file_layout=file_layout, rate=rate or npz_rate)
         elif ext == ".csv":
-            X, time, file_layout, rate, groups = _load_csv(p, mapping, rate)
-            raw.update(X=X, time=time, file_layout=file_layout, rate=rate)
+            X, time, file_layout, rate, groups, lines = _load_csv(p, mapping, rate)
+            raw.update(X=X, time=time, file_layout=file_layout, rate=rate, lines=lines)
             if groups is not None:
-                labels, X4, time, frames = groups
+                labels, X4, time, frames, lines = groups
                 raw.update(people=[(lab, (X4[k], None, 0)) for k, lab in enumerate(labels)], time=time,
-                           frames=frames)
+                           frames=frames, lines=lines)
                 raw["decided"].append(f"{len(labels)} {'person' if len(labels) == 1 else 'people'} "
                                       "(the CSV's person column)")
                 return raw
         elif ext in (".trc", ".c3d"):
             load = _load_trc if ext == ".trc" else _load_c3d
-            X, time, file_layout, rate, trc_units, rules, subject = load(p, rate, subject_params)
-            raw.update(X=X, time=time, file_layout=file_layout, rate=rate, units=trc_units, subject=subject)
+            X, time, file_layout, rate, trc_units, rules, subject, lines = load(p, rate, subject_params)
+            raw.update(X=X, time=time, file_layout=file_layout, rate=rate, units=trc_units, subject=subject,
+                       lines=lines)
             raw["decided"] += [rules] if rules else []
         else:
             raise RecordingError(f"not a keypoint file: expected a FreeMoCap folder, .npy, .npz, .csv, "
@@ -446,7 +451,7 @@ def _one_person(raw, layout, units, up, handed, subject_params):
         decided.append(f"subject parameters {os.path.basename(os.fspath(subject_params))} not used (only for "
                        "a TRC's Plug-in Gait markers)")
     rec = _finish(X, conf, name, src, decided, raw["hands"], units, up, handed, raw["rate"], raw["time"],
-                  frames=raw["frames"], units_said=units_said)
+                  frames=raw["frames"], units_said=units_said, lines=raw.get("lines"))
     if subject is not None and subject.height:
         rec.metadata["subject_height"] = subject.height
     return rec
@@ -489,12 +494,14 @@ def keypoints_from_points(time, points, layout, source, units="m", up="+z", how=
     return rec
 
 
-def _finish(X, conf, name, src, decided, hands, units, up, handed, rate, time, frames=None, units_said="as set"):
+def _finish(X, conf, name, src, decided, hands, units, up, handed, rate, time, frames=None, units_said="as set",
+            lines=None):
     """The shared end of reading: confidence → missing, hand knuckles, units, up axis,
     handedness, times; returns the :class:`KeypointRecording`.  frames: ``(T,)`` sample numbers
     on the rate's clock when there are no times (a person's frames of a file with several;
     default ``0 .. T-1``).  units_said: where ``units`` came from, for the read's line (``"as
-    set"``, ``"the file's"``)."""
+    set"``, ``"the file's"``).  lines: ``(T,)`` the text file's line of each frame (0: none),
+    named in a frame's error; None for a binary file (the error names the frame alone)."""
     T = X.shape[0]
     # confidence → missing
     if conf is not None:
@@ -554,7 +561,7 @@ def _finish(X, conf, name, src, decided, hands, units, up, handed, rate, time, f
         if not np.all(np.isfinite(time)) or np.any(d <= 0):
             k = int(np.nonzero(~np.isfinite(time[1:]) | (d <= 0))[0][0]) + 1
             raise RecordingError(f"time {shown(float(time[k]))} s of frame {k} is not after the previous "
-                                 f"frame's {shown(float(time[k - 1]))} s", path=src)
+                                 f"frame's {shown(float(time[k - 1]))} s", path=src, line=_line_of(lines, k))
         decided.append(f"{1.0 / np.median(d):.3g} Hz (from the times{unit_note})")
     # a floor tilted in the file (camera coordinates, a capture volume set up off level)
     tilt = _floor_tilt(X, lay, time)
@@ -571,6 +578,13 @@ def _finish(X, conf, name, src, decided, hands, units, up, handed, rate, time, f
 
 
 # --------------------------------------------------------------------------
+def _line_of(lines, k):
+    """The text file's line of frame ``k`` (:func:`_finish`'s ``lines``), or None."""
+    if lines is None or not 0 <= k < len(lines) or int(lines[k]) <= 0:
+        return None
+    return int(lines[k])
+
+
 def _time_in_seconds(time):
     """``(seconds, note)``: times read in the unit their steps say
     (:func:`.recording.time_unit_of_step`); note says a unit other than seconds (", in ms")."""
@@ -763,6 +777,10 @@ def _layout_from_columns(cols):
 
 
 def _load_csv(path, mapping, rate):
+    """``(X (T, K, 3), time (T,) or None, layout, rate, people, lines (T,))`` of a keypoint CSV;
+    ``people``: :func:`_csv_people`'s split where a person column names several rows a time
+    (then ``X``'s rows are the file's and ``lines`` None: the split carries its own), else None;
+    ``lines``: each data row's line in the file."""
     rows = list(csv.reader(io.StringIO(read_text(path), newline="")))
     rows = [(i + 1, r) for i, r in enumerate(rows) if r and any(c.strip() for c in r)
             and not r[0].lstrip().startswith("#")]
@@ -827,16 +845,18 @@ def _load_csv(path, mapping, rate):
     if tcol is not None and not np.isfinite(tv).any():
         tcol = None                             # a time column with no time in it: the rate decides
     if pcol is not None:
-        return X.reshape(len(data), -1, 3), None, name, rate, _csv_people(path, data, cols, pcol, tcol, tv, X)
+        return (X.reshape(len(data), -1, 3), None, name, rate, _csv_people(path, data, cols, pcol, tcol, tv, X),
+                None)
     if tcol in ("time", "t", "seconds", "timestamp"):
         time = tv                               # its unit from its steps (_time_in_seconds)
     elif tcol == "frame" and rate:
         time = (tv - tv[0]) / float(rate)
-    return X.reshape(len(data), -1, 3), time, name, rate, None
+    return X.reshape(len(data), -1, 3), time, name, rate, None, np.array([ln for ln, _ in data], np.int64)
 
 
 def _csv_people(path, data, cols, pcol, tcol, tv, X):
-    """``(labels, X (P, G, K, 3), time (G,) or None, frames (G,))`` of a keypoint CSV whose ``pcol`` column
+    """``(labels, X (P, G, K, 3), time (G,) or None, frames (G,), lines (P, G))`` of a keypoint CSV whose
+    ``pcol`` column
     names each row's person: the people laid on the file's times (or frame numbers, from 0 at
     the file's first), NaN where a person has no row.  Labels: numbers in numerical order, else
     names in the order they first appear."""
@@ -873,9 +893,11 @@ def _csv_people(path, data, cols, pcol, tcol, tv, X):
         raise RecordingError(f"person {ids[k]} has two rows at {tcol} {shown(float(tv[k]))}", path=path,
                              line=data[k][0])
     X4[row, col] = X.reshape(len(X), -1, 3)
+    lines = np.zeros((P, G), np.int64)                  # each person's row's line at each time, 0: none
+    lines[row, col] = [ln for ln, _ in data]
     if tcol == "frame":
-        return labels, X4, None, grid - grid[0]
-    return labels, X4, grid, np.arange(G, dtype=np.float64)
+        return labels, X4, None, grid - grid[0], lines
+    return labels, X4, grid, np.arange(G, dtype=np.float64), lines
 
 
 #: points a layout chosen from a TRC's markers must have (the limbs' joints)
@@ -897,9 +919,10 @@ def trc_point(marker) -> str:
 
 
 def _load_trc(path, rate, subject_params=None):
-    """``(X (T, K, 3), time (T,) s or None, layout, rate, units, rules, subject)`` of an OpenSim
-    ``.trc`` file: its table read here, its markers made a layout's points by
-    :func:`_markers_to_points`.  subject_params: as :func:`read_keypoints` takes it."""
+    """``(X (T, K, 3), time (T,) s or None, layout, rate, units, rules, subject, lines (T,))`` of an
+    OpenSim ``.trc`` file: its table read here, its markers made a layout's points by
+    :func:`_markers_to_points`; ``lines``: each data row's line in the file.  subject_params: as
+    :func:`read_keypoints` takes it."""
     lines = read_text(path).splitlines()
 
     def cells(line):
@@ -941,19 +964,21 @@ def _load_trc(path, rate, subject_params=None):
         raise
     M = data[:, 2:].reshape(len(rows), len(names), 3)
     time, rate = _trc_time(data, rate, file_rate)
-    return _markers_to_points(path, names, M, units, rate, time, subject_params, "TRC", dict(line=4))
+    return (*_markers_to_points(path, names, M, units, rate, time, subject_params, "TRC", dict(line=4)),
+            np.array(lines_no, np.int64))
 
 
 def _load_c3d(path, rate, subject_params=None):
     """As :func:`_load_trc`, of a C3D file (:func:`.io_c3d.read_c3d`): its frames' times from
-    ``POINT:RATE`` (the take's first frame at ``(first - 1) / rate`` s), or ``rate`` when given."""
+    ``POINT:RATE`` (the take's first frame at ``(first - 1) / rate`` s), or ``rate`` when given;
+    ``lines`` None (a binary file: errors name the frame)."""
     from . import io_c3d
     c = io_c3d.read_c3d(path)
     where = dict(offset=c.labels_offset)
     _marker_layout(c.names, path, "C3D", where)
     time = None if rate else c.time
-    return _markers_to_points(path, c.names, c.points, c.units, rate or c.rate, time, subject_params, "C3D",
-                              where)
+    return (*_markers_to_points(path, c.names, c.points, c.units, rate or c.rate, time, subject_params, "C3D",
+                                where), None)
 
 
 def _subject_of(name) -> str:

@@ -50,7 +50,8 @@ import numpy as np
 from .devices import DEVICES, canonical_device, snake_name
 from .plain import shown
 from .recording import (Recording, RecordingError, TrackerStream, UNITS, canonical_axes, canonical_units,
-                        decode_text, load_json_file, read_file_bytes, time_unit_of_step, to_blender)
+                        decode_text, json_key_line, load_json_file, read_file_bytes, read_text, time_unit_of_step,
+                        to_blender)
 from . import rotations as rot
 from .rotations import normalize
 from .axes_detect import choose_axes, heading_from_positions, heading_quats, length_units, up_axis, yaw_of
@@ -281,44 +282,51 @@ _ORDERS = ("XYZ", "XZY", "YXZ", "YZX", "ZXY", "ZYX")
 
 
 def load_layout(path):
-    """A layout file (JSON, as :func:`save_layout` writes it) as a dict; errors name the file."""
+    """A layout file (JSON, as :func:`save_layout` writes it) as a dict; errors name the file,
+    the line of the first key at fault (:func:`.recording.json_key_line`) and every problem."""
     layout = load_json_file(path)
-    problems = []
+    problems, keys = [], []
+
+    def bad(problem, *key):
+        problems.append(problem)
+        keys.append(key)
     if not isinstance(layout, dict) or layout.get("format") != "wide_csv":
-        problems.append('expected an object with "format": "wide_csv"')
+        bad('expected an object with "format": "wide_csv"', "format")
     else:
         devs = layout.get("devices")
         if not isinstance(devs, dict) or not devs:
-            problems.append('"devices" must map device names to their columns')
+            bad('"devices" must map device names to their columns', "devices")
         else:
             for d, cols in devs.items():
                 if canonical_device(d) is None:
-                    problems.append(f"unknown device {d!r}")
+                    bad(f"unknown device {d!r}", "devices", d)
                 elif not isinstance(cols, dict) or not isinstance(cols.get("pos"), list) or len(cols["pos"]) != 3:
-                    problems.append(f"{d}: \"pos\" must list the x, y, z columns")
+                    bad(f"{d}: \"pos\" must list the x, y, z columns", "devices", d, "pos")
                 elif cols.get("rot") is not None and (not isinstance(cols["rot"], list) or len(cols["rot"]) != 4):
-                    problems.append(f"{d}: \"rot\" must list the w, x, y, z columns (or be null)")
+                    bad(f"{d}: \"rot\" must list the w, x, y, z columns (or be null)", "devices", d, "rot")
                 elif cols.get("euler") is not None and (not isinstance(cols["euler"], list) or len(cols["euler"]) != 3
                                                         or cols.get("rot")):
-                    problems.append(f"{d}: \"euler\" must list the x, y, z angle columns (and \"rot\" be null)")
+                    bad(f"{d}: \"euler\" must list the x, y, z angle columns (and \"rot\" be null)", "devices", d,
+                        "euler")
         tm = layout.get("time")
         if not isinstance(tm, dict) or not isinstance(tm.get("column"), str) or \
                 tm.get("unit") not in ("s", "ms", "us", "ns", "delta_ms", "delta_s", "frames", "iso8601"):
-            problems.append('"time" must be {"column": NAME, "unit": "s"|"ms"|"us"|"ns"|"delta_ms"|"delta_s"'
-                            '|"frames"|"iso8601"} (with "rate": HZ for frames)')
+            bad('"time" must be {"column": NAME, "unit": "s"|"ms"|"us"|"ns"|"delta_ms"|"delta_s"'
+                '|"frames"|"iso8601"} (with "rate": HZ for frames)', "time")
         elif tm.get("rate") is not None and not (isinstance(tm["rate"], (int, float)) and tm["rate"] > 0):
-            problems.append('"time": "rate" must be a positive number of samples per second')
+            bad('"time": "rate" must be a positive number of samples per second', "time", "rate")
         eu = layout.get("euler")
         if eu is not None and (not isinstance(eu, dict) or str(eu.get("order", "")).upper() not in _ORDERS
                                or eu.get("unit") not in (None, "deg", "rad")):
-            problems.append('"euler" must be {"order": "XYZ"|"ZXY"|... (applied first to last, about the fixed '
-                            'axes), "unit": "deg"|"rad"}')
+            bad('"euler" must be {"order": "XYZ"|"ZXY"|... (applied first to last, about the fixed '
+                'axes), "unit": "deg"|"rad"}', "euler")
         for key, allowed in (("units", tuple(UNITS)), ("axes", ("unity", "openxr", "blender")),
                              ("delimiter", DELIMITERS), ("decimal", (".", ","))):
             if layout.get(key) is not None and layout[key] not in allowed:
-                problems.append(f'"{key}" must be one of {", ".join(allowed)} or null')
+                bad(f'"{key}" must be one of {", ".join(allowed)} or null', key)
     if problems:
-        raise RecordingError("layout file: " + "; ".join(problems), path=path)
+        line = json_key_line(read_text(path), keys[0]) if isinstance(layout, dict) else None
+        raise RecordingError("layout file: " + "; ".join(problems), path=path, line=line)
     return layout
 
 

@@ -664,9 +664,10 @@ def load_joint_map(path) -> JointMap:
     "primary": AXIS, "secondary": AXIS}``; a joint left out takes its position's joint with the
     T-pose rest axes, the ankles the bone ankle -> ball of the foot, which needs
     ``rest_is_tpose``), ``parents`` (``[[child, parent], ...]`` for detection) and
-    ``description``.  Errors name the file and the problem.
+    ``description``.  Errors name the file, the line of the key at fault
+    (:func:`.recording.json_key_line`) and the problem.
     """
-    from .recording import read_text
+    from .recording import json_key_line, read_text
     where = os.fspath(path)
     try:
         text = read_text(path)
@@ -678,70 +679,75 @@ def load_joint_map(path) -> JointMap:
         raise ValueError(f"{where}: not valid JSON (line {exc.lineno}: {exc.msg})") from None
     if not isinstance(data, dict):
         raise ValueError(f"{where}: expected a JSON object with \"positions\"")
+
+    def at(*key):
+        """``where`` with the line of ``key`` (a key path) in the file, where it is written."""
+        line = json_key_line(text, key)
+        return where if line is None else f"{where}, line {line}"
     unknown = sorted(set(data) - _FILE_KEYS)
     if unknown:
-        raise ValueError(f"{where}: unknown field(s) {', '.join(unknown)} (expected "
+        raise ValueError(f"{at(unknown[0])}: unknown field(s) {', '.join(unknown)} (expected "
                          f"{', '.join(sorted(_FILE_KEYS))})")
     positions = data.get("positions")
     if not isinstance(positions, dict):
-        raise ValueError(f"{where}: \"positions\" must be an object naming a source joint for each body "
+        raise ValueError(f"{at('positions')}: \"positions\" must be an object naming a source joint for each body "
                          f"joint ({', '.join(JN)})")
     bad = sorted(set(positions) - set(JN))
     if bad:
-        raise ValueError(f"{where}: positions: unknown body joint(s) {', '.join(bad)} "
+        raise ValueError(f"{at('positions', bad[0])}: positions: unknown body joint(s) {', '.join(bad)} "
                          f"(body joints: {', '.join(JN)})")
     missing = [n for n in JN if n not in positions]
     if missing:
-        raise ValueError(f"{where}: positions: missing body joint(s) {', '.join(missing)}")
-    pos = {n: _file_point(positions[n], f"{where}: positions.{n}") for n in JN}
+        raise ValueError(f"{at('positions')}: positions: missing body joint(s) {', '.join(missing)}")
+    pos = {n: _file_point(positions[n], f"{at('positions', n)}: positions.{n}") for n in JN}
 
     units = data.get("units", "auto")
     if isinstance(units, bool) or not (
             (isinstance(units, (int, float)) and np.isfinite(units) and units > 0)
             or units == "auto" or units in UNIT_CANDIDATES):
-        raise ValueError(f"{where}: units must be metres per unit (a positive number), \"auto\" or one of "
+        raise ValueError(f"{at('units')}: units must be metres per unit (a positive number), \"auto\" or one of "
                          f"{', '.join(UNIT_CANDIDATES)}; got {shown(units)}")
     if isinstance(units, str) and units != "auto":
         units = UNIT_CANDIDATES[units]
     up, fwd = data.get("up", "y"), data.get("forward", "z")
     for k, v in (("up", up), ("forward", fwd)):
         if not (isinstance(v, str) and re.fullmatch(r"[+-]?[xyzXYZ]", v.strip())):
-            raise ValueError(f"{where}: {k} must be an axis such as \"y\" or \"-z\"; got {shown(v)}")
+            raise ValueError(f"{at(k)}: {k} must be an axis such as \"y\" or \"-z\"; got {shown(v)}")
     try:
         axis_conversion(up, fwd)
     except ValueError as exc:
-        raise ValueError(f"{where}: {exc}") from None
+        raise ValueError(f"{at('forward')}: {exc}") from None
     tpose = data.get("rest_is_tpose", True)
     if not isinstance(tpose, bool):
-        raise ValueError(f"{where}: rest_is_tpose must be true or false; got {shown(tpose)}")
+        raise ValueError(f"{at('rest_is_tpose')}: rest_is_tpose must be true or false; got {shown(tpose)}")
     fp = data.get("foot_pitch", "auto")
     if not (fp is None or fp == "auto" or (isinstance(fp, (int, float)) and not isinstance(fp, bool)
                                             and 0.0 <= fp <= 70.0)):
-        raise ValueError(f"{where}: foot_pitch must be degrees (0-70), \"auto\" or null; got {shown(fp)}")
+        raise ValueError(f"{at('foot_pitch')}: foot_pitch must be degrees (0-70), \"auto\" or null; got {shown(fp)}")
 
     oris_in = data.get("orientations", {})
     if not isinstance(oris_in, dict):
-        raise ValueError(f"{where}: \"orientations\" must be an object")
+        raise ValueError(f"{at('orientations')}: \"orientations\" must be an object")
     bad = sorted(set(oris_in) - set(ORIENTED_JOINTS))
     if bad:
-        raise ValueError(f"{where}: orientations: unknown joint(s) {', '.join(bad)} "
+        raise ValueError(f"{at('orientations', bad[0])}: orientations: unknown joint(s) {', '.join(bad)} "
                          f"(oriented joints: {', '.join(ORIENTED_JOINTS)})")
     ori = {}
     for n in ORIENTED_JOINTS:
-        w = f"{where}: orientations.{n}"
         if n not in oris_in:
-            ori[n] = _default_orientation(n, pos, where)
+            ori[n] = _default_orientation(n, pos, at("positions", n))
             if not tpose:
-                raise ValueError(f"{w} is needed: the default (the T-pose rest axes) needs "
-                                 "\"rest_is_tpose\": true")
+                raise ValueError(f"{at('rest_is_tpose')}: orientations.{n} is needed: the default (the T-pose "
+                                 "rest axes) needs \"rest_is_tpose\": true")
             continue
         o = oris_in[n]
+        w = f"{at('orientations', n)}: orientations.{n}"
         if not (isinstance(o, dict) and set(o) == {"joint", "primary", "secondary"}
                 and isinstance(o["joint"], str) and o["joint"].strip()):
             raise ValueError(f'{w}: expected {{"joint": "Name", "primary": AXIS, "secondary": AXIS}}, '
                              f"got {shown(o)}")
-        ori[n] = OrientationSpec(o["joint"].strip(), _file_axis(o["primary"], f"{w}.primary"),
-                                 _file_axis(o["secondary"], f"{w}.secondary"))
+        axes = [_file_axis(o[k], f"{at('orientations', n, k)}: orientations.{n}.{k}") for k in ("primary", "secondary")]
+        ori[n] = OrientationSpec(o["joint"].strip(), *axes)
         if not tpose and "rest" in (ori[n].primary.kind, ori[n].secondary.kind):
             raise ValueError(f'{w}: "rest" axes need "rest_is_tpose": true')
 
@@ -749,12 +755,13 @@ def load_joint_map(path) -> JointMap:
     if not (isinstance(parents, list) and all(
             isinstance(p, list) and len(p) == 2 and all(isinstance(x, str) and x.strip() for x in p)
             for p in parents)):
-        raise ValueError(f'{where}: parents must be a list of ["child", "parent"] joint names; got {shown(parents)}')
+        raise ValueError(f'{at("parents")}: parents must be a list of ["child", "parent"] joint names; '
+                         f'got {shown(parents)}')
     name = data.get("name", os.path.splitext(os.path.basename(where))[0])
     desc = data.get("description", f"joint-map file {os.path.basename(where)}")
     for k, v in (("name", name), ("description", desc)):
         if not (isinstance(v, str) and v.strip()):
-            raise ValueError(f"{where}: {k} must be a non-empty string; got {shown(v)}")
+            raise ValueError(f"{at(k)}: {k} must be a non-empty string; got {shown(v)}")
     return JointMap(name, pos, ori, unit_scale=units, up=up.strip(), forward=fwd.strip(), rest_is_tpose=tpose,
                     foot_pitch=fp, parents=tuple(tuple(p) for p in parents), description=desc)
 

@@ -210,6 +210,47 @@ def load_json_file(path):
         raise RecordingError(f"not valid JSON ({exc.msg})", path=path, line=exc.lineno) from None
 
 
+def json_key_line(text, key_path):
+    """The 1-based line of ``text`` (a JSON document that parses) where the key ``key_path``
+    (a tuple of object keys, and array indices as ints) is written, for an error about its value:
+    the line of ``"key":`` of the deepest part of the path the text holds (a device's line when
+    the key asked for inside it is missing); None when not even the first key is there.  A key
+    written twice counts where it is written last (the value ``json.loads`` keeps)."""
+    import json
+    want = tuple(key_path)
+    stack, found, line, i, n = [], {}, 1, 0, len(text)
+    while i < n:
+        c = text[i]
+        if c == "\n":
+            line += 1
+        elif c == '"':
+            j = i + 1
+            while j < n and text[j] != '"':
+                j += 2 if text[j] == "\\" else 1
+            k = j + 1
+            while k < n and text[k] in " \t\r\n":
+                k += 1
+            if stack and stack[-1][0] == "{" and k < n and text[k] == ":":
+                try:
+                    stack[-1][1] = json.loads(text[i:j + 1])
+                except ValueError:
+                    stack[-1][1] = None
+                path = tuple(f[1] for f in stack)
+                if path == want[:len(path)]:
+                    found[len(path)] = line
+            line += text.count("\n", i, j)
+            i = j
+        elif c in "{[":
+            stack.append([c, None if c == "{" else 0])
+        elif c in "}]":
+            if stack:
+                stack.pop()
+        elif c == "," and stack and stack[-1][0] == "[":
+            stack[-1][1] += 1
+        i += 1
+    return found[max(found)] if found else None
+
+
 def canonical_axes(axes) -> str:
     """Canonical axes name (see :data:`AXES`) for ``axes`` (case-insensitive, aliases allowed)."""
     key = str(axes).strip().lower()

@@ -1,0 +1,143 @@
+"""Errors on bad input name the file's line: a keypoint CSV's / TRC's frame whose time does not
+advance, and the key at fault in a JSON side file (layout, device offsets, joint map)."""
+import json
+
+import pytest
+
+from blender_manikin.core import joint_maps as jmod
+from blender_manikin.core.device_offsets import load_offsets
+from blender_manikin.core.io_keypoints import read_keypoint_people, read_keypoints
+from blender_manikin.core.io_wide_csv import load_layout
+from blender_manikin.core.recording import RecordingError, json_key_line
+
+from fixtures_keypoints import hinge_motion, write_layout_csv, write_trc
+
+
+@pytest.fixture(scope="module")
+def motion():
+    return hinge_motion(frames=60, seed=0)
+
+
+def _time_back(lines, k):
+    """Row ``k`` of a table's text lines with its time cell set to the previous row's."""
+    sep = "\t" if "\t" in lines[k] else ","
+    ti = 1 if sep == "\t" else 0
+    prev, row = lines[k - 1].split(sep), lines[k].split(sep)
+    row[ti] = prev[ti]
+    lines[k] = sep.join(row)
+
+
+def test_keypoint_csv_time_not_advancing_names_its_line(tmp_path, motion):
+    body, pos, world = motion
+    path = tmp_path / "kp.csv"
+    write_layout_csv(path, "coco17", body, pos, world)
+    lines = path.read_text().splitlines()
+    lines.insert(1, "# a comment line")          # skipped rows still count as lines
+    _time_back(lines, 21)                         # line 22: frame 19 (the header, the comment, frames 0..18 before)
+    path.write_text("\n".join(lines) + "\n")
+    with pytest.raises(RecordingError, match=r"kp.csv, line 22: time .* s of frame 19 is not after the previous "
+                                             r"frame's .* s") as e:
+        read_keypoints(path)
+    assert e.value.line == 22
+
+
+def test_keypoint_csv_empty_time_cell_names_its_line(tmp_path, motion):
+    body, pos, world = motion
+    path = tmp_path / "gap.csv"
+    write_layout_csv(path, "coco17", body, pos, world)
+    lines = path.read_text().splitlines()
+    row = lines[31].split(",")
+    row[0] = ""
+    lines[31] = ",".join(row)
+    path.write_text("\n".join(lines) + "\n")
+    with pytest.raises(RecordingError, match=r"gap.csv, line 32: time nan s of frame 30 is not after"):
+        read_keypoints(path)
+
+
+def test_keypoint_csv_frame_column_names_its_line(tmp_path, motion):
+    """A frame-number column read with a rate: a frame number that goes back names its line, also
+    through read_keypoint_people (one person)."""
+    body, pos, world = motion
+    path = tmp_path / "frames.csv"
+    write_layout_csv(path, "coco17", body, pos, world)
+    lines = path.read_text().splitlines()
+    lines[0] = lines[0].replace("time", "frame", 1)
+    for k in range(1, len(lines)):
+        row = lines[k].split(",")
+        row[0] = str(k - 1 if k != 10 else 3)     # line 11 (lines[10]): frame 9 written as 3
+        lines[k] = ",".join(row)
+    path.write_text("\n".join(lines) + "\n")
+    for read in (read_keypoints, read_keypoint_people):
+        with pytest.raises(RecordingError, match=r"frames.csv, line 11: time .* s of frame 9 is not after"):
+            read(path, rate=30)
+
+
+def test_trc_time_not_advancing_names_its_line(tmp_path, motion):
+    body, pos, world = motion
+    path = tmp_path / "back.trc"
+    write_trc(path, body, pos, world)
+    lines = path.read_text().splitlines()
+    first = next(k for k in range(5, len(lines)) if lines[k].strip())     # the first data row
+    _time_back(lines, first + 12)
+    path.write_text("\n".join(lines) + "\n")
+    with pytest.raises(RecordingError, match=rf"back.trc, line {first + 13}: time .* s of frame 12 is not after"):
+        read_keypoints(path)
+
+
+def test_json_key_line():
+    text = ('{"format": "wide_csv",\n'
+            '  "devices": {\n'
+            '    "head": {"pos": ["a", "b", "c"]},\n'
+            '    "right_hand": {\n'
+            '      "pos": ["d", "e", "f"],\n'
+            '      "rot": [0, 0, 0, 0]\n'
+            '    }\n'
+            '  },\n'
+            '  "rot": "not the one",\n'
+            '  "list": [{"rot": 1}, {"a\\"b": "x\\ny",\n'
+            '  "rot": 2}]\n'
+            '}\n')
+    assert json_key_line(text, ("devices", "right_hand", "rot")) == 6
+    assert json_key_line(text, ("rot",)) == 9
+    assert json_key_line(text, ("devices", "head", "rot")) == 3      # missing: its device's line
+    assert json_key_line(text, ("list", 1, "rot")) == 11
+    assert json_key_line(text, ("list", 1, 'a"b')) == 10
+    assert json_key_line(text, ("nope",)) is None
+
+
+def test_layout_content_error_names_its_line(tmp_path):
+    bad = tmp_path / "layout.json"
+    bad.write_text(json.dumps({"format": "wide_csv",
+                               "devices": {"head": {"pos": ["x", "y", "z"], "rot": None},
+                                           "elbow": {"pos": ["a", "b", "c"]}},
+                               "time": {"column": "t", "unit": "s"}}, indent=2))
+    want = next(k for k, t in enumerate(bad.read_text().splitlines(), 1) if '"elbow":' in t)
+    with pytest.raises(RecordingError, match=rf"layout.json, line {want}: layout file: unknown device 'elbow'"):
+        load_layout(bad)
+
+
+def test_offsets_content_error_names_its_line(tmp_path):
+    bad = tmp_path / "offsets.json"
+    bad.write_text('{\n  "devices": {\n    "head": {"pos": [0, 0, 0]},\n    "right_hand": {\n'
+                   '      "pos": [0, 0, 0],\n      "rot": [0, 0, 0, 0]\n    }\n  }\n}\n')
+    with pytest.raises(RecordingError, match=r"offsets.json, line 6: right_hand: 'rot' must be a non-zero "
+                                             r"quaternion"):
+        load_offsets(bad)
+    (tmp_path / "bare.json").write_text('{"head": {"pos": [0, 0, 0]},\n "tail": {}}')     # the bare form
+    with pytest.raises(RecordingError, match=r"bare.json, line 2: unknown device 'tail'"):
+        load_offsets(tmp_path / "bare.json")
+
+
+def test_joint_map_content_error_names_its_line(tmp_path):
+    from test_joint_map_files import _lafan1_file_dict
+    d = _lafan1_file_dict()
+    d["orientations"]["head"]["primary"] = "up"
+    f = tmp_path / "map.json"
+    f.write_text(json.dumps(d, indent=2))
+    lines = f.read_text().splitlines()
+    start = next(k for k, t in enumerate(lines) if '"orientations":' in t)
+    head = next(k for k in range(start, len(lines)) if '"head":' in lines[k])
+    want = next(k for k in range(head, len(lines)) if '"primary":' in lines[k]) + 1
+    with pytest.raises(ValueError, match=rf"map.json, line {want}: orientations.head.primary: bad axis") as e:
+        jmod.load_joint_map(f)
+    assert str(e.value).startswith(f"{f}, line {want}: ")
