@@ -58,7 +58,7 @@ from blender_manikin.core import bone_maps  # noqa: E402
 from blender_manikin.core import skeleton as sk  # noqa: E402
 from blender_manikin.core.solve import SolveSettings, solve_recording  # noqa: E402
 from blender_util import (build_armature, humanoid_bones, humanoid_joints,  # noqa: E402
-                          mixamo_style_character, styled_character)
+                          mixamo_style_character, rigify_character, styled_character)
 
 FPS = 30.0
 J = sk.J
@@ -76,18 +76,6 @@ def _mixamo_props(name, stature, arm=1.0, leg=1.0):
     return build_armature(name, humanoid_bones(P, bone_maps.preset("mixamo").bones), seed=9)
 
 
-def _rigify():
-    import addon_utils
-    addon_utils.enable("rigify", default_set=True, persistent=True)
-    bpy.ops.object.armature_human_metarig_add()
-    meta = bpy.context.active_object
-    bpy.ops.pose.rigify_generate()
-    rig = bpy.context.active_object
-    bpy.data.objects.remove(meta)
-    bpy.ops.object.mode_set(mode='OBJECT')
-    return rig
-
-
 def build_rig(kind):
     """``(object, {joint: deforming bone to measure})``."""
     if kind == "mixamo_cm":
@@ -95,7 +83,7 @@ def build_rig(kind):
         names = bone_maps.preset("mixamo").bones
         return obj, {j: names[j] for j in MEASURED}
     if kind == "rigify":
-        obj = _rigify()
+        obj = rigify_character()
         m = {"pelvis": "DEF-spine"}
         for side, s in (("left", "L"), ("right", "R")):
             m.update({f"{side}_shoulder": f"DEF-upper_arm.{s}", f"{side}_elbow": f"DEF-forearm.{s}",

@@ -95,6 +95,17 @@ def write_layout_csv(path, layout, body, pos, world, fps=30.0, sigma=0.0, seed=0
     return clean
 
 
+def set_csv_cells(path, cells):
+    """Rewrite the CSV ``path`` with ``cells`` ``{(line index, column index): text}`` put in
+    (line index 0: the header), as a damaged or hand-edited file has them."""
+    lines = path.read_text().splitlines()
+    for (k, c), text in cells.items():
+        row = lines[k].split(",")
+        row[c] = text
+        lines[k] = ",".join(row)
+    path.write_text("\n".join(lines) + "\n")
+
+
 #: Pose2Sim's markers for Halpe 26 (its skeleton tree: the eyes and ears left out), as its TRC files name them
 POSE2SIM_HALPE26 = ("Hip", "RHip", "RKnee", "RAnkle", "RBigToe", "RSmallToe", "RHeel", "LHip", "LKnee", "LAnkle",
                     "LBigToe", "LSmallToe", "LHeel", "Neck", "Head", "Nose", "RShoulder", "RElbow", "RWrist",

@@ -10,7 +10,7 @@ from blender_manikin.core.io_keypoints import read_keypoint_people, read_keypoin
 from blender_manikin.core.io_wide_csv import load_layout
 from blender_manikin.core.recording import RecordingError, json_key_line
 
-from fixtures_keypoints import hinge_motion, write_layout_csv, write_trc
+from fixtures_keypoints import hinge_motion, set_csv_cells, write_layout_csv, write_trc
 
 
 @pytest.fixture(scope="module")
@@ -45,11 +45,7 @@ def test_keypoint_csv_empty_time_cell_names_its_line(tmp_path, motion):
     body, pos, world = motion
     path = tmp_path / "gap.csv"
     write_layout_csv(path, "coco17", body, pos, world)
-    lines = path.read_text().splitlines()
-    row = lines[31].split(",")
-    row[0] = ""
-    lines[31] = ",".join(row)
-    path.write_text("\n".join(lines) + "\n")
+    set_csv_cells(path, {(31, 0): ""})
     with pytest.raises(RecordingError, match=r"gap.csv, line 32: time nan s of frame 30 is not after"):
         read_keypoints(path)
 
@@ -60,13 +56,9 @@ def test_keypoint_csv_frame_column_names_its_line(tmp_path, motion):
     body, pos, world = motion
     path = tmp_path / "frames.csv"
     write_layout_csv(path, "coco17", body, pos, world)
-    lines = path.read_text().splitlines()
-    lines[0] = lines[0].replace("time", "frame", 1)
-    for k in range(1, len(lines)):
-        row = lines[k].split(",")
-        row[0] = str(k - 1 if k != 10 else 3)     # line 11 (lines[10]): frame 9 written as 3
-        lines[k] = ",".join(row)
-    path.write_text("\n".join(lines) + "\n")
+    n = len(path.read_text().splitlines())
+    # frame numbers for times; line 11 (index 10): frame 9 written as 3
+    set_csv_cells(path, {(0, 0): "frame", **{(k, 0): str(k - 1 if k != 10 else 3) for k in range(1, n)}})
     for read in (read_keypoints, read_keypoint_people):
         with pytest.raises(RecordingError, match=r"frames.csv, line 11: time .* s of frame 9 is not after"):
             read(path, rate=30)

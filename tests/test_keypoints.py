@@ -18,8 +18,8 @@ from blender_manikin.core.io_keypoints import is_keypoint_input, read_keypoints
 from blender_manikin.core.recording import RecordingError
 from blender_manikin.core.solve import SolveError, SolveSettings, solve_recording
 
-from fixtures_keypoints import (POSE2SIM_HALPE26, hinge_motion, to_y_up, write_freemocap, write_layout_csv, write_trc,
-                                write_layout_npy)
+from fixtures_keypoints import (POSE2SIM_HALPE26, hinge_motion, set_csv_cells, to_y_up, write_freemocap,
+                                write_layout_csv, write_layout_npy, write_trc)
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 LIMB_JOINTS = [sk.J[f"{s}_{j}"] for s in ("left", "right")
@@ -302,11 +302,7 @@ def test_bad_inputs_name_the_file_line_and_problem(tmp_path, motion):
         read_keypoints(tmp_path / "tiny.npy")
     p = tmp_path / "cells.csv"
     write_layout_csv(p, "coco17", body, pos, world)
-    lines = p.read_text().splitlines()
-    cells = lines[5].split(",")
-    cells[4] = "oops"
-    lines[5] = ",".join(cells)
-    p.write_text("\n".join(lines) + "\n")
+    set_csv_cells(p, {(5, 4): "oops"})
     with pytest.raises(RecordingError, match=r"cells.csv, line 6: column 'left_eye_x': 'oops' is not a number"):
         read_keypoints(p)
     with pytest.raises(RecordingError, match="layout coco17 has 17 points, the file 33"):

@@ -248,22 +248,28 @@ def test_keypoint_lower_body_takes_without_pelvis_markers_stay_upright(motion):
     assert b22.lower_body and not b22.pelvis_tilt and sk.J["pelvis"] not in b22.end_rot
 
 
+def _solved_with_points_cut(motion, layout, sides, points):
+    """``(full, cut)`` solves of ``motion``'s ``layout`` keypoints: all of them, and with ``points``
+    (``"wrist"``, ...) of ``sides`` never seen (NaN the whole take; still a full-body take)."""
+    body, pos, world = motion
+    lay = kl.LAYOUTS[layout]
+    clean = kl.keypoints_from_body22(pos, world, layout, body.stature)
+    t = np.arange(len(clean)) / 30.0
+    cut = clean.copy()
+    gone = {f"{s}_{w}" for s in sides for w in points}
+    cut[:, [k for k, p in enumerate(lay.points) if p in gone]] = np.nan
+    assert not kl.lower_body_only(cut, layout)
+    full = solve_recording(keypoints_from_points(t, clean, layout, "full"), SolveSettings(fps=30.0))
+    return full, solve_recording(keypoints_from_points(t, cut, layout, "cut"), SolveSettings(fps=30.0))
+
+
 @pytest.mark.parametrize("layout, sides", [("coco17", ("left", "right")), ("mediapipe33", ("left",))])
 def test_arms_never_seen_hang_at_rest(motion, layout, sides):
     """Video keypoints with the hands cut off all take (shoulders, trunk and head seen, an arm's
     elbow and wrist never): the arm hangs at rest from its shoulder (70° below the shoulder line,
     elbow straight), said so; the rest of the body as the full take solves it.
     Before: refused ("joint(s) left_elbow, ... cannot be placed")."""
-    body, pos, world = motion
-    lay = kl.LAYOUTS[layout]
-    clean = kl.keypoints_from_body22(pos, world, layout, body.stature)
-    t = np.arange(len(clean)) / 30.0
-    cut = clean.copy()
-    arm = {f"{s}_{w}" for s in sides for w in ("elbow", "wrist", "index", "pinky", "thumb")}
-    cut[:, [k for k, p in enumerate(lay.points) if p in arm]] = np.nan
-    assert not kl.lower_body_only(cut, layout)
-    full = solve_recording(keypoints_from_points(t, clean, layout, "full"), SolveSettings(fps=30.0))
-    out = solve_recording(keypoints_from_points(t, cut, layout, "cut"), SolveSettings(fps=30.0))
+    full, out = _solved_with_points_cut(motion, layout, sides, ("elbow", "wrist", "index", "pinky", "thumb"))
     summary = out.summary()
     assert f"arm(s) never seen: the {' and '.join(sides)} arm(s) hang at rest from the shoulder (70° below " \
            "horizontal, elbow straight)" in summary, summary
@@ -335,15 +341,7 @@ def test_a_wrist_never_seen_continues_its_upper_arm(motion, layout, sides):
     upper arm, straight, its length the proportions' beside the measured upper arm; said so, the
     rest of the body as the full take solves it.  Before: refused ("joint(s) left_wrist ... cannot
     be placed")."""
-    body, pos, world = motion
-    lay = kl.LAYOUTS[layout]
-    clean = kl.keypoints_from_body22(pos, world, layout, body.stature)
-    t = np.arange(len(clean)) / 30.0
-    cut = clean.copy()
-    hand = {f"{s}_{w}" for s in sides for w in ("wrist", "index", "pinky", "thumb")}
-    cut[:, [k for k, p in enumerate(lay.points) if p in hand]] = np.nan
-    full = solve_recording(keypoints_from_points(t, clean, layout, "full"), SolveSettings(fps=30.0))
-    out = solve_recording(keypoints_from_points(t, cut, layout, "cut"), SolveSettings(fps=30.0))
+    full, out = _solved_with_points_cut(motion, layout, sides, ("wrist", "index", "pinky", "thumb"))
     summary = out.summary()
     assert f"wrist(s) never seen: the {' and '.join(sides)} forearm(s) continue the upper arm, straight" in summary, \
         summary.split("; ")

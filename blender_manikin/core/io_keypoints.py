@@ -981,12 +981,6 @@ def _load_c3d(path, rate, subject_params=None):
                                 where), None)
 
 
-def _subject_of(name) -> str:
-    """The ``Subject:`` prefix of a marker's name (``"Bob"`` of ``"Bob:LASI"``), ``""`` without one."""
-    name = str(name).strip()
-    return name.rsplit(":", 1)[0].strip() if ":" in name else ""
-
-
 def _is_body(names) -> bool:
     """Whether marker ``names`` (one subject's) make a body: a whole anatomical marker set, or
     points named for a layout's limbs (:data:`TRC_NEEDED`)."""
@@ -1003,7 +997,7 @@ def _one_subject(names, M, path, kind, where):
     None); markers of two or more bodies are refused, naming them (one subject a file)."""
     groups = {}
     for k, n in enumerate(names):
-        groups.setdefault(_subject_of(n), []).append(k)
+        groups.setdefault(marker_sets.marker_subject(n), []).append(k)
     if len([g for g in groups if g]) < 2:
         return names, M, None
     bodies = [g for g in groups if _is_body([names[k] for k in groups[g]])]

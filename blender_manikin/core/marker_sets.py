@@ -119,6 +119,12 @@ def marker_key(name) -> str:
     return re.sub(r"_study$", "", key)
 
 
+def marker_subject(name) -> str:
+    """The ``Subject:`` prefix of a marker's name (``"Bob"`` of ``"Bob:LASI"``), ``""`` without one."""
+    name = str(name).strip()
+    return name.rsplit(":", 1)[0].strip() if ":" in name else ""
+
+
 def _roles(keys, set_name):
     """``({(side, role): marker index}, [missing marker names])`` of ``keys`` (marker keys) for a set."""
     index = {k: i for i, k in reversed(list(enumerate(keys)))}

@@ -32,6 +32,7 @@ import os
 import re
 from dataclasses import dataclass, field
 
+from .marker_sets import marker_subject
 from .plain import shown
 from .recording import RecordingError, read_text
 
@@ -207,7 +208,7 @@ def find_subject_params(trc_path, marker_names):
         files = sorted(f for f in os.listdir(folder) if os.path.isfile(os.path.join(folder, f)))
     except OSError:
         return None
-    subjects = {str(n).strip().rsplit(":", 1)[0].strip().lower() for n in marker_names if ":" in str(n)}
+    subjects = {marker_subject(n).lower() for n in marker_names} - {""}
     for ext in EXTENSIONS:
         for f in files:
             stem, e = os.path.splitext(f)
