@@ -443,7 +443,7 @@ def test_auto_calibration_finds_a_low_t_pose_or_an_a_pose(droop):
     pos, rot = body_frames(body, 60, heading=30.0, arm_down=droop)
     targets, *_ = device_targets(pos, rot, get_preset("none"), "none")
     b, _, info = cs.calibrate(cs.SolveSettings(fps=60.0), targets, np.arange(60) / 60.0, "none")
-    assert info[0].startswith(f"calibrated on a {'T' if droop < 20 else 'A'}-pose"), info
+    assert info[0].startswith(f"calibrated on {'a T' if droop < 20 else 'an A'}-pose"), info
     assert b.stature == pytest.approx(1.80, abs=0.01)
     rest = b.rest_positions()
     assert np.linalg.norm(rest[J["left_wrist"]] - rest[J["right_wrist"]]) == pytest.approx(1.66 + 0.02, abs=0.01)

@@ -440,6 +440,16 @@ def test_adaptive_beats_naive_as_noise_grows(tmp_path, motion, sigma):
     assert err["adaptive"] < err["naive"], err
 
 
+def test_the_summary_says_which_ik_solved(tmp_path, motion):
+    """A researcher comparing naive and adaptive HybrIK (``--ik``, the panel's *IK*) reads in the
+    summary (command line, panel, batch) which of the two solved the take, and where the floor was."""
+    body, pos, world = motion
+    write_layout_npy(tmp_path / "k.npy", "coco17", body, pos, world, sigma=0.01, seed=3)
+    for ik in ("adaptive", "naive"):
+        s = solve_recording(tmp_path / "k.npy", SolveSettings(fps=30.0, ik=ik)).summary()
+        assert re.search(rf"; keypoints: {ik} HybrIK, floor at [+-]\d\.\d{{3}} m moved to 0; ", s), s
+
+
 def test_unknown_ik_and_never_seen_points(tmp_path, motion):
     body, pos, world = motion
     write_layout_npy(tmp_path / "k.npy", "coco17", body, pos, world)

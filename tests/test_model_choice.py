@@ -130,6 +130,28 @@ def test_a_model_named_by_the_user_solves_the_whole_take():
     assert mc.resolve_model("manikin_s_six") == mc.shipped_model_path("six")
 
 
+def test_a_chosen_model_needing_trackers_the_recording_lacks_names_them_all():
+    """*Pose Model: Six Trackers* (``--model six``) on a head-and-hands take: the error names every
+    tracker the model takes that the take lacks and how to choose a model that fits, not the first
+    one alone ("the pose model needs a 'pelvis' tracker")."""
+    tg, _ = targets_for(devices=REQUIRED_DEVICES)
+    with pytest.raises(mc.ModelError, match=r"model manikin_s_six takes the pelvis, left foot, right foot "
+                       r"tracker\(s\), which the recording does not have \(it has head, left hand, right hand\): "
+                       r"choose the model for its trackers \(Pose Model: Automatic, --model auto\)"):
+        mc.plan_models(tg, "six")
+
+
+def test_a_dual_attention_poser_model_is_named_as_one():
+    """A researcher comparing backbones solves with a Dual Attention Poser model (``train --arch dap``,
+    exported): the summary names the backbone from the model's contract, whatever the file is called."""
+    dap = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "benchmarks", "models",
+                       "manikin_dap.onnx")
+    tg, _ = targets_for(devices=REQUIRED_DEVICES)
+    plan = mc.plan_models(tg, dap)
+    assert plan.notes[0] == "model manikin_dap (Dual Attention Poser; head, left hand, right hand, chosen)"
+    assert mc.plan_models(tg, "head_hands").notes[0] == "model manikin_s (head, left hand, right hand, chosen)"
+
+
 def test_the_solve_summary_says_which_model_solved(tmp_path):
     from fixtures_six_trackers import six_tracker_recording
     from blender_manikin.core.io_csv import write_csv

@@ -343,6 +343,23 @@ def test_train_cli_selects_the_dual_attention_backbone(cache, bvh_dir, tmp_path)
         assert torch.allclose(state[k], v, atol=1e-7), k
 
 
+@pytest.mark.parametrize("flags, said", [
+    (["--arch", "dap"], r"--arch dap: --init \S+ is a posenet model \(fine-tuning keeps its backbone"),
+    (["--causal"], r"--causal: --init \S+ is not a causal model"),
+    (["--six-trackers"], r"--six-trackers: --init \S+ takes head, left_hand, right_hand$"),
+])
+def test_init_refuses_a_backbone_or_inputs_other_than_its_own(tmp_path, flags, said):
+    """Fine-tuning keeps the weights' architecture: ``--init manikin_s.onnx --arch dap`` (a user
+    wanting a Dual Attention Poser from the shipped Transformer), ``--causal`` or ``--six-trackers``
+    were dropped without a word and trained the Transformer, non-causal, on head and hands."""
+    from blender_manikin.training import train
+    from blender_manikin.core.model_choice import shipped_model_path
+    with pytest.raises(SystemExit, match=said):
+        train.main(["--bvh", str(tmp_path / "never_read"), "--out", str(tmp_path / "run"),
+                    "--init", shipped_model_path("head_hands"), "--quiet"] + flags)
+    assert not os.path.exists(tmp_path / "run" / "checkpoint.pt")
+
+
 @pytest.fixture(scope="module")
 def asf_dir(tmp_path_factory):
     """An ASF/AMC source (CMU layout): one performer, two takes of swaying and bending."""

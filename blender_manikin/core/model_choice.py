@@ -164,6 +164,11 @@ def plan_models(targets, model=None, threads=None, bridge_s=TRACKER_BRIDGE_S, bl
     path = resolve_model(model)
     if path is not None:
         runner = load_model(path, threads=threads)
+        lacking = [d for d in runner.contract.devices if d not in targets.pos]
+        if lacking:
+            raise ModelError(f"model {_stem(path)} takes the {_device_words(lacking)} tracker(s), which the "
+                             f"recording does not have (it has {_device_words(targets.pos)}): choose the model "
+                             f"for its trackers (Pose Model: Automatic, --model auto)")
         return ModelPlan([runner], [np.ones(targets.num_frames)], [_stem(path)],
                          [_whole_take_note(runner, targets, chosen=True)])
     T = targets.num_frames
@@ -208,13 +213,20 @@ def plan_models(targets, model=None, threads=None, bridge_s=TRACKER_BRIDGE_S, bl
     return ModelPlan(runners, [weights[k] for k in used], names, notes)
 
 
+#: backbones the solve summary names beside a chosen model (the contract's ``architecture.arch``; the
+#: shipped Transformer, ``posenet``, goes unnamed)
+BACKBONE_LABELS = {"dap": "Dual Attention Poser"}
+
+
 def _stem(path):
     return os.path.splitext(os.path.basename(str(path)))[0]
 
 
 def _whole_take_note(runner, targets, chosen=False):
     devices = tuple(runner.contract.devices)
-    note = f"model {_stem(runner.path)} ({_device_words(devices)}{', chosen' if chosen else ''})"
+    arch = (runner.contract.raw.get("architecture") or {}).get("arch")
+    backbone = f"{BACKBONE_LABELS[arch]}; " if arch in BACKBONE_LABELS else ""
+    note = f"model {_stem(runner.path)} ({backbone}{_device_words(devices)}{', chosen' if chosen else ''})"
     unused = [d for d in EXTRA_DEVICES if d in targets.pos and d not in devices]
     if unused:
         note += f"; the {_device_words(unused)} tracker(s) drive the solve directly, not the network"

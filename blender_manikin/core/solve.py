@@ -179,7 +179,7 @@ class SolveOutcome:
                                 "the headset lay still",
                                 "pelvis and right foot trackers",
                                 "spikes removed", "lower body only", "arm(s) never seen", "wrist(s) never seen",
-                                "no twist information",
+                                "no twist information", "keypoints: adaptive HybrIK", "keypoints: naive HybrIK",
                                 "point(s) never seen", "retarget:", "smoothing", "no smoothing", "no mannequin")) \
                     or " tracker offset" in note or " teleport" in note or " snap turn" in note \
                     or note.endswith("the arm hangs relaxed there"):
@@ -612,7 +612,7 @@ def calibrate(settings: SolveSettings, targets: TrackerTargets, times, offsets):
         body = cal.body_for(res.measurements)
     except ValueError as exc:
         raise SolveError(f"calibration at {t - t0:.2f} s: {exc}") from exc
-    note = (f"calibrated on a {res.pose}-pose at {t - t0:.2f} s: stature "
+    note = (f"calibrated on {'an' if res.pose == 'A' else 'a'} {res.pose}-pose at {t - t0:.2f} s: stature "
             f"{res.measurements.stature:.2f} m, arm span {res.measurements.arm_span or 0:.2f} m")
     legs = res.measured.get("legs") or {}
     if legs.get("used") and res.measurements.thigh is not None and res.measurements.shank is not None:

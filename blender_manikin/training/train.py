@@ -76,10 +76,12 @@ def build_parser():
     p.add_argument("--head-hidden", type=int, default=256)
     p.add_argument("--dropout", type=float, default=0.05,
                    help="residual and attention dropout while training (also with --init; a resumed run keeps its own)")
-    p.add_argument("--causal", action="store_true", help="live variant: attend to past frames only")
-    p.add_argument("--arch", choices=("posenet", "dap"), default="posenet",
-                   help="backbone: posenet (shared Transformer, global + local heads) or dap (Dual Attention "
-                        "Poser: global and local paths, cross-attention mixer, gated-MLP decoders)")
+    p.add_argument("--causal", action="store_true",
+                   help="live variant: attend to past frames only (with --init, only from a causal model)")
+    p.add_argument("--arch", choices=("posenet", "dap"), default=None,
+                   help="backbone: posenet (default: shared Transformer, global + local heads) or dap (Dual "
+                        "Attention Poser: global and local paths, cross-attention mixer, gated-MLP decoders); "
+                        "with --init, the weights' own (another is refused)")
     p.add_argument("--six-trackers", action="store_true", help="inputs: head, hands, pelvis and feet")
     p.add_argument("--devices", default=None, metavar="D1,D2,...",
                    help="input devices, comma-separated, in any order (head and hands required), e.g. "
@@ -313,8 +315,16 @@ def main(argv=None):
             cfg, init_state = load_initial_weights(args.init)
         except (OSError, ValueError) as exc:
             raise SystemExit(str(exc)) from None
-        if args.devices is not None and parse_devices(args.devices, args.six_trackers) != tuple(cfg.devices):
-            raise SystemExit(f"--devices {args.devices}: --init {args.init} takes {', '.join(cfg.devices)}")
+        if (args.devices is not None or args.six_trackers) \
+                and parse_devices(args.devices, args.six_trackers) != tuple(cfg.devices):
+            said = f"--devices {args.devices}" if args.devices is not None else "--six-trackers"
+            raise SystemExit(f"{said}: --init {args.init} takes {', '.join(cfg.devices)}")
+        if args.arch is not None and args.arch != cfg.arch:
+            raise SystemExit(f"--arch {args.arch}: --init {args.init} is a {cfg.arch} model (fine-tuning keeps "
+                             f"its backbone; leave out --arch, or train a {args.arch} model without --init)")
+        if args.causal and not cfg.causal:
+            raise SystemExit(f"--causal: --init {args.init} is not a causal model (it sees future frames; "
+                             f"fine-tuning keeps that): leave out --causal, or train a causal model without --init")
         if args.window is not None and args.window != cfg.window:
             from .init_weights import widen_window
             try:
@@ -328,7 +338,7 @@ def main(argv=None):
         cfg = ModelConfig(kind=args.kind, devices=devices, window=args.window or 40, d_model=args.d_model,
                           layers=args.layers, heads=args.heads, ff_mult=args.ff_mult,
                           head_hidden=args.head_hidden, dropout=args.dropout, causal=args.causal,
-                          arch=args.arch)
+                          arch=args.arch or "posenet")
 
     # ---------------------------------------------------------------- data
     try:
