@@ -24,7 +24,8 @@ left half-written).
 
 Options of ``solve`` (they mirror the panel; ``--help`` has them all):
 
---axes openxr|unity|blender   override the file's axes metadata
+--axes NAME                   override the file's axes metadata: openxr, unity,
+                              blender or unreal
 --units m|cm|mm               override the file's units metadata
 --fps N                       solve/scene frame rate (default 30)
 --calibration-time SECONDS    T-pose at that time (seconds after the first sample)
@@ -129,7 +130,7 @@ if __package__:   # run as a plain script (blender --python cli.py), _script_mai
 def _add_solve_options(s):
     """The options every solve takes (the panel's settings)."""
     from .core.skeleton import LENGTH_RANGES
-    s.add_argument("--axes", choices=("openxr", "unity", "blender"), default=None,
+    s.add_argument("--axes", choices=("openxr", "unity", "blender", "unreal"), default=None,
                    help="axes of the input (default: the file's metadata; OpenXR for CSV, Unity for .bsor)")
     s.add_argument("--units", choices=("m", "cm", "mm"), default=None,
                    help="position units of the input (default: the file's metadata, else metres)")

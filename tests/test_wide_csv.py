@@ -487,3 +487,121 @@ def test_unity_vector_and_quaternion_tuples(tmp_path):
     save_layout(tmp_path / "layout.json", rec.metadata["layout"])
     again = formats.load_recording(path, layout=str(tmp_path / "layout.json"))
     np.testing.assert_array_equal(again.streams["head"].pos, rec.streams["head"].pos)
+
+
+#: Unreal Engine's axes from Blender's: +X forward (Blender -Y), +Y right (Blender -X), +Z up;
+#: left-handed.  Written out here, not taken from the reader, so the test checks the reader.
+M_UNREAL = np.array([[0.0, -1.0, 0.0], [-1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])
+
+
+def unreal_rotator(R):
+    """Pitch, yaw, roll (degrees) of rotation matrices ``R`` ``(T, 3, 3)`` in Unreal's axes (the
+    columns the images of X, Y, Z), inverting UE's ``FRotationMatrix``: forward
+    ``(CP CY, CP SY, SP)``, right ``(SR SP CY - CR SY, SR SP SY + CR CY, -SR CP)``, up
+    ``(-(CR SP CY + SR SY), CY SR - CR SP SY, CR CP)``."""
+    f, r, u = R[:, :, 0], R[:, :, 1], R[:, :, 2]
+    return (np.degrees(np.arcsin(np.clip(f[:, 2], -1, 1))), np.degrees(np.arctan2(f[:, 1], f[:, 0])),
+            np.degrees(np.arctan2(-r[:, 2], u[:, 2])))
+
+
+def write_unreal(path, rotation):
+    """The motion as an Unreal Engine logger writes it: centimetres, Unreal's axes, devices
+    ``Camera`` / ``MotionController_L`` / ``MotionController_R``; rotation ``"quat"`` (X, Y, Z, W),
+    ``"rotator"`` (Pitch, Yaw, Roll columns) or ``"euler"`` (``FRotator::Euler()``: X, Y, Z =
+    roll, pitch, yaw)."""
+    t, pos, quat = motion()
+    cols, data = ["Time"], [t]
+    for dev, name in (("head", "Camera"), ("left_hand", "MotionController_L"), ("right_hand", "MotionController_R")):
+        R = M_UNREAL @ rot.quat_to_matrix(quat[dev]) @ M_UNREAL.T
+        p = pos[dev] @ M_UNREAL.T * 100.0
+        cols += [f"{name}_Location_{a}" for a in "XYZ"]
+        data += list(p.T)
+        pitch, yaw, roll = unreal_rotator(R)
+        if rotation == "quat":
+            cols += [f"{name}_Rotation_{a}" for a in "XYZW"]
+            data += list(rot.matrix_to_quat(R)[:, [1, 2, 3, 0]].T)
+        elif rotation == "rotator":
+            cols += [f"{name}_Rotation_{a}" for a in ("Pitch", "Yaw", "Roll")]
+            data += [pitch, yaw, roll]
+        else:
+            cols += [f"{name}_Rotation_{a}" for a in "XYZ"]
+            data += [roll, pitch, yaw]
+    with open(path, "w") as f:
+        f.write(",".join(cols) + "\n")
+        for row in np.stack(data, -1):
+            f.write(",".join(f"{v:.7f}" for v in row) + "\n")
+
+
+@pytest.mark.parametrize("rotation", ["quat", "rotator", "euler"])
+def test_unreal_logs_are_read_in_unreal_axes(tmp_path, rotation):
+    """Unreal's Z-up, left-handed, X-forward axes were read as Blender's: the take mirrored and
+    turned 90° (the left hand on the performer's right, the solved wrists 77 cm off), and its
+    Pitch / Yaw / Roll columns were left out as no rotation at all."""
+    path = tmp_path / "unreal.csv"
+    write_unreal(path, rotation)
+    rec = formats.load_recording(path)
+    line = rec.metadata["detected"]
+    assert rec.metadata["axes"] == "unreal" and "axes unreal (left-handed)" in line, line
+    assert "units cm" in line, line
+    _, pos, quat = motion()
+    for dev in ("head", "left_hand", "right_hand"):
+        s = rec.streams[dev]
+        assert np.abs(s.pos - pos[dev]).max() < 2e-4, (rotation, dev)
+        err = np.degrees(rot.geodesic_angle(rot.quat_to_matrix(s.quat), rot.quat_to_matrix(quat[dev])))
+        assert err.max() < 0.01, (rotation, dev, err.max())
+    if rotation != "quat":
+        assert "Unreal rotators (roll, pitch, yaw) in degrees" in line, line
+        # the layout file keeps the rotator convention: read again through it, the same poses
+        from blender_manikin.core.io_wide_csv import save_layout
+        again = formats.load_recording(path, layout=str(save_layout(tmp_path / "l.json", rec.metadata["layout"])))
+        np.testing.assert_allclose(again.streams["left_hand"].quat, rec.streams["left_hand"].quat, atol=1e-12)
+    # a Blender-axes file of the same take is still read as Blender's
+    p2 = tmp_path / "blender.csv"
+    write_wide(p2, **FAMILIES["zup_blender"])
+    assert formats.load_recording(p2).metadata["axes"] == "blender"
+    # and the axes can be given (the panel's Axes, --axes unreal)
+    assert formats.load_recording(path, axes="unreal").metadata["axes"] == "unreal"
+
+
+@pytest.mark.parametrize("style", ["{d}_m{r}{c}", "{d}.m[{r}][{c}]"])
+def test_openvr_pose_matrices(tmp_path, style):
+    """OpenVR's ``HmdMatrix34_t`` poses (3x4, row-major, the position in the last column, right-handed
+    Y up) logged one element a column, trackers included: such a file was read as a native CSV
+    and refused for lacking ``device, px, ...``."""
+    t, pos, quat = motion()
+    names = {"head": "hmd", "left_hand": "controller_left", "right_hand": "controller_right",
+             "pelvis": "tracker_waist", "left_foot": "tracker_left_foot", "right_foot": "tracker_right_foot"}
+    cols, data = ["time"], [t]
+    for dev, name in names.items():
+        p, q = from_blender(pos[dev], quat[dev], "openxr")
+        R = rot.quat_to_matrix(q)
+        for r in range(3):
+            for c in range(4):
+                cols.append(style.format(d=name, r=r, c=c))
+                data.append(R[:, r, c] if c < 3 else p[:, r])
+    arr = np.stack(data, -1)
+    arr[5, 1:] = np.nan                                  # a lost sample
+    path = tmp_path / "openvr.csv"
+    with open(path, "w") as f:
+        f.write(",".join(cols) + "\n")
+        for row in arr:
+            f.write(",".join("" if np.isnan(v) else f"{v:.7f}" for v in row) + "\n")
+    rec = formats.load_recording(path)
+    line = rec.metadata["detected"]
+    assert "3x4 pose matrices (row-major)" in line and rec.metadata["axes"] == "openxr", line
+    for dev in names:
+        s = rec.streams[dev]
+        ok = np.arange(T) != 5
+        assert not s.valid[5] and s.valid[ok].all(), dev
+        assert np.abs(s.pos[ok] - pos[dev][ok]).max() < 2e-4, dev
+        err = np.degrees(rot.geodesic_angle(rot.quat_to_matrix(s.quat[ok]), rot.quat_to_matrix(quat[dev][ok])))
+        assert err.max() < 0.01, (dev, err.max())
+    from blender_manikin.core.io_wide_csv import save_layout
+    again = formats.load_recording(path, layout=str(save_layout(tmp_path / "l.json", rec.metadata["layout"])))
+    np.testing.assert_allclose(again.streams["pelvis"].quat[ok], rec.streams["pelvis"].quat[ok], atol=1e-12)
+    # a matrix without its position column is named
+    bad = tmp_path / "bad.csv"
+    with open(bad, "w") as f:
+        f.write(",".join(c for c in cols if not c.startswith("hmd") or not c.endswith(("23", "[2][3]"))) + "\n")
+    with pytest.raises(RecordingError, match=r"bad.csv, line 1: head: pose matrix without m23"):
+        formats.load_recording(bad)

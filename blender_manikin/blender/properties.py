@@ -19,6 +19,7 @@ _AXES_ITEMS = [
     ('OPENXR', "OpenXR / SteamVR", "Right-handed, +Y up, -Z forward"),
     ('UNITY', "Unity", "Left-handed, +Y up, +Z forward"),
     ('BLENDER', "Blender", "Right-handed, +Z up, -Y forward"),
+    ('UNREAL', "Unreal Engine", "Left-handed, +Z up, +X forward (Unreal's world and component axes)"),
 ]
 _UNITS_ITEMS = [
     ('AUTO', "From File", "Units from the file's metadata, else metres"),

@@ -10,6 +10,11 @@ or seated person, when that is clear (a tracking-space origin on the floor under
 otherwise, Y or Z by the hands hanging below the head along it and the headset's own up axis
 along it (a world-space log whose origin is anywhere).
 
+**Z up**: Blender (right-handed, -Y forward) or Unreal (left-handed, +X forward).  Read in the
+wrong one a take is mirrored and turned 90°: the hands' left-right line runs along the head's
+forward axis, so the convention that sees the left hand on the head's left decides
+(:func:`hands_on_their_sides`), else the cues below.
+
 **Forward**: Unity (left-handed, +Z forward) or OpenXR / OpenVR (right-handed, -Z forward).
 Read in the wrong one of the two conventions, a take of a headset and two hands is its own
 mirror image front to back with the head turned to face backwards: every frame as plausible a
@@ -52,13 +57,14 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .recording import increasing_mask
+from .recording import LEFT_HANDED, increasing_mask
 from .rotations import axis_angle_to_quat, normalize, quat_rotate, quat_to_matrix
 from .smoothing import smooth_frames
 
-#: each Y-up convention's up axis (index) and the head's local forward axis, in its own
-#: coordinates (the Z-up Blender convention has nothing to tell apart)
-CONVENTIONS = {"unity": (1, (0.0, 0.0, 1.0)), "openxr": (1, (0.0, 0.0, -1.0)), "blender": (2, (0.0, -1.0, 0.0))}
+#: each convention's up axis (index) and the head's local forward axis, in its own coordinates:
+#: Unity or OpenXR (Y up), Blender (right-handed) or Unreal (left-handed, +X forward) (Z up)
+CONVENTIONS = {"unity": (1, (0.0, 0.0, 1.0)), "openxr": (1, (0.0, 0.0, -1.0)), "blender": (2, (0.0, -1.0, 0.0)),
+               "unreal": (2, (1.0, 0.0, 0.0))}
 #: m/s of horizontal head speed above which the head is walking (a step is 1-1.5 m/s)
 WALK_SPEED = 0.5
 #: seconds walked forward less backward (or the reverse) that decide
@@ -219,6 +225,35 @@ def reach_ahead(pos, fwd, rows):
     return float(np.percentile(ahead, 90) + np.percentile(ahead, 10)) if ahead.size else 0.0
 
 
+#: of the Z-up conventions (Blender, Unreal), the one that sees the left hand on the head's left
+#: by this much (the median cosine of the hands' left-right line to the head's left) where the
+#: other does not: read in the wrong one, the take is mirrored and turned 90°, the hands' line
+#: along the head's forward axis
+SIDE_MIN = 0.5
+
+
+def hands_on_their_sides(time, pos, quat, axes):
+    """The median, over the frames with the hands 20 cm or more apart horizontally, of the cosine
+    between the left-minus-right hand line and the head's left in ``axes`` (1: the hands' line
+    points the head's left; 0: along its forward axis), or None with no such frames.  Arguments
+    as :func:`facing_evidence`."""
+    if "left_hand" not in pos or "right_hand" not in pos:
+        return None
+    time = np.asarray(time, np.float64)
+    rows = _rows(time, pos, quat)
+    fwd, up = _forward(quat["head"][rows], axes)
+    up_vec = np.zeros(3)
+    up_vec[up] = 1.0
+    left = np.cross(up_vec, fwd) * (-1.0 if axes in LEFT_HANDED else 1.0)   # left-handed: mirrored
+    line = np.asarray(pos["left_hand"], np.float64)[rows] - np.asarray(pos["right_hand"], np.float64)[rows]
+    line[:, up] = 0.0
+    apart = np.linalg.norm(line, axis=-1)
+    ok = np.isfinite(apart) & (apart >= 0.2)
+    if not ok.any():
+        return None
+    return float(np.median(np.sum(line[ok] * left[ok], -1) / apart[ok]))
+
+
 def facing_evidence(time, pos, quat, axes) -> FacingEvidence:
     """The cues (:class:`FacingEvidence`) for reading a take in ``axes``.  time ``(T,)``
     seconds; pos: device -> ``(T, 3)`` metres; quat: device -> ``(T, 4)`` wxyz, both in the
@@ -327,6 +362,12 @@ def choose_axes(time, pos, quats_for, candidates):
     decide); time, pos as :func:`facing_evidence`."""
     if len(candidates) == 1:
         return candidates[0], "the only convention with that up axis"
+    if quats_for is not None and set(candidates) == {"blender", "unreal"}:
+        side = {a: hands_on_their_sides(time, pos, quats_for(a), a) for a in candidates}
+        best = max(candidates, key=lambda a: -2.0 if side[a] is None else side[a])
+        other = next(a for a in candidates if a != best)
+        if side[best] is not None and side[best] >= SIDE_MIN and (side[other] or 0.0) < SIDE_MIN:
+            return best, "from the hands' left-right line (the left hand on the head's left)"
     if quats_for is None:
         ev = {a: _positions_only_evidence(time, pos, a) for a in candidates}
     else:

@@ -29,7 +29,7 @@ Format (UTF-8, optional BOM)::
 * Column order is free; extra columns are ignored; the header names are
   case-insensitive.
 * Lines starting with ``#`` are comments.  ``# key: value`` comment lines are
-  metadata: ``axes`` (``openxr`` default, ``unity``, ``blender``; see
+  metadata: ``axes`` (``openxr`` default, ``unity``, ``blender``, ``unreal``; see
   :mod:`.recording`), ``units`` (``m``, ``cm``, ``mm``), ``source`` (free
   text); other keys are kept in :attr:`Recording.metadata`.
 
@@ -245,7 +245,7 @@ def _device_codes(block, unknown, labels):
 def read_csv(path, axes=None, units=None, block_bytes=None) -> Recording:
     """Read a native CSV recording (see module docstring).
 
-    path: file path.  axes: ``openxr``/``unity``/``blender`` overriding the
+    path: file path.  axes: ``openxr``/``unity``/``blender``/``unreal`` overriding the
     file's ``# axes:`` metadata (default ``openxr``).  units: ``m``/``cm``/``mm``
     overriding ``# units:`` (default ``m``).  block_bytes: how much of the file is
     parsed at a time (default :data:`BLOCK_BYTES`; the result does not depend on it).
@@ -494,7 +494,7 @@ def write_csv(path, recording_or_streams, axes="openxr", units="m", metadata=Non
 
     recording_or_streams: a :class:`Recording`, a dict device → stream, or an
     iterable of :class:`TrackerStream`.  axes: convention of the written file
-    (``openxr`` default, ``unity``, ``blender``).  units: ``m``/``cm``/``mm``.
+    (``openxr`` default, ``unity``, ``blender``, ``unreal``).  units: ``m``/``cm``/``mm``.
     metadata: extra ``# key: value`` lines (values are written with ``str``;
     a Recording's own scalar metadata is written too, ``axes``/``units``
     always reflect what was written).  precision: decimals for time and

@@ -17,8 +17,9 @@ Detected:
   any column order (the letters name the components);
 * Euler angles: three columns ``<dev>_rot_{x,y,z}``, ``<dev>_euler_*``, ``<dev>_angles_*``,
   degrees when any exceeds 2π + 0.5, else radians; rotations about the fixed axes applied in
-  :data:`EULER_ORDERS` order (Unity's Z, X, Y for a Unity file), unless a layout file's
-  ``"euler"`` states the order and unit;
+  :data:`EULER_ORDERS` order (Unity's Z, X, Y for a Unity file; an Unreal file's are its
+  rotator's roll, pitch and yaw, :data:`ROTATOR`), unless a layout file's ``"euler"`` states the
+  order and unit; ``<dev>_rot_{pitch,yaw,roll}`` columns are an Unreal rotator (Unreal's axes);
 * field separators (:func:`sniff_delimiter`: commas, semicolons or tabs) and decimal commas (a
   file not separated by commas with commas in its numbers);
 * time: a ``time``/``t``/``seconds``/``timestamp`` column, in seconds, or in milliseconds, µs or
@@ -30,7 +31,9 @@ Detected:
 * units from an arm's length (:func:`.axes_detect.length_units`: the hands 55 apart from the head
   means centimetres), wherever the origin is;
 * axes: Y-up or Z-up from the head's height, or where that is unclear from the hands below the
-  head and the headset's own up axis (:func:`.axes_detect.up_axis`); between Unity (left-handed, +Z forward) and
+  head and the headset's own up axis (:func:`.axes_detect.up_axis`); between Blender
+  (right-handed) and Unreal (left-handed, +X forward), the one that sees the left hand on the
+  head's left, else the cues below; between Unity (left-handed, +Z forward) and
   OpenXR/OpenVR (right-handed, -Z forward), the convention the take faces forward in: the way
   the performer walks, else the head turning about the neck behind it, else the hands reaching
   ahead of the head (:func:`.axes_detect.choose_axes`; datasets' READMEs are not always right
@@ -49,7 +52,7 @@ import numpy as np
 
 from .devices import DEVICES, canonical_device, snake_name
 from .plain import shown
-from .recording import (Recording, RecordingError, TrackerStream, UNITS, canonical_axes, canonical_units,
+from .recording import (LEFT_HANDED, Recording, RecordingError, TrackerStream, UNITS, canonical_axes, canonical_units,
                         decode_text, json_key_line, load_json_file, read_file_bytes, read_text, time_unit_of_step,
                         to_blender)
 from . import rotations as rot
@@ -183,7 +186,12 @@ def device_of(prefix):
     return canonical_device(key) or canonical_device(key.replace("_", ""))
 
 
-_COMPONENT = re.compile(r"^(?P<dev>.+?)_(?:(?P<word>[a-z]+)_)?(?P<axis>[xyzw])$")
+_COMPONENT = re.compile(r"^(?P<dev>.+?)_(?:(?P<word>[a-z]+)_)?(?P<axis>[xyzw]|pitch|yaw|roll)$")
+#: a pose matrix's element: ``<dev>_m00`` ... ``<dev>_m23``, ``<dev>_m_0_3``, ``<dev>.m[0][3]`` (row,
+#: column), as OpenVR's ``HmdMatrix34_t m[3][4]`` (row-major: rotation, then the position column)
+_MATRIX = re.compile(r"^(?P<dev>.+?)_(?:(?P<word>[a-z]+)_)?m_?(?P<r>[0-3])_?(?P<c>[0-3])$")
+#: an Unreal rotator's angles as the x, y, z of its ``FRotator::Euler()`` (roll, pitch, yaw)
+_ROTATOR_AXES = {"roll": "x", "pitch": "y", "yaw": "z"}
 
 
 def parse_columns(header):
@@ -206,11 +214,23 @@ def parse_columns(header):
         if name in _FRAMES:                   # a frame counter: the time when nothing better is there
             frame_col = frame_col or (i, "frames")
             continue
+        m = _MATRIX.match(name)
+        if m:
+            prefix, word = m.group("dev"), m.group("word") or ""
+            dev = device_of(prefix)
+            if dev is None and word:
+                prefix, dev = f"{prefix}_{word}", device_of(f"{prefix}_{word}")
+            if dev is not None:
+                g = groups.setdefault(dev, {"pos": {}, "rot": {}, "prefix": _raw_prefix(raw, prefix)})
+                g.setdefault("mat", {})[(int(m.group("r")), int(m.group("c")))] = i
+                continue
         m = _COMPONENT.match(name)
         if not m:
             skipped.append(raw)
             continue
         prefix, word, axis = m.group("dev"), m.group("word") or "", m.group("axis")
+        rotator = axis in _ROTATOR_AXES
+        axis = _ROTATOR_AXES.get(axis, axis)
         # "<dev>_q_x" style: the word may have been swallowed into the prefix
         dev = device_of(prefix)
         if dev is None and word and device_of(f"{prefix}_{word}"):     # "<dev with _>_x": no component word
@@ -223,7 +243,7 @@ def parse_columns(header):
         if dev is None:
             skipped.append(raw)
             continue
-        kind = "rot" if word in _ROT_WORDS or axis == "w" else "pos" if word in _POS_WORDS else None
+        kind = "rot" if word in _ROT_WORDS or axis == "w" or rotator else "pos" if word in _POS_WORDS else None
         if kind is None:
             skipped.append(raw)
             continue
@@ -231,7 +251,29 @@ def parse_columns(header):
         if axis in g[kind]:
             raise RecordingError(f"two columns for {dev} {kind} {axis}: {header[g[kind][axis]]!r} and {raw!r}")
         g[kind][axis] = i
+        if rotator:
+            g["rotator"] = True
+    for dev, g in groups.items():
+        _matrix_columns(dev, g, header)
     return groups, time_col or frame_col, skipped
+
+
+def _matrix_columns(dev, g, header):
+    """A group of pose-matrix columns (``g["mat"]``: (row, column) -> column index) as the
+    position columns (the 4th column's x, y, z) and ``g["mat"]``, the 9 rotation columns row by
+    row; a 4x4 matrix's last row is not used."""
+    if "mat" not in g:
+        return
+    need = [(r, c) for r in range(3) for c in range(4)]
+    lacking = [f"m{r}{c}" for r, c in need if (r, c) not in g["mat"]]
+    if lacking:
+        raise RecordingError(f"{dev}: pose matrix without {', '.join(lacking)} (a 3x4 matrix needs rows 0-2, "
+                             "columns 0-3: the rotation, then the position)")
+    if g["pos"] or g["rot"]:
+        other = header[next(iter({**g["pos"], **g["rot"]}.values()))]
+        raise RecordingError(f"{dev}: a pose matrix and other pose columns ({other!r})")
+    g["pos"] = {a: g["mat"][(r, 3)] for r, a in enumerate("xyz")}
+    g["mat"] = [g["mat"][(r, c)] for r in range(3) for c in range(3)]
 
 
 def looks_wide(head_text):
@@ -277,8 +319,21 @@ def _time(col, values, header=None, rate=None, path=None):
 LAYOUT_VERSION = 1
 #: the Euler-angle order each convention's tools write, as rotations about the fixed axes applied
 #: first letter first (Unity's ``eulerAngles``: Z, then X, then Y); a layout file's "euler" wins
-EULER_ORDERS = {"unity": "ZXY", "openxr": "XYZ", "blender": "XYZ"}
-_ORDERS = ("XYZ", "XZY", "YXZ", "YZX", "ZXY", "ZYX")
+EULER_ORDERS = {"unity": "ZXY", "openxr": "XYZ", "blender": "XYZ", "unreal": "ROTATOR"}
+#: an Unreal ``FRotator``: x, y, z are its roll, pitch and yaw (``FRotator::Euler()``), in degrees,
+#: in Unreal's left-handed axes: yaw turns +X toward +Y, pitch lifts +X toward +Z, roll lowers +Y
+#: toward -Z; as rotations about the fixed axes, X by -roll, then Y by -pitch, then Z by yaw
+ROTATOR = "ROTATOR"
+_ORDERS = ("XYZ", "XZY", "YXZ", "YZX", "ZXY", "ZYX", ROTATOR)
+
+
+def euler_matrix(angles, order):
+    """``(T, 3, 3)`` rotation matrices of Euler angles ``(T, 3)`` (radians, the x, y, z columns)
+    applied about the fixed axes in ``order`` (first letter first), or an Unreal rotator's
+    (:data:`ROTATOR`: x, y, z = roll, pitch, yaw)."""
+    if order == ROTATOR:
+        return rot.fixed_axes_euler_to_matrix(np.asarray(angles, np.float64) * [-1.0, -1.0, 1.0], "XYZ")
+    return rot.fixed_axes_euler_to_matrix(angles, order)
 
 
 def load_layout(path):
@@ -302,6 +357,10 @@ def load_layout(path):
                     bad(f"unknown device {d!r}", "devices", d)
                 elif not isinstance(cols, dict) or not isinstance(cols.get("pos"), list) or len(cols["pos"]) != 3:
                     bad(f"{d}: \"pos\" must list the x, y, z columns", "devices", d, "pos")
+                elif cols.get("matrix") is not None and (not isinstance(cols["matrix"], list)
+                                                         or len(cols["matrix"]) != 9 or cols.get("rot")):
+                    bad(f"{d}: \"matrix\" must list the 9 rotation columns row by row (and \"rot\" be null)",
+                        "devices", d, "matrix")
                 elif cols.get("rot") is not None and (not isinstance(cols["rot"], list) or len(cols["rot"]) != 4):
                     bad(f"{d}: \"rot\" must list the w, x, y, z columns (or be null)", "devices", d, "rot")
                 elif cols.get("euler") is not None and (not isinstance(cols["euler"], list) or len(cols["euler"]) != 3
@@ -319,8 +378,8 @@ def load_layout(path):
         if eu is not None and (not isinstance(eu, dict) or str(eu.get("order", "")).upper() not in _ORDERS
                                or eu.get("unit") not in (None, "deg", "rad")):
             bad('"euler" must be {"order": "XYZ"|"ZXY"|... (applied first to last, about the fixed '
-                'axes), "unit": "deg"|"rad"}', "euler")
-        for key, allowed in (("units", tuple(UNITS)), ("axes", ("unity", "openxr", "blender")),
+                'axes) or "rotator" (Unreal\'s roll, pitch, yaw), "unit": "deg"|"rad"}', "euler")
+        for key, allowed in (("units", tuple(UNITS)), ("axes", ("unity", "openxr", "blender", "unreal")),
                              ("delimiter", DELIMITERS), ("decimal", (".", ","))):
             if layout.get(key) is not None and layout[key] not in allowed:
                 bad(f'"{key}" must be one of {", ".join(allowed)} or null', key)
@@ -362,10 +421,27 @@ def _layout_groups(layout, header, path, hline):
             {a: col(c) for a, c in zip("xyz", cols["euler"])} if cols.get("euler") else {}
         groups[dev] = {"pos": {a: col(c) for a, c in zip("xyz", cols["pos"])}, "rot": rot,
                        "prefix": _prefix_of(cols["pos"]) or d}
+        if cols.get("matrix"):
+            groups[dev]["mat"] = [col(c) for c in cols["matrix"]]
     unit = layout["time"]["unit"]
     name = {"s": "seconds_stated", "ms": "time_ms", "us": "time_us", "ns": "time_ns", "delta_ms": "delta_time_ms",
             "delta_s": "delta_time", "frames": "frames", "iso8601": "time"}[unit]
     return groups, (col(layout["time"]["column"]), name), []
+
+
+def _matrix_quats(m):
+    """``(T, 4)`` wxyz quaternions of rotation matrices given row by row, ``(T, 9)`` (NaN where a
+    sample is lost), made orthonormal first (logged matrices are rounded)."""
+    m = np.asarray(m, np.float64).reshape(-1, 3, 3)
+    ok = np.isfinite(m).all(axis=(1, 2))
+    out = np.full((len(m), 4), np.nan)
+    if ok.any():
+        u, _, vt = np.linalg.svd(m[ok])
+        R = u @ vt
+        bad = np.linalg.det(R) < 0                       # not a rotation (a mirror): lost
+        out[ok] = rot.matrix_to_quat(R)
+        out[np.flatnonzero(ok)[bad]] = np.nan
+    return out
 
 
 def read_wide_csv(path, axes=None, units=None, layout=None, rate=None) -> Recording:
@@ -447,7 +523,7 @@ def read_wide_table(path, header, hline, table, axes=None, units=None, layout=No
         if g["rot"] and len(g["rot"]) != 4 and set(g["rot"]) != set("xyz"):
             raise RecordingError(f"{dev}: rotation columns {sorted(g['rot'])}: a quaternion needs w, x, y, z, "
                                  "Euler angles x, y, z", path=path, line=hline)
-    kinds = {"euler" if len(g["rot"]) == 3 else "quat" for g in groups.values() if g["rot"]}
+    kinds = {"euler" if len(g["rot"]) == 3 else "quat" for g in groups.values() if g["rot"] or g.get("mat")}
     if len(kinds) > 1:
         raise RecordingError("some devices have quaternion and others Euler-angle columns: "
                              + ", ".join(f"{d} {'Euler' if len(g['rot']) == 3 else 'quaternion'}"
@@ -468,7 +544,8 @@ def read_wide_table(path, header, hline, table, axes=None, units=None, layout=No
     if iso is not None:
         text_cells[:, time_col[0]] = "0"
     # the time's and the devices' columns; others (names, events, flags) may hold anything
-    used = sorted({time_col[0]} | {i for g in groups.values() for i in (*g["pos"].values(), *g["rot"].values())})
+    used = sorted({time_col[0]} | {i for g in groups.values()
+                                   for i in (*g["pos"].values(), *g["rot"].values(), *g.get("mat", ()))})
     values = np.full(text_cells.shape, np.nan)
     try:
         values[:, used] = text_cells[:, used].astype(np.float64)      # one vectorised conversion
@@ -507,11 +584,12 @@ def read_wide_table(path, header, hline, table, axes=None, units=None, layout=No
 
         def quats_for(order):       # each order's quaternions once (detection, then the read)
             if order not in made:
-                made[order] = {d: (rot.matrix_to_quat(rot.fixed_axes_euler_to_matrix(angles[d], order)) if g["rot"]
+                made[order] = {d: (rot.matrix_to_quat(euler_matrix(angles[d], order)) if g["rot"]
                                    else np.tile([1.0, 0, 0, 0], (len(t), 1))) for d, g in groups.items()}
             return made[order]
     else:
-        quat = {d: (values[:, [g["rot"][a] for a in "wxyz"]] if g["rot"] else np.tile([1.0, 0, 0, 0], (len(t), 1)))
+        quat = {d: (values[:, [g["rot"][a] for a in "wxyz"]] if g["rot"] else _matrix_quats(values[:, g["mat"]])
+                    if g.get("mat") else np.tile([1.0, 0, 0, 0], (len(t), 1)))
                 for d, g in groups.items()}
     # units from an arm's length (the hands' distance to the head), wherever the origin is
     if units is None:
@@ -525,18 +603,21 @@ def read_wide_table(path, header, hline, table, axes=None, units=None, layout=No
     if euler:      # the order a convention's tools write (Unity: Z, X, Y), unless stated
         def order_for(ax):
             return str(eu.get("order") or EULER_ORDERS.get(ax, "XYZ")).upper()
-    unrotated = [d for d, g in groups.items() if not g["rot"]]
-    if axes is None:
+    unrotated = [d for d, g in groups.items() if not g["rot"] and not g.get("mat")]
+    rotators = [d for d, g in groups.items() if g.get("rotator")]
+    if axes is None and rotators:      # pitch, yaw, roll columns: an Unreal rotator, in Unreal's axes
+        axes, up = "unreal", 2
+        axes_note = f"axes unreal (left-handed), from the rotator columns of {', '.join(rotators)} (pitch, yaw, roll)"
+    elif axes is None:
         up, up_how = up_axis(metres, quats_for(order_for("openxr")) if euler else quat)
-        cands = ("blender",) if up == 2 else ("unity", "openxr")
+        cands = ("blender", "unreal") if up == 2 else ("unity", "openxr")
         axes, why = choose_axes(t, metres, (lambda c: quats_for(order_for(c))) if euler else
                                 None if unrotated == list(groups) else (lambda c: quat), cands)
         up_note = "" if up_how == "the head's height" else f", {'Z' if up == 2 else 'Y'} up from {up_how}"
-        axes_note = (f"axes {axes} ({'left-handed' if axes == 'unity' else 'right-handed'}){up_note}, "
-                     + (why if len(cands) > 1 else "Z up"))
+        axes_note = f"axes {axes} ({'left-handed' if axes in LEFT_HANDED else 'right-handed'}){up_note}, {why}"
     else:
         axes = canonical_axes(axes)
-        up = 2 if axes == "blender" else 1
+        up = 2 if axes in ("blender", "unreal") else 1
         axes_note = f"axes {axes} ({given['axes']})"
     head_h = float(np.nanmedian(metres["head"][:, up]))
     units_note = f"units {units} ({units_how or f'head at {head_h:.2f} m'})"
@@ -567,9 +648,15 @@ def read_wide_table(path, header, hline, table, axes=None, units=None, layout=No
         stated = "stated" if eu.get("order") else ("Unity's" if axes == "unity" else "chosen")
         qnote = (f"Euler angles in {'degrees' if eu_unit == 'deg' else 'radians'}, fixed axes {order_for(axes)} "
                  f"({stated} order)")
+        if order_for(axes) == ROTATOR:
+            qnote = (f"Unreal rotators (roll, pitch, yaw) in {'degrees' if eu_unit == 'deg' else 'radians'}"
+                     + (" (stated)" if eu.get("order") else ""))
     else:
         has_w_first = all(g["rot"]["w"] < g["rot"]["x"] for g in groups.values() if g["rot"])
         qnote = "quaternions w,x,y,z" if has_w_first else "quaternions x,y,z,w"
+        if any(g.get("mat") for g in groups.values()):
+            qnote = "3x4 pose matrices (row-major)" + ("" if all(g.get("mat") for g in groups.values() if g["rot"]
+                                                               or g.get("mat")) else f"; {qnote}")
     if rot_note:
         qnote = rot_note if len(unrotated) == len(groups) else f"{qnote}; {rot_note}"
     hands = "/".join(f"{groups[d]['prefix']}_*" for d in ("left_hand", "right_hand"))
@@ -579,6 +666,7 @@ def read_wide_table(path, header, hline, table, axes=None, units=None, layout=No
     used = {"format": "wide_csv", "version": LAYOUT_VERSION,
             "devices": {d: {"pos": [header[g["pos"][a]] for a in "xyz"],
                             "rot": [header[g["rot"][a]] for a in "wxyz"] if g["rot"] and not euler else None,
+                            **({"matrix": [header[i] for i in g["mat"]]} if g.get("mat") else {}),
                             **({"euler": [header[g["rot"][a]] for a in "xyz"] if g["rot"] else None}
                                if euler else {})}
                         for d, g in groups.items()},

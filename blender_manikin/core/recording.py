@@ -29,11 +29,13 @@ openxr      right-handed, +Y up, -Z forward, +X right        (x, y, z) → (-x, 
             (also OpenVR/SteamVR, WebXR, OpenGL)
 unity       left-handed, +Y up, +Z forward, +X right         (x, y, z) → (-x, -z, y)
 blender     right-handed, +Z up, -Y forward, -X right        identity
+unreal      left-handed, +Z up, +X forward, +Y right         (x, y, z) → (-y, -x, z)
+            (Unreal Engine's world and component axes)
 ==========  ==============================================  =====================
 
-Both maps keep "forward" forward, "up" up and "right" right.  Positions convert
+All maps keep "forward" forward, "up" up and "right" right.  Positions convert
 as ``p_b = M p``; rotation matrices as ``R_b = M R Mᵀ`` (a proper rotation even
-for Unity's improper ``M``, det -1).  On quaternions this is
+for Unity's and Unreal's improper ``M``, det -1).  On quaternions this is
 ``(w, v) → (w, det(M) · M v)``, which keeps the sign of ``w`` (so sign
 continuity and deliberate sign flips survive the conversion).
 """
@@ -49,17 +51,21 @@ from .plain import shown
 from .devices import ALIASES as DEVICE_ALIASES, DEVICES, canonical_device  # noqa: F401
 
 #: axis conventions understood by the readers and writers
-AXES = ("openxr", "unity", "blender")
+AXES = ("openxr", "unity", "blender", "unreal")
+#: the conventions of :data:`AXES` whose axes are left-handed
+LEFT_HANDED = ("unity", "unreal")
 
 _AXES_ALIASES = {
     "openxr": "openxr", "openvr": "openxr", "steamvr": "openxr", "webxr": "openxr",
     "opengl": "openxr", "unity": "unity", "blender": "blender",
+    "unreal": "unreal", "ue4": "unreal", "ue5": "unreal", "unreal_engine": "unreal",
 }
 
 _M = {
     "openxr": np.array([[-1.0, 0, 0], [0, 0, 1.0], [0, 1.0, 0]]),
     "unity": np.array([[-1.0, 0, 0], [0, 0, -1.0], [0, 1.0, 0]]),
     "blender": np.eye(3),
+    "unreal": np.array([[0.0, -1.0, 0], [-1.0, 0, 0], [0, 0, 1.0]]),
 }
 
 #: length units: metres per unit
