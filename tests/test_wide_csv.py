@@ -605,3 +605,35 @@ def test_openvr_pose_matrices(tmp_path, style):
         f.write(",".join(c for c in cols if not c.startswith("hmd") or not c.endswith(("23", "[2][3]"))) + "\n")
     with pytest.raises(RecordingError, match=r"bad.csv, line 1: head: pose matrix without m23"):
         formats.load_recording(bad)
+
+
+@pytest.mark.parametrize("rotation", ["rotator", "quat"])
+def test_unreal_tostring_cells(tmp_path, rotation):
+    """A Blueprint logger appends each pose's ToString(): ``X=36.935 Y=-44.006 Z=162.432`` (FVector),
+    ``P=-0.017 Y=-29.943 R=0.027`` (FRotator) or ``X=.. Y=.. Z=.. W=..`` (FQuat) in one field, under
+    ``HMDLocation``, ``LeftControllerRotation``: such a file was refused as a native CSV without
+    ``device, px, ...`` (and ``HMDLocation`` split into columns was no device)."""
+    t, pos, quat = motion()
+    names = (("head", "HMD"), ("left_hand", "LeftController"), ("right_hand", "RightController"))
+    cells = [[f"{v:.4f}" for v in t]]
+    for dev, _ in names:
+        R = M_UNREAL @ rot.quat_to_matrix(quat[dev]) @ M_UNREAL.T
+        p = pos[dev] @ M_UNREAL.T * 100.0
+        cells.append([f"X={a:.3f} Y={b:.3f} Z={c:.3f}" for a, b, c in p])
+        if rotation == "rotator":
+            cells.append([f"P={a:.6f} Y={b:.6f} R={c:.6f}" for a, b, c in zip(*unreal_rotator(R))])
+        else:
+            cells.append([f"X={x:.9f} Y={y:.9f} Z={z:.9f} W={w:.9f}" for w, x, y, z in rot.matrix_to_quat(R)])
+    path = tmp_path / "unreal_log.csv"
+    with open(path, "w") as f:
+        f.write("Time," + ",".join(f"{n}Location,{n}Rotation" for _, n in names) + "\n")
+        for row in zip(*cells):
+            f.write(",".join(row) + "\n")
+    rec = formats.load_recording(path)
+    line = rec.metadata["detected"]
+    assert rec.metadata["axes"] == "unreal" and "Unreal's X=.. Y=.. Z=.." in line, line
+    for dev, _ in names:
+        s = rec.streams[dev]
+        assert np.abs(s.pos - pos[dev]).max() < 2e-5, dev              # ToString's 3 decimals of a centimetre
+        err = np.degrees(rot.geodesic_angle(rot.quat_to_matrix(s.quat), rot.quat_to_matrix(quat[dev])))
+        assert err.max() < 0.01, (dev, err.max())

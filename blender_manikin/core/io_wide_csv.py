@@ -14,7 +14,9 @@ Detected:
   ``pelvis``, ``hip``; ``left_foot``, ``foot_l``, ``tracker_left_foot``, ...);
 * components: ``<dev>_pos_x``, ``<dev>_position_x``, ``<dev>.position.x``, ``<dev>_x`` for
   positions, ``<dev>_rot_{w,x,y,z}``, ``<dev>_quat_*``, ``<dev>.rotation.*`` for quaternions, in
-  any column order (the letters name the components);
+  any column order (the letters name the components); pose matrices ``<dev>_m00`` ... ``<dev>_m23``
+  (OpenVR's ``HmdMatrix34_t``, row-major); Unity's ``(x, y, z)`` tuples and Unreal's ``ToString()``
+  (``X=.. Y=.. Z=..``, ``P=.. Y=.. R=..``) in one field;
 * Euler angles: three columns ``<dev>_rot_{x,y,z}``, ``<dev>_euler_*``, ``<dev>_angles_*``,
   degrees when any exceeds 2π + 0.5, else radians; rotations about the fixed axes applied in
   :data:`EULER_ORDERS` order (Unity's Z, X, Y for a Unity file; an Unreal file's are its
@@ -89,31 +91,51 @@ def sniff_delimiter(header_line):
 _TUPLE = re.compile(r"\(([^()]*)\)")
 
 
+#: Unreal's ToString() of an FVector ("X=10.000 Y=-2.500 Z=160.000"), an FQuat ("X=... Y=... Z=...
+#: W=...") or an FRotator ("P=-5.000000 Y=90.000000 R=0.000000": pitch, yaw, roll) in one field
+_UNREAL_VALUE = r'[^\s,;\t"]+'
+_UNREAL = re.compile(r"([XYZWPR])=(" + _UNREAL_VALUE + ")")
+#: a whole field of them (from a field's start to its end)
+_UNREAL_CELL = re.compile(r'(?<![^,;\t"])[XYZWPR]=' + _UNREAL_VALUE + r"(?: +[XYZWPR]=" + _UNREAL_VALUE
+                          + r')*(?=[,;\t"]|$)')
+_UNREAL_NAMES = {"XYZ": ("x", "y", "z"), "XYZW": ("x", "y", "z", "w"), "PYR": ("pitch", "yaw", "roll")}
+
+
 def tuple_header(header, first_row, delim):
     """``header`` with each column whose cell in ``first_row`` (the first data line, text) is a
     parenthesised tuple spread over one column per component (``head_position`` ->
-    ``head_position_x``, ``_y``, ``_z``; four: ``_x`` .. ``_w``, Unity's quaternion order), or
-    ``header`` itself when the row has none."""
-    if "(" not in first_row:
+    ``head_position_x``, ``_y``, ``_z``; four: ``_x`` .. ``_w``, Unity's quaternion order), or an
+    Unreal ToString() (``X=.. Y=.. Z=..`` -> ``_x``, ``_y``, ``_z``; ``P=.. Y=.. R=..`` ->
+    ``_pitch``, ``_yaw``, ``_roll``), or ``header`` itself when the row has none."""
+    if "(" not in first_row and "=" not in first_row:
         return header
     fields = re.split(re.escape(delim) + r"(?![^()]*\))", first_row)
     if len(fields) != len(header):
         return header
     out = []
     for name, cell in zip(header, fields):
-        m = _TUPLE.fullmatch(cell.strip().strip('"'))
-        if not m:
-            out.append(name)
+        cell = cell.strip().strip('"')
+        m = _TUPLE.fullmatch(cell)
+        if m:
+            n = len(re.split(r"\s*[,;]\s*", m.group(1).strip()))
+            out += [f"{name}_{a}" for a in ("xyz" if n == 3 else "xyzw" if n == 4 else range(n))]
             continue
-        n = len(re.split(r"\s*[,;]\s*", m.group(1).strip()))
-        out += [f"{name}_{a}" for a in ("xyz" if n == 3 else "xyzw" if n == 4 else range(n))]
+        letters = "".join(m.group(1) for m in _UNREAL.finditer(cell)) if _UNREAL_CELL.fullmatch(cell) else ""
+        if letters in _UNREAL_NAMES:
+            out += [f"{name}_{a}" for a in _UNREAL_NAMES[letters]]
+            continue
+        out.append(name)
     return out
 
 
 def _untuple(line, delim):
-    """``line`` with each parenthesised tuple's components as fields of their own."""
-    return _TUPLE.sub(lambda m: delim.join(re.split(r"\s*[,;]\s*", m.group(1).strip())), line) if "(" in line \
-        else line
+    """``line`` with each parenthesised tuple's or Unreal ToString()'s components as fields of
+    their own."""
+    if "(" in line:
+        line = _TUPLE.sub(lambda m: delim.join(re.split(r"\s*[,;]\s*", m.group(1).strip())), line)
+    if "=" in line:
+        line = _UNREAL_CELL.sub(lambda m: delim.join(v.group(2) for v in _UNREAL.finditer(m.group(0))), line)
+    return line
 
 
 def iso_seconds(cells, path=None, lines=None):
@@ -194,6 +216,11 @@ _MATRIX = re.compile(r"^(?P<dev>.+?)_(?:(?P<word>[a-z]+)_)?m_?(?P<r>[0-3])_?(?P<
 _ROTATOR_AXES = {"roll": "x", "pitch": "y", "yaw": "z"}
 
 
+#: an acronym run into the next word (``HMDLocation``, ``XRHead``): split there before
+#: :func:`.devices.snake_name`, which splits only a lower-case letter from a capital
+_ACRONYM = re.compile(r"(?<=[A-Z])(?=[A-Z][a-z])")
+
+
 def parse_columns(header):
     """``({device: {"pos": {axis: col}, "rot": {axis: col}, "prefix": str}}, time_column, skipped)``.
 
@@ -202,7 +229,7 @@ def parse_columns(header):
     only when there is no time column (kind ``"frames"``, read with a rate)."""
     groups, time_col, skipped, frame_col = {}, None, [], None
     for i, raw in enumerate(header):
-        name = snake_name(raw)
+        name = snake_name(_ACRONYM.sub("_", raw))
         if i == 0 and (name == "" or name.startswith("unnamed")):
             continue
         if name in _TIME_S + _TIME_MS + _DELTA_MS + _DELTA_S and time_col is None:
@@ -486,7 +513,9 @@ def read_wide_csv(path, axes=None, units=None, layout=None, rate=None) -> Record
     note = "" if delim == "," else (f"fields separated by {_DELIMITER_NAMES[delim]}"
                                     + (", decimal commas" if decimal == "," else ""))
     if tuples:
-        note = "; ".join(n for n in (note, "vectors and quaternions as (x, y, z[, w]) tuples") if n)
+        what = "Unreal's X=.. Y=.. Z=.. / P=.. Y=.. R=.. strings" if "=" in body[0][1] else \
+            "vectors and quaternions as (x, y, z[, w]) tuples"
+        note = "; ".join(n for n in (note, what) if n)
     extra = {"delimiter": delim, "decimal": decimal} if delim != "," or decimal != "." else {}
     return read_wide_table(path, header, hline, table, axes=axes, units=units, layout=layout, rate=rate,
                            note=note, layout_extra=extra)
