@@ -138,3 +138,30 @@ def test_a_meta_rig_export_without_a_t_pose(tmp_path):
     assert "head=CenterEyeAnchor_*" in summary
     assert "named 'CenterEyeAnchor', a headset" in summary, summary
     assert abs(out.result.body.stature - 1.68) < 0.03
+
+
+def test_a_hand_tracked_take_s_summary_names_the_hand_tracking_preset(tmp_path):
+    """Hands tracked without controllers (the OpenXR hand-tracking wrist joint) beside a headset:
+    auto takes them for grip poses, the solved wrists 6 cm off the performer's, and the summary named
+    only ``none`` as the other choice; it names ``openxr_hand_tracking`` too, which puts them on."""
+    body = sk.make_body(1.75)
+    holds = [standing_targets(body, "T", seconds=4.0), standing_targets(body, "forward", seconds=2.0)]
+    T = sum(h.num_frames for h in holds)
+    pos, quat, joints = {}, {}, {}
+    for d in DEVICES:
+        joints[d] = np.concatenate([h.pos[d] for h in holds])
+        R = np.concatenate([h.rot[d] for h in holds])
+        p, R = remove_offsets(joints[d], R, HEADSET_PRESET if d == "head" else "openxr_hand_tracking", d)
+        pos[d], quat[d] = p, rot.matrix_to_quat(R)
+    path = write_wide_poses(tmp_path / "hands.csv", np.arange(T) / holds[0].fps, pos, quat, HEADSET_NAMES)
+
+    def wrist_error(out):
+        res = out.result
+        f = np.clip(np.round((res.t0 + np.arange(res.num_frames) / res.fps) * holds[0].fps).astype(int), 0, T - 1)
+        return max(float(np.median(np.linalg.norm(res.positions[:, sk.J[j]] - joints[d][f], axis=-1)))
+                   for d, j in (("left_hand", "left_wrist"), ("right_hand", "right_wrist")))
+    out, summary = _solve(path)
+    assert "openxr_hand_tracking if the hands are tracked without controllers" in summary, summary
+    assert wrist_error(out) > 0.04
+    out = solve_recording(str(path), SolveSettings(fps=30.0, offsets="openxr_hand_tracking"))
+    assert wrist_error(out) < 0.01

@@ -351,7 +351,10 @@ def offsets_note(setting, resolved, recording=None, guessed=None):
     if not isinstance(resolved, str):
         return None
     if guessed:
-        return f"offsets {resolved} (auto: {guessed}; choose offsets none if the head samples are the head joint's)"
+        hands = ("; openxr_hand_tracking if the hands are tracked without controllers (wrist joints)"
+                 if resolved == "openxr_generic" else "")
+        return (f"offsets {resolved} (auto: {guessed}; choose offsets none if the head samples are the head "
+                f"joint's{hands})")
     if resolved == "none":
         return None
     why = "from the file" if isinstance(meta, str) and meta.strip() == resolved else "the format's default"
