@@ -1,14 +1,16 @@
-"""Unity or OpenXR: how often a wide CSV's axes are read the right way (``core/axes_detect.py``).
+"""Unity or OpenXR, Blender or Unreal: how often a wide CSV's axes are read the right way
+(``core/axes_detect.py``).
 
 Every clip of the Bandai Namco set (all 3,076 takes) and of the HDM05 subset becomes a
 recording of a headset and two controllers (the ground truth's head joint and wrists, moved to
 the headset and grip poses by the ``openxr_generic`` offsets) and, as a mocap export would be,
-of the head joint and wrists themselves.  Each is written in Unity's and in OpenXR's axes and
-read back by the detection: single clips (1-10 s), and takes of 10 clips one after the other
-(each clip moved and turned to start where the one before ended, as one longer recording).
-Prints, per row, how many readings the hands' reach alone (the rule before this module) and
-the three cues (walking, then head turns, then reach) got right, and which cue decided; then
-the real VR recordings of ``../shared/data/vr`` (Beat Saber, Unity axes).  A second table
+of the head joint and wrists themselves.  Each is written in Unity's and in OpenXR's axes (Y
+up), and in Blender's and Unreal's (Z up), and read back by the detection: single clips
+(1-10 s), and takes of 10 clips one after the other (each clip moved and turned to start where
+the one before ended, as one longer recording).  Prints, per row, how many readings the hands'
+reach alone (the rule before this module) and the detection got right (Z up: the hands'
+left-right line first; then walking, head turns, reach), and which cue decided; then the real
+VR recordings of ``../shared/data/vr`` (Beat Saber, Unity axes).  A second table
 writes the same headsets and controllers without orientations (a logger of positions only):
 the axes read, and the heading :func:`.axes_detect.heading_from_positions` gives against the
 hips' facing, beside the single direction unrotated devices faced before.
@@ -42,6 +44,8 @@ from blender_manikin.core.skeleton import J  # noqa: E402
 
 DEVICES = ("head", "left_hand", "right_hand")
 CONVENTIONS = ("unity", "openxr")
+#: the Z-up pair, told apart by the hands' left-right line (Blender right-handed, Unreal left-handed)
+CONVENTIONS_Z = ("blender", "unreal")
 TAKE_CLIPS = 10
 
 
@@ -105,25 +109,27 @@ def stitch_facing(clips):
     return t, P, R, np.concatenate(facing)
 
 
-def read_both_ways(t, P, R, truth):
-    """``(reach_right, chosen_right, cue)`` for the take written in ``truth`` axes."""
+def read_both_ways(t, P, R, truth, conventions=CONVENTIONS):
+    """``(reach_right, chosen_right, cue)`` for the take written in ``truth`` axes, one of
+    ``conventions`` (a pair with the same up axis)."""
     pos, quat = {}, {}
     for d in DEVICES:
         pos[d], quat[d] = from_blender(P[d], rot.matrix_to_quat(R[d]), truth)
-    ev = {a: ad.facing_evidence(t, pos, quat, a) for a in CONVENTIONS}
-    reach = max(CONVENTIONS, key=lambda a: ev[a].reach)
-    chosen, why = ad.choose_axes(t, pos, lambda a: quat, CONVENTIONS)
-    cue = "walking" if "walking" in why else "turns" if "turns" in why else "reach"
+    ev = {a: ad.facing_evidence(t, pos, quat, a) for a in conventions}
+    reach = max(conventions, key=lambda a: ev[a].reach)
+    chosen, why = ad.choose_axes(t, pos, lambda a: quat, conventions)
+    cue = ("hands" if "left-right line" in why else "walking" if "walking" in why
+           else "turns" if "turns" in why else "reach")
     return reach == truth, chosen == truth, cue
 
 
-def tally(takes):
-    """Counts over ``takes`` (each ``(t, P, R)``) read in both conventions."""
+def tally(takes, conventions=CONVENTIONS):
+    """Counts over ``takes`` (each ``(t, P, R)``) read in both of ``conventions``."""
     n = reach = chosen = 0
-    cues = {"walking": 0, "turns": 0, "reach": 0}
+    cues = {"hands": 0, "walking": 0, "turns": 0, "reach": 0}
     for t, P, R in takes:
-        for truth in CONVENTIONS:
-            r, c, cue = read_both_ways(t, P, R, truth)
+        for truth in conventions:
+            r, c, cue = read_both_ways(t, P, R, truth, conventions)
             n += 1
             reach += r
             chosen += c
@@ -151,7 +157,7 @@ def positions_only(takes):
     return n, right, np.concatenate(errors), np.concatenate(fixed)
 
 
-def vr_rows():
+def vr_rows(conventions=CONVENTIONS):
     from blender_manikin.core.formats import load_recording
     rows = []
     for path in sorted(glob.glob(os.path.join(SHARED, "vr", "*.bsor"))):
@@ -160,7 +166,7 @@ def vr_rows():
         t = rec.streams["head"].time[:T]
         P = {d: rec.streams[d].pos[:T] for d in DEVICES}
         R = {d: rot.quat_to_matrix(rec.streams[d].quat[:T]) for d in DEVICES}
-        rows.append((os.path.basename(path), tally([(t, P, R)])))
+        rows.append((os.path.basename(path), tally([(t, P, R)], conventions)))
     return rows
 
 
@@ -169,31 +175,35 @@ def main(argv=None):
     ap.add_argument("--max-clips", type=int, default=0, help="per dataset (0: all)")
     args = ap.parse_args(argv)
     from blender_manikin.training import dataset
-    print("| recordings | head | clips per take | readings | reach alone right | three cues right "
-          "| decided by walking / turns / reach |")
-    print("|---|---|---:|---:|---:|---:|---|")
 
     def row(name, head, per, counts):
         n, reach, chosen, cues = counts
         print(f"| {name} | {head} | {per} | {n} | {100 * reach / n:.1f} % | {100 * chosen / n:.1f} % | "
-              f"{cues['walking']} / {cues['turns']} / {cues['reach']} |")
+              f"{cues['hands']} / {cues['walking']} / {cues['turns']} / {cues['reach']} |")
 
-    for name, (source, _) in DATASETS.items():
-        if not os.path.exists(source):
-            print(f"{name}: {source} not found, skipped")
-            continue
-        files = dataset.build_cache(source, verbose=False)
-        files = files[:args.max_clips] if args.max_clips else files
-        order = np.random.default_rng(0).permutation(len(files))
-        for headset in (True, False):
-            clips = [clip_devices(files[i], headset) for i in order]
-            clips = [c for c in clips if len(c[0]) >= 4]
-            head = "headset" if headset else "head joint"
-            row(name, head, 1, tally(clips))
-            groups = [stitch(clips[k:k + TAKE_CLIPS]) for k in range(0, len(clips) - TAKE_CLIPS + 1, TAKE_CLIPS)]
-            row(name, head, TAKE_CLIPS, tally(groups))
-    for name, counts in vr_rows():
-        row(name, "headset", "whole replay", counts)
+    for conventions, title in ((CONVENTIONS, "Y up: Unity or OpenXR"),
+                               (CONVENTIONS_Z, "Z up: Blender or Unreal (first the hands' left-right line)")):
+        print(f"\n{title}")
+        print("| recordings | head | clips per take | readings | reach alone right | chosen right "
+              "| decided by hands / walking / turns / reach |")
+        print("|---|---|---:|---:|---:|---:|---|")
+        for name, (source, _) in DATASETS.items():
+            if not os.path.exists(source):
+                print(f"{name}: {source} not found, skipped")
+                continue
+            files = dataset.build_cache(source, verbose=False)
+            files = files[:args.max_clips] if args.max_clips else files
+            order = np.random.default_rng(0).permutation(len(files))
+            for headset in (True, False):
+                clips = [clip_devices(files[i], headset) for i in order]
+                clips = [c for c in clips if len(c[0]) >= 4]
+                head = "headset" if headset else "head joint"
+                row(name, head, 1, tally(clips, conventions))
+                groups = [stitch(clips[k:k + TAKE_CLIPS])
+                          for k in range(0, len(clips) - TAKE_CLIPS + 1, TAKE_CLIPS)]
+                row(name, head, TAKE_CLIPS, tally(groups, conventions))
+        for name, counts in vr_rows(conventions):
+            row(name, "headset", "whole replay", counts)
     print("\npositions only (no orientation columns): the axes from walking and reaching against the heading "
           "from the hands' left-right line and the walking direction; that heading against the hips' facing")
     print("| recordings | clips per take | readings | axes right | heading error median / 90th pct [deg] "
