@@ -137,6 +137,14 @@ def test_save_to_json_and_load_back_gives_the_same_list(addon, tmp_path, monkeyp
         bone_maps.load_bone_map(path).to_dict()
 
 
+
+def test_save_map_has_the_file_browsers_warning_before_replacing_a_file(addon):
+    """Save Map's file browser marks a chosen name that exists in red before it is replaced, as
+    Blender's exporters' do: Blender shows that only for an operator with a ``check_existing``
+    property that is on (a real window showed Save Map replacing a user's JSON without it)."""
+    props = bpy.ops.manikin.save_bone_map.get_rna_type().properties
+    assert "check_existing" in props.keys() and props["check_existing"].default is True
+
 def test_a_bad_bone_name_is_an_error_naming_the_joint_and_the_bone(addon):
     _, src, char, s = _scene(alt=False)
     s.retarget_target = char

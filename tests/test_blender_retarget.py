@@ -446,8 +446,10 @@ def test_each_retargeted_take_is_exported_as_its_own_fbx(addon, tmp_path):
     with open(paths[0], "ab") as f:
         f.write(b"the animator's edit")
     before = open(paths[0], "rb").read()
-    with pytest.raises(ValueError, match="already exists and is not this tool's"):
+    with pytest.raises(ValueError, match="already exists and is not this tool's") as refused:
         fbx_presets.export_fbx_takes(str(tmp_path / "takes"), char, "unity")
+    # the panel's words, not the command line's (a real window said "pass --overwrite")
+    assert "tick Replace Files" in str(refused.value) and "--overwrite" not in str(refused.value)
     assert open(paths[0], "rb").read() == before
     assert fbx_presets.export_fbx_takes(str(tmp_path / "takes"), char, "unity", overwrite=True) == paths
     from test_blender_fbx_presets import _import

@@ -488,3 +488,32 @@ def test_live_swivel_hands_on_an_arm_under_a_constrained_socket(addon):
         hl, _ = _world_pose(live, arm)
         worst = max(worst, float(np.abs(hp - hl).max()))
     assert worst < MM, worst
+
+
+def test_the_animators_own_manikin_named_constraints_survive_the_rig(addon):
+    """Only the rig's own constraints are its (``MANIKIN follow IK``, ...): an animator's
+    constraint whose name merely starts with ``MANIKIN `` (``MANIKIN mine``) stays, unmuted, when
+    a second retarget rebuilds the rig, when the rig is muted and when Bake removes it; and its
+    bone is not taken for one the rig drives.  (A real Blender window showed a second retarget
+    deleting it.)"""
+    src, char = _take()
+    hips = bone_maps.preset("mixamo").bones["pelvis"]
+    fore = LIMB_BONES[0][1]
+    for name in (fore, hips):
+        c = char.pose.bones[name].constraints.new('LIMIT_SCALE')
+        c.name = "MANIKIN mine"
+
+    def mine():
+        return [(n, [(c.name, c.mute) for c in char.pose.bones[n].constraints if c.name == "MANIKIN mine"])
+                for n in (fore, hips)]
+
+    kept = [(fore, [("MANIKIN mine", False)]), (hips, [("MANIKIN mine", False)])]
+    retarget_apply.retarget_onto(src, char, "auto", None, "as_is", True)
+    retarget_apply.retarget_onto(src, char, "auto", None, "as_is", True)      # the rig rebuilt
+    assert cs.is_character_rig(char) and mine() == kept
+    assert hips not in cs.rig_driven_bones(char)
+    live_rig.set_rig_enabled(char, False)
+    assert mine() == kept
+    live_rig.set_rig_enabled(char, True)
+    cs.bake_character_rig(char, remove_rig=True)
+    assert not cs.is_character_rig(char) and mine() == kept

@@ -60,6 +60,8 @@ def _animators_edits(arm):
     arm["my_prop"] = 3.5
     con = arm.pose.bones["head"].constraints.new('LIMIT_ROTATION')
     con.name = "MyLimit"
+    con = arm.pose.bones["head"].constraints.new('LIMIT_SCALE')
+    con.name = "MANIKIN mine"                  # the animator's, named like the live rig's own
     drv = arm.driver_add('["my_prop"]')
     drv.driver.expression = "1.25"
     bpy.context.view_layer.objects.active = arm
@@ -88,6 +90,8 @@ def _check_edits_kept(arm, names):
     assert tracks["Layer"].strips[0].action.name == "OnlyInTheNLA"
     assert tracks["Layer"].strips[0].blend_type == 'ADD'
     assert "MyLimit" in arm.pose.bones["head"].constraints
+    assert "MANIKIN mine" in arm.pose.bones["head"].constraints
+    assert not arm.pose.bones["head"].constraints["MANIKIN mine"].mute
     assert any(d.data_path == '["my_prop"]' and d.driver.expression == "1.25" for d in arm.animation_data.drivers)
     assert "my_prop" in arm.keys()
     assert arm.mode == 'POSE'

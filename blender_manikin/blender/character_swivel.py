@@ -79,7 +79,6 @@ PREFIX = "MANIKIN_"
 PROP_RIG = "manikin_character_rig"
 #: the action's custom property naming the live action a baked action came from
 PROP_BAKED_FROM = "manikin_baked_from"
-CON_PREFIX = live_rig.CON_PREFIX
 
 
 @dataclass(frozen=True)
@@ -500,7 +499,7 @@ def remove_character_rig(obj, context=None):
                 ad.drivers.remove(fc)
     for pb in obj.pose.bones:
         for c in list(pb.constraints):
-            if c.name.startswith(CON_PREFIX):
+            if live_rig.is_rig_constraint(c):
                 pb.constraints.remove(c)
     n = sum(1 for b in obj.data.bones if b.name.startswith(PREFIX))
     if n:
@@ -524,7 +523,7 @@ def rig_driven_bones(obj):
     """The character's own bones the rig drives (those with ``MANIKIN ...`` constraints), parents first."""
     return [b.name for b in obj.data.bones
             if not b.name.startswith(PREFIX)
-            and any(c.name.startswith(CON_PREFIX) for c in obj.pose.bones[b.name].constraints)]
+            and any(live_rig.is_rig_constraint(c) for c in obj.pose.bones[b.name].constraints)]
 
 
 def bake_character_rig(obj, frame_start=None, frame_end=None, context=None, remove_rig: bool = True,

@@ -120,6 +120,16 @@ COLL_CTRL = "MANIKIN controls"
 COLL_MCH = "MANIKIN mechanism"
 #: constraint names (all prefixed so they can be found again)
 CON_PREFIX = "MANIKIN "
+#: the names (less :data:`CON_PREFIX`) of every constraint the live rigs add: only constraints of
+#: these full names are the rig's (:func:`is_rig_constraint`); an animator's own ``MANIKIN mine``
+#: is left alone when a rig is rebuilt, muted or removed
+CON_NAMES = ("swivel track", "IK", "follow IK", "pronation", "twist share", "hand rotation", "foot rotation")
+_CON_FULL = frozenset(CON_PREFIX + n for n in CON_NAMES)
+
+
+def is_rig_constraint(con) -> bool:
+    """True for a constraint a live rig added (named ``MANIKIN <one of CON_NAMES>``)."""
+    return con.name in _CON_FULL
 
 
 @dataclass(frozen=True)
@@ -302,7 +312,10 @@ def _bone_collections(obj):
 
 
 def _constraint(pb, ctype, name):
-    """A constraint named ``CON_PREFIX + name`` on pose bone ``pb`` (existing ones are replaced)."""
+    """A constraint named ``CON_PREFIX + name`` on pose bone ``pb`` (existing ones are replaced);
+    ``name`` one of :data:`CON_NAMES`."""
+    if name not in CON_NAMES:
+        raise ValueError(f"live rig constraint {name!r} is not in CON_NAMES")
     full = CON_PREFIX + name
     old = pb.constraints.get(full)
     if old is not None:
@@ -315,7 +328,7 @@ def _constraint(pb, ctype, name):
 def _clear_rig_constraints(obj):
     for pb in obj.pose.bones:
         for c in list(pb.constraints):
-            if c.name.startswith(CON_PREFIX):
+            if is_rig_constraint(c):
                 pb.constraints.remove(c)
 
 
@@ -509,7 +522,7 @@ def set_rig_enabled(obj, enabled: bool):
     n = 0
     for pb in obj.pose.bones:
         for c in pb.constraints:
-            if c.name.startswith(CON_PREFIX) and c.mute == bool(enabled):
+            if is_rig_constraint(c) and c.mute == bool(enabled):
                 c.mute = not enabled
                 n += 1
     return n

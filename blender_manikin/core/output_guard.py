@@ -83,9 +83,10 @@ def in_the_way(paths) -> list:
     return out
 
 
-def check_free(paths, overwrite=False):
+def check_free(paths, overwrite=False, remedy="pass --overwrite to replace, or choose another --out"):
     """Raise :class:`OutputInTheWay` naming the ``paths`` that would replace a file the user made or
-    changed (:func:`in_the_way`), unless ``overwrite``."""
+    changed (:func:`in_the_way`), unless ``overwrite``.  remedy: what the message tells the user
+    to do (the command line's options by default; Blender's operators name their own fields)."""
     if overwrite:
         return
     blocked = in_the_way(paths)
@@ -93,8 +94,7 @@ def check_free(paths, overwrite=False):
         names = ", ".join(os.fspath(p) for p in blocked)
         raise OutputInTheWay(f"{names} already exist{'s' if len(blocked) == 1 else ''} and "
                              f"{'is' if len(blocked) == 1 else 'are'} not this tool's unchanged output of an "
-                             "earlier run (made or edited since): nothing written; pass --overwrite to replace, "
-                             "or choose another --out")
+                             f"earlier run (made or edited since): nothing written; {remedy}")
 
 
 def _source(source, person) -> dict:

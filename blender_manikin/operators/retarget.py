@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import os
 
-from bpy.props import StringProperty
+from bpy.props import BoolProperty, StringProperty
 from bpy.types import Operator
 
 
@@ -136,6 +136,9 @@ class MANIKIN_OT_save_bone_map(Operator):
     filepath: StringProperty(subtype='FILE_PATH', default="",
                              description="Where to write the map (default: the user's bone map folder)")
     filter_glob: StringProperty(default="*.json", options={'HIDDEN'})
+    #: the file browser marks a name that exists in red before it is replaced (as Export FBX's does)
+    check_existing: BoolProperty(name="Check Existing", default=True, options={'HIDDEN'},
+                                 description="Warn before replacing a file of this name")
 
     @classmethod
     def poll(cls, context):
