@@ -97,6 +97,43 @@ def test_json_key_line():
     assert json_key_line(text, ("nope",)) is None
 
 
+def test_json_key_line_array_elements():
+    """An array index in the path names the line its element starts on (pretty-printed: each its
+    own line; one line: that line); past the end, the array's key's line."""
+    doc = {"parents": [["a", "b"], ["c", "d"], ["e", 3]], "pos": [0.5, "x", 1], "deep": [[1, [2, {"k": 4}]]]}
+    text = json.dumps(doc, indent=2)
+    lines = text.splitlines()
+    par = next(k for k, t in enumerate(lines, 1) if '"parents":' in t)
+    assert json_key_line(text, ("parents", 0)) == par + 1
+    assert json_key_line(text, ("parents", 2)) == par + 9            # each pair is 4 lines: [, a, b, ]
+    assert json_key_line(text, ("parents", 2, 1)) == par + 11
+    assert json_key_line(text, ("parents", 7)) == par                # no such element: the key's line
+    pos = next(k for k, t in enumerate(lines, 1) if '"pos":' in t)
+    assert json_key_line(text, ("pos", 1)) == pos + 2
+    assert lines[json_key_line(text, ("deep", 0, 1, 1, "k")) - 1].strip() == '"k": 4'
+    one = json.dumps(doc)
+    assert all(json_key_line(one, k) == 1 for k in (("parents", 2), ("pos", 1), ("deep", 0, 1, 1, "k")))
+    assert json_key_line('[\n 1,\n "a,]\\"[",\n 3\n]', (2,)) == 4    # commas and brackets in strings
+
+
+def test_array_element_errors_name_the_element_line(tmp_path):
+    from test_joint_map_files import _lafan1_file_dict
+    off = tmp_path / "offsets.json"
+    off.write_text(json.dumps({"devices": {"head": {"pos": [0, 0, 0], "rot": [1, 0, 0, "x"]}}}, indent=2))
+    want = next(k for k, t in enumerate(off.read_text().splitlines(), 1) if '"x"' in t)
+    with pytest.raises(RecordingError, match=rf"offsets.json, line {want}: head: pos/rot must be lists of numbers"):
+        load_offsets(off)
+    d = _lafan1_file_dict()
+    d["parents"] = [["Hips", "Spine"], ["Head", 3]]
+    f = tmp_path / "map.json"
+    f.write_text(json.dumps(d, indent=2))
+    lines = f.read_text().splitlines()
+    par = next(k for k, t in enumerate(lines) if '"parents":' in t)
+    want = next(k for k in range(par, len(lines)) if '"Head",' in lines[k])   # the bad pair's "[" is the line before
+    with pytest.raises(ValueError, match=rf"map.json, line {want}: parents must be a list"):
+        jmod.load_joint_map(f)
+
+
 def test_layout_content_error_names_its_line(tmp_path):
     bad = tmp_path / "layout.json"
     bad.write_text(json.dumps({"format": "wide_csv",

@@ -393,6 +393,16 @@ def validate_offsets(offsets, where="offsets") -> dict:
     return _checked_offsets(offsets, fail)
 
 
+def _first_not_number(v):
+    """``(k,)``, the index of the first element of the list ``v`` that is not a finite number
+    (the rest of a key path, for an error's line); ``()`` when every one is, or ``v`` is no list."""
+    if isinstance(v, (list, tuple)):
+        for k, x in enumerate(v):
+            if isinstance(x, bool) or not isinstance(x, (int, float)) or not np.isfinite(x):
+                return (k,)
+    return ()
+
+
 def _checked_offsets(offsets, fail):
     """:func:`validate_offsets`'s work; ``fail(problem, *key_path)`` raises for a problem with
     the value at ``key_path`` (the keys in the JSON document, e.g. ``("devices", "head", "pos")``)."""
@@ -422,16 +432,17 @@ def _checked_offsets(offsets, fail):
         try:
             pos = np.asarray(e.get("pos", [0.0, 0.0, 0.0]), dtype=np.float64)
         except (TypeError, ValueError):
-            fail(f"{d}: pos/rot must be lists of numbers", *top, d, "pos")
+            fail(f"{d}: pos/rot must be lists of numbers", *top, d, "pos", *_first_not_number(e.get("pos")))
         try:
             rot = np.asarray(e.get("rot", [1.0, 0.0, 0.0, 0.0]), dtype=np.float64)
         except (TypeError, ValueError):
-            fail(f"{d}: pos/rot must be lists of numbers", *top, d, "rot")
+            fail(f"{d}: pos/rot must be lists of numbers", *top, d, "rot", *_first_not_number(e.get("rot")))
         if pos.shape != (3,) or not np.all(np.isfinite(pos)):
-            fail(f"{d}: 'pos' must be 3 finite numbers (metres), got {shown(e.get('pos'))}", *top, d, "pos")
+            fail(f"{d}: 'pos' must be 3 finite numbers (metres), got {shown(e.get('pos'))}", *top, d, "pos",
+                 *_first_not_number(e.get("pos")))
         if rot.shape != (4,) or not np.all(np.isfinite(rot)) or np.linalg.norm(rot) < 1e-6:
             fail(f"{d}: 'rot' must be a non-zero quaternion [w, x, y, z], got {shown(e.get('rot'))}",
-                 *top, d, "rot")
+                 *top, d, "rot", *_first_not_number(e.get("rot")))
         rot = rot / np.linalg.norm(rot)
         out[d] = {"pos": [float(v) for v in pos], "rot": [float(v) for v in rot]}
     return {"name": name, "description": desc, "devices": out}

@@ -752,11 +752,11 @@ def load_joint_map(path) -> JointMap:
             raise ValueError(f'{w}: "rest" axes need "rest_is_tpose": true')
 
     parents = data.get("parents", [])
-    if not (isinstance(parents, list) and all(
-            isinstance(p, list) and len(p) == 2 and all(isinstance(x, str) and x.strip() for x in p)
-            for p in parents)):
-        raise ValueError(f'{at("parents")}: parents must be a list of ["child", "parent"] joint names; '
-                         f'got {shown(parents)}')
+    bad = [(k,) for k, p in enumerate(parents if isinstance(parents, list) else [])
+           if not (isinstance(p, list) and len(p) == 2 and all(isinstance(x, str) and x.strip() for x in p))]
+    if not isinstance(parents, list) or bad:
+        raise ValueError(f'{at("parents", *bad[0]) if bad else at("parents")}: parents must be a list of '
+                         f'["child", "parent"] joint names; got {shown(parents)}')
     name = data.get("name", os.path.splitext(os.path.basename(where))[0])
     desc = data.get("description", f"joint-map file {os.path.basename(where)}")
     for k, v in (("name", name), ("description", desc)):

@@ -218,15 +218,22 @@ def load_json_file(path):
 
 def json_key_line(text, key_path):
     """The 1-based line of ``text`` (a JSON document that parses) where the key ``key_path``
-    (a tuple of object keys, and array indices as ints) is written, for an error about its value:
-    the line of ``"key":`` of the deepest part of the path the text holds (a device's line when
-    the key asked for inside it is missing); None when not even the first key is there.  A key
-    written twice counts where it is written last (the value ``json.loads`` keeps)."""
+    (a tuple of object keys, and array indices as ints counted from 0) is written, for an error
+    about its value: the line of ``"key":`` of the deepest part of the path the text holds (a
+    device's line when the key asked for inside it is missing); for an array index, the line
+    its element starts on (``("parents", 2)``: the third pair's ``[``; the array's key's line
+    when it has fewer elements); None when not even the first key is there.  A key written
+    twice counts where it is written last (the value ``json.loads`` keeps)."""
     import json
     want = tuple(key_path)
     stack, found, line, i, n = [], {}, 1, 0, len(text)
     while i < n:
         c = text[i]
+        if stack and stack[-1][0] == "[" and stack[-1][2] and c not in " \t\r\n,]":
+            stack[-1][2] = False                         # an array's element starts here
+            path = tuple(f[1] for f in stack)
+            if path == want[:len(path)]:
+                found[len(path)] = line
         if c == "\n":
             line += 1
         elif c == '"':
@@ -247,12 +254,13 @@ def json_key_line(text, key_path):
             line += text.count("\n", i, j)
             i = j
         elif c in "{[":
-            stack.append([c, None if c == "{" else 0])
+            stack.append([c, None, False] if c == "{" else [c, 0, True])   # [kind, key or index, element due]
         elif c in "}]":
             if stack:
                 stack.pop()
         elif c == "," and stack and stack[-1][0] == "[":
             stack[-1][1] += 1
+            stack[-1][2] = True
         i += 1
     return found[max(found)] if found else None
 
