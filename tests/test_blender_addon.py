@@ -1,6 +1,7 @@
 """Add-on registration, the solve operator (with a stand-in solver), errors, cancel and undo."""
 import os
 import threading
+import traceback
 from types import SimpleNamespace
 
 import numpy as np
@@ -249,6 +250,58 @@ def test_cancel_leaves_nothing(addon, recording, monkeypatch):
     with pytest.raises(solve_job.SolveCancelled):
         job.write(bpy.context)
     assert (len(bpy.data.objects), len(bpy.data.actions), len(bpy.data.armatures)) == before
+
+
+def _reader_test_file(kind, tmp_path):
+    """A small file of ``kind`` (wide CSV, JSON frames, keypoint CSV, native CSV) and its source."""
+    import json
+    from blender_manikin.core import rotations as rot
+    from fixtures_keypoints import hinge_motion, write_layout_csv
+    from fixtures_recordings import write_wide_poses
+    if kind == "keypoint_csv":
+        body, pos, world = hinge_motion(frames=60)
+        write_layout_csv(tmp_path / "kp.csv", "halpe26", body, pos, world)
+        return str(tmp_path / "kp.csv"), "KEYPOINTS"
+    res = synthetic_result(T=48, fps=24.0)
+    if kind == "native_csv":
+        return str(write_recording_csv(tmp_path / "take.csv", res)), "FILE"
+    t = res.t0 + np.arange(res.num_frames) / res.fps
+    quat = {d: rot.matrix_to_quat(res.targets.rot[d]) for d in res.targets.devices}
+    if kind == "wide_csv":
+        return str(write_wide_poses(tmp_path / "wide.csv", t, res.targets.pos, quat,
+                                    {d: d for d in res.targets.devices}, axes="blender")), "FILE"
+    frames = [{"time": float(t[k]), **{d: {"position": res.targets.pos[d][k].tolist(),
+                                           "rotation": [*quat[d][k, 1:].tolist(), float(quat[d][k, 0])]}
+                                       for d in res.targets.devices}} for k in range(len(t))]
+    (tmp_path / "frames.json").write_text(json.dumps({"frames": frames}, indent=1))
+    return str(tmp_path / "frames.json"), "FILE"
+
+
+@pytest.mark.parametrize("kind,reader", [("wide_csv", "io_wide_csv"), ("native_csv", "io_csv"),
+                                         ("json", "io_json"), ("keypoint_csv", "io_keypoints")])
+def test_cancel_stops_the_read(addon, tmp_path, monkeypatch, kind, reader):
+    """Esc while a file is read (not solved): the reader checks the job's cancel between chunks
+    of rows, so the read stops there, inside the reader, and nothing is kept."""
+    from blender_manikin.core import io_csv, recording as rec
+    monkeypatch.setattr(rec, "CHECK_ROWS", 8)              # a small file read in several chunks
+    monkeypatch.setattr(io_csv, "BLOCK_BYTES", 512)
+    path, source = _reader_test_file(kind, tmp_path)
+    job = solve_job.SolveJob(solve_job.SolveConfig(filepath=path, source=source, fps=24.0, calibration="MEASURE",
+                                                   height=1.8))
+    real, checks = solve_job._check_cancel, []
+
+    def check(flag):                 # the job's cancel check; Esc at the third one made while reading
+        if job.stage.startswith("reading"):
+            checks.append(job.stage)
+            if len(checks) == 3:
+                job.cancel()
+        real(flag)
+    monkeypatch.setattr(solve_job, "_check_cancel", check)
+    with pytest.raises(solve_job.SolveCancelled) as e:
+        job.compute()
+    assert len(checks) == 3                  # the stage's own check, then two chunks read
+    assert any(f.filename.endswith(os.path.join("core", f"{reader}.py")) for f in traceback.extract_tb(e.tb))
+    assert job.recording is None and job.result is None
 
 
 def test_scene_objects_as_trackers(addon):

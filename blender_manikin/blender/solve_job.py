@@ -252,7 +252,14 @@ class SolveJob:
         """:func:`core.solve.solve_recording` on the file or the gathered scene recording.
         Sets ``self.result`` (and ``recording``, ``report``, ``targets``, ``body``, ``offsets``,
         ``info``, ``timings``); with ``split_people`` and several people in the file, sets
-        ``self.people`` instead, solves nothing and returns None."""
+        ``self.people`` instead, solves nothing and returns None.  :meth:`cancel` stops it
+        also while a file is read: the readers check it between chunks
+        (:func:`core.recording.cancellable_reads`)."""
+        from ..core.recording import cancellable_reads
+        with cancellable_reads(lambda: _check_cancel(self._cancel)):
+            return self._compute()
+
+    def _compute(self):
         if self.split_people:
             self.split_people = False
             self._set(0.0, "reading the file's people")

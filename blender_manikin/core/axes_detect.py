@@ -57,7 +57,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .recording import LEFT_HANDED, increasing_mask
+from .recording import LEFT_HANDED, increasing_mask, read_check
 from .rotations import axis_angle_to_quat, normalize, quat_rotate, quat_to_matrix
 from .smoothing import smooth_frames
 
@@ -368,10 +368,11 @@ def choose_axes(time, pos, quats_for, candidates):
         other = next(a for a in candidates if a != best)
         if side[best] is not None and side[best] >= SIDE_MIN and (side[other] or 0.0) < SIDE_MIN:
             return best, "from the hands' left-right line (the left hand on the head's left)"
-    if quats_for is None:
-        ev = {a: _positions_only_evidence(time, pos, a) for a in candidates}
-    else:
-        ev = {a: facing_evidence(time, pos, quats_for(a), a) for a in candidates}
+    ev = {}
+    for a in candidates:              # each takes a good part of a second on a long take: a cancel between
+        read_check()
+        ev[a] = _positions_only_evidence(time, pos, a) if quats_for is None else \
+            facing_evidence(time, pos, quats_for(a), a)
     walk = max(candidates, key=lambda a: ev[a].walk)
     if ev[walk].walk >= WALK_MIN_S:
         return walk, f"from the walking direction ({ev[walk].walk:.1f} s forward)"

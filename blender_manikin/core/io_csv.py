@@ -50,7 +50,7 @@ from .plain import shown
 from .pose_result import DEVICES
 from .recording import (
     Recording, RecordingError, TrackerStream, UNITS, canonical_axes, canonical_device,
-    canonical_units, decode_text, from_blender, not_data, text_codec, to_blender,
+    canonical_units, decode_text, from_blender, not_data, read_check, text_codec, to_blender,
 )
 from .rotations import normalize, vector_norm
 
@@ -248,7 +248,8 @@ def read_csv(path, axes=None, units=None, block_bytes=None) -> Recording:
     path: file path.  axes: ``openxr``/``unity``/``blender``/``unreal`` overriding the
     file's ``# axes:`` metadata (default ``openxr``).  units: ``m``/``cm``/``mm``
     overriding ``# units:`` (default ``m``).  block_bytes: how much of the file is
-    parsed at a time (default :data:`BLOCK_BYTES`; the result does not depend on it).
+    parsed at a time (default :data:`BLOCK_BYTES`; the result does not depend on it); a
+    cancel (:func:`.recording.cancellable_reads`) is checked before each.
     The common rows (no quotes, nothing odd) go through numpy's C parser; a block with
     anything else is parsed field by field, so errors name the exact line either way.
 
@@ -264,6 +265,7 @@ def read_csv(path, axes=None, units=None, block_bytes=None) -> Recording:
     any_text = False
     first = 1                                # line number of the block's first line
     for text in _text_blocks(path, max(int(block_bytes or BLOCK_BYTES), 1)):
+        read_check()                         # a cancel (Esc in Blender) stops the read between blocks
         if header is not None and text[:1] not in ("\n", "#") and "#" not in text and "\r" not in text \
                 and "\n\n" not in text:
             # the usual block: data lines only (no comment, blank line or CR), parsed unsplit

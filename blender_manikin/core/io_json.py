@@ -36,7 +36,7 @@ import numpy as np
 
 from .io_wide_csv import read_wide_table
 from .plain import shown
-from .recording import Recording, RecordingError, decode_text, read_file_bytes
+from .recording import Recording, RecordingError, decode_text, read_check, read_file_bytes, row_chunks
 from .rotations import matrix_to_quat
 
 #: keys that say which side a list's object is on, and the sides they name
@@ -207,23 +207,28 @@ def read_json(path, axes=None, units=None, layout=None, rate=None) -> Recording:
     text = decode_text(read_file_bytes(path), path=path, errors="replace")
     if not text.strip():
         raise RecordingError("file is empty", path=path)
+    read_check()                                  # a cancel before the parse (one call, a second or two)
     frames, lines = frames_of(path, text)
     if lines is None:
         lines = [None] * len(frames)
-    flat = []
-    for k, f in enumerate(frames):
-        if not isinstance(f, dict):
-            raise RecordingError(f"a frame is {type(f).__name__} {shown(f)}, not an object", path=path,
-                                 line=lines[k])
-        flat.append(flatten(f))
-    header = list(dict.fromkeys(k for f in flat for k in f))
+    flat, names = [], {}
+    for part in row_chunks(len(frames)):          # in chunks: a cancel is checked between them
+        for k in range(part.start, part.stop):
+            f = frames[k]
+            if not isinstance(f, dict):
+                raise RecordingError(f"a frame is {type(f).__name__} {shown(f)}, not an object", path=path,
+                                     line=lines[k])
+            flat.append(flatten(f))
+        names.update(dict.fromkeys(k for f in flat[part] for k in f))
+    header = list(names)
     if isinstance(layout, (str, os.PathLike)):
         layout = load_layout(layout)
 
     def table():
         if len(flat) < 2:
             raise RecordingError("fewer than two frames", path=path)
-        cells = np.array([[str(f.get(k, "nan")) for k in header] for f in flat], dtype=str)
+        cells = np.concatenate([np.array([[str(f.get(k, "nan")) for k in header] for f in flat[part]], dtype=str)
+                                for part in row_chunks(len(flat))])
         return cells, lines
 
     return read_wide_table(path, header, None, table, axes=axes, units=units,

@@ -76,8 +76,8 @@ from . import marker_sets
 from . import subject_params as sp
 from . import rotations as rot
 from .plain import shown
-from .recording import (RecordingError, UNITS, canonical_units, decode_head, load_json_file, missing_file, read_text,
-                        time_unit_of_step)
+from .recording import (RecordingError, UNITS, canonical_units, chunked, decode_head, load_json_file, missing_file,
+                        read_text, row_chunks, time_unit_of_step)
 
 #: points with a confidence below this are treated as missing
 MIN_CONFIDENCE = 0.3
@@ -781,9 +781,8 @@ def _load_csv(path, mapping, rate):
     ``people``: :func:`_csv_people`'s split where a person column names several rows a time
     (then ``X``'s rows are the file's and ``lines`` None: the split carries its own), else None;
     ``lines``: each data row's line in the file."""
-    rows = list(csv.reader(io.StringIO(read_text(path), newline="")))
-    rows = [(i + 1, r) for i, r in enumerate(rows) if r and any(c.strip() for c in r)
-            and not r[0].lstrip().startswith("#")]
+    rows = [(i + 1, r) for i, r in enumerate(chunked(csv.reader(io.StringIO(read_text(path), newline=""))))
+            if r and any(c.strip() for c in r) and not r[0].lstrip().startswith("#")]   # a cancel checked by chunk
     if not rows:
         raise RecordingError("file is empty", path=path)
     hline, header = rows[0]
@@ -821,7 +820,7 @@ def _load_csv(path, mapping, rate):
         pcol = None                 # a value on every row: a row number (an "id" column), not a person
     X = np.empty((len(data), len(idx)))
     tv = np.empty(len(data))
-    for k, (ln, r) in enumerate(data):
+    for k, (ln, r) in enumerate(chunked(data)):
         if len(r) != len(cols):
             raise RecordingError(f"expected {len(cols)} comma-separated fields (as in the header), found {len(r)}",
                                  path=path, line=ln)
@@ -945,7 +944,7 @@ def _load_trc(path, rate, subject_params=None):
     _marker_layout(names, path, "TRC", dict(line=4))      # names refused before the table is read
     width = 2 + 3 * len(names)
     rows, lines_no = [], []
-    for i, line in enumerate(lines[5:], start=6):
+    for i, line in enumerate(chunked(lines[5:]), start=6):
         if line.strip():              # missing trailing cells (markers lost) and empty ones are NaN
             c = [v.strip() or "nan" for v in cells(line)][:width]
             rows.append(c + ["nan"] * (width - len(c)))
@@ -953,7 +952,8 @@ def _load_trc(path, rate, subject_params=None):
     if not rows:
         raise RecordingError("no data rows after the TRC header", path=path)
     try:
-        data = np.array(rows, dtype=np.float64)         # one conversion of the whole table
+        data = np.concatenate([np.array(rows[part], dtype=np.float64).reshape(-1, width)    # a chunk at a time
+                               for part in row_chunks(len(rows))])
     except ValueError:
         for row, i in zip(rows, lines_no):              # the first cell that is not a number, and its line
             for v in row:

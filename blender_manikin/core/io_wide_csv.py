@@ -55,8 +55,8 @@ import numpy as np
 from .devices import DEVICES, canonical_device, snake_name
 from .plain import shown
 from .recording import (LEFT_HANDED, Recording, RecordingError, TrackerStream, UNITS, canonical_axes, canonical_units,
-                        decode_text, json_key_line, load_json_file, read_file_bytes, read_text, time_unit_of_step,
-                        to_blender)
+                        decode_text, json_key_line, load_json_file, read_check, read_file_bytes, read_text,
+                        row_chunks, time_unit_of_step, to_blender)
 from . import rotations as rot
 from .rotations import normalize
 from .axes_detect import choose_axes, heading_from_positions, heading_quats, length_units, up_axis, yaw_of
@@ -499,16 +499,19 @@ def read_wide_csv(path, axes=None, units=None, layout=None, rate=None) -> Record
     def table():
         if len(body) < 2:
             raise RecordingError("fewer than two rows of samples", path=path)
-        cells = [(ln.replace(",", ".") if decimal == "," else ln)
-                 for ln in ((_untuple(ln, delim) if tuples else ln) for _, ln in body)]      # 1,62 is 1.62
-        cells = [ln.split(delim) for ln in cells]
-        counts = np.fromiter((len(c) for c in cells), dtype=np.int64, count=len(cells))
-        wrong = np.nonzero(counts != len(header))[0]
-        if wrong.size:
-            k = int(wrong[0])
-            raise RecordingError(f"{counts[k]} fields, the header has {len(header)}", path=path, line=body[k][0])
-        text_cells = np.char.strip(np.array(cells, dtype=str))
-        return np.char.strip(text_cells, '"'), [n for n, _ in body]
+        parts = []
+        for part in row_chunks(len(body)):        # in chunks: a cancel is checked between them
+            cells = [(ln.replace(",", ".") if decimal == "," else ln)
+                     for ln in ((_untuple(ln, delim) if tuples else ln) for _, ln in body[part])]   # 1,62 is 1.62
+            cells = [ln.split(delim) for ln in cells]
+            counts = np.fromiter((len(c) for c in cells), dtype=np.int64, count=len(cells))
+            wrong = np.nonzero(counts != len(header))[0]
+            if wrong.size:
+                k = int(wrong[0])
+                raise RecordingError(f"{counts[k]} fields, the header has {len(header)}", path=path,
+                                     line=body[part.start + k][0])
+            parts.append(np.char.strip(np.char.strip(np.array(cells, dtype=str)), '"'))
+        return np.concatenate(parts), [n for n, _ in body]
 
     note = "" if delim == "," else (f"fields separated by {_DELIMITER_NAMES[delim]}"
                                     + (", decimal commas" if decimal == "," else ""))
@@ -577,7 +580,8 @@ def read_wide_table(path, header, hline, table, axes=None, units=None, layout=No
                                    for i in (*g["pos"].values(), *g["rot"].values(), *g.get("mat", ()))})
     values = np.full(text_cells.shape, np.nan)
     try:
-        values[:, used] = text_cells[:, used].astype(np.float64)      # one vectorised conversion
+        for part in row_chunks(len(values)):             # vectorised, a chunk of rows at a time
+            values[part, used] = text_cells[part][:, used].astype(np.float64)
     except ValueError:
         for k, row in enumerate(text_cells[:, used]):                 # only to name the bad cell's line
             for c in row:
@@ -638,6 +642,7 @@ def read_wide_table(path, header, hline, table, axes=None, units=None, layout=No
         axes, up = "unreal", 2
         axes_note = f"axes unreal (left-handed), from the rotator columns of {', '.join(rotators)} (pitch, yaw, roll)"
     elif axes is None:
+        read_check()                                      # the detection takes a second on a long take
         up, up_how = up_axis(metres, quats_for(order_for("openxr")) if euler else quat)
         cands = ("blender", "unreal") if up == 2 else ("unity", "openxr")
         axes, why = choose_axes(t, metres, (lambda c: quats_for(order_for(c))) if euler else

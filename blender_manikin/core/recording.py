@@ -41,8 +41,11 @@ continuity and deliberate sign flips survive the conversion).
 """
 from __future__ import annotations
 
+import contextlib
 import errno
+import itertools
 import os
+import threading
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -118,6 +121,56 @@ def missing_file(path) -> str:
     if os.path.isdir(path):
         return "a folder, not a file"
     return "no such file"
+
+
+#: rows (samples, frames, lines) a long reader parses between two :func:`read_check` calls:
+#: a fraction of a second of work, so a read stops soon after it is asked to
+CHECK_ROWS = 4096
+_READS = threading.local()
+
+
+@contextlib.contextmanager
+def cancellable_reads(check):
+    """Inside this block, the readers in this thread call ``check()`` (no arguments) between
+    chunks of a long read (:func:`read_check`); it stops the read by raising (the add-on's
+    solve job raises its ``SolveCancelled`` once Esc was pressed).  One check per thread (a
+    worker's read is not stopped by another's Esc); the one before is restored on leaving."""
+    before = getattr(_READS, "check", None)
+    _READS.check = check
+    try:
+        yield
+    finally:
+        _READS.check = before
+
+
+def read_check():
+    """Called by a reader between chunks of its work: the check of the enclosing
+    :func:`cancellable_reads` in this thread, which raises to stop the read; nothing outside one."""
+    check = getattr(_READS, "check", None)
+    if check is not None:
+        check()
+
+
+def row_chunks(n, size=None):
+    """Slices ``0:size``, ``size:2*size``, ... of ``n`` rows (``size`` default :data:`CHECK_ROWS`),
+    :func:`read_check` called before each: how a reader walks a long table in chunks."""
+    size = max(int(CHECK_ROWS if size is None else size), 1)
+    for start in range(0, int(n), size):
+        read_check()
+        yield slice(start, min(start + size, int(n)))
+
+
+def chunked(items, size=None):
+    """The items of the iterable ``items``, taken ``size`` (default :data:`CHECK_ROWS`) at a
+    time with :func:`read_check` before each chunk: how a reader walks a long iterator (a
+    ``csv.reader``) in chunks."""
+    items = iter(items)
+    while True:
+        read_check()
+        part = list(itertools.islice(items, max(int(CHECK_ROWS if size is None else size), 1)))
+        if not part:
+            return
+        yield from part
 
 
 def read_file_bytes(path) -> bytes:
