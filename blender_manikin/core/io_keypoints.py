@@ -61,8 +61,8 @@ naming the file and the problem (and the line, for CSV).
 from __future__ import annotations
 
 import csv
-import io
 import os
+import re
 import tokenize
 import zipfile
 import zlib
@@ -76,8 +76,8 @@ from . import marker_sets
 from . import subject_params as sp
 from . import rotations as rot
 from .plain import shown
-from .recording import (RecordingError, UNITS, canonical_units, chunked, decode_head, load_json_file, missing_file,
-                        read_text, row_chunks, time_unit_of_step)
+from .recording import (RecordingError, UNITS, batches, canonical_units, chunked, decode_head, load_json_file,
+                        missing_file, read_check, read_text, row_chunks, time_unit_of_step)
 
 #: points with a confidence below this are treated as missing
 MIN_CONFIDENCE = 0.3
@@ -257,6 +257,7 @@ def read_keypoint_people(path, layout=None, units=None, up=None, rate=None, mapp
     out = []
     all_labels = [lab for lab, _ in raw["people"]]
     for lab, X, conf, first, sl in people:
+        read_check()                          # each person takes a moment: a cancel between them
         said = f"person {lab} of {len(raw['people'])} ({', '.join(lab2 for lab2, _ in raw['people'])}), " \
                f"frames {first + sl.start}-{first + sl.stop - 1}"
         one = dict(raw, X=X[sl], conf=None if conf is None else conf[sl],
@@ -779,13 +780,14 @@ def _layout_from_columns(cols):
 def _load_csv(path, mapping, rate):
     """``(X (T, K, 3), time (T,) or None, layout, rate, people, lines (T,))`` of a keypoint CSV;
     ``people``: :func:`_csv_people`'s split where a person column names several rows a time
-    (then ``X``'s rows are the file's and ``lines`` None: the split carries its own), else None;
-    ``lines``: each data row's line in the file."""
-    rows = [(i + 1, r) for i, r in enumerate(chunked(csv.reader(io.StringIO(read_text(path), newline=""))))
-            if r and any(c.strip() for c in r) and not r[0].lstrip().startswith("#")]   # a cancel checked by chunk
-    if not rows:
+    (then ``X`` and ``lines`` None: the split carries its own), else None; ``lines``: each data
+    row's line in the file.  The rows are parsed a chunk at a time (:func:`.recording.batches`:
+    a cancel is checked between chunks), so the file's text cells are never held all at once."""
+    rows = ((i, r) for i, r in enumerate(csv.reader(_text_lines(read_text(path))), 1)
+            if r and any(c.strip() for c in r) and not r[0].lstrip().startswith("#"))
+    hline, header = next(rows, (None, None))
+    if header is None:
         raise RecordingError("file is empty", path=path)
-    hline, header = rows[0]
     cols = [c.strip().lower() for c in header]
     if mapping is not None:
         if not isinstance(mapping, dict):
@@ -812,65 +814,80 @@ def _load_csv(path, mapping, rate):
             idx.append(cols.index(c))
     tcol = next((c for c in ("time", "t", "seconds", "timestamp", "frame") if c in cols), None)
     pcol = next((c for c in PERSON_COLUMNS if c in cols), None)
-    data = rows[1:]
-    if not data:
+    Xs, tvs, lines, ids = [], [], [], []
+    for part in batches(rows):
+        x, t = _csv_numbers(part, cols, idx, tcol, path)
+        Xs.append(x)
+        tvs.append(t)
+        lines.extend(ln for ln, _ in part)
+        if pcol is not None:
+            ids.extend(r[cols.index(pcol)].strip() for _, r in part)
+    if not lines:
         raise RecordingError("no data rows after the header", path=path, line=hline)
-    if pcol is not None and len(data) > 1 and len({r[cols.index(pcol)].strip() for _, r in data
-                                                   if len(r) == len(cols)}) == len(data):
+    X, tv, lines = np.concatenate(Xs), np.concatenate(tvs), np.array(lines, np.int64)
+    del Xs, tvs
+    if pcol is not None and len(lines) > 1 and len(set(ids)) == len(lines):
         pcol = None                 # a value on every row: a row number (an "id" column), not a person
-    X = np.empty((len(data), len(idx)))
-    tv = np.empty(len(data))
-    for k, (ln, r) in enumerate(chunked(data)):
-        if len(r) != len(cols):
-            raise RecordingError(f"expected {len(cols)} comma-separated fields (as in the header), found {len(r)}",
-                                 path=path, line=ln)
-        for m, i in enumerate(idx):
-            cell = r[i].strip()
-            if not cell or cell.lower() == "nan":
-                X[k, m] = np.nan
-                continue
-            try:
-                X[k, m] = float(cell)
-            except ValueError:
-                raise RecordingError(f"column {cols[i]!r}: {cell!r} is not a number", path=path, line=ln) from None
-        if tcol is not None:
-            try:
-                cell = r[cols.index(tcol)].strip()
-                tv[k] = float(cell) if cell else np.nan      # FreeMoCap leaves it empty without timestamps
-            except ValueError:
-                raise RecordingError(f"column {tcol!r}: {r[cols.index(tcol)]!r} is not a number",
-                                     path=path, line=ln) from None
     time = None
     if tcol is not None and not np.isfinite(tv).any():
         tcol = None                             # a time column with no time in it: the rate decides
     if pcol is not None:
-        return (X.reshape(len(data), -1, 3), None, name, rate, _csv_people(path, data, cols, pcol, tcol, tv, X),
-                None)
+        read_check()
+        return None, None, name, rate, _csv_people(path, ids, lines, pcol, tcol, tv, X), None
     if tcol in ("time", "t", "seconds", "timestamp"):
         time = tv                               # its unit from its steps (_time_in_seconds)
     elif tcol == "frame" and rate:
         time = (tv - tv[0]) / float(rate)
-    return X.reshape(len(data), -1, 3), time, name, rate, None, np.array([ln for ln, _ in data], np.int64)
+    return X.reshape(len(X), -1, 3), time, name, rate, None, lines
 
 
-def _csv_people(path, data, cols, pcol, tcol, tv, X):
+def _text_lines(text):
+    """The lines of ``text`` with their ends (``\n``, ``\r\n`` or ``\r``), one at a time, for
+    ``csv.reader`` (as ``io.StringIO(text, newline="")`` gives them, without its copy of the text)."""
+    return (m.group() for m in re.finditer(r"[^\r\n]*(?:\r\n|\r|\n)|[^\r\n]+\Z", text))
+
+
+def _csv_numbers(part, cols, idx, tcol, path):
+    """``(X (n, len(idx)), time (n,))`` of ``part``, a chunk of a keypoint CSV's data rows
+    ``[(line, cells), ...]``: the point columns ``idx`` and the time column ``tcol`` (NaN
+    without one) as numbers, an empty cell or ``nan`` NaN.  Raises naming the line of a row with
+    the wrong number of fields, or of a cell that is not a number."""
+    for ln, r in part:
+        if len(r) != len(cols):
+            raise RecordingError(f"expected {len(cols)} comma-separated fields (as in the header), found {len(r)}",
+                                 path=path, line=ln)
+    take = list(idx) + ([cols.index(tcol)] if tcol is not None else [])
+    try:            # the chunk at once, each cell as float() reads it; an empty cell (FreeMoCap's time) NaN
+        values = np.array([[r[i] or "nan" for i in take] for _, r in part], np.float64).reshape(len(part), len(take))
+    except ValueError:                          # a blank cell (NaN too), or the cell at fault and its line
+        values = np.empty((len(part), len(take)))
+        for k, (ln, r) in enumerate(part):
+            for m, i in enumerate(take):
+                cell = r[i].strip()
+                try:
+                    values[k, m] = float(cell) if cell else np.nan
+                except ValueError:
+                    raise RecordingError(f"column {cols[i]!r}: {r[i].strip() if m < len(idx) else r[i]!r} "
+                                         "is not a number", path=path, line=ln) from None
+    return values[:, :len(idx)], (values[:, len(idx)] if tcol is not None else np.full(len(part), np.nan))
+
+
+def _csv_people(path, ids, lines, pcol, tcol, tv, X):
     """``(labels, X (P, G, K, 3), time (G,) or None, frames (G,), lines (P, G))`` of a keypoint CSV whose
-    ``pcol`` column
-    names each row's person: the people laid on the file's times (or frame numbers, from 0 at
-    the file's first), NaN where a person has no row.  Labels: numbers in numerical order, else
-    names in the order they first appear."""
-    i = cols.index(pcol)
-    ids = [r[i].strip() for _, r in data]
-    for (ln, _), v in zip(data, ids):
+    ``pcol`` column names each row's person (``ids``: each data row's, ``lines`` (N,) its line,
+    ``tv`` its time, ``X`` (N, 3K) its points): the people laid on the file's times (or frame
+    numbers, from 0 at the file's first), NaN where a person has no row.  Labels: numbers in
+    numerical order, else names in the order they first appear."""
+    for ln, v in zip(lines, ids):
         if not v:
-            raise RecordingError(f"column {pcol!r} is empty: every row needs its person", path=path, line=ln)
+            raise RecordingError(f"column {pcol!r} is empty: every row needs its person", path=path, line=int(ln))
     if tcol is None:
         raise RecordingError(f"a {pcol!r} column needs a time or frame column to put the people's rows "
-                             "together", path=path, line=data[0][0])
+                             "together", path=path, line=int(lines[0]))
     if not np.isfinite(tv).all():
         k = int(np.nonzero(~np.isfinite(tv))[0][0])
         raise RecordingError(f"column {tcol!r} is empty: with several people every row needs it",
-                             path=path, line=data[k][0])
+                             path=path, line=int(lines[k]))
     labels = list(dict.fromkeys(ids))
     try:
         labels.sort(key=float)
@@ -890,10 +907,11 @@ def _csv_people(path, data, cols, pcol, tcol, tv, X):
         repeat[first] = False
         k = int(np.argmax(repeat))
         raise RecordingError(f"person {ids[k]} has two rows at {tcol} {shown(float(tv[k]))}", path=path,
-                             line=data[k][0])
+                             line=int(lines[k]))
     X4[row, col] = X.reshape(len(X), -1, 3)
-    lines = np.zeros((P, G), np.int64)                  # each person's row's line at each time, 0: none
-    lines[row, col] = [ln for ln, _ in data]
+    at = np.zeros((P, G), np.int64)                     # each person's row's line at each time, 0: none
+    at[row, col] = lines
+    lines = at
     if tcol == "frame":
         return labels, X4, None, grid - grid[0], lines
     return labels, X4, grid, np.arange(G, dtype=np.float64), lines

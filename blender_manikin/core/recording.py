@@ -160,16 +160,22 @@ def row_chunks(n, size=None):
         yield slice(start, min(start + size, int(n)))
 
 
-def chunked(items, size=None):
-    """The items of the iterable ``items``, taken ``size`` (default :data:`CHECK_ROWS`) at a
-    time with :func:`read_check` before each chunk: how a reader walks a long iterator (a
-    ``csv.reader``) in chunks."""
+def batches(items, size=None):
+    """Lists of ``size`` (default :data:`CHECK_ROWS`) successive items of the iterable ``items``
+    (the last one shorter), :func:`read_check` called before each: how a reader walks a long
+    iterator (a ``csv.reader``) a chunk at a time."""
     items = iter(items)
     while True:
         read_check()
         part = list(itertools.islice(items, max(int(CHECK_ROWS if size is None else size), 1)))
         if not part:
             return
+        yield part
+
+
+def chunked(items, size=None):
+    """The items of the iterable ``items`` one by one, taken from it in :func:`batches`."""
+    for part in batches(items, size):
         yield from part
 
 
