@@ -52,6 +52,12 @@ class Contract:
         return bool(aug.get("mirror"))
 
     @property
+    def causal(self):
+        """Whether the model attends to past frames only (``train --causal``, a live variant): it is
+        run with one window per frame that ends at that frame (:func:`.pipeline.run_network`)."""
+        return bool(self.raw.get("causal"))
+
+    @property
     def body(self):
         """Whether the model takes :data:`features.BODY_FEATURES` (the performer's proportions)."""
         return bool(self.raw.get("body_features"))

@@ -3,7 +3,8 @@
 :func:`solve` runs, for T frames at any fps:
 
 1. resample the head and hand targets to the network's fps (contract) and
-   cut them into centred windows (stride W/2), batched through onnxruntime;
+   cut them into centred windows (stride W/2), batched through onnxruntime
+   (a causal model, ``train --causal``: one window per frame, ending at it);
 2. decode every window from its canonical frame and blend overlapping
    windows (weights rising from each window's ends to its centre,
    :func:`window_blend_weights`; 6D rotations and (cos, sin) averaged, then
@@ -249,6 +250,13 @@ def run_network(targets: TrackerTargets, body: Body, runner, progress=None, stri
     mirror: one of :data:`MIRROR_CHOICES` (default :data:`MIRROR_WINDOWS` for a model trained
     with mirrored windows, else "off"): windows also run as their left/right mirror image,
     averaged back in.
+
+    A causal model (its contract's ``causal``, ``train --causal``) is run as it is trained and
+    as a live solver would run it: one window per frame (at the model's rate), ending at that
+    frame, whose last output frame is the result (frames before the take's start repeat its first
+    frame); ``stride`` and ``overlap`` do not apply and the temporal filter is off, so each frame
+    depends only on the targets up to it (within one frame at the model's rate when the scene's
+    rate differs), at about W / overlap times the network time of a centred model.
     """
     c = runner.contract
     W = c.window
@@ -265,18 +273,27 @@ def run_network(targets: TrackerTargets, body: Body, runner, progress=None, stri
             raise ValueError(f"the pose model needs a '{d}' tracker; the recording has {list(targets.pos)}")
         pos_m[d], rot_m[d], t_in, t_out = resample_pose_targets(targets.pos[d], targets.rot[d], fps, c.fps)
     N = t_out.shape[0]
-    if not stride:
-        stride = round(W / overlap_windows(DEFAULT_OVERLAP if overlap is None else overlap))
-    stride = min(max(int(stride), 1), W)                                  # no frame between two windows
-    pad = W // 2
-    starts = np.arange(-pad, max(N - pad, 1), stride)
-    if starts[-1] + W < N:               # a stride over half a window: one more window reaches the last frame
-        starts = np.append(starts, N - pad)
+    causal = bool(getattr(c, "causal", False))
+    if causal:
+        # a causal (live) model: one window per frame, ending at the frame it solves, whose output
+        # is the window's last frame; the first frames see the take's first frame repeated before it
+        starts = np.arange(N) - (W - 1)
+        keep = slice(W - 1, W)
+        tri = np.ones(1)
+    else:
+        if not stride:
+            stride = round(W / overlap_windows(DEFAULT_OVERLAP if overlap is None else overlap))
+        stride = min(max(int(stride), 1), W)                              # no frame between two windows
+        pad = W // 2
+        starts = np.arange(-pad, max(N - pad, 1), stride)
+        if starts[-1] + W < N:           # a stride over half a window: one more window reaches the last frame
+            starts = np.append(starts, N - pad)
+        keep = slice(None)
+        tri = window_blend_weights(W)
     # Body-conditioned models were trained with the stature defined from the skeleton (head joint
     # 0.871 statures above the ankles, as make_body builds); older ones with the body's own.
     s_net = float(features.stature_from_offsets(body.offsets)) if c.body else body.stature
     body_in = features.body_features(body.offsets, s_net)[None] if c.body else None
-    tri = window_blend_weights(W)
     # a multiple of the runner's batch, so onnxruntime sees the same batches whatever the chunking
     per = max(int(windows_per_batch or NETWORK_WINDOWS_PER_BATCH), 1)
     rb = max(int(getattr(runner, "batch", 1) or 1), 1)
@@ -299,7 +316,8 @@ def run_network(targets: TrackerTargets, body: Body, runner, progress=None, stri
             y[odd] = features.mirror_outputs(y[odd], c.kind)
         else:
             y = runner.predict(x)
-        dec = features.decode_outputs(y, C, o, stature, wpos["head"], kind=c.kind)
+        frames, idx = frames[:, keep], idx[:, keep]
+        dec = features.decode_outputs(y[:, keep], C, o, stature, wpos["head"][:, keep], kind=c.kind)
         flat_idx = idx.reshape(-1)
         wts = (tri[None] * ((frames >= 0) & (frames < N))).reshape(-1)
         wsum += np.bincount(flat_idx, wts, minlength=N)
@@ -313,7 +331,8 @@ def run_network(targets: TrackerTargets, body: Body, runner, progress=None, stri
             progress(min(b0 + per, len(starts)) / len(starts))
     blended = {k: (a / wsum[:, None]).reshape((N,) + shape[:-2] + (6,) if k.endswith("_rot") else (N,) + shape)
                for k, (a, shape) in acc.items()}
-    sigma = (NETWORK_SMOOTH_S if smooth_s is None else float(smooth_s)) * c.fps
+    # the temporal filter is centred (it reads later frames): a causal model's frames are left as is
+    sigma = 0.0 if causal else (NETWORK_SMOOTH_S if smooth_s is None else float(smooth_s)) * c.fps
     if sigma > 0:      # a temporal filter on the predicted rotations and swivel angles
         blended = {k: (smooth_frames(v, sigma) if k in SMOOTHED_OUTPUTS else v) for k, v in blended.items()}
     if sigma > 0 and ANKLE_SMOOTH_S > 0 and "ankle_pos" in blended:     # smooth_s=0: no filter at all
