@@ -163,7 +163,8 @@ def _add_solve_options(s):
                         "headset: its T-pose, or a head named hmd, Main Camera, ...)")
     s.add_argument("--bvh-units", choices=("cm", "m"), default="cm", help="BVH length unit (default cm)")
     s.add_argument("--model", default="auto", metavar="auto|head_hands|pelvis|six|FILE.onnx",
-                   help="the pose network: auto (default: the shipped model for the recording's trackers, "
+                   help="trackers: the pose network (keypoints are solved without one): auto (default: the "
+                        "shipped model for the recording's trackers, "
                         "head and hands / + pelvis / + pelvis and feet, per stretch when a tracker is lost "
                         "for long), a shipped model's name, or a model you trained")
     from .core.pipeline import DEFAULT_OVERLAP, OVERLAP_CHOICES
@@ -195,7 +196,7 @@ def _add_solve_options(s):
                    help="trackers and keypoints: 'auto' (default: each device or point gets the "
                         "Savitzky-Golay filter its measured noise calls for; clean ones are left as they are) "
                         "or one window in seconds for all (0: off)")
-    s.add_argument("--ik", choices=("adaptive", "naive"), default="adaptive",
+    s.add_argument("--ik", choices=("adaptive", "naive"), default=None,
                    help="keypoints: HybrIK adaptive (default) or naive twist-and-swing IK")
     s.add_argument("--keep-sides", action="store_true",
                    help="keep the left/right labels as read (default: keypoints: a leg's or arm's points "
@@ -443,6 +444,24 @@ def expand_inputs(inputs, out=None):
     return list(first.values())
 
 
+def inapplicable_options(args, inputs):
+    """Lines saying which given options do not apply to which of ``inputs`` (paths): ``--ik`` only
+    to keypoint inputs, ``--model`` only to tracker recordings.  Printed once per run, so a batch
+    that mixes both kinds is told how many inputs solve without the option."""
+    from .core.io_keypoints import is_keypoint_input
+    kp = sum(bool(is_keypoint_input(p)) for p in inputs)
+    trackers = len(inputs) - kp
+    notes = []
+    if getattr(args, "ik", None) is not None and trackers:
+        notes.append(f"--ik {args.ik}: not used for the {trackers} tracker recording(s) of {len(inputs)} "
+                     f"input(s) (the pose network solves them; --ik chooses the IK of keypoint inputs)")
+    model = str(getattr(args, "model", None) or "auto")
+    if model.strip().lower() != "auto" and kp:
+        notes.append(f"--model {model}: not used for the {kp} keypoint input(s) of {len(inputs)} "
+                     f"(HybrIK IK solves them, without a pose network; --model is for tracker recordings)")
+    return notes
+
+
 def solve_settings(args):
     """The :class:`core.solve.SolveSettings` of the command-line options."""
     from .core import device_offsets
@@ -456,7 +475,7 @@ def solve_settings(args):
     st = SolveSettings(axes=args.axes, units=args.units, fps=float(args.fps), offsets=offsets,
                        layout=layout, rate=getattr(args, "rate", None), keypoint_layout=keypoint_layout,
                        up=getattr(args, "up", None), smoothing=getattr(args, "smoothing", "auto"),
-                       ik=getattr(args, "ik", "adaptive"), mapping=getattr(args, "mapping", None),
+                       ik=getattr(args, "ik", None) or "adaptive", mapping=getattr(args, "mapping", None),
                        model=getattr(args, "model", None), sole=getattr(args, "sole", None),
                        floor=getattr(args, "floor", 0.0), fix_sides=not getattr(args, "keep_sides", False),
                        despike=not getattr(args, "keep_spikes", False),
@@ -774,7 +793,10 @@ def main(argv=None):
     names = folder_stems(inputs, {p: [lab for q, lab, _ in jobs if q == p] for p, lab, _ in jobs if lab is not None},
                          args.out, output_tail(formats))
     jobs = [(p, names[(p, None if lab is None else str(lab))], lab, rec) for p, lab, rec in jobs]
+    notes = inapplicable_options(args, inputs)
     if args.dry_run:
+        for note in notes:
+            print(f"blender_manikin: {note}", file=sys.stderr, flush=True)
         return dry_run(jobs, args.out, formats, getattr(args, "overwrite", False))
     failed = done = 0
     path = inputs[0]
@@ -808,6 +830,8 @@ def main(argv=None):
             print(f"blender_manikin: interrupted during {path}: {done - failed} input(s) converted, "
                   f"{len(inputs) - done} not", file=sys.stderr, flush=True)
             return 128 + (interrupted[0] if interrupted else signal.SIGINT)   # 130 Ctrl-C, 143 SIGTERM
+    for note in notes:                  # once per run, beside the batch's count
+        print(f"blender_manikin: {note}", file=sys.stderr, flush=True)
     print(f"blender_manikin: {done - failed} converted, {failed} error(s) of {len(jobs)} input(s); "
           f"outputs in {args.out}", file=sys.stderr, flush=True)
     return 1 if failed else 0
@@ -925,6 +949,8 @@ def convert_main(args, fmts):
             return 2
         except KeyboardInterrupt:     # run() said how far it got; the manifest holds it
             return 128 + (interrupted[0] if interrupted else signal.SIGINT)   # 130 Ctrl-C, 143 SIGTERM
+    for note in inapplicable_options(args, inputs):       # once per run
+        print(f"blender_manikin: {note}", file=sys.stderr, flush=True)
     return code
 
 

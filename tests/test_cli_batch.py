@@ -175,3 +175,16 @@ def test_a_broken_link_in_a_solved_folder_is_named(tmp_path):
     os.symlink("loop.csv", tmp_path / "loop.csv")
     os.symlink(tmp_path / "moved.txt", tmp_path / "notes.txt")          # no recording's extension: left out
     assert cli.expand_inputs([str(tmp_path)]) == [str(tmp_path / n) for n in ("gone.csv", "loop.csv", "walk.csv")]
+
+
+def test_options_that_do_not_apply_to_an_input_are_said_once(tmp_path, capsys):
+    # --ik on a tracker recording and --model on a keypoint input did nothing and said nothing
+    keypoints = os.path.join(ROOT, "examples", "example_keypoints")
+    code = cli.main(["solve", EXAMPLE, keypoints, "--out", str(tmp_path / "o"), "--format", "json",
+                     "--ik", "naive", "--model", "head_hands"])
+    assert code == 0
+    err = capsys.readouterr().err
+    assert err.count("--ik naive: not used for the 1 tracker recording(s) of 2 input(s)") == 1
+    assert err.count("--model head_hands: not used for the 1 keypoint input(s) of 2") == 1
+    code = cli.main(["solve", EXAMPLE, keypoints, "--out", str(tmp_path / "o"), "--format", "json", "--dry-run"])
+    assert code == 0 and "not used for" not in capsys.readouterr().err      # nothing given: nothing said
