@@ -202,3 +202,22 @@ def test_a_tall_seated_performer_solved_standing_is_told_to_set_seated():
     assert "check whether the performer sits" not in seated.summary()
     typed = cs.solve_recording(rec, cs.SolveSettings(fps=30.0, height=2.0))
     assert "check whether the performer sits" not in typed.summary()
+
+
+def test_a_six_tracker_take_without_a_t_pose_is_not_told_the_performer_may_sit():
+    """Pelvis and foot trackers, no T-pose (the take cut after it): the pelvis tracker's offset is
+    not measured and the arms are lengthened to reach the hands (1.89 m for a 1.72 m performer).
+    The legs are tracked, so the summary does not say the performer may sit; it names the
+    unmeasured pelvis offset."""
+    from blender_manikin.core.recording import Recording, TrackerStream
+    from fixtures_six_trackers import body_with_legs, random_mounts, six_tracker_recording
+    base = six_tracker_recording(body_with_legs(1.72, 1.0), random_mounts(5), duration=8.0, seed=5,
+                                 heading=20.0, shift=(0.3, -0.2))
+    streams = {k: TrackerStream(k, st.time[st.time >= 2.0], st.pos[st.time >= 2.0], st.quat[st.time >= 2.0])
+               for k, st in base.streams.items()}
+    out = cs.solve_recording(Recording(streams=streams, source=base.source, metadata=dict(base.metadata)),
+                             cs.SolveSettings(fps=30.0))
+    said = out.summary()
+    assert "check the arms: the hands reach" in said, said
+    assert "performer sits" not in said, said
+    assert "the pelvis tracker's offset was not measured (no T-pose)" in said, said

@@ -173,6 +173,7 @@ class SolveOutcome:
         for note in self.info:
             if note.startswith(("offsets ", "trimmed to", "calibrated", "calibration: ", "no T-pose found",
                                 "arm span", "estimated stature", "stature ", "check whether the performer sits",
+                                "check the arms: ",
                                 "head stands", "floor at",
                                 "left/right labels swapped back", "left and right controllers swapped back",
                                 "left and right foot trackers swapped back", "pelvis and left foot trackers",
@@ -718,6 +719,35 @@ def default_solver(targets, body, progress=None, model=None, overlap=None):
 ARM_SPAN_SITS_RATIO = 1.08
 
 
+def long_reach_note(outcome: SolveOutcome, span, stature):
+    """The summary's note when the arms were lengthened to ``span`` metres, over
+    :data:`ARM_SPAN_SITS_RATIO` times the ``stature`` (metres) the standing head height gave,
+    with advice that fits the take's trackers.  Head and hands only: the head is lower than a
+    standing one's, so the performer may sit.  With a pelvis tracker whose offset was not
+    measured (no T-pose, not typed) that offset is the likelier cause (a generated 1.72 m
+    six-tracker take without its T-pose: 1.89 m with the pelvis tracker, arms kept with head and
+    hands only).  With pelvis and both foot trackers the legs are tracked, so sitting is not
+    offered."""
+    from . import calibration as cal
+    have = outcome.targets.pos if outcome.targets is not None else {}
+    legs_tracked = all(d in have for d in ("pelvis", "left_foot", "right_foot"))
+    pelvis_unmeasured = "pelvis" in have and "pelvis" not in cal.typed_tracker_offsets(outcome.offsets)
+    reach = (f"the hands reach {span:.2f} m apart, {span / stature:.2f} times the {stature:.2f} m the standing "
+             f"head height gives (an arm span is about the stature)")
+    if not pelvis_unmeasured and not legs_tracked:
+        # arms this long for the body the head sized: the head is lower than a standing one's
+        return (f"check whether the performer sits: {reach}; set the Posture to Seated (--posture seated), "
+                "or type the height")
+    advice = []
+    if pelvis_unmeasured:
+        advice.append("the pelvis tracker's offset was not measured (no T-pose), which can put the shoulders "
+                      "out of the hands' reach: type its offset or calibrate on a T-pose (--calibration-take)")
+    if not legs_tracked:
+        advice.append("or the performer sits: set the Posture to Seated (--posture seated)")
+    advice.append("or type the height and arm span")
+    return f"check the arms: {reach}; " + ", ".join(advice)
+
+
 def adapt_arms(settings: SolveSettings, outcome: SolveOutcome, result, solver, progress=None):
     """Lengthen arms built from proportions when the hands cannot reach their trackers.
 
@@ -747,11 +777,7 @@ def adapt_arms(settings: SolveSettings, outcome: SolveOutcome, result, solver, p
     stature = float(body.stature)
     if (not settings.height and str(settings.posture or "standing").lower() == "standing"
             and new_span > ARM_SPAN_SITS_RATIO * stature and stature >= cal.PLAUSIBLE_STATURE[0]):
-        # arms this long for the body the head sized: the head is lower than a standing one's
-        outcome.info.append(f"check whether the performer sits: the hands reach {new_span:.2f} m apart, "
-                            f"{new_span / stature:.2f} times the {stature:.2f} m the standing head height gives "
-                            "(an arm span is about the stature); set the Posture to Seated (--posture seated), "
-                            "or type the height")
+        outcome.info.append(long_reach_note(outcome, new_span, stature))
     outcome.body = body
     return again
 
