@@ -27,7 +27,9 @@ replay): the stature from the clip's standing head height (:func:`.solve.body_fr
 proportional arms (the add-on then lengthens arms that cannot reach; the benchmark does not).
 
 Methods: (a) the shipped model, network + analytic limbs (``core.pipeline.solve``); (p) the
-previously shipped model, same pipeline; (b) the network-only baseline: the same backbone trained
+previously shipped model, same pipeline (a model of another backbone given as ``--model`` or
+``--previous-model``, a Dual Attention Poser, is named in its row: "(p) MANIKIN, Dual Attention
+Poser (manikin_dap.onnx)"); (b) the network-only baseline: the same backbone trained
 to predict all 22 rotations, posed by FK (AvatarPoser-style, ``core.baselines.network_only``);
 (c) classic IK: body under the head, straight spine, two-bone arms with a fixed pole, straight
 planted legs (``core.baselines.classic_ik``).
@@ -96,6 +98,7 @@ import numpy as np  # noqa: E402
 from blender_manikin.core import baselines, features, metrics, pipeline, rotations as rot  # noqa: E402
 from blender_manikin.core import skeleton as sk  # noqa: E402
 from blender_manikin.core.devices import DEVICE_JOINT, REQUIRED_DEVICES  # noqa: E402
+from blender_manikin.core.model_choice import BACKBONE_LABELS  # noqa: E402
 from blender_manikin.core.model_runner import ModelRunner, MODELS_DIR  # noqa: E402
 from blender_manikin.core.pose_result import TrackerTargets  # noqa: E402
 from blender_manikin.core.smoothing import parse_smoothing, smooth_targets  # noqa: E402
@@ -122,6 +125,18 @@ TRACKER_SETS = {
     "6": ("6 trackers (+ pelvis, feet)", REQUIRED_DEVICES + ("pelvis", "left_foot", "right_foot")),
 }
 SHIPPED = "(a) MANIKIN, shipped model"
+PREVIOUS_ROW = "(p) MANIKIN, previous model"
+
+
+def row_label(key, runner):
+    """The tables' name of the row ``key`` (:data:`SHIPPED` or :data:`PREVIOUS_ROW`) solved with
+    ``runner``: ``key`` for the Transformer (posenet); for another backbone (the contract's
+    ``architecture.arch``) its name and file in place of "shipped/previous model", as
+    ``"(p) MANIKIN, Dual Attention Poser (manikin_dap.onnx)"``."""
+    arch = (runner.contract.raw.get("architecture") or {}).get("arch")
+    if arch not in BACKBONE_LABELS:
+        return key
+    return f"{key.split(',')[0]}, {BACKBONE_LABELS[arch]} ({os.path.basename(runner.path)})"
 #: ``--body`` modes and their table titles
 BODY_TITLES = {"calibrated": "calibrated body (T-pose: stature and arm span)", "gt": "true skeleton",
                "tpose": "T-pose calibration (the add-on's, from the performer's T-pose)",
@@ -315,7 +330,7 @@ def clip_metrics(res, gt_local, gt_pos, fps, contacts, targets=None):
     return ev
 
 
-PER_CLASS_METHODS = (SHIPPED, "(p) MANIKIN, previous model")
+PER_CLASS_METHODS = (SHIPPED, PREVIOUS_ROW)
 PER_CLASS_COLUMNS = ("MPJPE", "L-PE")
 
 
@@ -460,7 +475,7 @@ def print_class_table(r):
     the previous model, classes sorted by the shipped model's MPJPE, worst first."""
     cls = r["by_class"]
     methods = [m for m in PER_CLASS_METHODS if any((m, "MPJPE") in c for c in cls.values())]
-    short = {SHIPPED: "(a)", "(p) MANIKIN, previous model": "(p)"}
+    short = {SHIPPED: "(a)", PREVIOUS_ROW: "(p)"}
     cols = ["clips", "frames"] + [f"{short[m]} {k} [cm]" for m in methods for k in PER_CLASS_COLUMNS]
     rows = []
     for name, c in cls.items():
@@ -575,10 +590,12 @@ def main(argv=None):
         dataset_files(name, args.max_clips)
 
     runner = ModelRunner(args.model)
-    methods = {"(a) MANIKIN, shipped model": lambda tg, b: pipeline.solve(tg, b, runner, overlap=args.overlap)}
+    methods = {SHIPPED: lambda tg, b: pipeline.solve(tg, b, runner, overlap=args.overlap)}
+    labels = {SHIPPED: row_label(SHIPPED, runner)}          # a DAP model's rows name its backbone
     if os.path.isfile(args.previous_model) and os.path.abspath(args.previous_model) != os.path.abspath(args.model):
         prev = ModelRunner(args.previous_model)
-        methods["(p) MANIKIN, previous model"] = lambda tg, b: pipeline.solve(tg, b, prev, overlap=args.overlap)
+        methods[PREVIOUS_ROW] = lambda tg, b: pipeline.solve(tg, b, prev, overlap=args.overlap)
+        labels[PREVIOUS_ROW] = row_label(PREVIOUS_ROW, prev)
     if os.path.isfile(args.fk_model):
         fk_runner = ModelRunner(args.fk_model)
         methods["(b) network only (FK, AvatarPoser-style)"] = lambda tg, b: baselines.network_only(tg, b, fk_runner)
@@ -609,7 +626,8 @@ def main(argv=None):
                        f"timestamp jitter {c['time_ms']:g} ms, resampled")
         print(f"\n{r['name']}, {what}: {r['clips']} clips, {r['frames']} frames at 30 fps "
               f"({os.path.basename(r['source'])}){caught}")
-        rows = [(m, {(f"{k} [{UNITS[k]}]" if UNITS.get(k) else k): v for k, v in row.items() if k in UNITS})
+        rows = [(labels.get(m, m), {(f"{k} [{UNITS[k]}]" if UNITS.get(k) else k): v for k, v in row.items()
+                                    if k in UNITS})
                 for m, row in r["rows"] if m in main_methods]
         cols = [f"{k} [{UNITS[k]}]" if UNITS[k] else k for k in COLUMNS]
         f2 = {(f"{k} [{UNITS[k]}]" if UNITS.get(k) else k): v for k, v in fmt.items()}
