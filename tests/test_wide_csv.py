@@ -637,3 +637,142 @@ def test_unreal_tostring_cells(tmp_path, rotation):
         assert np.abs(s.pos - pos[dev]).max() < 2e-5, dev              # ToString's 3 decimals of a centimetre
         err = np.degrees(rot.geodesic_angle(rot.quat_to_matrix(s.quat), rot.quat_to_matrix(quat[dev])))
         assert err.max() < 0.01, (dev, err.max())
+
+
+def _write_columns(path, cols, data, fmt="{:.7f}"):
+    with open(path, "w") as f:
+        f.write(",".join(cols) + "\n")
+        for row in np.stack(data, -1):
+            f.write(",".join(fmt.format(v) for v in row) + "\n")
+
+
+def test_pitch_yaw_roll_columns_of_a_y_up_file_are_not_taken_for_unreal(tmp_path):
+    """Pitch / yaw / roll columns made a file Unreal's (Z up) without looking at its positions:
+    a Unity logger's eulerAngles named so (Y up) was read lying down, the head at -0.03 m (before
+    those columns were read, it was read upright without rotations).  Now refused, naming the
+    columns, the up axis the head stands along and the way out; so is a rotator read in axes
+    given as another convention's."""
+    t, pos, quat = motion()
+    cols, data = ["time"], [t]
+    for dev, name in (("head", "Head"), ("left_hand", "LeftHand"), ("right_hand", "RightHand")):
+        p, q = from_blender(pos[dev], quat[dev], "unity")
+        cols += [f"{name}_pos_{a}" for a in "xyz"] + [f"{name}_rot_{a}" for a in ("pitch", "yaw", "roll")]
+        data += list(p.T) + list(np.degrees(rot.matrix_to_fixed_axes_euler(rot.quat_to_matrix(q), "ZXY")).T)
+    path = tmp_path / "unity_pyr.csv"
+    _write_columns(path, cols, data)
+    with pytest.raises(RecordingError, match=r"unity_pyr.csv, line 1: .*Head_rot_pitch.*\(Y up, .*layout file"):
+        formats.load_recording(path)
+    unreal = tmp_path / "unreal.csv"
+    write_unreal(unreal, "rotator")
+    with pytest.raises(RecordingError, match=r"unreal.csv, line 1: .*Camera_Rotation_Pitch.*axes blender"):
+        formats.load_recording(unreal, axes="blender")
+
+
+def test_a_rotator_without_its_roll_is_named(tmp_path):
+    """A rotator missing a column was refused as "rotation columns ['y', 'z']: a quaternion needs
+    w, x, y, z, Euler angles x, y, z", naming neither its pitch/yaw columns nor the roll."""
+    path = tmp_path / "unreal.csv"
+    write_unreal(path, "rotator")
+    lines = path.read_text().splitlines()
+    k = lines[0].split(",").index("Camera_Rotation_Roll")
+    half = tmp_path / "half.csv"
+    half.write_text("\n".join(",".join(c for i, c in enumerate(ln.split(",")) if i != k) for ln in lines) + "\n")
+    with pytest.raises(RecordingError, match=r"half.csv, line 1: head: rotator columns pitch, yaw without roll"):
+        formats.load_recording(half)
+
+
+def test_an_all_zero_pose_matrix_is_a_lost_sample(tmp_path):
+    """OpenVR leaves a pose it has not got as zeros, and loggers write them: such a 3x4 matrix
+    (no rotation at all) was read as a valid sample, the identity rotation at the origin."""
+    t, pos, quat = motion()
+    cols, data = ["time"], [t]
+    for dev, name in (("head", "hmd"), ("left_hand", "controller_left"), ("right_hand", "controller_right")):
+        p, q = from_blender(pos[dev], quat[dev], "openxr")
+        R = rot.quat_to_matrix(q)
+        for r in range(3):
+            for c in range(4):
+                cols.append(f"{name}_m{r}{c}")
+                data.append(R[:, r, c] if c < 3 else p[:, r])
+    data = [np.where(np.arange(T) == 5, 0.0, d) if k else d for k, d in enumerate(data)]
+    path = tmp_path / "openvr_zeros.csv"
+    _write_columns(path, cols, data)
+    rec = formats.load_recording(path)
+    for dev in ("head", "left_hand", "right_hand"):
+        s = rec.streams[dev]
+        assert not s.valid[5] and s.valid[np.arange(T) != 5].all(), dev
+
+
+@pytest.mark.parametrize("style", ["unreal", "unity"])
+def test_an_empty_tostring_cell_is_a_lost_sample(tmp_path, style):
+    """An empty cell is a lost sample, but an empty ToString() field (a controller not tracked
+    yet, or lost) was not spread: on the first row the file was refused as "left_hand: position
+    columns [] (need x, y, z)", further on as "17 fields, the header has 19"."""
+    t, pos, quat = motion()
+    names = (("head", "HMD"), ("left_hand", "LeftController"), ("right_hand", "RightController"))
+    cells = [[f"{v:.4f}" for v in t]]
+    for dev, _ in names:
+        if style == "unreal":
+            R = M_UNREAL @ rot.quat_to_matrix(quat[dev]) @ M_UNREAL.T
+            cells.append([f"X={a:.3f} Y={b:.3f} Z={c:.3f}" for a, b, c in pos[dev] @ M_UNREAL.T * 100.0])
+            cells.append([f"P={a:.6f} Y={b:.6f} R={c:.6f}" for a, b, c in zip(*unreal_rotator(R))])
+        else:
+            p, q = from_blender(pos[dev], quat[dev], "unity")
+            cells.append(["(" + ", ".join(f"{x:.5f}" for x in v) + ")" for v in p])
+            cells.append(["(" + ", ".join(f"{x:.5f}" for x in v) + ")" for v in q[:, [1, 2, 3, 0]]])
+    cells[3][0] = cells[4][0] = cells[3][7] = cells[4][7] = ""   # the left controller lost: first row, and later
+    path = tmp_path / "tostring.csv"
+    with open(path, "w") as f:
+        f.write("Time," + ",".join(f"{n}Location,{n}Rotation" for _, n in names) + "\n")
+        for row in zip(*cells):
+            f.write(",".join(row) + "\n")
+    rec = formats.load_recording(path, axes=None if style == "unreal" else "unity")
+    s = rec.streams["left_hand"]
+    assert not s.valid[0] and not s.valid[7] and s.valid[1:7].all() and s.valid[8:].all()
+    assert np.abs(s.pos[8:] - pos["left_hand"][8:]).max() < 2e-5
+    assert rec.streams["head"].valid.all()
+
+
+@pytest.mark.parametrize("axes", ["blender", "unreal", "unity", "openxr"])
+def test_a_head_without_rotation_columns_does_not_decide_the_axes_by_where_it_faces(tmp_path, axes):
+    """A headset logged by position only, its controllers with rotations: the axes were chosen by
+    the head's orientation, taken as the identity, so the way the performer happened to face
+    decided (turned a quarter or half turn, a Blender file was read as Unreal's, a Unity file as
+    OpenXR's); the positions decide now, as for a file with no rotations at all."""
+    t, pos, quat = motion()
+    for turn in (90, 180):
+        Rz = rot.axis_angle_rotation(np.array([0, 0, 1.0]), np.full(T, np.radians(turn)))
+        cols, data = ["time"], [t]
+        for dev in ("head", "left_hand", "right_hand"):
+            p, q = from_blender(np.einsum("tij,tj->ti", Rz, pos[dev]),
+                                rot.matrix_to_quat(Rz @ rot.quat_to_matrix(quat[dev])), axes)
+            cols += [f"{dev}_pos_{a}" for a in "xyz"]
+            data += list(p.T)
+            if dev != "head":
+                cols += [f"{dev}_rot_{a}" for a in "wxyz"]
+                data += list(q.T)
+        path = tmp_path / f"turned_{turn}.csv"
+        _write_columns(path, cols, data, "{:.6f}")
+        assert formats.load_recording(path).metadata["axes"] == axes, turn
+
+
+def test_a_pose_matrix_beside_euler_angles_is_named(tmp_path):
+    """A headset's pose matrix beside controllers' Euler angles was refused as "some devices have
+    quaternion and others Euler-angle columns: left_hand Euler, right_hand Euler", naming no device
+    with a quaternion: the matrix is named now."""
+    t, pos, quat = motion()
+    cols, data = ["time"], [t]
+    for dev, name in (("head", "hmd"), ("left_hand", "controller_left"), ("right_hand", "controller_right")):
+        p, q = from_blender(pos[dev], quat[dev], "openxr")
+        R = rot.quat_to_matrix(q)
+        if dev == "head":
+            for r in range(3):
+                for c in range(4):
+                    cols.append(f"{name}_m{r}{c}")
+                    data.append(R[:, r, c] if c < 3 else p[:, r])
+        else:
+            cols += [f"{name}_pos_{a}" for a in "xyz"] + [f"{name}_euler_{a}" for a in "xyz"]
+            data += list(p.T) + list(rot.matrix_to_fixed_axes_euler(R, "XYZ").T)
+    path = tmp_path / "mixed.csv"
+    _write_columns(path, cols, data)
+    with pytest.raises(RecordingError, match=r"mixed.csv, line 1: .*head pose matrix, left_hand Euler"):
+        formats.load_recording(path)

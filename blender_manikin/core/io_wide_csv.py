@@ -21,7 +21,8 @@ Detected:
   degrees when any exceeds 2π + 0.5, else radians; rotations about the fixed axes applied in
   :data:`EULER_ORDERS` order (Unity's Z, X, Y for a Unity file; an Unreal file's are its
   rotator's roll, pitch and yaw, :data:`ROTATOR`), unless a layout file's ``"euler"`` states the
-  order and unit; ``<dev>_rot_{pitch,yaw,roll}`` columns are an Unreal rotator (Unreal's axes);
+  order and unit; ``<dev>_rot_{pitch,yaw,roll}`` columns are an Unreal rotator (Unreal's axes; a
+  file whose head stands along Y, or given other axes, is refused);
 * field separators (:func:`sniff_delimiter`: commas, semicolons or tabs) and decimal commas (a
   file not separated by commas with commas in its numbers);
 * time: a ``time``/``t``/``seconds``/``timestamp`` column, in seconds, or in milliseconds, µs or
@@ -102,35 +103,62 @@ _UNREAL_NAMES = {"XYZ": ("x", "y", "z"), "XYZW": ("x", "y", "z", "w"), "PYR": ("
 
 
 def tuple_header(header, first_row, delim):
-    """``header`` with each column whose cell in ``first_row`` (the first data line, text) is a
-    parenthesised tuple spread over one column per component (``head_position`` ->
-    ``head_position_x``, ``_y``, ``_z``; four: ``_x`` .. ``_w``, Unity's quaternion order), or an
-    Unreal ToString() (``X=.. Y=.. Z=..`` -> ``_x``, ``_y``, ``_z``; ``P=.. Y=.. R=..`` ->
-    ``_pitch``, ``_yaw``, ``_roll``), or ``header`` itself when the row has none."""
-    if "(" not in first_row and "=" not in first_row:
-        return header
-    fields = re.split(re.escape(delim) + r"(?![^()]*\))", first_row)
-    if len(fields) != len(header):
-        return header
-    out = []
-    for name, cell in zip(header, fields):
-        cell = cell.strip().strip('"')
+    """``header`` with each column whose cell in ``first_row`` (the first data line, text; or a
+    list of lines, each column's first non-empty cell deciding) is a parenthesised tuple spread
+    over one column per component (``head_position`` -> ``head_position_x``, ``_y``, ``_z``; four:
+    ``_x`` .. ``_w``, Unity's quaternion order), or an Unreal ToString() (``X=.. Y=.. Z=..`` ->
+    ``_x``, ``_y``, ``_z``; ``P=.. Y=.. R=..`` -> ``_pitch``, ``_yaw``, ``_roll``), or ``header``
+    itself when the rows have none."""
+    return _spread_header(header, first_row, delim)[0]
+
+
+def _fields(line, delim):
+    """A data line's fields, a parenthesised tuple's separators kept inside it."""
+    return re.split(re.escape(delim) + r"(?![^()]*\))", line)
+
+
+def _spread_header(header, rows, delim):
+    """``(header, widths)``: :func:`tuple_header`'s header, and ``{column: components}`` of the
+    spread columns (indices into ``header`` as given)."""
+    rows = [rows] if isinstance(rows, str) else list(rows)
+    cells = [None] * len(header)
+    for row in rows:
+        if "(" not in row and "=" not in row:
+            continue
+        fields = _fields(row, delim)
+        if len(fields) != len(header):
+            continue
+        for i, cell in enumerate(fields):
+            cell = cell.strip().strip('"')
+            if cells[i] is None and cell:
+                cells[i] = cell
+        if all(c is not None for c in cells):
+            break
+    out, widths = [], {}
+    for i, (name, cell) in enumerate(zip(header, cells)):
+        cell = cell or ""
         m = _TUPLE.fullmatch(cell)
         if m:
             n = len(re.split(r"\s*[,;]\s*", m.group(1).strip()))
-            out += [f"{name}_{a}" for a in ("xyz" if n == 3 else "xyzw" if n == 4 else range(n))]
-            continue
-        letters = "".join(m.group(1) for m in _UNREAL.finditer(cell)) if _UNREAL_CELL.fullmatch(cell) else ""
-        if letters in _UNREAL_NAMES:
-            out += [f"{name}_{a}" for a in _UNREAL_NAMES[letters]]
-            continue
-        out.append(name)
-    return out
+            names = [f"{name}_{a}" for a in ("xyz" if n == 3 else "xyzw" if n == 4 else range(n))]
+        else:
+            letters = "".join(m.group(1) for m in _UNREAL.finditer(cell)) if _UNREAL_CELL.fullmatch(cell) else ""
+            names = [f"{name}_{a}" for a in _UNREAL_NAMES[letters]] if letters in _UNREAL_NAMES else [name]
+        if len(names) > 1 or names[0] != name:
+            widths[i] = len(names)
+        out += names
+    return out, widths
 
 
-def _untuple(line, delim):
+def _untuple(line, delim, widths=None, columns=None):
     """``line`` with each parenthesised tuple's or Unreal ToString()'s components as fields of
-    their own."""
+    their own; with ``widths`` (:func:`_spread_header`'s, of a header of ``columns`` columns), an
+    empty field of a spread column (a lost sample) as that many empty fields."""
+    if widths and (delim * 2 in line or line.startswith(delim) or line.endswith(delim) or '""' in line):
+        fields = _fields(line, delim)
+        if len(fields) == columns and any(not fields[i].strip().strip('"') for i in widths):
+            line = delim.join(delim.join([""] * widths[i]) if i in widths and not f.strip().strip('"') else f
+                              for i, f in enumerate(fields))
     if "(" in line:
         line = _TUPLE.sub(lambda m: delim.join(re.split(r"\s*[,;]\s*", m.group(1).strip())), line)
     if "=" in line:
@@ -213,7 +241,8 @@ _COMPONENT = re.compile(r"^(?P<dev>.+?)_(?:(?P<word>[a-z]+)_)?(?P<axis>[xyzw]|pi
 #: column), as OpenVR's ``HmdMatrix34_t m[3][4]`` (row-major: rotation, then the position column)
 _MATRIX = re.compile(r"^(?P<dev>.+?)_(?:(?P<word>[a-z]+)_)?m_?(?P<r>[0-3])_?(?P<c>[0-3])$")
 #: an Unreal rotator's angles as the x, y, z of its ``FRotator::Euler()`` (roll, pitch, yaw)
-_ROTATOR_AXES = {"roll": "x", "pitch": "y", "yaw": "z"}
+_ROTATOR_AXES = {"pitch": "y", "yaw": "z", "roll": "x"}
+_ROTATOR_WORDS = {a: w for w, a in _ROTATOR_AXES.items()}
 
 
 #: an acronym run into the next word (``HMDLocation``, ``XRHead``): split there before
@@ -311,7 +340,7 @@ def looks_wide(head_text):
     delim = sniff_delimiter(lines[0])
     header = [c.strip().strip('"') for c in lines[0].split(delim)]
     if len(lines) > 1:
-        header = tuple_header(header, lines[1], delim)
+        header = tuple_header(header, lines[1:200], delim)
     try:
         groups, _, _ = parse_columns(header)
     except RecordingError:
@@ -458,17 +487,24 @@ def _layout_groups(layout, header, path, hline):
 
 def _matrix_quats(m):
     """``(T, 4)`` wxyz quaternions of rotation matrices given row by row, ``(T, 9)`` (NaN where a
-    sample is lost), made orthonormal first (logged matrices are rounded)."""
+    sample is lost: a NaN element, a mirror, or a singular matrix such as all zeros), made
+    orthonormal first (logged matrices are rounded)."""
     m = np.asarray(m, np.float64).reshape(-1, 3, 3)
     ok = np.isfinite(m).all(axis=(1, 2))
     out = np.full((len(m), 4), np.nan)
     if ok.any():
-        u, _, vt = np.linalg.svd(m[ok])
+        u, s, vt = np.linalg.svd(m[ok])
         R = u @ vt
-        bad = np.linalg.det(R) < 0                       # not a rotation (a mirror): lost
+        # not a rotation: a mirror, or singular (OpenVR's zeros for a pose it has not got): lost
+        bad = (np.linalg.det(R) < 0) | ~(s[:, -1] > 1e-6 * s[:, 0])
         out[ok] = rot.matrix_to_quat(R)
         out[np.flatnonzero(ok)[bad]] = np.nan
     return out
+
+
+def _rotation_kind(group):
+    """How a device's orientation is given, in words (an error's)."""
+    return "pose matrix" if group.get("mat") else "Euler" if len(group["rot"]) == 3 else "quaternion"
 
 
 def read_wide_csv(path, axes=None, units=None, layout=None, rate=None) -> Recording:
@@ -491,7 +527,8 @@ def read_wide_csv(path, axes=None, units=None, layout=None, rate=None) -> Record
     delim = (layout or {}).get("delimiter") or sniff_delimiter(header_text)
     header = [c.strip().strip('"') for c in header_text.split(delim)]
     body = rows[1:]
-    spread = tuple_header(header, body[0][1], delim) if body else header
+    spread, widths = _spread_header(header, [ln for _, ln in body[:200]], delim)
+    columns = len(header)
     tuples, header = spread != header, spread
     decimal = (layout or {}).get("decimal") or \
         ("," if delim != "," and any("," in ln for _, ln in body[:200]) else ".")
@@ -502,7 +539,8 @@ def read_wide_csv(path, axes=None, units=None, layout=None, rate=None) -> Record
         parts = []
         for part in row_chunks(len(body)):        # in chunks: a cancel is checked between them
             cells = [(ln.replace(",", ".") if decimal == "," else ln)
-                     for ln in ((_untuple(ln, delim) if tuples else ln) for _, ln in body[part])]   # 1,62 is 1.62
+                     for ln in ((_untuple(ln, delim, widths, columns) if tuples else ln)
+                                for _, ln in body[part])]                                  # 1,62 is 1.62
             cells = [ln.split(delim) for ln in cells]
             counts = np.fromiter((len(c) for c in cells), dtype=np.int64, count=len(cells))
             wrong = np.nonzero(counts != len(header))[0]
@@ -516,7 +554,7 @@ def read_wide_csv(path, axes=None, units=None, layout=None, rate=None) -> Record
     note = "" if delim == "," else (f"fields separated by {_DELIMITER_NAMES[delim]}"
                                     + (", decimal commas" if decimal == "," else ""))
     if tuples:
-        what = "Unreal's X=.. Y=.. Z=.. / P=.. Y=.. R=.. strings" if "=" in body[0][1] else \
+        what = "Unreal's X=.. Y=.. Z=.. / P=.. Y=.. R=.. strings" if any("=" in ln for _, ln in body[:200]) else \
             "vectors and quaternions as (x, y, z[, w]) tuples"
         note = "; ".join(n for n in (note, what) if n)
     extra = {"delimiter": delim, "decimal": decimal} if delim != "," or decimal != "." else {}
@@ -552,14 +590,22 @@ def read_wide_table(path, header, hline, table, axes=None, units=None, layout=No
     for dev, g in groups.items():
         if len(g["pos"]) != 3:
             raise RecordingError(f"{dev}: position columns {sorted(g['pos'])} (need x, y, z)", path=path, line=hline)
+        if g.get("rotator") and set(g["rot"]) != set("xyz"):      # named by their words, not as x, y, z
+            order = [a for a in "yzxw" if a in g["rot"]]
+            words = ", ".join(_ROTATOR_WORDS.get(a, a) for a in order)
+            lacking = ", ".join(w for w, a in _ROTATOR_AXES.items() if a not in g["rot"]) or "the others"
+            raise RecordingError(f"{dev}: rotator columns {words} without {lacking} "
+                                 f"({', '.join(header[g['rot'][a]] for a in order)}; an Unreal rotator needs "
+                                 "pitch, yaw and roll)", path=path, line=hline)
         if g["rot"] and len(g["rot"]) != 4 and set(g["rot"]) != set("xyz"):
             raise RecordingError(f"{dev}: rotation columns {sorted(g['rot'])}: a quaternion needs w, x, y, z, "
                                  "Euler angles x, y, z", path=path, line=hline)
     kinds = {"euler" if len(g["rot"]) == 3 else "quat" for g in groups.values() if g["rot"] or g.get("mat")}
     if len(kinds) > 1:
-        raise RecordingError("some devices have quaternion and others Euler-angle columns: "
-                             + ", ".join(f"{d} {'Euler' if len(g['rot']) == 3 else 'quaternion'}"
-                                         for d, g in groups.items() if g["rot"]), path=path, line=hline)
+        raise RecordingError("some devices have quaternion or pose-matrix and others Euler-angle columns: "
+                             + ", ".join(f"{d} {_rotation_kind(g)}" for d, g in groups.items()
+                                         if g["rot"] or g.get("mat")),
+                             path=path, line=hline)
     euler = kinds == {"euler"}
     missing = [d for d in ("head", "left_hand", "right_hand") if d not in groups]
     if missing:
@@ -638,15 +684,29 @@ def read_wide_table(path, header, hline, table, axes=None, units=None, layout=No
             return str(eu.get("order") or EULER_ORDERS.get(ax, "XYZ")).upper()
     unrotated = [d for d, g in groups.items() if not g["rot"] and not g.get("mat")]
     rotators = [d for d, g in groups.items() if g.get("rotator")]
-    if axes is None and rotators:      # pitch, yaw, roll columns: an Unreal rotator, in Unreal's axes
-        axes, up = "unreal", 2
+    if rotators:                       # pitch, yaw, roll columns: an Unreal rotator, in Unreal's axes only
+        named = ", ".join(header[groups[rotators[0]]["rot"][a]] for a in "yzx")
+        if axes is not None and canonical_axes(axes) != "unreal":
+            raise RecordingError(f"{named}: pitch, yaw and roll columns are an Unreal rotator, read in Unreal's "
+                                 f"axes, not in the axes {canonical_axes(axes)} ({given['axes']}): leave the axes to "
+                                 "the file (or give unreal), or name them as Euler angles in a layout file "
+                                 '("euler" columns x, y, z and the "euler" order)', path=path, line=hline)
+        up, up_how = up_axis(metres, quats_for(ROTATOR)) if axes is None else (2, None)
+        if up != 2:
+            raise RecordingError(f"{named}: pitch, yaw and roll columns are read as an Unreal rotator, in Unreal's "
+                                 f"axes (Z up), but the head stands along Y (Y up, from {up_how}): not an Unreal "
+                                 'file; name them as Euler angles in a layout file ("euler" columns x, y, z and '
+                                 'the "euler" order), or leave them out', path=path, line=hline)
+    if axes is None and rotators:
+        axes = "unreal"
         axes_note = f"axes unreal (left-handed), from the rotator columns of {', '.join(rotators)} (pitch, yaw, roll)"
     elif axes is None:
         read_check()                                      # the detection takes a second on a long take
         up, up_how = up_axis(metres, quats_for(order_for("openxr")) if euler else quat)
         cands = ("blender", "unreal") if up == 2 else ("unity", "openxr")
-        axes, why = choose_axes(t, metres, (lambda c: quats_for(order_for(c))) if euler else
-                                None if unrotated == list(groups) else (lambda c: quat), cands)
+        # the head's orientation gives each reading's facing; without it, the positions do
+        axes, why = choose_axes(t, metres, None if "head" in unrotated else
+                                (lambda c: quats_for(order_for(c))) if euler else (lambda c: quat), cands)
         up_note = "" if up_how == "the head's height" else f", {'Z' if up == 2 else 'Y'} up from {up_how}"
         axes_note = f"axes {axes} ({'left-handed' if axes in LEFT_HANDED else 'right-handed'}){up_note}, {why}"
     else:
