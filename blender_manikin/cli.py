@@ -129,8 +129,9 @@ if __package__:   # run as a plain script (blender --python cli.py), _script_mai
 
 def _add_solve_options(s):
     """The options every solve takes (the panel's settings)."""
+    from .core.recording import AXES
     from .core.skeleton import LENGTH_RANGES
-    s.add_argument("--axes", choices=("openxr", "unity", "blender", "unreal"), default=None,
+    s.add_argument("--axes", choices=AXES, default=None,
                    help="axes of the input (default: the file's metadata; OpenXR for CSV, Unity for .bsor)")
     s.add_argument("--units", choices=("m", "cm", "mm"), default=None,
                    help="position units of the input (default: the file's metadata, else metres)")

@@ -9,7 +9,7 @@ import pytest
 from blender_manikin.core.io_bsor import parse_bsor, read_bsor
 from blender_manikin.core.io_csv import read_csv, write_csv
 from blender_manikin.core.recording import (
-    RecordingError, TrackerStream, axes_matrix, from_blender, to_blender,
+    AXES, RecordingError, TrackerStream, axes_matrix, from_blender, to_blender,
 )
 from blender_manikin.core.resample import resample
 from blender_manikin.core.rotations import axis_angle_to_quat, geodesic_angle, quat_to_matrix
@@ -56,7 +56,7 @@ def test_unity_axes_improper_matrix_gives_proper_rotations():
     np.testing.assert_allclose(quat_to_matrix(q), M @ Ru @ M.T, atol=1e-12)
 
 
-@pytest.mark.parametrize("axes", ["openxr", "unity", "blender"])
+@pytest.mark.parametrize("axes", AXES)
 def test_conversion_round_trip_keeps_quaternion_sign(axes):
     rng = np.random.default_rng(3)
     p = rng.normal(size=(20, 3))
@@ -71,7 +71,7 @@ def test_conversion_round_trip_keeps_quaternion_sign(axes):
 
 # --------------------------------------------------------------------------
 # CSV round trips
-@pytest.mark.parametrize("axes", ["openxr", "unity", "blender"])
+@pytest.mark.parametrize("axes", AXES)
 @pytest.mark.parametrize("units", ["m", "mm"])
 def test_csv_round_trip_each_axes(tmp_path, axes, units):
     path, rec = write_recording_csv(tmp_path, axes=axes, units=units, duration=1.5,
