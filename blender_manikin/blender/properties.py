@@ -147,7 +147,7 @@ class MANIKIN_Settings(PropertyGroup):
         name="Keypoints", subtype='FILE_PATH', default="",
         description="Keypoint file: FreeMoCap output_data/mediapipe_body_3d_xyz.npy (or the recording "
                     "folder), .npy / .npz array (frames x points x 3), CSV with time and <point>_x/_y/_z, or "
-                    "an OpenSim .trc of markers named as points (Pose2Sim, Sports2D), or a .trc / .c3d of anatomical "
+                    "an OpenSim .trc of markers named as points (Pose2Sim), or a .trc / .c3d of anatomical "
                     "markers (Plug-in Gait, OpenCap; C3D from Vicon, Qualisys, OptiTrack, Cortex)")
     keypoint_from: EnumProperty(name="From", default='FILE',
                                 items=[('FILE', "File", "A keypoint file or FreeMoCap folder"),

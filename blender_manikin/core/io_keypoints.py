@@ -5,8 +5,12 @@ Inputs:
 * a FreeMoCap recording folder: ``output_data/mediapipe_body_3d_xyz.npy`` (frames × 33 × 3,
   millimetres, NaN where a point was lost), with ``mediapipe_{left,right}_hand_3d_xyz.npy``
   (frames × 21 × 3) when present (their knuckles then orient the hands); the folder itself,
-  its ``output_data`` folder or the ``.npy`` file may be given;
-* ``.npy``: ``(T, K, 3)``, ``(T, K, 4)`` (the 4th value a confidence 0-1) or ``(T, 3K)``;
+  its ``output_data`` folder or the ``.npy`` file may be given; a pre-1.0 (2022) recording
+  folder's ``DataArrays/mediaPipeSkel_3d_origin_aligned.npy`` too (:data:`FREEMOCAP_FILES`);
+* ``.npy``: ``(T, K, 3)``, ``(T, K, 4)`` (the 4th value a confidence 0-1) or ``(T, 3K)``; an
+  array whose first points are a layout's and the rest others (:data:`LEADING_POINTS`:
+  FreeMoCap's whole MediaPipe skeleton, 543 or 553 points; 4D-Humans' ``pred_keypoints_3d``, 44,
+  and VIBE's ``joints3d``, 49, OpenPose's 25 joints first) is read from those first points;
 * ``.npz``: one such array under ``keypoints`` / ``joints3d`` / ``joints`` / ``positions`` /
   ``points`` / ``pose3d`` / ``kp3d`` (or the only 2-3-D array), with optional ``fps``,
   ``time`` (seconds), ``confidence`` ``(T, K)`` and ``layout``;
@@ -16,7 +20,9 @@ Inputs:
   FreeMoCap's ``body_`` prefix, :func:`.keypoint_layouts.point_key`; empty cells for missing
   points), or other names through a mapping file
   (``{"layout": "coco17", "columns": {"nose": "Nose", ...}}``: layout point → column prefix);
-* ``.trc`` (OpenSim's marker trajectories, as Pose2Sim and Sports2D write them): its
+  or a long table, a row per point per frame (``frame``, ``keypoint``, ``x``, ``y``, ``z``:
+  FreeMoCap's ``*_by_frame.csv`` and v2's files, :func:`_load_long_csv`);
+* ``.trc`` (OpenSim's marker trajectories, as Pose2Sim writes them): its
   markers named as a layout's points (``RHip``, ``LBigToe``, ``Hip`` for the hips' midpoint,
   ``Head`` for the head top: :func:`trc_point`), the layout the one whose points they cover most
   (Pose2Sim's 22 markers of Halpe 26 make ``halpe26`` without the eyes and ears), its other
@@ -45,7 +51,9 @@ in fewer than :data:`MIN_PERSON_FRAMES` frames is left out with a note.
 The layout (:mod:`.keypoint_layouts`) is given (``layout=``, ``--layout``), stored in the file,
 or told from the point count (17 points: COCO-17 or Human3.6M-17, told apart by their first
 points: COCO's nose sits near its ears, Human3.6M's pelvis far from its right ankle) or the
-CSV's column names.  Units (m, cm, mm) come from the leg's length, the up axis from the
+CSV's column names.  Units (m, cm, mm) come from the leg's length (a leg that makes a
+performer shorter or taller than :data:`PLAUSIBLE_STATURE` is said: the file's scale may be its
+own, as MotionBERT's ``X3D.npy``'s), the up axis from the
 shoulders standing above the ankles (the hips where no frame has shoulders: a lower-body marker
 set), and the handedness from the face or the feet pointing
 forward of the body's left-right axis; a floor tilted in the file (a pitched camera's frame) is
@@ -55,7 +63,8 @@ the nose near the ears); units mm (leg 0.86 m); up +Y, right-handed (nose ahead 
 30 Hz (assumed: set the rate)``.
 
 Returned points are ``(T, K, 3)`` float64, metres, Blender axes (+Z up, right-handed), NaN where
-a point is missing or below the confidence threshold.  Errors are :class:`.recording.RecordingError`
+a point is missing or below the confidence threshold.  Points that all share one coordinate (a
+2-D pose, as Sports2D's ``.trc`` with Z 0) are refused.  Errors are :class:`.recording.RecordingError`
 naming the file and the problem (and the line, for CSV).
 """
 from __future__ import annotations
@@ -75,6 +84,7 @@ from . import keypoint_layouts as kl
 from . import marker_sets
 from . import subject_params as sp
 from . import rotations as rot
+from . import skeleton as sk
 from .plain import shown
 from .recording import (RecordingError, UNITS, batches, canonical_units, chunked, decode_head, load_json_file,
                         missing_file, read_check, read_text, row_chunks, time_unit_of_step)
@@ -89,6 +99,22 @@ PERSON_COLUMNS = ("person", "person_id", "id", "track", "track_id", "subject")
 #: a person seen (half the points or more) in fewer frames than this is left out
 MIN_PERSON_FRAMES = 5
 _NPZ_KEYS = ("keypoints", "joints3d", "joints", "positions", "points", "pose3d", "kp3d", "data")
+#: FreeMoCap folders' body files, in the order looked for: v1's ``output_data`` and its pre-1.0
+#: (2022) ``DataArrays`` whole skeleton (body, hands and face, of which the body's 33 are read)
+FREEMOCAP_FILES = (os.path.join("output_data", FREEMOCAP_BODY), FREEMOCAP_BODY,
+                   os.path.join("DataArrays", "mediaPipeSkel_3d_origin_aligned.npy"))
+#: arrays whose first points are a layout's, in its order, their other points left out: point
+#: count → (layout, whose array it is and what its points are)
+LEADING_POINTS = {
+    44: ("body25", "4D-Humans / HMR 2.0's pred_keypoints_3d: OpenPose's 25 joints, then 19 extra"),
+    49: ("body25", "SPIN / VIBE's joints3d: OpenPose's 25 joints, then 24 extra"),
+    543: ("mediapipe33", "FreeMoCap's whole MediaPipe skeleton: the body's 33, then the hands' 2 x 21 and the "
+                         "face's 468"),
+    553: ("mediapipe33", "FreeMoCap's whole MediaPipe skeleton: the body's 33, then the hands' 2 x 21 and the "
+                         "face's 478"),
+}
+#: statures (metres) a leg told in metres may imply without a note that the file's scale may not be metric
+PLAUSIBLE_STATURE = (1.2, 2.2)
 
 
 @dataclass
@@ -119,11 +145,12 @@ class KeypointRecording:
 # recognising keypoint inputs
 def freemocap_body_file(path):
     """The ``mediapipe_body_3d_xyz.npy`` of a FreeMoCap folder at ``path`` (the recording
-    folder, its ``output_data`` or the file itself), else None."""
+    folder, its ``output_data`` or the file itself), else a pre-1.0 recording folder's
+    ``DataArrays/mediaPipeSkel_3d_origin_aligned.npy`` (:data:`FREEMOCAP_FILES`), else None."""
     p = os.fspath(path)
     if os.path.isfile(p):
         return p if os.path.basename(p) == FREEMOCAP_BODY else None
-    for cand in (os.path.join(p, "output_data", FREEMOCAP_BODY), os.path.join(p, FREEMOCAP_BODY)):
+    for cand in (os.path.join(p, f) for f in FREEMOCAP_FILES):
         if os.path.isfile(cand):
             return cand
     return None
@@ -144,7 +171,8 @@ def is_keypoint_input(path) -> bool:
                 header = (decode_head(f.read(4096)).splitlines() or [""])[0]
         except OSError:
             return False
-        return _layout_from_columns([c.strip().lower() for c in header.split(",")]) is not None
+        cols = [c.strip().lower() for c in header.split(",")]
+        return _layout_from_columns(cols) is not None or _long_header(cols)
     return False
 
 
@@ -369,7 +397,10 @@ def _load_input(path, rate, mapping, subject_params, person_axis, layout):
                                  f".trc or .c3d, got {ext or '(no extension)'!r}", path=p)
     if np.ndim(raw["X"]) == 4:
         K = raw["X"].shape[2]
-        n_points = [len(kl.LAYOUTS[kl.canonical_layout(layout)].points)] if layout is not None else None
+        n_points = None
+        if layout is not None:
+            name = kl.canonical_layout(layout)
+            n_points = [len(kl.LAYOUTS[name].points)] + [k for k, (lay, _) in LEADING_POINTS.items() if lay == name]
         axis, how = people_axis(raw["X"].shape, person_axis if person_axis is not None else npz_axis,
                                 raw["src"], n_points)
         X4 = np.moveaxis(np.asarray(raw["X"]), axis, 0)
@@ -403,7 +434,7 @@ def people_axis(shape, person_axis=None, path="", point_counts=None):
     if len(shape) != 4 or shape[3] not in (3, 4):
         raise RecordingError(f"a 4-D keypoint array must be (people, frames, points, 3|4) or (frames, people, "
                              f"points, 3|4); found shape {tuple(shape)}", path=src)
-    counts = point_counts or sorted({len(lay.points) for lay in kl.array_layouts().values()})
+    counts = point_counts or sorted({len(lay.points) for lay in kl.array_layouts().values()} | set(LEADING_POINTS))
     if shape[2] not in counts:
         raise RecordingError(f"shape {tuple(shape)}: its third axis ({shape[2]}) is no layout's point count "
                              f"({', '.join(map(str, counts))})", path=src)
@@ -442,8 +473,16 @@ def _one_person(raw, layout, units, up, handed, subject_params):
         how = "as set"
     elif raw["file_layout"] is not None:
         name, how = kl.canonical_layout(raw["file_layout"]), "from the file"
+    elif K in LEADING_POINTS:
+        name, how = LEADING_POINTS[K][0], "told from the point count"
     else:
         name, how = _layout_from_count(X, src)
+    lead = LEADING_POINTS.get(K)
+    if lead is not None and lead[0] == name:        # a layout's points first, then others: those read
+        n = len(kl.LAYOUTS[name].points)
+        X, conf = X[:, :n], (None if conf is None else conf[:, :n])
+        how += f"; the first {n} of the file's {K}, {lead[1]}"
+        K = n
     if len(kl.LAYOUTS[name].points) != K:
         raise RecordingError(f"layout {name} has {len(kl.LAYOUTS[name].points)} points, the file {K}",
                              path=src)
@@ -513,6 +552,13 @@ def _finish(X, conf, name, src, decided, hands, units, up, handed, rate, time, f
     X[~np.isfinite(X).all(-1)] = np.nan
     if not np.isfinite(X).any():
         raise RecordingError("no finite keypoint in the file", path=src)
+    # one coordinate the same on every point of every frame: a picture's points, not 3-D ones
+    span = np.nanmax(X, axis=(0, 1)) - np.nanmin(X, axis=(0, 1))
+    if span.max() > 0 and span.min() <= 1e-9 * span.max():
+        a = int(np.argmin(span))
+        raise RecordingError(f"every point has the same {'XYZ'[a]} ({shown(float(np.nanmin(X[..., a])))}): the "
+                             f"points lie in one plane, a 2-D pose (as Sports2D's .trc: the picture's pixels / 1000, "
+                             f"Z 0); 3-D keypoints are needed", path=src)
 
     lay = kl.LAYOUTS[name]
     if hands is not None:
@@ -535,7 +581,16 @@ def _finish(X, conf, name, src, decided, hands, units, up, handed, rate, time, f
         if u is None:
             raise RecordingError(f"cannot tell the units: the hip-to-ankle distance is {leg:.4g} "
                                  f"(expected about 0.85 m, 85 cm or 850 mm); set the units", path=src)
-        decided.append(f"units {u} (leg {leg * UNITS[u]:.2f} m)")
+        # a leg that makes no adult's stature: the file's scale may be its own (MotionBERT's X3D.npy
+        # is scaled to the video's picture: a body 2 units tall when standing, smaller when it moves);
+        # the leg at its straightest (95th percentile: not a bent knee's or a seated pose's)
+        straight = _median_dist(X, lay, "left_hip", "left_ankle", "right_hip", "right_ankle", q=95.0)
+        stature = straight * UNITS[u] / (sk.PROPORTIONS["thigh"] + sk.PROPORTIONS["shank"])
+        low, high = PLAUSIBLE_STATURE
+        odd = "" if low <= stature <= high else (
+            f": a performer about {stature:.2f} m tall; if not, the file's scale is not {u} (a lifter's "
+            f"own scale, as MotionBERT's X3D.npy has): set the performer's height (--height)")
+        decided.append(f"units {u} (leg {leg * UNITS[u]:.2f} m{odd})")
     X *= UNITS[u]
 
     # up axis and handedness
@@ -718,13 +773,15 @@ def _shape_points(X, conf, path):
     return X, conf
 
 
-def _median_dist(X, lay, *pairs):
+def _median_dist(X, lay, *pairs, q=50.0):
+    """The median (``q``: another percentile) over frames and ``pairs`` of the distance between
+    each pair of points (names of ``lay``), in the file's unit; NaN where none is seen."""
     d = []
     for a, b in zip(pairs[0::2], pairs[1::2]):
         d.append(np.linalg.norm(X[:, lay.index(a)] - X[:, lay.index(b)], axis=-1))
     d = np.concatenate(d)
     d = d[np.isfinite(d)]
-    return float(np.median(d)) if d.size else float("nan")
+    return float(np.percentile(d, q)) if d.size else float("nan")
 
 
 def _layout_from_count(X, path):
@@ -789,6 +846,8 @@ def _load_csv(path, mapping, rate):
     if header is None:
         raise RecordingError("file is empty", path=path)
     cols = [c.strip().lower() for c in header]
+    if mapping is None and _long_header(cols):
+        return _load_long_csv(path, cols, rows, hline, rate)
     if mapping is not None:
         if not isinstance(mapping, dict):
             mapping = load_json_file(os.fspath(mapping))
@@ -839,6 +898,87 @@ def _load_csv(path, mapping, rate):
     elif tcol == "frame" and rate:
         time = (tv - tv[0]) / float(rate)
     return X.reshape(len(X), -1, 3), time, name, rate, None, lines
+
+
+#: the columns of a long keypoint table, a row per point per frame (FreeMoCap's ``*_by_frame.csv``)
+LONG_COLUMNS = ("frame", "keypoint", "x", "y", "z")
+
+
+def _long_header(cols) -> bool:
+    """True for the header ``cols`` (lower case) of a long keypoint table (:data:`LONG_COLUMNS`)."""
+    return all(c in cols for c in LONG_COLUMNS) and _layout_from_columns(cols) is None
+
+
+def _load_long_csv(path, cols, rows, hline, rate):
+    """As :func:`_load_csv`, of a long table: a row per point per frame, with ``frame``,
+    ``keypoint``, ``x``, ``y``, ``z`` columns (FreeMoCap v1's ``<recording>_by_frame.csv``, v2's
+    ``freemocap_data_by_frame.csv`` and ``<tracker>_body_3d_xyz.csv``).  A ``model`` column: the
+    rows of the body's model (its name's last word ``body``: ``mediapipe_body``, ``rtmpose.body``);
+    a ``trajectory`` column: the ``3d_xyz`` rows.  The layout from the points' names
+    (:func:`.keypoint_layouts.layout_from_names`), other points left out; the time from a ``time``
+    / ``timestamp`` column where it is filled in (FreeMoCap leaves it empty without timestamps),
+    else the frame numbers at ``rate``."""
+    at = {c: i for i, c in reversed(list(enumerate(cols)))}
+    recs = []
+    for part in batches(rows):
+        for ln, r in part:
+            if len(r) != len(cols):
+                raise RecordingError(f"expected {len(cols)} comma-separated fields (as in the header), found "
+                                     f"{len(r)}", path=path, line=ln)
+            recs.append((ln, r))
+    if not recs:
+        raise RecordingError("no data rows after the header", path=path, line=hline)
+    if "model" in at:                           # the body's rows, not the hands', face's or centres of mass'
+        models = list(dict.fromkeys(r[at["model"]].strip() for _, r in recs))
+        body = [m for m in models if re.split(r"[._\s]", m.lower())[-1] == "body"]
+        if not body:
+            raise RecordingError(f"column 'model' names {', '.join(map(repr, models))}: none is a body's (a "
+                                 "name ending in 'body', as mediapipe_body)", path=path, line=hline)
+        recs = [(ln, r) for ln, r in recs if r[at["model"]].strip() == body[0]]
+    if "trajectory" in at:
+        kinds = list(dict.fromkeys(r[at["trajectory"]].strip() for _, r in recs))
+        kind = "3d_xyz" if "3d_xyz" in kinds else kinds[0]
+        recs = [(ln, r) for ln, r in recs if r[at["trajectory"]].strip() == kind]
+    names = list(dict.fromkeys(r[at["keypoint"]].strip() for _, r in recs))
+    found = kl.layout_from_names(names)
+    if found is None:
+        raise RecordingError(f"the 'keypoint' column's points ({', '.join(names[:8])}"
+                             f"{', ...' if len(names) > 8 else ''}) are not every point of one of "
+                             f"{', '.join(kl.array_layouts())}", path=path, line=hline)
+    name, by_point = found
+    index = {by_point[p]: k for k, p in enumerate(kl.LAYOUTS[name].points)}
+    tcol = next((c for c in ("time", "timestamp") if c in at), None)
+
+    def number(ln, r, c):
+        cell = r[at[c]].strip()
+        try:
+            return float(cell) if cell else np.nan
+        except ValueError:
+            raise RecordingError(f"column {c!r}: {cell!r} is not a number", path=path, line=ln) from None
+    frame = np.array([number(ln, r, "frame") for ln, r in recs])
+    if not np.isfinite(frame).all():
+        ln = recs[int(np.argmax(~np.isfinite(frame)))][0]
+        raise RecordingError("column 'frame' is empty: every row needs its frame", path=path, line=ln)
+    frames, first = np.unique(frame, return_index=True)
+    X = np.full((len(frames), len(index), 3), np.nan)
+    seen = np.zeros(X.shape[:2], bool)
+    for (ln, r), f in zip(recs, np.searchsorted(frames, frame)):
+        k = index.get(r[at["keypoint"]].strip())
+        if k is None:
+            continue
+        if seen[f, k]:
+            raise RecordingError(f"point {r[at['keypoint']].strip()} has two rows at frame "
+                                 f"{shown(float(frames[f]))}", path=path, line=ln)
+        seen[f, k] = True
+        X[f, k] = [number(ln, r, c) for c in "xyz"]
+    lines = np.array([recs[i][0] for i in first], np.int64)
+    time = None
+    if tcol is not None:
+        tv = np.array([number(recs[i][0], recs[i][1], tcol) for i in first])
+        time = tv if np.isfinite(tv).all() else None
+    if time is None and rate:
+        time = (frames - frames[0]) / float(rate)
+    return X, time, name, rate, None, lines
 
 
 def _text_lines(text):

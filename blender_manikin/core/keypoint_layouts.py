@@ -146,7 +146,7 @@ LAYOUTS = {f.name: f for f in (
     KeypointLayout("coco17", "COCO 17", _COCO17),
     KeypointLayout("h36m17", "Human3.6M 17 (VideoPose3D, MotionBERT)", _H36M17),
     KeypointLayout("smpl22", "SMPL 22 body joints", _SMPL22),
-    KeypointLayout("smpl24", "SMPL 24 (22 + hands; 4D-Humans, SMPL fits)", _SMPL22 + ("left_hand", "right_hand")),
+    KeypointLayout("smpl24", "SMPL 24 (22 + hands; SMPL fits)", _SMPL22 + ("left_hand", "right_hand")),
     KeypointLayout("body25", "OpenPose BODY_25", _BODY25),
     KeypointLayout("halpe26", "Halpe 26 (AlphaPose, RTMPose; Pose2Sim)", _HALPE26),
     KeypointLayout("opencap", "joint centres from OpenCap's anatomical markers", _OPENCAP),
