@@ -251,6 +251,14 @@ def test_latin1_and_crlf_text():
     np.testing.assert_allclose(clip.global_transforms()[0], TINY_POS, atol=1e-9)
 
 
+def test_byte_order_mark():
+    """An ASF and an AMC saved with a UTF-8 byte-order mark (Windows tools) read as without one
+    (they were "line 1: expected a ':' keyword, got '\\ufeff'" / "expected a frame number")."""
+    sk = read_asf(_bytes(TINY_ASF, "utf-8-sig"), "tiny.asf")
+    clip = read_amc(_bytes(TINY_AMC, "utf-8-sig"), sk, "bom.amc")
+    np.testing.assert_allclose(clip.global_transforms()[0], TINY_POS, atol=1e-9)
+
+
 def test_read_asf_amc_from_paths(tmp_path):
     (tmp_path / "tiny.asf").write_text(TINY_ASF)
     (tmp_path / "tiny_01.amc").write_text(TINY_AMC)

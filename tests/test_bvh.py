@@ -221,6 +221,29 @@ def test_good_fixture_parses():
     assert np.allclose(clip.end_sites[1], [0, 5, 0])
 
 
+@pytest.mark.parametrize("encoding", ["utf-8-sig", "utf-16"])
+def test_byte_order_mark_and_utf16(encoding):
+    """A BVH saved with a byte-order mark (Windows tools: Notepad, .NET's Encoding.UTF8) or as
+    UTF-16 (PowerShell's Out-File) reads like plain UTF-8 (it was "line 1: expected 'HIERARCHY',
+    got '\\ufeffHIERARCHY'"); CRLF line ends too."""
+    data = GOOD.replace("JOINT Spine", "JOINT Rücken").replace("\n", "\r\n").encode(encoding)
+    clip = read_bvh(io.BytesIO(data), name="walk.bvh")
+    assert clip.joint_names == ("Hips", "Rücken") and clip.motion.shape == (3, 9)
+    assert np.allclose(clip.motion[:, 1], [90, 91, 92])
+
+
+def test_names_in_another_8_bit_encoding_stay_distinct():
+    """A header that is not UTF-8 (Shift-JIS joint names, as MikuMikuDance tools write) is read
+    as Latin-1, as the ASF/AMC reader does: 左足 and 左手 stay two joints (their bytes became the
+    same U+FFFD run: "line 11: duplicate joint name '����'")."""
+    text = GOOD.replace("ROOT Hips", "ROOT センター").replace("JOINT Spine", "JOINT 左足").replace(
+        "End Site\n    {\n      OFFSET 0 5 0\n    }\n  }\n", "}\n  JOINT 左手\n  {\n    OFFSET 0 5 0\n"
+        "    CHANNELS 3 Zrotation Xrotation Yrotation\n  }\n").replace(" 0 0 0 0 0 0 0\n", " 0 0 0 0 0 0 0 0 0 0\n")
+    clip = read_bvh(io.BytesIO(text.encode("shift_jis")), name="mmd.bvh")
+    assert [n.encode("latin-1").decode("shift_jis") for n in clip.joint_names] == ["センター", "左足", "左手"]
+    assert clip.motion.shape == (3, 12)
+
+
 def test_error_wrong_value_count():
     lines = GOOD.split("\n")
     lines[19] = "0 91 0 0 0 0 0"        # file line 20

@@ -188,3 +188,58 @@ def test_a_misspelt_joint_in_a_joint_map_file_is_named_with_its_entry(motion, tm
                                          r"orientations\.left_wrist: 'LeftHnad'; orientations\.left_ankle: "
                                          r"'LeftToee' \(its joints: Hips, .*LeftHand"):
         clip_to_body_motion(clip, str(f))
+
+
+def _toes_to_end_sites(clip):
+    """The clip with its ``LeftToeBase`` / ``RightToeBase`` leaf joints replaced by an End Site of
+    the same OFFSET on the foot: the Perception Neuron (Axis Neuron BVH) layout, whose feet end in
+    an End Site with no toe joint (``RightFoot { ... End Site { OFFSET 0 -7.85 17.85 } }``)."""
+    from blender_manikin.core.bvh import BvhClip
+    drop = [clip.joint_index(n) for n in ("LeftToeBase", "RightToeBase")]
+    keep = [j for j in range(clip.num_joints) if j not in drop]
+    ends = clip.end_sites.copy()
+    for j in drop:
+        ends[clip.parents[j]] = clip.offsets[j]
+    new = {j: k for k, j in enumerate(keep)}
+    cols = np.concatenate([np.arange(len(clip.channels[j])) + clip.channel_starts[j] for j in keep])
+    return BvhClip(clip.name, [clip.joint_names[j] for j in keep],
+                   [new[int(clip.parents[j])] if clip.parents[j] >= 0 else -1 for j in keep],
+                   clip.offsets[keep], [clip.channels[j] for j in keep], clip.frame_time,
+                   clip.motion[:, cols], end_sites=ends[keep])
+
+
+def _map_file_dict(jm):
+    """A joint-map file's dict with a built-in map's positions (its orientations left to the defaults)."""
+    def point(p):
+        if p.kind == "joint":
+            return p.joints[0]
+        return {"lerp": list(p.joints), "t": p.t} if p.kind == "lerp" else {"chain": list(p.joints), "at": p.t}
+    return {"name": "neuron_like", "units": "cmu", "foot_pitch": "auto",
+            "positions": {n: point(jm.positions[n]) for n in skeleton.JOINT_NAMES}}
+
+
+def test_a_joint_map_file_may_name_an_end_site(motion, tmp_path):
+    """A rig whose feet end in an End Site with no toe joint (Perception Neuron's Axis Neuron BVH,
+    older Biovision rigs) is mapped by a joint-map file naming ``"LeftFoot/End Site"`` as the ball
+    of the foot: the same body motion as the CMU map on the rig with its toe joints (before, no map
+    could name an End Site: "names joint(s) this skeleton does not have: positions.left_foot")."""
+    body, _, _, pos, rot = motion
+    clip = _toes_to_end_sites(_through_file(cmu_clip(body, pos, rot), tmp_path, "take.bvh"))
+    clip = _through_file(clip, tmp_path, "neuron_take.bvh")
+    assert "LeftToeBase" not in clip.joint_names
+    d = _map_file_dict(jmod.CMU)
+    d["positions"]["left_foot"] = "LeftFoot/End Site"
+    d["positions"]["right_foot"] = "RightFoot/End Site"
+    f = tmp_path / "neuron.json"
+    f.write_text(json.dumps(d))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        m = clip_to_body_motion(clip, str(f))
+    _check_roundtrip(m, pos, rot, body)
+    with pytest.raises(ValueError, match=r"give it as the joint map"):   # detection says how
+        detect_joint_map(clip.joint_names, clip.parents)
+    d["orientations"] = {"left_ankle": {"joint": "LeftFoot/End Site", "primary": "+y", "secondary": "+x"}}
+    f.write_text(json.dumps(d))
+    with pytest.raises(ValueError, match=r"orientations\.left_ankle: 'LeftFoot/End Site' is an End Site, which "
+                                         r"has no rotation"):
+        clip_to_body_motion(clip, str(f))

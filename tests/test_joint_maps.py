@@ -230,3 +230,54 @@ def test_real_bandai_file():
     # bone lengths are constant in the source: the Body reproduces them
     L = np.linalg.norm(P[:, 1:] - P[:, skeleton.PARENTS[1:]], axis=-1)
     assert np.abs(L - m.body.bone_lengths()[1:]).max() < 1e-3
+
+
+def _to_blender_axes(clip):
+    """The same take written in Blender's own axes (Z up, the performer facing -Y), as Blender's BVH
+    export writes an armature built in Blender: every OFFSET, End Site and world pose turned by
+    ``(x, y, z) -> (x, -z, y)``."""
+    from blender_manikin.core.bvh import BvhClip
+    M = axis_conversion("y", "z")
+    pos, rot = clip.global_transforms()
+    loc = np.empty(rot.shape)
+    tr = np.empty(pos.shape)
+    for j in range(clip.num_joints):
+        p, Rw = clip.parents[j], M @ rot[:, j] @ M.T
+        if p < 0:
+            loc[:, j], tr[:, j] = Rw, pos[:, j] @ M.T
+        else:
+            Rp = M @ rot[:, p] @ M.T
+            loc[:, j] = np.swapaxes(Rp, -1, -2) @ Rw
+            tr[:, j] = np.einsum("tji,tj->ti", Rp, (pos[:, j] - pos[:, p]) @ M.T)
+    return BvhClip.from_local_transforms(clip.name, clip.joint_names, clip.parents, clip.offsets @ M.T,
+                                         clip.channels, loc, tr, clip.frame_time, end_sites=clip.end_sites @ M.T)
+
+
+def test_z_up_take_with_up_override_and_the_warning_without(motion):
+    """A Z-up take mapped with ``up="z", forward="-y"`` is the Y-up take's body motion, without a
+    warning (the rest-pose check measured the map's own +Y up and warned "the rest pose is not a
+    T-pose ... 'spine': 90" on every such take); read as the map's Y-up, the warning says which
+    file axis the spine runs along and what to give (it said only "not a T-pose")."""
+    body, _, _, pos, rot = motion
+    clip = cmu_clip(body, pos[:30], rot[:30])
+    zup = _to_blender_axes(clip)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        m = clip_to_body_motion(zup, "cmu", up="z", forward="-y")
+    _check_roundtrip(m, pos[:30], rot[:30], body)
+    assert max(rest_pose_report(zup, "cmu", up="z", forward="-y").values()) < 1e-6
+    with pytest.warns(UserWarning, match=r"its spine runs along the file's \+z axis, not the up axis in use "
+                                         r"\(\+y\): if that is the file's up axis, give up 'z', forward '-y'"):
+        clip_to_body_motion(zup, "cmu")
+
+
+@pytest.mark.parametrize("prefix", ["Model_", "mixamorig_"])
+def test_a_prefix_every_joint_shares_is_looked_past(motion, prefix, tmp_path):
+    """A Mixamo rig whose every joint carries a prefix ending in ``_`` (``Model_Hips``, ``Model_Spine``,
+    ... as in a public BVH; ``mixamorig_Hips`` where a tool replaced Mixamo's ``:``) is detected and
+    mapped as Mixamo (it was "no joint map fits this skeleton (... mixamo: missing Hips, Spine, ...)")."""
+    body, _, _, pos, rot = motion
+    clip = _through_file(mixamo_clip(body, pos, rot, prefix=prefix), tmp_path, "take.bvh")
+    assert clip.joint_names[0] == prefix + "Hips"
+    assert detect_joint_map(clip.joint_names, clip.parents) is MIXAMO
+    _check_roundtrip(clip_to_body_motion(clip), pos, rot, body)

@@ -64,7 +64,8 @@ HDM05 are 120 fps), hence ``fps``.
 Problems raise :class:`AsfAmcError` (a :class:`~blender_manikin.core.bvh.BvhError`,
 hence a ``ValueError``), e.g. ``HDM_bd_squat_001.amc line 57: bone 'lfemur'
 expects 3 values (dof rx ry rz), got 2``.  Text is read as UTF-8, falling
-back to Latin-1 (HDM05's AMC headers carry a German path in Latin-1).
+back to Latin-1 (HDM05's AMC headers carry a German path in Latin-1); a byte-order mark is
+dropped and UTF-16 read (:func:`~blender_manikin.core.bvh.read_bvh`'s bytes).
 
 Reading sources
 ---------------
@@ -187,7 +188,7 @@ import numpy as np
 
 from . import joint_maps
 from . import rotations as rot
-from .bvh import BvhClip, BvhError, _read_bytes, euler_to_matrix  # degrees, BVH channel order
+from .bvh import BvhClip, BvhError, _decode, _read_bytes, euler_to_matrix  # degrees, BVH channel order
 from .joint_maps import JointMap, OrientationSpec, bone, chain, joint, lerp, rest
 
 __all__ = [
@@ -328,13 +329,6 @@ def _ordered_euler(angles_deg, order: str) -> np.ndarray:
 
 # --------------------------------------------------------------------------
 # bytes and text
-def _decode(data: bytes) -> str:
-    try:
-        return data.decode("utf-8")
-    except UnicodeDecodeError:
-        return data.decode("latin-1")
-
-
 def _strip_suffix(name: str, suffixes) -> str:
     base = os.path.basename(str(name).replace("\\", "/"))
     low = base.lower()

@@ -55,6 +55,10 @@ member is kept zlib-compressed in memory (about 30 % of its size) until it is
 yielded in name order, with ``sort=False`` members come in archive order and
 nothing is buffered.
 
+Text is UTF-8 (a byte-order mark, as Windows tools write, is dropped) or UTF-16 / UTF-32
+with a BOM (:func:`.recording.text_codec`), converted to UTF-8 before parsing; a header that
+is not UTF-8 is read as Latin-1 (joint names in another 8-bit encoding stay distinct).
+
 Parsing speed comes from reading the MOTION block with ``np.loadtxt`` (C
 parser); the header is parsed line by line in Python.  Problems raise
 :class:`BvhError` naming the file, the line and the problem, e.g.
@@ -75,6 +79,7 @@ from typing import Callable, Iterator, Optional, Tuple
 import numpy as np
 
 from . import rotations as rot
+from .recording import text_codec
 
 __all__ = [
     "BvhError", "BvhClip", "read_bvh", "write_bvh", "iter_bvh_sources",
@@ -261,6 +266,27 @@ class BvhClip:
             p[j] = self.offsets[j] + (p[par] if par >= 0 else 0.0)
         return p
 
+    def end_site_joints(self) -> np.ndarray:
+        """``(E,)`` indices of the joints that have an End Site, ascending."""
+        return np.nonzero(np.all(np.isfinite(self.end_sites), axis=1))[0]
+
+    def end_site_positions(self, positions=None, rotations=None):
+        """World positions of the End Sites, ``(T, E, 3)`` in :meth:`end_site_joints` order
+        (source units and axes): ``p_world[j] + R_world[j] @ end_sites[j]``.
+
+        ``positions`` ``(T, J, 3)`` / ``rotations`` ``(T, J, 3, 3)``: :meth:`global_transforms`'s
+        output (computed when not given); the zero pose's are :meth:`rest_end_sites`.
+        """
+        if positions is None or rotations is None:
+            positions, rotations = self.global_transforms()
+        e = self.end_site_joints()
+        return positions[:, e] + np.einsum("teij,ej->tei", rotations[:, e], self.end_sites[e])
+
+    def rest_end_sites(self):
+        """``(E, 3)`` End Site positions of the zero-channel pose (every world rotation identity)."""
+        e = self.end_site_joints()
+        return self.rest_positions()[e] + self.end_sites[e]
+
     # ------------------------------------------------------------------
     @classmethod
     def from_local_transforms(cls, name, joint_names, parents, offsets, channels, local_rot,
@@ -318,7 +344,20 @@ def _read_bytes(path_or_fileobj):
             data = data.encode("utf-8")
     if data[:2] == b"\x1f\x8b":
         data = gzip.decompress(data)
+    codec, skip = text_codec(data[:512])        # a BOM (Windows tools), or UTF-16/32 text
+    if skip or codec != "utf-8":
+        data = data[skip:].decode(codec, errors="replace").encode("utf-8")
     return data, display
+
+
+def _decode(data: bytes) -> str:
+    """Header text: UTF-8, else Latin-1, so names in another 8-bit encoding (Windows-1252,
+    Shift-JIS) stay as distinct as their bytes (U+FFFD replacements made ``左足`` and ``左手`` in
+    Shift-JIS the same name)."""
+    try:
+        return data.decode("utf-8")
+    except UnicodeDecodeError:
+        return data.decode("latin-1")
 
 
 _MOTION_RE = re.compile(rb"^[ \t]*MOTION[ \t]*\r?$", re.MULTILINE | re.IGNORECASE)
@@ -336,11 +375,11 @@ def read_bvh(path_or_fileobj, name: Optional[str] = None) -> BvhClip:
     take = _strip_bvh_suffix(name if name else display)
     m = _MOTION_RE.search(data)
     if m is None:
-        text = data.decode("utf-8", errors="replace")
+        text = _decode(data)
         _parse_hierarchy(text, src)          # reports where the hierarchy goes wrong
         nlines = text.count("\n") + (0 if text.endswith("\n") else 1)
         raise BvhError(src, nlines, "no MOTION section after the HIERARCHY")
-    header = data[: m.start()].decode("utf-8", errors="replace")
+    header = _decode(data[: m.start()])
     motion_line = header.count("\n") + 1
     joints = _parse_hierarchy(header, src)
 

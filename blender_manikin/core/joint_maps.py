@@ -71,7 +71,9 @@ Mixamo (``mixamorig:`` names, a BVH written from its FBX rig, e.g. by Blender's
 BVH export) has every cgspeed name, so it maps like CMU but for the spine:
 spine1-3 at the quarters of ``chain(Hips, Spine, Spine1, Spine2, Neck)``, and
 its ``Neck`` (on ``Spine2``, where cgspeed's is on ``Spine1``) is the neck base.
-The hierarchy tells the two rigs apart (:func:`detect_joint_map`).
+The hierarchy tells the two rigs apart (:func:`detect_joint_map`).  Names are matched exactly,
+else case-insensitively without a namespace (``mixamorig:``) or a prefix ending in ``_`` that
+every joint shares (``Model_Hips``, ``mixamorig_Hips``: :func:`_shared_prefix`).
 
 LaFAN1 (Ubisoft La Forge, CC BY-NC-ND 4.0; ``lafan1``): Hips, Left/RightUpLeg, Leg, Foot,
 Toe, Spine, Spine1, Spine2, Neck, Head, Left/RightShoulder, Arm, ForeArm, Hand; centimetres,
@@ -94,7 +96,10 @@ zero pose a T-pose with world-aligned frames (so ``rest`` axes, as CMU).  spine1
 quarters of ``chain(Hips, Chest, ..., Chest4, Neck)``, the collar ``lerp(Collar, Shoulder;
 0.4)`` (the Collar joint sits 3 cm off the midline), the foot its ``Toe`` (ball of the foot).
 
-Any other rig: a joint-map file (JSON, :func:`load_joint_map`, README "Joint-map files").
+Any other rig: a joint-map file (JSON, :func:`load_joint_map`, README "Joint-map files").  Its
+points may name a joint's End Site as ``"<joint>/End Site"`` (:data:`END_SITE`): the End Site
+OFFSET's end, posed with that joint (``p[j] + R_world[j] @ end_site[j]``), for a rig whose foot
+ends in an End Site with no toe joint (Perception Neuron's Axis Neuron BVH).
 
 Orientations
 ------------
@@ -208,7 +213,7 @@ from .rotations import normalize
 __all__ = [
     "Point", "joint", "lerp", "chain", "Axis", "local", "bone", "rest", "OrientationSpec",
     "JointMap", "BANDAI", "CMU", "MIXAMO", "LAFAN1", "STYLE100", "JOINT_MAPS", "load_joint_map",
-    "ORIENTED_JOINTS", "MotionClip",
+    "ORIENTED_JOINTS", "MotionClip", "END_SITE",
     "detect_joint_map", "get_joint_map", "axis_conversion", "detect_unit_scale",
     "estimate_floor", "clip_to_body_motion", "take_id_from_name", "rest_pose_report",
     "UNIT_CANDIDATES", "REST_FOOT_DIRECTION", "REST_FOOT_PITCH", "BANDAI_FOOT_PITCH",
@@ -536,14 +541,29 @@ def _norm_name(n: str) -> str:
     return n.strip().lower()
 
 
+def _shared_prefix(names: Sequence[str]) -> str:
+    """The prefix up to an ``_`` that every name starts with (``Model_`` of ``Model_Hips``,
+    ``Model_Spine``, ...; ``mixamorig_`` where a tool turned Mixamo's ``mixamorig:`` into an
+    underscore), or ``""``."""
+    if len(names) < 2:
+        return ""
+    pre = os.path.commonprefix(list(names))
+    return pre[: pre.rfind("_") + 1]
+
+
 class _Resolver:
-    """Find source joints by exact name, else case-insensitively without a namespace."""
+    """Find source joints by exact name, else case-insensitively without a namespace (``ns:``,
+    ``a|b``) or without a prefix every joint name shares (:func:`_shared_prefix`)."""
 
     def __init__(self, names: Sequence[str]):
         self.exact = {n: i for i, n in enumerate(names)}
         self.loose = {}
         for i, n in enumerate(names):
             self.loose.setdefault(_norm_name(n), i)
+        pre = _shared_prefix(names)
+        for i, n in enumerate(names):
+            if pre and len(n) > len(pre):
+                self.loose.setdefault(_norm_name(n[len(pre):]), i)
 
     def find(self, name: str) -> Optional[int]:
         i = self.exact.get(name)
@@ -554,6 +574,18 @@ class _Resolver:
         if i is None:
             raise KeyError(f"{clip_name}: source joint {name!r} not found")
         return i
+
+
+#: Suffix that names a joint's End Site as a source point in a map: ``"LeftFoot/End Site"`` is
+#: the end of ``LeftFoot``'s End Site OFFSET, for a rig whose foot or head ends in an End Site
+#: with no toe or head-top joint (Perception Neuron's Axis Neuron BVH, older Biovision rigs).
+END_SITE = "/End Site"
+
+
+def _point_names(clip: BvhClip) -> Tuple[str, ...]:
+    """The clip's joint names, then ``<joint>/End Site`` for each joint with an End Site
+    (:meth:`BvhClip.end_site_joints` order): the names a map's points may use."""
+    return tuple(clip.joint_names) + tuple(clip.joint_names[j] + END_SITE for j in clip.end_site_joints())
 
 
 def detect_joint_map(joint_names: Sequence[str], parents: Optional[Sequence[int]] = None) -> JointMap:
@@ -573,7 +605,9 @@ def detect_joint_map(joint_names: Sequence[str], parents: Optional[Sequence[int]
         if not miss and not wrong and (best is None or need > len(best.source_joints())):
             best = jm
     if best is None:
-        raise ValueError("no joint map fits this skeleton (" + "; ".join(report) + ")")
+        raise ValueError("no joint map fits this skeleton (" + "; ".join(report) + "); write a joint-map "
+                         ".json for it (README 'Joint-map files'; a foot or head that ends in an End Site "
+                         f"is named like 'LeftFoot{END_SITE}') and give it as the joint map")
     return best
 
 
@@ -879,8 +913,8 @@ def orientation_corrections(clip: BvhClip, jm: JointMap, M: np.ndarray,
     ``foot_pitch`` (degrees) sets the ankles' body-frame primary direction
     :func:`foot_direction`.
     """
-    res = _Resolver(clip.joint_names)
-    rest_pos = clip.rest_positions()
+    res = _Resolver(_point_names(clip))
+    rest_pos = np.concatenate([clip.rest_positions(), clip.rest_end_sites()])
     out = {}
     for name in ORIENTED_JOINTS:
         spec = jm.orientations[name]
@@ -890,24 +924,27 @@ def orientation_corrections(clip: BvhClip, jm: JointMap, M: np.ndarray,
         a = _source_axis(spec.primary, A, M, res, rest_pos, clip.name)
         b = _source_axis(spec.secondary, B, M, res, rest_pos, clip.name)
         C = _frame(a, b) @ _frame(np.asarray(A, float), np.asarray(B, float)).T
-        out[name] = (res(spec.source, clip.name), C)
+        j = res(spec.source, clip.name)
+        if j >= clip.num_joints:
+            raise ValueError(f"{clip.name}: orientations.{name}: {spec.source!r} is an End Site, which has no "
+                             "rotation; name its joint")
+        out[name] = (j, C)
     return out
 
 
-def rest_pose_report(clip: BvhClip, joint_map: Union[None, str, JointMap] = None) -> Dict[str, float]:
+def rest_pose_report(clip: BvhClip, joint_map: Union[None, str, JointMap] = None,
+                     up: Optional[str] = None, forward: Optional[str] = None) -> Dict[str, float]:
     """Angles (degrees) between the zero-channel pose's limbs and a T-pose.
 
     Keys ``left_arm``, ``right_arm`` (shoulder->wrist vs. +-left),
     ``left_leg``, ``right_leg`` (hip->ankle vs. down), ``spine`` (pelvis->neck
-    vs. up), measured in the map's source axes.  All near 0 (legs may splay
+    vs. up), measured in the map's source axes, or ``up`` / ``forward`` where given (as
+    :func:`clip_to_body_motion`'s overrides).  All near 0 (legs may splay
     ~20 degrees in CMU) means the rest pose is a T-pose.
     """
     jm = get_joint_map(joint_map, clip)
-    M = axis_conversion(jm.up, jm.forward)
-    res = _Resolver(clip.joint_names)
-    rp = clip.rest_positions()
-    W = _resolve_weights(jm, res, lambda a, b: float(np.linalg.norm(rp[b] - rp[a])), clip.name)
-    p = (W @ rp) @ M.T          # Blender axes, source units
+    M = axis_conversion(up or jm.up, forward or jm.forward)
+    p = _rest_body_points(clip, jm) @ M.T          # Blender axes, source units
 
     def ang(v, d):
         v = normalize(v)
@@ -920,6 +957,32 @@ def rest_pose_report(clip: BvhClip, joint_map: Union[None, str, JointMap] = None
         "right_leg": ang(p[_J["right_ankle"]] - p[_J["right_hip"]], np.array([0, 0, -1.0])),
         "spine": ang(p[_J["neck"]] - p[_J["pelvis"]], np.array([0, 0, 1.0])),
     }
+
+
+def _rest_body_points(clip: BvhClip, jm: JointMap) -> np.ndarray:
+    """``(22, 3)`` body joints on the clip's zero-channel pose (source axes and units)."""
+    res = _Resolver(_point_names(clip))
+    rp = np.concatenate([clip.rest_positions(), clip.rest_end_sites()])
+    W = _resolve_weights(jm, res, lambda a, b: float(np.linalg.norm(rp[b] - rp[a])), clip.name)
+    return W @ rp
+
+
+def _axes_hint(clip: BvhClip, jm: JointMap, M: np.ndarray, rep: Mapping[str, float]) -> str:
+    """When the rest spine (pelvis -> neck) lies more than 45 degrees off the up axis in use, the
+    source axis it runs along and the axes to give: a Z-up file (Blender's BVH export of a Z-up
+    armature) read as the map's Y-up one maps the performer lying down."""
+    if rep["spine"] <= 45.0:
+        return ""
+    p = _rest_body_points(clip, jm)
+
+    def axis(v):                                   # the source axis nearest to v, e.g. "+z"
+        k = int(np.argmax(np.abs(v)))
+        return ("+" if v[k] > 0 else "-") + "xyz"[k]
+    up, used = axis(p[_J["neck"]] - p[_J["pelvis"]]), axis(M[2])   # M's row 2: the source up in use
+    hint = ", forward '-y' for Blender's axes" if up == "+z" else ""
+    return (f"; its spine runs along the file's {up} axis, not the up axis in use ({used}): if that is the "
+            f"file's up axis, give up '{up.lstrip('+')}'{hint} (a sources file's or joint-map file's "
+            '"up" / "forward")')
 
 
 def detect_unit_scale(leg_length_source_units: float) -> float:
@@ -1051,7 +1114,8 @@ def _check_source_joints(jm: JointMap, clip: BvhClip) -> None:
     """``ValueError`` naming the clip, the map (its description: a joint-map file's name) and each
     entry (``positions.left_wrist``, ``orientations.left_ankle``) whose source joint the clip's
     skeleton does not have (a misspelt name in a joint-map file), with the skeleton's joints."""
-    miss = set(jm.missing(clip.joint_names))
+    names = _point_names(clip)
+    miss = set(jm.missing(names))
     if not miss:
         return
     entries = [(f"positions.{n}", p.joints) for n, p in jm.positions.items()]
@@ -1060,7 +1124,7 @@ def _check_source_joints(jm: JointMap, clip: BvhClip) -> None:
     where = [f"{w}: {', '.join(repr(j) for j in dict.fromkeys(js) if j in miss)}"
              for w, js in entries if miss & set(js)]
     raise ValueError(f"{clip.name}: joint map {jm.name!r} ({jm.description or 'built in'}) names joint(s) this "
-                     f"skeleton does not have: {'; '.join(where)} (its joints: {', '.join(clip.joint_names)})")
+                     f"skeleton does not have: {'; '.join(where)} (its joints: {', '.join(names)})")
 
 
 def clip_to_body_motion(clip: BvhClip, joint_map: Union[None, str, JointMap] = None, *,
@@ -1085,11 +1149,12 @@ def clip_to_body_motion(clip: BvhClip, joint_map: Union[None, str, JointMap] = N
     jm = get_joint_map(joint_map, clip)
     _check_source_joints(jm, clip)
     M = axis_conversion(up or jm.up, forward or jm.forward)
-    res = _Resolver(clip.joint_names)
-    pos_src, rot_src = clip.global_transforms()
+    res = _Resolver(_point_names(clip))
     T = clip.num_frames
     if T == 0:
         raise ValueError(f"{clip.name}: clip has no frames")
+    pos_src, rot_src = clip.global_transforms()
+    pos_src = np.concatenate([pos_src, clip.end_site_positions(pos_src, rot_src)], axis=1)   # + End Sites
 
     # chain weights from the clip's mean joint distances (constant for rigid bones)
     sample = pos_src[:: max(1, T // 64)]
@@ -1114,10 +1179,10 @@ def clip_to_body_motion(clip: BvhClip, joint_map: Union[None, str, JointMap] = N
     scale = float(scale)
 
     if any(ax.kind == "rest" for o in jm.orientations.values() for ax in (o.primary, o.secondary)):
-        rep = rest_pose_report(clip, jm)
+        rep = rest_pose_report(clip, jm, up, forward)
         if not jm.rest_is_tpose or max(rep["left_arm"], rep["right_arm"], rep["spine"]) > 30.0:
             warnings.warn(f"{clip.name}: joint map {jm.name!r} takes orientations from the rest pose, "
-                          f"but the rest pose is not a T-pose ({rep})")
+                          f"but the rest pose is not a T-pose ({rep})" + _axes_hint(clip, jm, M, rep))
 
     # positions: W combines source joints, then axes and units
     P = np.einsum("kj,tjc->tkc", W, pos_src)
