@@ -281,3 +281,16 @@ def test_a_prefix_every_joint_shares_is_looked_past(motion, prefix, tmp_path):
     assert clip.joint_names[0] == prefix + "Hips"
     assert detect_joint_map(clip.joint_names, clip.parents) is MIXAMO
     _check_roundtrip(clip_to_body_motion(clip), pos, rot, body)
+
+
+@pytest.mark.parametrize("frame_time, fps", [(0.0333, 30.0), (0.0167, 60.0), (0.0417, 24.0), (0.0111, 90.0),
+                                             (0.0083333, 120.0), (0.0333667, 1 / 0.0333667), (0.03, 1 / 0.03)])
+def test_frame_time_written_with_few_digits(motion, tmp_path, frame_time, fps):
+    """``Frame Time: 0.0333`` (a tool that writes four decimals) is 30 fps, the one whole rate whose
+    frame time rounds to it (it was 30.03; 0.0167 gave 59.88); NTSC's 0.0333667 keeps 29.97 and
+    ``0.03``, which 29-40 fps all round to, keeps 33.3."""
+    body, _, _, pos, rot = motion
+    clip = cmu_clip(body, pos[:4], rot[:4])
+    clip.frame_time = frame_time
+    m = clip_to_body_motion(_through_file(clip, tmp_path, "take.bvh"))
+    assert m.fps == pytest.approx(fps, rel=1e-9)

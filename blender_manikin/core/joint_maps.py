@@ -821,7 +821,8 @@ class MotionClip:
       :data:`ORIENTED_JOINTS` (identity = T-pose rest frame of that joint).
     * ``body``: the clip's own :class:`skeleton.Body`.
     * ``fps``: frames per second (1 / Frame Time, rounded when within 1e-4
-      of an integer); ``name``: take name; ``take_id``: split key.
+      of an integer or when a whole rate's frame time rounds to the Frame Time as written:
+      ``0.0333`` is 30); ``name``: take name; ``take_id``: split key.
     * ``unit_scale`` (metres per source unit), ``floor_height`` (metres,
       converted axes, already subtracted), ``foot_pitch`` (degrees, see
       :func:`clip_to_body_motion`), ``joint_map`` (map name), ``source``
@@ -1037,9 +1038,21 @@ def estimate_foot_pitch(positions: np.ndarray, tol: float = 0.02, percentile: fl
 
 
 def _snap_fps(frame_time: float) -> float:
+    """``1 / frame_time``, or a whole rate: the nearest when within 1e-4 of it, else the only one
+    whose frame time rounds to ``frame_time`` as written (``0.0333`` is 30 fps, not 30.03;
+    ``0.0167`` 60; ``0.0333667``, NTSC's 29.97, keeps its rate; ``0.03`` fits 29-40 and keeps 33.3)."""
     fps = 1.0 / frame_time
     r = round(fps)
-    return float(r) if r > 0 and abs(fps - r) < 1e-4 * fps else fps
+    if r > 0 and abs(fps - r) < 1e-4 * fps:
+        return float(r)
+    text = repr(float(frame_time))               # the digits as written (shortest repr)
+    if "." not in text or "e" in text:
+        return fps
+    half = 0.5 * 10.0 ** -len(text.split(".")[1])
+    if half >= frame_time:
+        return fps
+    fits = range(int(np.ceil(1.0 / (frame_time + half))), int(np.floor(1.0 / (frame_time - half))) + 1)
+    return float(fits[0]) if len(fits) == 1 and fits[0] > 0 else fps
 
 
 def _mirror(v):
