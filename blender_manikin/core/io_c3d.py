@@ -31,7 +31,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .plain import shown
-from .recording import RecordingError, read_file_bytes
+from .recording import RecordingError, read_file_bytes, row_chunks
 
 BLOCK = 512
 #: parameter section byte 3: the processor that wrote the file
@@ -284,10 +284,12 @@ def read_c3d(path) -> C3DMarkers:
                              "short)", path=path, offset=len(data))
     names = [(labels[k] if k < len(labels) else "") or f"*{k}" for k in range(used)]
     block = np.frombuffer(data, np.uint8, n * frame_bytes, at).reshape(n, frame_bytes)
-    raw = block[:, :4 * used * word].tobytes()
-    vals = (dec.floats(raw) if is_float else dec.ints(raw).astype(np.float64)).reshape(n, used, 4)
-    pts = vals[..., :3] * (1.0 if is_float else abs(scale))
-    bad = ~(vals[..., 3] >= 0) | ~np.isfinite(pts).all(-1)
-    pts[bad] = np.nan
+    pts = np.empty((n, used, 3))
+    for part in row_chunks(n):                   # a chunk of frames at a time: a cancel is checked between
+        raw = block[part, :4 * used * word].tobytes()
+        vals = (dec.floats(raw) if is_float else dec.ints(raw).astype(np.float64)).reshape(-1, used, 4)
+        chunk = vals[..., :3] * (1.0 if is_float else abs(scale))
+        chunk[~(vals[..., 3] >= 0) | ~np.isfinite(chunk).all(-1)] = np.nan
+        pts[part] = chunk
     return C3DMarkers(names, pts, units, float(rate), int(first_frame), dec.name,
                       params[("POINT", "LABELS")].offset if ("POINT", "LABELS") in params else None)

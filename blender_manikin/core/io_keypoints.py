@@ -459,6 +459,7 @@ def _one_person(raw, layout, units, up, handed, subject_params):
     src, decided, subject = raw["src"], list(raw["decided"]), raw["subject"]
     units_said = "as set" if units else "the file's"          # the option, else the file's header (TRC)
     units = units or raw["units"]
+    read_check()                          # between the load and the two steps after it: a cancel there
     X, conf = _shape_points(raw["X"], raw["conf"], src)
     T, K = X.shape[:2]
     if T < 2:
@@ -490,6 +491,7 @@ def _one_person(raw, layout, units, up, handed, subject_params):
     if _explicit(subject_params) and subject is None:
         decided.append(f"subject parameters {os.path.basename(os.fspath(subject_params))} not used (only for "
                        "a TRC's Plug-in Gait markers)")
+    read_check()
     rec = _finish(X, conf, name, src, decided, raw["hands"], units, up, handed, raw["rate"], raw["time"],
                   frames=raw["frames"], units_said=units_said, lines=raw.get("lines"))
     if subject is not None and subject.height:

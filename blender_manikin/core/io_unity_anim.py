@@ -42,12 +42,13 @@ import re
 
 import numpy as np
 
+from . import recording as _recording
 from . import rotations as rot
 from .devices import DEVICES, canonical_device, device_of_object_name, snake_name
 from .plain import shown
 from .recording import (
-    Recording, RecordingError, TrackerStream, canonical_axes, canonical_units, read_text, to_blender,
-    UNITS,
+    Recording, RecordingError, TrackerStream, canonical_axes, canonical_units, chunked, read_check,
+    read_text, to_blender, UNITS,
 )
 
 #: Unity's ``RotationOrder`` (an Euler curve's ``m_RotationOrder``) → the fixed-axes order, first
@@ -245,6 +246,24 @@ _KEY_START = re.compile(r"( *)- (serializedVersion: \d+ *\r?\n *)?time: [^\n]*\n
 _KEY_TAIL_LINE = re.compile(r" *(\w+): [^\n]*\n")
 
 
+def _key_numbers(text, one, start, end, pad, lines_per_key, size):
+    """The numbers of the keys ``one`` (:func:`_key_pattern`) from ``start`` to ``end`` of ``text``
+    as a ``(K, 1 + 3 C)`` array (time, value, inSlope, outSlope), None where the keys do not cover
+    every line.  Read about ``size`` characters (:data:`.recording.CHECK_ROWS` keys) at a time (cut
+    where a key begins: a line ``pad + "- "``), :func:`.recording.read_check` before each, so a
+    cancel stops a long clip."""
+    parts, a = [], start
+    while a < end:
+        read_check()
+        b = text.find("\n" + pad + "- ", min(a + max(size, 1), end) - 1, end) + 1 or end
+        rows = one.findall(text, a, b)
+        if len(rows) * lines_per_key != text.count("\n", a, b):
+            return None
+        parts.append(np.array(rows, dtype=np.float64).reshape(len(rows), -1))
+        a = b
+    return np.concatenate(parts) if parts else None
+
+
 def _fast_key_blocks(text):
     """``[(head start, keys end, _KeyBlock)]`` of the ``m_Curve:`` key lists written exactly in
     Unity's form (:func:`_key_pattern`, every key alike), their numbers converted at once; a list in
@@ -287,10 +306,9 @@ def _fast_key_blocks(text):
             c = nxt.lstrip(" ")[:1]                            # "": indented deeper (or a blank line)
             if c in ("", "\t", "\r", "\n", "#") or (c == "-" and len(nxt) - len(nxt.lstrip(" ")) == indent):
                 continue
-        rows = one.findall(text, start, end)
-        if len(rows) * lines_per_key != text.count("\n", start, end):
+        numbers = _key_numbers(text, one, start, end, pad, lines_per_key, (pos - start) * _recording.CHECK_ROWS)
+        if numbers is None:
             continue             # a line no key of this form covers: matches start at line starts, so they tile
-        numbers = np.array(rows, dtype=np.float64).reshape(len(rows), -1)
         if not np.isfinite(numbers[:, 0]).all():
             continue                                           # the general reader names the key
         out.append((line_start, end, _KeyBlock(text, start, end, 0, indent, comps, numbers)))
@@ -365,7 +383,7 @@ def _parse(text, path, blocks):
     pos, n0 = 0, 1
     for seg_end, keys_end, block in blocks + [(len(text), len(text), None)]:
         piece = text[pos:seg_end].splitlines()         # ends in a line break: its lines as in one split
-        for n, raw in enumerate(piece, n0):
+        for n, raw in enumerate(chunked(piece), n0):   # a cancel checked between chunks of lines
             s = raw.rstrip()
             if not s:
                 continue
@@ -472,6 +490,8 @@ def _sequence(lines, i, indent, path):
     out = _Seq()
     out.line = lines[i][0]
     while i < len(lines):
+        if len(out) % _recording.CHECK_ROWS == 0:
+            read_check()                        # a long key list: a cancel checked every CHECK_ROWS items
         ln, ind, text = lines[i]
         if ind < indent or not (text == "-" or text.startswith("- ")):
             if ind > indent:

@@ -34,6 +34,7 @@ the ``fpzip`` package (``pip install 'blender-manikin[xror]'``).
 from __future__ import annotations
 
 import os
+import time
 
 import numpy as np
 
@@ -41,7 +42,7 @@ from .io_bsor import (
     beat_saber_offsets, game_version_warning, pose_frame_masks, pose_frames_to_streams, song_speed,
 )
 from .plain import shown
-from .recording import Recording, RecordingError, canonical_axes, canonical_units, read_file_bytes
+from .recording import Recording, RecordingError, canonical_axes, canonical_units, read_check, read_file_bytes
 
 #: XROR joint names -> devices
 JOINTS = {"HEAD": "head", "HAND_LEFT": "left_hand", "HAND_RIGHT": "right_hand", "WAIST": "pelvis",
@@ -71,6 +72,10 @@ def _tracked_hand(device) -> bool:
     return "HAND" in kind and "CONTROLLER" not in kind
 
 
+#: seconds between two cancel checks (:func:`.recording.read_check`) while the fpzip decoder runs
+DECODER_POLL_S = 0.1
+
+
 def decompress_isolated(blob: bytes, path, limit: int):
     """fpzip-decompress ``blob`` in a child Python process and return the float32 array.
 
@@ -82,6 +87,7 @@ def decompress_isolated(blob: bytes, path, limit: int):
     import io
     import subprocess
     import sys
+    import tempfile
     env = dict(os.environ, PYTHONPATH=os.pathsep.join(p for p in sys.path if p))
 
     def cap():                           # POSIX: no more memory than the frames can need
@@ -92,19 +98,39 @@ def decompress_isolated(blob: bytes, path, limit: int):
         except (ImportError, ValueError, OSError):
             pass
 
-    try:
-        p = subprocess.run([sys.executable, "-c", _DECOMPRESS], input=blob, capture_output=True, env=env,
-                           timeout=300, preexec_fn=cap if os.name == "posix" else None)
-    except (OSError, subprocess.TimeoutExpired) as exc:
-        raise RecordingError(f"frames: could not run the fpzip decoder ({exc})", path=path) from None
+    # the frames go to the decoder from a temporary file, so that waiting for it can be cut in short
+    # waits with a cancel check between them (communicate's input is not sent on past a timeout)
+    with tempfile.TemporaryFile() as source:
+        source.write(blob)
+        source.seek(0)
+        try:
+            p = subprocess.Popen([sys.executable, "-c", _DECOMPRESS], stdin=source, stdout=subprocess.PIPE,
+                                 stderr=subprocess.PIPE, env=env, preexec_fn=cap if os.name == "posix" else None)
+        except OSError as exc:
+            raise RecordingError(f"frames: could not run the fpzip decoder ({exc})", path=path) from None
+        deadline = time.monotonic() + 300
+        try:
+            while True:                  # a cancel (read_check) checked every DECODER_POLL_S while it decodes
+                try:
+                    out, err = p.communicate(timeout=DECODER_POLL_S)
+                    break
+                except subprocess.TimeoutExpired:
+                    if time.monotonic() > deadline:
+                        raise RecordingError("frames: could not run the fpzip decoder (it ran for more than "
+                                             "300 s)", path=path) from None
+                    read_check()
+        finally:
+            if p.returncode is None:     # stopped (a cancel, the time limit): the decoder ends with the read
+                p.kill()
+                p.communicate()
     if p.returncode != 0:
         if p.returncode < 0:
             why = f"the decoder crashed with signal {-p.returncode}"
         else:
-            why = (p.stderr.decode("utf-8", "replace").strip().splitlines() or [f"exit status {p.returncode}"])[-1]
+            why = (err.decode("utf-8", "replace").strip().splitlines() or [f"exit status {p.returncode}"])[-1]
         raise RecordingError(f"frames: fpzip could not decompress them (corrupt data: {why})", path=path)
     try:
-        return np.load(io.BytesIO(p.stdout), allow_pickle=False)
+        return np.load(io.BytesIO(out), allow_pickle=False)
     except ValueError as exc:
         raise RecordingError(f"frames: the fpzip decoder returned no array ({exc})", path=path) from None
 
