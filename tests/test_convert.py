@@ -1,4 +1,5 @@
 """Dataset-scale conversion on Dask (core/convert.py, `blender-manikin convert`), without Blender."""
+import dataclasses
 import json
 import os
 import shutil
@@ -483,3 +484,51 @@ def test_solve_into_a_convert_folder_keeps_converts_names(tmp_path):
     assert cli.main(["solve", a, "--out", str(out), "--format", "json"]) == 0
     assert sorted(n for n in os.listdir(out) if n.endswith(".json")) == sorted(
         [f"take-{short_hash(a)}.json", f"take-{short_hash(b)}.json"])
+
+
+def test_a_group_file_is_parsed_once_per_worker_not_once_per_person(tmp_path, monkeypatch):
+    """What a worker does with a three-person file's tasks (people_tasks plans them, convert_task
+    solves each): the file is parsed once to list the people and once more for all three (it was
+    parsed again for each person: four times); each person's output is the one a fresh parse
+    gives, one person's failure leaves the others converted, and another file's task drops the
+    kept one."""
+    from fixtures_keypoints import hinge_motion, to_y_up
+    from blender_manikin.core import io_keypoints, keypoint_layouts as kl
+    body, pos, world = hinge_motion(frames=90, seed=1)
+    clean = kl.keypoints_from_body22(pos, world, "coco17", body.stature)
+    X = np.stack([to_y_up(clean + [1.5 * k, 0.0, 0.0]) for k in range(3)])
+    X[1, 60:] = np.nan                               # person 1 leaves after 60 frames
+    np.save(tmp_path / "group.npy", X)
+    path = str(tmp_path / "group.npy")
+    parses, real = [], io_keypoints._load_npy
+    monkeypatch.setattr(io_keypoints, "_load_npy", lambda p, *a, **k: parses.append(p) or real(p, *a, **k))
+    io_keypoints.forget_loads()
+    settings = SolveSettings(fps=30.0)
+    tasks = convert.people_tasks([path], settings)
+    assert [t[1] for t in tasks] == ["0", "1", "2"] and len(parses) == 1
+    st = dataclasses.asdict(settings)
+    outs = {}
+    for kept in (True, False):
+        out = tmp_path / f"out_{kept}"
+        out.mkdir()
+        recs = []
+        for p, person, people in tasks:
+            if not kept:
+                io_keypoints.forget_loads()          # as if each person ran on a worker of its own
+            recs.append(convert.convert_task(p, str(out), f"group_p{person}", ["json"], st, person=person,
+                                             people=people))
+        assert [(r["status"], r["person"], r["frames"]) for r in recs] == [("ok", "0", 90), ("ok", "1", 60),
+                                                                           ("ok", "2", 90)]
+        outs[kept] = {n: json.loads((out / n).read_text())["positions"] for n in sorted(os.listdir(out))}
+        assert len(parses) == (2 if kept else 5)
+        assert io_keypoints._KEPT == {}              # dropped after the file's last person
+    assert outs[True] == outs[False]
+    # one person failing (a label not in the file) leaves the next converted, from the kept parse
+    bad = convert.convert_task(path, str(tmp_path / "out_True"), "group_p9", ["json"], st, person="9",
+                               people=["0", "1", "2"])
+    assert bad["status"] == "error" and "no such person" in bad["error"]
+    ok = convert.convert_task(path, str(tmp_path / "out_True"), "group_p0", ["json"], st, person="0",
+                              people=["0", "1", "2"])
+    assert ok["status"] == "ok" and len(parses) == 6
+    convert.convert_task(EXAMPLE, str(tmp_path / "out_True"), "take", ["json"], st)
+    assert io_keypoints._KEPT == {}                  # a one-person task drops the group file

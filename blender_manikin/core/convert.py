@@ -16,7 +16,10 @@ dask-kubernetes: any ``distributed`` scheduler address).
   person setting ``all`` (the default) is one task per person, each written to
   ``DIR/STEM_p<label>.<ext>`` as ``solve`` names them (:func:`.file_names.person_stems`); its
   manifest lines carry ``person`` (the label) and ``people`` (all of the file's), and each person
-  is done, skipped or redone on its own as an input is.
+  is done, skipped or redone on its own as an input is.  The file is parsed once to list its
+  people, then once per worker that solves any of them: a worker keeps the last group file it
+  parsed (one file, :func:`.io_keypoints.reusing_loads`) for its next person of that file, and
+  drops it after the file's last person or before another file.
 * ``DIR/manifest.jsonl`` gets one line per finished input: status (``ok``/``error``), frames,
   seconds, stature, quality notes, outputs, the error, and the input's size and modification
   time when it was read (``source``).  A rerun skips the inputs already converted (every output
@@ -33,6 +36,7 @@ Needs the ``[dask]`` extra (``dask[distributed]``); no bpy.
 """
 from __future__ import annotations
 
+import contextlib
 import glob
 import json
 import os
@@ -284,8 +288,11 @@ def convert_task(path, out_dir, stem, fmts, settings, model=None, options=None, 
     """Convert one recording (with ``person``: that person of a keypoint file with several,
     ``people`` all of its labels); returns its manifest record (never raises for a bad file)."""
     from . import model_choice, pipeline
+    from .io_keypoints import forget_loads, reusing_loads
     t0 = time.perf_counter()
     rec = _error_record(path, None, person, people)    # its source before reading: a change after shows
+    if person is None:
+        forget_loads()                # a group file kept by a person's task before: not needed now
     try:
         st = SolveSettings(**(settings if person is None else dict(settings, person=person)))
         spec = model if model is not None else st.model
@@ -295,7 +302,10 @@ def convert_task(path, out_dir, stem, fmts, settings, model=None, options=None, 
             plan = model_choice.plan_models(targets, spec, threads=1)
             return pipeline.solve(targets, body, plan, progress=progress, overlap=st.overlap)
 
-        out = solve_recording(path, st, solver=solver)
+        # a person's task: the group file this worker parsed for another of its people is not
+        # parsed again (one file kept per worker: io_keypoints.reusing_loads)
+        with reusing_loads() if person is not None else contextlib.nullcontext():
+            out = solve_recording(path, st, solver=solver)
         for fmt in fmts:
             writer = formats.WRITERS[fmt]
             dst = os.path.join(out_dir, stem + writer.extension)
@@ -308,6 +318,8 @@ def convert_task(path, out_dir, stem, fmts, settings, model=None, options=None, 
                    + [n for n in out.info if not n.startswith("calibrated")])
     except Exception as exc:          # one bad file never stops the others
         rec["error"] = error_message(exc)
+    if person is not None and people and str(person) == str(people[-1]):
+        forget_loads()                # the file's last person (tasks are queued in order): not kept on
     rec["seconds"] = round(time.perf_counter() - t0, 3)
     return rec
 

@@ -69,9 +69,11 @@ naming the file and the problem (and the line, for CSV).
 """
 from __future__ import annotations
 
+import contextlib
 import csv
 import os
 import re
+import threading
 import tokenize
 import zipfile
 import zlib
@@ -349,7 +351,68 @@ def _seen_frames(X, conf):
     return ok.sum(1) * 2 >= X.shape[1]
 
 
+#: the last file :func:`_load_input` read inside :func:`reusing_loads` (this process's, one file):
+#: ``{"key": (path, size, modification time, options), "raw": its dict}``
+_KEPT = {}
+_KEPT_LOCK = threading.Lock()
+_REUSE = threading.local()
+
+
+@contextlib.contextmanager
+def reusing_loads():
+    """Inside this block, a file this process loaded last (inside such a block too), unchanged
+    since (same size and modification time) and read with the same options, is not parsed again:
+    the batch converter's per-person tasks (``core.convert``) read a group file once per worker,
+    not once per person.  One file is kept at most: loading another drops it first
+    (:func:`forget_loads` drops it at once).  Outside such a block, reads neither use nor fill it."""
+    before = getattr(_REUSE, "on", False)
+    _REUSE.on = True
+    try:
+        yield
+    finally:
+        _REUSE.on = before
+
+
+def forget_loads():
+    """Drop the file :func:`reusing_loads` keeps (its arrays are freed when nothing else holds them)."""
+    with _KEPT_LOCK:
+        _KEPT.clear()
+
+
+def _load_key(path, rate, mapping, subject_params, person_axis, layout):
+    """What a kept load must match: the file (absolute path, size, modification time in ns) and
+    the options; None (never kept) for a folder, a mapping given as a dict or a missing file."""
+    p = os.path.abspath(os.fspath(path))
+    if not isinstance(mapping, (str, os.PathLike, type(None))):
+        return None
+    try:
+        st = os.stat(p)
+    except OSError:
+        return None
+    if not os.path.isfile(p):
+        return None
+    return (p, st.st_size, st.st_mtime_ns, rate, None if mapping is None else os.fspath(mapping),
+            None if subject_params is None else str(subject_params), person_axis, layout)
+
+
 def _load_input(path, rate, mapping, subject_params, person_axis, layout):
+    """:func:`_read_input`, or inside :func:`reusing_loads` the file this process read last when it
+    is the same (the dict is shared: its readers copy what they change)."""
+    key = _load_key(path, rate, mapping, subject_params, person_axis, layout) \
+        if getattr(_REUSE, "on", False) else None
+    if key is None:
+        return _read_input(path, rate, mapping, subject_params, person_axis, layout)
+    with _KEPT_LOCK:
+        if _KEPT.get("key") == key:
+            return _KEPT["raw"]
+        _KEPT.clear()                    # the file before is dropped before this one is read
+    raw = _read_input(path, rate, mapping, subject_params, person_axis, layout)
+    with _KEPT_LOCK:
+        _KEPT.update(key=key, raw=raw)
+    return raw
+
+
+def _read_input(path, rate, mapping, subject_params, person_axis, layout):
     """The file read as it stands: a dict of ``X`` (its array), ``time``, ``conf``,
     ``file_layout``, ``hands``, ``src``, ``decided``, ``subject``, ``units``, ``rate`` and
     ``people`` (None for one person, else ``[(label, (X (T, K, 3|4), conf, first frame)), ...]``
