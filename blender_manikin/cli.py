@@ -8,7 +8,8 @@ Two ways to run it (the same code)::
 
 INPUT is a recording (any format of :mod:`blender_manikin.core.formats`: ``.csv`` native
 or wide layout, ``.bsor`` Beat Saber replay, ``.xror`` XROR), 3D keypoints (a FreeMoCap
-recording folder, ``.npy`` / ``.npz`` arrays, a keypoint CSV, a ``.trc`` / ``.c3d`` of markers; solved by HybrIK IK, see
+recording folder, ``.npy`` / ``.npz`` arrays, a keypoint CSV, a keypoint ``.json`` or a folder of per-frame
+JSON keypoints (EasyMocap, OpenPose 3-D), a ``.trc`` / ``.c3d`` of markers; solved by HybrIK IK, see
 :mod:`blender_manikin.core.keypoint_solve`) or a folder (its recordings, sorted).  For every
 input the scene is reset to an empty factory scene, the recording is solved and
 ``DIR/STEM.<ext>`` is written for each format (inputs that share a name, ``take.csv`` in two
@@ -411,15 +412,17 @@ def parse_formats(text):
 
 def expand_inputs(inputs, out=None):
     """Files of ``inputs`` with folders expanded to their recordings (sorted), except FreeMoCap
-    recording folders, which are one input each.  Order kept; a file given twice (again, in a
-    folder also given, or through a symbolic link) is solved once, under its first name.  A
-    folder's sub-folders are not searched: they are named on stderr (but not ``out``, the output
-    folder), so a nested take is not passed over unseen; a symbolic link with a recording's
-    extension whose target is gone (or that loops) is listed, and its solve says so."""
-    from .core.io_keypoints import freemocap_body_file
+    recording folders and folders of per-frame JSON keypoints, which are one input each.  Order
+    kept; a file given twice (again, in a folder also given, or through a symbolic link) is
+    solved once, under its first name.  A folder's sub-folders are not searched: they are named
+    on stderr (but not ``out``, the output folder), so a nested take is not passed over unseen;
+    a symbolic link with a recording's extension whose target is gone (or that loops) is listed,
+    and its solve says so."""
+    from .core.io_keypoints import freemocap_body_file, keypoint_json_files
     files = []
     for item in inputs:
-        if os.path.isdir(item) and freemocap_body_file(item):     # a FreeMoCap recording: one input
+        if os.path.isdir(item) and (freemocap_body_file(item) or keypoint_json_files(item)):
+            # a FreeMoCap recording, a folder of per-frame JSON keypoints (EasyMocap, OpenPose): one input
             files.append(item.rstrip("/\\") or item)
         elif os.path.isdir(item):
             # a link with a recording's extension whose target is gone or that loops is kept, so

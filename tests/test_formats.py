@@ -18,7 +18,7 @@ EXAMPLE = os.path.join(ROOT, "examples", "example_recording.csv")
 def test_readers_by_extension_and_by_content(tmp_path):
     assert formats.input_extensions() == (".csv", ".bsor", ".xror", ".json", ".jsonl", ".ndjson", ".npy", ".npz",
                                           ".trc", ".c3d", ".anim")
-    assert [f.name for f in formats.READERS.values() if f.kind == "keypoints"] == ["keypoints"]
+    assert [f.name for f in formats.READERS.values() if f.kind == "keypoints"] == ["keypoints", "keypoints_json"]
     assert formats.reader_for("x.CSV").name == "csv" and formats.reader_for("y.bsor").name == "bsor"
     # a replay saved under another name is still recognised by its magic number
     path = tmp_path / "replay.dat"

@@ -141,12 +141,15 @@ class MANIKIN_Settings(PropertyGroup):
                             for f in formats.READERS.values() if f.kind == "trackers")),
                ('SCENE', "Scene", "Animated objects or bones in this scene, mapped to devices"),
                ('KEYPOINTS', "Keypoints", "3D keypoints from markerless or marker capture: a FreeMoCap "
-                "folder's mediapipe_body_3d_xyz.npy, an .npy / .npz array, a keypoint CSV, an OpenSim .trc "
+                "folder's mediapipe_body_3d_xyz.npy, an .npy / .npz array, a keypoint CSV or JSON (EasyMocap, "
+                "OpenPose 3-D, MMPose, MediaPipe), an OpenSim .trc "
                 "(Pose2Sim) or a marker capture .c3d (Vicon, Qualisys); solved by HybrIK twist-and-swing IK")])
     keypoint_path: StringProperty(
         name="Keypoints", subtype='FILE_PATH', default="",
         description="Keypoint file: FreeMoCap output_data/mediapipe_body_3d_xyz.npy (or the recording "
-                    "folder), .npy / .npz array (frames x points x 3), CSV with time and <point>_x/_y/_z, or "
+                    "folder), .npy / .npz array (frames x points x 3), CSV with time and <point>_x/_y/_z, a "
+                    "keypoint JSON (MMPose results, MediaPipe landmark lists) or a folder of per-frame JSON "
+                    "files (EasyMocap keypoints3d, OpenPose --3d), or "
                     "an OpenSim .trc of markers named as points (Pose2Sim), or a .trc / .c3d of anatomical "
                     "markers (Plug-in Gait, OpenCap; C3D from Vicon, Qualisys, OptiTrack, Cortex)")
     keypoint_from: EnumProperty(name="From", default='FILE',

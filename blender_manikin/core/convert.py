@@ -91,14 +91,15 @@ def collect_inputs(items, exclude=()):
 
 def _walk_recordings(folder, kept=lambda p: True):
     """Recordings under ``folder``: files with a reader's extension, and FreeMoCap recording
-    folders (one input each; their own arrays are not inputs); folders for which ``kept(path)``
+    folders and folders of per-frame JSON keypoints (one input each; their own files are not
+    inputs); folders for which ``kept(path)``
     is false are not searched."""
-    from .io_keypoints import freemocap_body_file
+    from .io_keypoints import freemocap_body_file, keypoint_json_files
     for d, dirs, fs in os.walk(folder):
         if not kept(d):
             dirs[:] = []
             continue
-        if freemocap_body_file(d):
+        if freemocap_body_file(d) or keypoint_json_files(d):
             dirs[:] = []
             yield d
             continue

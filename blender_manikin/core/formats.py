@@ -65,8 +65,8 @@ def register_writer(fmt: WriterFormat) -> WriterFormat:
 
 
 def input_extensions() -> tuple:
-    """Every extension a reader claims, e.g. ``(".csv", ".bsor")``."""
-    return tuple(e for f in READERS.values() for e in f.extensions)
+    """Every extension a reader claims, each once, e.g. ``(".csv", ".bsor")``."""
+    return tuple(dict.fromkeys(e for f in READERS.values() for e in f.extensions))
 
 
 #: extensions other files share (layout and offsets files, this add-on's JSON output, convert's
@@ -101,9 +101,16 @@ def reader_for(path) -> ReaderFormat:
     :class:`RecordingError` naming the file when no reader knows it."""
     path = os.fspath(path)
     ext = os.path.splitext(path)[1].lower()
-    for fmt in READERS.values():
-        if ext in fmt.extensions:
-            return fmt
+    claim = [fmt for fmt in READERS.values() if ext in fmt.extensions]
+    if len(claim) > 1:                  # an extension formats share (.json): the one whose sniff knows the file
+        try:
+            with open(path, "rb") as f:
+                head = f.read(SNIFF_BYTES)
+        except OSError:
+            head = b""
+        return next((fmt for fmt in claim if fmt.sniff is not None and fmt.sniff(head)), claim[0])
+    if claim:
+        return claim[0]
     try:
         with open(path, "rb") as f:
             head = f.read(SNIFF_BYTES)
@@ -238,6 +245,18 @@ def _read_keypoints(path, axes=None, units=None):
 # 3D keypoints; keypoint CSVs and FreeMoCap folders are recognised by io_keypoints.is_keypoint_input
 register_reader(ReaderFormat("keypoints", "3D keypoints", (".npy", ".npz", ".trc", ".c3d"), _read_keypoints,
                              kind="keypoints"))
+
+
+def _sniff_keypoint_json(head: bytes) -> bool:
+    from .io_keypoints import looks_like_keypoint_json
+    return looks_like_keypoint_json(decode_head(head))
+
+
+# 3D keypoints as JSON (EasyMocap's keypoints3d/ frames, OpenPose's pose_keypoints_3d, MMPose's results,
+# MediaPipe landmark lists): told from the JSON readers' shared .json by their first bytes; a folder of
+# per-frame files is one input (io_keypoints.keypoint_json_files)
+register_reader(ReaderFormat("keypoints_json", "3D keypoints JSON", (".json",), _read_keypoints,
+                             _sniff_keypoint_json, kind="keypoints"))
 
 
 def _read_unity_anim(path, axes=None, units=None):

@@ -32,6 +32,13 @@ Inputs:
   beside the TRC (:func:`.subject_params.find_subject_params`), gives the subject's joint widths
   and stature (``metadata["subject_height"]``, metres).  Markers of one ``Subject:`` prefix only
   (several subjects in one file are refused, naming them);
+* JSON (:func:`_load_json_keypoints`): a folder of one file per frame (:func:`keypoint_json_files`:
+  EasyMocap's ``keypoints3d/000000.json``, ``[{"id", "keypoints3d": [[x, y, z, c] * 25]}]``;
+  OpenPose's ``--3d`` ``*_keypoints.json``, ``people[].pose_keypoints_3d`` flat x, y, z, c), or one
+  file of a take (MMPose's results, ``{"meta_info", "instance_info": [{"frame_id", "instances":
+  [{"keypoints", "keypoint_scores"}]}]}``, the layout from ``meta_info``'s ``dataset_name``; a
+  list of MediaPipe landmark lists ``[[{"x", "y", "z", "visibility"} * 33], ...]``), each person
+  by their id (else their place in the frame), the ``c`` / score / visibility the confidence;
 * ``.c3d`` (Vicon, Qualisys, OptiTrack / Motive, Cortex marker capture, :mod:`.io_c3d`): its
   ``POINT:LABELS`` markers read as a TRC's (the same step, :func:`_markers_to_points`), units
   from ``POINT:UNITS``, times from ``POINT:RATE`` and the first frame.
@@ -71,6 +78,7 @@ from __future__ import annotations
 
 import contextlib
 import csv
+import json
 import os
 import re
 import threading
@@ -88,8 +96,8 @@ from . import subject_params as sp
 from . import rotations as rot
 from . import skeleton as sk
 from .plain import shown
-from .recording import (RecordingError, UNITS, batches, canonical_units, chunked, decode_head, load_json_file,
-                        missing_file, read_check, read_text, row_chunks, time_unit_of_step)
+from .recording import (RecordingError, UNITS, batches, canonical_units, chunked, decode_head, json_key_line,
+                        load_json_file, missing_file, read_check, read_text, row_chunks, time_unit_of_step)
 
 #: points with a confidence below this are treated as missing
 MIN_CONFIDENCE = 0.3
@@ -110,6 +118,11 @@ FREEMOCAP_FILES = (os.path.join("output_data", FREEMOCAP_BODY), FREEMOCAP_BODY,
 LEADING_POINTS = {
     44: ("body25", "4D-Humans / HMR 2.0's pred_keypoints_3d: OpenPose's 25 joints, then 19 extra"),
     49: ("body25", "SPIN / VIBE's joints3d: OpenPose's 25 joints, then 24 extra"),
+    137: ("body25", "OpenPose's / EasyMocap's total: 25 joints, then 2 x 21 hands and 70 face points"),
+    67: ("body25", "EasyMocap's bodyhand: OpenPose's 25 joints, then the left and right hands' 2 x 21"),
+    118: ("body25", "EasyMocap's bodyhandface: OpenPose's 25 joints, then 2 x 21 hands and 51 face points"),
+    133: ("coco17", "COCO-WholeBody (MMPose, RTMPose / RTMW3D): COCO's 17 body points, then 6 feet, 68 face "
+                    "and 2 x 21 hands"),
     543: ("mediapipe33", "FreeMoCap's whole MediaPipe skeleton: the body's 33, then the hands' 2 x 21 and the "
                          "face's 468"),
     553: ("mediapipe33", "FreeMoCap's whole MediaPipe skeleton: the body's 33, then the hands' 2 x 21 and the "
@@ -162,11 +175,13 @@ def is_keypoint_input(path) -> bool:
     """True for what :func:`read_keypoints` reads: a FreeMoCap folder, a ``.npy`` / ``.npz`` / ``.trc`` / ``.c3d``,
     or a CSV whose columns are ``<point>_x/_y/_z`` of a keypoint layout (no tracker devices)."""
     p = os.fspath(path)
-    if freemocap_body_file(p):
+    if freemocap_body_file(p) or keypoint_json_files(p):
         return True
     ext = os.path.splitext(p)[1].lower()
     if ext in (".npy", ".npz", ".trc", ".c3d"):
         return os.path.isfile(p)
+    if ext == ".json":
+        return os.path.isfile(p) and _json_head_kind(p) is not None
     if ext == ".csv" and os.path.isfile(p):
         try:
             with open(p, "rb") as f:
@@ -342,7 +357,13 @@ def _person_key(person):
 
 def _seen_frames(X, conf):
     """``(T,)`` bool: frames where at least half of the ``(T, K, 3|4)`` points are finite (and
-    at or above :data:`MIN_CONFIDENCE` where a confidence is given)."""
+    at or above :data:`MIN_CONFIDENCE` where a confidence is given); of an array whose first points are
+    a layout's (:data:`LEADING_POINTS`), those points only (COCO-WholeBody's hands and face are often
+    below the threshold while the body is seen)."""
+    lead = LEADING_POINTS.get(X.shape[1])
+    if lead is not None:
+        n = len(kl.LAYOUTS[lead[0]].points)
+        X, conf = X[:, :n], (None if conf is None else np.asarray(conf)[:, :n])
     ok = np.isfinite(X[..., :3]).all(-1)
     c = X[..., 3] if X.shape[-1] == 4 and conf is None else conf
     if c is not None:
@@ -424,11 +445,23 @@ def _read_input(path, rate, mapping, subject_params, person_axis, layout):
     raw = dict(decided=[], subject=None, time=None, conf=None, file_layout=None, hands=None,
                units=None, rate=rate, people=None, frames=None, lines=None)
     npz_axis = None
+    json_files = None if body_file else keypoint_json_files(p)
     if body_file:
         raw.update(X=_load_npy(body_file), file_layout="mediapipe33", src=body_file)
         raw["decided"].append("FreeMoCap folder")
         raw["hands"] = {s: _optional_npy(os.path.join(os.path.dirname(body_file), f"mediapipe_{s}_hand_3d_xyz.npy"))
                         for s in ("left", "right")}
+    elif json_files is not None or os.path.splitext(p)[1].lower() == ".json":
+        raw["src"] = p
+        if json_files is None and not os.path.exists(p):
+            raise RecordingError(missing_file(p), path=p)
+        X, people, frames, file_layout, said = _load_json_keypoints(p, *(json_files or (None, None)))
+        raw.update(X=X, frames=frames, file_layout=file_layout)
+        raw["decided"].append(said)
+        if people is not None:
+            raw["people"] = people
+            raw["decided"].append(f"{len(people)} people (the file's person ids, else their place in each frame)")
+            return raw
     else:
         raw["src"] = p
         if not os.path.exists(p):
@@ -456,8 +489,9 @@ def _read_input(path, rate, mapping, subject_params, person_axis, layout):
                        lines=lines)
             raw["decided"] += [rules] if rules else []
         else:
-            raise RecordingError(f"not a keypoint file: expected a FreeMoCap folder, .npy, .npz, .csv, "
-                                 f".trc or .c3d, got {ext or '(no extension)'!r}", path=p)
+            raise RecordingError(f"not a keypoint file: expected a FreeMoCap folder, a folder of per-frame JSON "
+                                 f"keypoints, .npy, .npz, .csv, .json, .trc or .c3d, got {ext or '(no extension)'!r}",
+                                 path=p)
     if np.ndim(raw["X"]) == 4:
         K = raw["X"].shape[2]
         n_points = None
@@ -1120,6 +1154,267 @@ def _csv_people(path, ids, lines, pcol, tcol, tv, X):
     if tcol == "frame":
         return labels, X4, None, grid - grid[0], lines
     return labels, X4, grid, np.arange(G, dtype=np.float64), lines
+
+
+# --------------------------------------------------------------------------
+# JSON keypoints: EasyMocap, OpenPose 3-D, MMPose, MediaPipe landmark dumps
+#: keys that mark a keypoint JSON document's frame (:func:`looks_like_keypoint_json`): EasyMocap's
+#: ``keypoints3d``, OpenPose's ``pose_keypoints_3d`` (``body_keypoints_3d`` in its older docs)
+_JSON_FRAME_KEYS = re.compile(r'"(keypoints3d|pose_keypoints_3d|body_keypoints_3d)"\s*:')
+#: keys that mark a whole take's keypoint JSON: MMPose's ``--save-predictions`` results file
+_JSON_TAKE_KEYS = re.compile(r'"(instance_info|meta_info)"\s*:')
+#: MMPose's ``meta_info`` ``dataset_name`` → the layout of its ``keypoints`` (COCO-WholeBody's
+#: 133 points start with COCO's 17: :data:`LEADING_POINTS`)
+_MMPOSE_DATASETS = {"h36m": "h36m17", "coco": "coco17", "coco_wholebody": "coco17", "halpe": "halpe26",
+                    "halpe26": "halpe26"}
+#: the head of a file read to tell a keypoint JSON (bytes)
+_JSON_HEAD = 65536
+
+
+def _landmark_list(head):
+    """``"frame"`` when the JSON text ``head`` starts with a MediaPipe landmark list (``[{"x", "y",
+    "z", "visibility"}, ...]``), ``"take"`` when it starts with a list of those (frames), else None."""
+    t = head.lstrip("\ufeff \t\r\n")
+    m = re.match(r"(\[\s*)+\{([^{}]*)\}", t)
+    if m is None:
+        return None
+    keys = set(re.findall(r'"([a-z_]+)"\s*:', m.group(2)))
+    if not {"x", "y", "z", "visibility"} <= keys:
+        return None
+    return "take" if re.match(r"\[\s*\[", t) else "frame"
+
+
+def keypoint_json_kind(head_text):
+    """``"frame"`` when the JSON text ``head_text`` (a file's first bytes) is one frame of 3D keypoints
+    (EasyMocap's ``keypoints3d/000000.json``, OpenPose's ``*_keypoints.json`` with
+    ``pose_keypoints_3d``, a MediaPipe landmark list), ``"take"`` when it holds a take's frames
+    (MMPose's results file, a list of MediaPipe landmark lists), else None."""
+    t = head_text.lstrip("\ufeff \t\r\n")
+    if t[:1] not in ("[", "{") or "blender_manikin" in t[:2000]:      # not this add-on's own JSON output
+        return None
+    if _JSON_TAKE_KEYS.search(t):
+        return "take"
+    if _JSON_FRAME_KEYS.search(t):
+        return "frame"
+    return _landmark_list(t)
+
+
+def looks_like_keypoint_json(head_text) -> bool:
+    """Whether the JSON text ``head_text`` is 3D keypoints (:func:`keypoint_json_kind`)."""
+    return keypoint_json_kind(head_text) is not None
+
+
+def _json_head_kind(path):
+    try:
+        with open(path, "rb") as f:
+            return keypoint_json_kind(decode_head(f.read(_JSON_HEAD)))
+    except OSError:
+        return None
+
+
+def keypoint_json_files(path):
+    """``(files, frame numbers)`` of a folder of one keypoint JSON file per frame at ``path``
+    (EasyMocap's ``keypoints3d`` folder, or its output folder holding one; OpenPose's
+    ``--write_json`` folder): its ``.json`` files, the first of them a frame
+    (:func:`keypoint_json_kind`), at least 2, in the order of the last number in their names
+    (``000012.json``, ``clip_000000000012_keypoints.json``; the names' order where they have none
+    or repeat one), the frame numbers those numbers (else 0, 1, ...).  None for anything else."""
+    p = os.fspath(path)
+    if not os.path.isdir(p):
+        return None
+    for d in (p, os.path.join(p, "keypoints3d")):
+        if not os.path.isdir(d):
+            continue
+        names = sorted(n for n in os.listdir(d) if n.lower().endswith(".json") and not n.startswith(".")
+                       and os.path.isfile(os.path.join(d, n)))
+        if len(names) < 2 or _json_head_kind(os.path.join(d, names[0])) != "frame":
+            continue
+        nums = [re.findall(r"\d+", os.path.splitext(n)[0]) for n in names]
+        if all(nums) and len({int(n[-1]) for n in nums}) == len(names):
+            order = sorted(range(len(names)), key=lambda k: int(nums[k][-1]))
+            frames = np.array([int(nums[k][-1]) for k in order], np.float64)
+        else:
+            order, frames = range(len(names)), np.arange(len(names), dtype=np.float64)
+        return [os.path.join(d, names[k]) for k in order], frames
+    return None
+
+
+def _json_points(value, key_path, text, path, what):
+    """``(K, 4)`` float64 (x, y, z, confidence; confidence NaN where not given) of a JSON value:
+    ``[[x, y, z(, c)], ...]`` or a flat ``[x, y, z, c, ...]`` (OpenPose's, 4 a point); raises naming
+    the file, the line and the problem."""
+    def bad(problem):
+        return RecordingError(f"{what}: {problem}", path=path, line=json_key_line(text, key_path))
+    try:
+        a = np.array(value, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise bad("expected numbers ([x, y, z] or [x, y, z, confidence] a point)") from None
+    if a.ndim == 3 and a.shape[0] == 1:          # MMPose: (1, K, 3) for one instance
+        a = a[0]
+    if a.ndim == 1:
+        if a.size % 4:
+            raise bad(f"{a.size} numbers: expected x, y, z, confidence for each point (4 a point)")
+        a = a.reshape(-1, 4)
+    if a.ndim == 2 and a.shape[1] == 2 and len(a) >= 17:
+        raise bad(f"shape {tuple(a.shape)}: [x, y] a point, a 2-D pose (a picture's); 3-D keypoints are needed")
+    if a.ndim != 2 or a.shape[1] not in (3, 4):
+        raise bad(f"shape {tuple(a.shape)}: expected [x, y, z] or [x, y, z, confidence] for each point")
+    if a.shape[1] == 3:
+        a = np.concatenate([a, np.full((len(a), 1), np.nan)], 1)
+    return a
+
+
+def _json_frame_people(doc, text, path, base=()):
+    """``[(label or None, (K, 4)), ...]``: the people of one frame's JSON value ``doc`` at the key path
+    ``base`` of ``text``: EasyMocap's ``[{"id", "keypoints3d"}, ...]``, OpenPose's ``{"people":
+    [{"pose_keypoints_3d": [x, y, z, c, ...], "person_id"}, ...]}``, a MediaPipe landmark list
+    ``[{"x", "y", "z", "visibility"}, ...]`` (one person, the visibility its confidence)."""
+    out = []
+    if isinstance(doc, dict) and isinstance(doc.get("people"), list):
+        for n, person in enumerate(doc["people"]):
+            key = next((k for k in ("pose_keypoints_3d", "body_keypoints_3d") if isinstance(person, dict)
+                        and k in person), None)
+            if key is None:
+                raise RecordingError(f"people[{n}]: no pose_keypoints_3d (an OpenPose file written with --3d "
+                                     "has them)", path=path, line=json_key_line(text, base + ("people", n)))
+            if not person[key]:
+                continue                            # OpenPose without --3d, or not reconstructed
+            pid = person.get("person_id")
+            pid = pid[0] if isinstance(pid, list) and len(pid) == 1 else pid
+            label = str(pid) if isinstance(pid, int) and pid >= 0 else None
+            out.append((label, _json_points(person[key], base + ("people", n, key), text, path,
+                                            f"people[{n}].{key}")))
+        return out
+    if isinstance(doc, list) and doc and all(isinstance(d, dict) and {"x", "y", "z"} <= set(d) for d in doc):
+        try:
+            a = np.array([[d["x"], d["y"], d["z"], d.get("visibility", np.nan)] for d in doc], np.float64)
+        except (TypeError, ValueError):
+            raise RecordingError("a landmark's x, y, z or visibility is not a number", path=path,
+                                 line=json_key_line(text, base)) from None
+        return [(None, a)]
+    if isinstance(doc, list):
+        for n, person in enumerate(doc):
+            if not (isinstance(person, dict) and "keypoints3d" in person):
+                raise RecordingError(f"[{n}]: expected a person's {{\"id\", \"keypoints3d\"}} (EasyMocap) or a "
+                                     "landmark's {\"x\", \"y\", \"z\", \"visibility\"} (MediaPipe)", path=path,
+                                     line=json_key_line(text, base + (n,)))
+            pid = person.get("id")
+            out.append((None if pid is None else str(pid),
+                        _json_points(person["keypoints3d"], base + (n, "keypoints3d"), text, path,
+                                     f"[{n}].keypoints3d (person {shown(pid)})")))
+        return out
+    raise RecordingError("not a keypoint frame: expected EasyMocap's [{\"id\", \"keypoints3d\"}], OpenPose's "
+                         "{\"people\": [{\"pose_keypoints_3d\"}]} or a MediaPipe landmark list", path=path,
+                         line=json_key_line(text, base) if base else 1)
+
+
+def _mmpose_frames(frames, text, path, base):
+    """``[(frame_id or None, [(label, (K, 4)), ...]), ...]`` of MMPose's ``instance_info``: each
+    frame's ``instances``, their ``keypoints`` ``[[x, y, z], ...]`` and ``keypoint_scores`` (the
+    confidence), a person labelled by its ``track_id`` where it has one."""
+    out = []
+    for f, frame in enumerate(chunked(frames)):
+        if not (isinstance(frame, dict) and isinstance(frame.get("instances"), list)):
+            raise RecordingError(f"frame {f}: expected {{\"frame_id\", \"instances\": [...]}} (MMPose's "
+                                 "instance_info)", path=path, line=json_key_line(text, base + (f,)))
+        people = []
+        for n, inst in enumerate(frame["instances"]):
+            at = base + (f, "instances", n)
+            if not (isinstance(inst, dict) and "keypoints" in inst):
+                raise RecordingError(f"frame {f}, instance {n}: no keypoints", path=path, line=json_key_line(text, at))
+            a = _json_points(inst["keypoints"], at + ("keypoints",), text, path, f"frame {f}, instance {n}: keypoints")
+            if "keypoint_scores" in inst:
+                s = np.array(inst["keypoint_scores"], np.float64).reshape(-1)
+                if s.size != len(a):
+                    raise RecordingError(f"frame {f}, instance {n}: {s.size} keypoint_scores for {len(a)} "
+                                         "keypoints", path=path, line=json_key_line(text, at + ("keypoint_scores",)))
+                a[:, 3] = s
+            tid = inst.get("track_id")
+            people.append((None if tid is None else str(tid), a))
+        fid = frame.get("frame_id")
+        out.append((fid if isinstance(fid, (int, float)) and not isinstance(fid, bool) else None, people))
+    return out
+
+
+def _load_json_keypoints(path, files=None, frames=None):
+    """``(X, people, frames (T,), file_layout, said)`` of a keypoint JSON file (a take: MMPose's
+    results, a list of MediaPipe landmark lists; or one frame) or of ``files``, a folder's
+    per-frame JSON files (:func:`keypoint_json_files`) with their frame numbers ``frames``.
+    ``X`` ``(T, K, 4)`` for one person (people None), else people ``[(label, ((T, K, 4), None, 0)),
+    ...]`` (X None); x, y, z as written, the 4th value the confidence (NaN where not given);
+    frames numbered from the first (0)."""
+    file_layout, said = None, "JSON keypoints"
+    if files is None:
+        text = read_text(path)
+        try:
+            doc = json.loads(text)
+        except json.JSONDecodeError as exc:
+            raise RecordingError(f"not valid JSON ({exc.msg})", path=path, line=exc.lineno) from None
+        take = None
+        if isinstance(doc, dict) and "instance_info" in doc:
+            meta = doc.get("meta_info") if isinstance(doc.get("meta_info"), dict) else {}
+            file_layout = _MMPOSE_DATASETS.get(str(meta.get("dataset_name", "")).strip().lower())
+            said = "MMPose results" + (f" ({meta['dataset_name']})" if meta.get("dataset_name") else "")
+            if not isinstance(doc["instance_info"], list):
+                raise RecordingError("instance_info: expected a list of frames", path=path,
+                                     line=json_key_line(text, ("instance_info",)))
+            take = _mmpose_frames(doc["instance_info"], text, path, ("instance_info",))
+        elif isinstance(doc, list) and doc and all(isinstance(f, dict) and "instances" in f for f in doc):
+            said, take = "MMPose results", _mmpose_frames(doc, text, path, ())
+        elif isinstance(doc, list) and doc and all(isinstance(f, list) for f in doc):
+            said = "MediaPipe landmark lists" if _landmark_list(text) else "a list of JSON frames"
+            take = [(None, _json_frame_people(f, text, path, (n,)) if f else []) for n, f in enumerate(chunked(doc))]
+        if take is None:
+            _json_frame_people(doc, text, path)     # refuses what is not a frame
+            raise RecordingError("1 frame: a file of one frame (EasyMocap's keypoints3d/000000.json, OpenPose's "
+                                 f"*_keypoints.json); give its folder ({os.path.dirname(os.path.abspath(path))}), "
+                                 "whose files are the frames", path=path)
+        ids = [fid for fid, _ in take]
+        if all(i is not None for i in ids) and np.all(np.diff(ids) > 0):
+            frames = np.asarray(ids, np.float64)
+        else:
+            frames = np.arange(len(take), dtype=np.float64)
+    else:
+        take = []
+        for f in chunked(files, 64):               # a cancel checked every 64 files
+            text = read_text(f)
+            try:
+                doc = json.loads(text)
+            except json.JSONDecodeError as exc:
+                raise RecordingError(f"not valid JSON ({exc.msg})", path=f, line=exc.lineno) from None
+            take.append((f, _json_frame_people(doc, text, f)))
+        kind = "EasyMocap" if os.path.basename(os.path.dirname(files[0])) == "keypoints3d" else "per-frame"
+        said = f"{len(files)} {kind} JSON files"
+    # the people, by label (a person with none: their place in the frame)
+    labels, K, first_at = [], None, None
+    for fr, (src, people) in enumerate(take):
+        for n, (lab, a) in enumerate(people):
+            lab = str(n) if lab is None else lab
+            if lab not in labels:
+                labels.append(lab)
+            if K is None:
+                K, first_at = len(a), (src if files is not None else path, fr)
+            elif len(a) != K:
+                where = src if files is not None else path
+                raise RecordingError(f"frame {fr}: person {lab} has {len(a)} points, frame {first_at[1]} "
+                                     f"{K}" + (f" ({os.path.basename(first_at[0])})" if files is not None else ""),
+                                     path=where)
+    if not labels:
+        raise RecordingError(f"no person with 3D keypoints in any of its {len(take)} frame(s)",
+                             path=os.path.dirname(files[0]) if files is not None else path)
+    try:
+        labels.sort(key=float)
+    except ValueError:
+        pass
+    X4 = np.full((len(labels), len(take), K, 4), np.nan)
+    number = {lab: k for k, lab in enumerate(labels)}
+    for fr, (_, people) in enumerate(take):
+        for n, (lab, a) in enumerate(people):
+            X4[number[str(n) if lab is None else lab], fr] = a
+    frames = np.asarray(frames, np.float64) - float(frames[0])
+    if len(labels) == 1:
+        return X4[0], None, frames, file_layout, said
+    return None, [(lab, (X4[k], None, 0)) for k, lab in enumerate(labels)], frames, file_layout, said
 
 
 #: points a layout chosen from a TRC's markers must have (the limbs' joints)
