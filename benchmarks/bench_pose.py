@@ -133,7 +133,7 @@ def row_label(key, runner):
     ``runner``: ``key`` for the Transformer (posenet); for another backbone (the contract's
     ``architecture.arch``) its name and file in place of "shipped/previous model", as
     ``"(p) MANIKIN, Dual Attention Poser (manikin_dap.onnx)"``."""
-    arch = (runner.contract.raw.get("architecture") or {}).get("arch")
+    arch = getattr(runner.contract, "arch", None)
     if arch not in BACKBONE_LABELS:
         return key
     return f"{key.split(',')[0]}, {BACKBONE_LABELS[arch]} ({os.path.basename(runner.path)})"

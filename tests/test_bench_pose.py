@@ -202,9 +202,9 @@ def test_your_own_mocap_is_a_dataset(tmp_path, monkeypatch, capsys):
 def test_a_dual_attention_poser_row_names_its_backbone():
     # a DAP model given as --previous-model was labelled "(p) MANIKIN, previous model"
     from types import SimpleNamespace
-    dap = SimpleNamespace(contract=SimpleNamespace(raw={"architecture": {"arch": "dap"}}),
+    dap = SimpleNamespace(contract=SimpleNamespace(arch="dap"),
                           path="/x/benchmarks/models/manikin_dap.onnx")
     assert bp.row_label(bp.PREVIOUS_ROW, dap) == "(p) MANIKIN, Dual Attention Poser (manikin_dap.onnx)"
     assert bp.row_label(bp.SHIPPED, dap) == "(a) MANIKIN, Dual Attention Poser (manikin_dap.onnx)"
-    posenet = SimpleNamespace(contract=SimpleNamespace(raw={"architecture": {"arch": "posenet"}}), path="/m/s.onnx")
+    posenet = SimpleNamespace(contract=SimpleNamespace(arch="posenet"), path="/m/s.onnx")
     assert bp.row_label(bp.PREVIOUS_ROW, posenet) == "(p) MANIKIN, previous model"

@@ -224,9 +224,9 @@ def _stem(path):
 
 def _whole_take_note(runner, targets, chosen=False):
     devices = tuple(runner.contract.devices)
-    arch = (runner.contract.raw.get("architecture") or {}).get("arch")
+    arch = getattr(runner.contract, "arch", None)
     backbone = f"{BACKBONE_LABELS[arch]}; " if arch in BACKBONE_LABELS else ""
-    if runner.contract.raw.get("causal"):        # run_network: one window ending at each frame, no overlap
+    if getattr(runner.contract, "causal", False):        # run_network: one window ending at each frame, no overlap
         backbone += "causal: each frame from a window ending at it; "
     note = f"model {_stem(runner.path)} ({backbone}{_device_words(devices)}{', chosen' if chosen else ''})"
     unused = [d for d in EXTRA_DEVICES if d in targets.pos and d not in devices]

@@ -52,6 +52,12 @@ class Contract:
         return bool(aug.get("mirror"))
 
     @property
+    def arch(self):
+        """The backbone the model was trained with (``train --arch``: ``posenet``, ``dap``), None
+        where the contract does not say."""
+        return (self.raw.get("architecture") or {}).get("arch")
+
+    @property
     def causal(self):
         """Whether the model attends to past frames only (``train --causal``, a live variant): it is
         run with one window per frame that ends at that frame (:func:`.pipeline.run_network`)."""
