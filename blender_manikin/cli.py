@@ -451,10 +451,11 @@ def expand_inputs(inputs, out=None):
 def inapplicable_options(args, inputs):
     """Lines saying which given options do not apply to which of ``inputs`` (paths): ``--ik`` only
     to keypoint inputs, ``--model`` only to tracker recordings.  Printed once per run, so a batch
-    that mixes both kinds is told how many inputs solve without the option."""
+    that mixes both kinds is told how many inputs solve without the option.  An input that is not
+    there (its own error says so) is counted as neither."""
     from .core.io_keypoints import is_keypoint_input
     kp = sum(bool(is_keypoint_input(p)) for p in inputs)
-    trackers = len(inputs) - kp
+    trackers = sum(os.path.exists(p) for p in inputs) - kp
     notes = []
     if getattr(args, "ik", None) is not None and trackers:
         notes.append(f"--ik {args.ik}: not used for the {trackers} tracker recording(s) of {len(inputs)} "
@@ -799,9 +800,10 @@ def main(argv=None):
     jobs = [(p, names[(p, None if lab is None else str(lab))], lab, rec) for p, lab, rec in jobs]
     notes = inapplicable_options(args, inputs)
     if args.dry_run:
-        for note in notes:
+        code = dry_run(jobs, args.out, formats, getattr(args, "overwrite", False))
+        for note in notes:              # at the end, as a solve says them
             print(f"blender_manikin: {note}", file=sys.stderr, flush=True)
-        return dry_run(jobs, args.out, formats, getattr(args, "overwrite", False))
+        return code
     failed = done = 0
     path = inputs[0]
     with _ctrl_c() as interrupted:

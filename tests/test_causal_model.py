@@ -73,3 +73,21 @@ def test_a_causal_model_solves_a_frame_alike_whatever_comes_after_it(tmp_path, t
     a = _fields(pipeline.run_network(targets, body, centred))
     b = _fields(pipeline.run_network(changed, body, centred))
     assert np.abs(a["root_rot"][:cut] - b["root_rot"][:cut]).max() > 1e-3
+
+
+def test_a_causal_model_trained_mirrored_does_not_flicker_on_a_held_pose(tmp_path, targets):
+    """A model trained on mirrored windows runs mirror "alternate" by default; with one window
+    per frame that left every other frame to the mirror image alone, so a held pose flickered
+    between two poses at the model's rate.  Each frame is averaged with its mirror instead."""
+    runner = _tiny_model(tmp_path, causal=True)
+    runner.contract.raw["training_data"] = {"augmentation": {"mirror": 0.5}}    # as train.py records it
+    assert runner.contract.trained_mirrored
+    n = 40
+    held = TrackerTargets(fps=targets.fps, pos={d: np.repeat(v[:1], n, 0) for d, v in targets.pos.items()},
+                          rot={d: np.repeat(v[:1], n, 0) for d, v in targets.rot.items()})
+    body = sk.make_body(1.75)
+    out = _fields(pipeline.run_network(held, body, runner))
+    both = _fields(pipeline.run_network(held, body, runner, mirror="both"))
+    for k, v in out.items():
+        np.testing.assert_allclose(v, np.repeat(v[:1], n, 0), atol=1e-6, err_msg=f"{k} changes on a held pose")
+        np.testing.assert_allclose(v, both[k], atol=1e-6, err_msg=k)

@@ -188,3 +188,16 @@ def test_options_that_do_not_apply_to_an_input_are_said_once(tmp_path, capsys):
     assert err.count("--model head_hands: not used for the 1 keypoint input(s) of 2") == 1
     code = cli.main(["solve", EXAMPLE, keypoints, "--out", str(tmp_path / "o"), "--format", "json", "--dry-run"])
     assert code == 0 and "not used for" not in capsys.readouterr().err      # nothing given: nothing said
+
+
+def test_a_dry_run_says_the_unused_options_at_its_end_and_counts_no_missing_input(tmp_path, capsys):
+    # the dry run said them before its listing (a solve says them at its end), and a missing
+    # file was one more "tracker recording" the option was not used for
+    keypoints = os.path.join(ROOT, "examples", "example_keypoints")
+    missing = str(tmp_path / "gone.csv")
+    code = cli.main(["solve", EXAMPLE, missing, keypoints, "--out", str(tmp_path / "o"), "--format", "json",
+                     "--ik", "naive", "--dry-run"])
+    assert code == 1
+    err = capsys.readouterr().err
+    assert "--ik naive: not used for the 1 tracker recording(s) of 3 input(s)" in err, err
+    assert err.index("--ik naive: not used") > err.index(f"ERROR {missing}"), err

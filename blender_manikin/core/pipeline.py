@@ -256,7 +256,9 @@ def run_network(targets: TrackerTargets, body: Body, runner, progress=None, stri
     frame, whose last output frame is the result (frames before the take's start repeat its first
     frame); ``stride`` and ``overlap`` do not apply and the temporal filter is off, so each frame
     depends only on the targets up to it (within one frame at the model's rate when the scene's
-    rate differs), at about W / overlap times the network time of a centred model.
+    rate differs), at about W / overlap times the network time of a centred model.  Its mirror
+    "alternate" (the default of a model trained mirrored) runs as "both", twice that time: with
+    one window per frame, alternating would leave every other frame to the mirror image alone.
     """
     c = runner.contract
     W = c.window
@@ -267,13 +269,17 @@ def run_network(targets: TrackerTargets, body: Body, runner, progress=None, stri
         raise ValueError(f"mirror {mirror!r}: choose one of {', '.join(MIRROR_CHOICES)}")
     if any(mirror_name(d) not in c.devices for d in c.devices):
         mirror = "off"                  # a model with a tracker on one side only has no mirror image
+    causal = bool(getattr(c, "causal", False))
+    if causal and mirror == "alternate":
+        # one window per frame: every other frame would be the mirror's alone (a held pose flickered
+        # between the two at the model's rate); each frame is averaged with its mirror instead
+        mirror = "both"
     pos_m, rot_m = {}, {}
     for d in c.devices:
         if d not in targets.pos:
             raise ValueError(f"the pose model needs a '{d}' tracker; the recording has {list(targets.pos)}")
         pos_m[d], rot_m[d], t_in, t_out = resample_pose_targets(targets.pos[d], targets.rot[d], fps, c.fps)
     N = t_out.shape[0]
-    causal = bool(getattr(c, "causal", False))
     if causal:
         # a causal (live) model: one window per frame, ending at the frame it solves, whose output
         # is the window's last frame; the first frames see the take's first frame repeated before it
