@@ -1,7 +1,7 @@
-"""tools/gui_userdata_check.sh, the CI step that drives every operator in a real Blender window,
-run here with stand-ins for Blender, xvfb-run and the zip build (no Blender needed): a Blender
-that never quits is stopped after GUI_CHECK_TIMEOUT_S and the step fails, where CI waited for
-ever.  Needs bash and coreutils' timeout (skipped without them)."""
+"""tools/gui_userdata_check.sh and tools/gui_solve_check.sh, the CI steps that drive the
+operators in a real Blender window, run here with stand-ins for Blender, xvfb-run and the zip
+build (no Blender needed): a Blender that never quits is stopped after GUI_CHECK_TIMEOUT_S and
+the step fails, where CI waited for ever.  Needs bash and coreutils' timeout (skipped without them)."""
 import os
 import shutil
 import signal
@@ -22,7 +22,9 @@ def _stub(folder, name, text):
     path.chmod(0o755)
 
 
-def test_gui_userdata_check_stops_a_blender_that_never_quits(tmp_path):
+@pytest.mark.parametrize("script, said", [("gui_userdata_check.sh", "userdata_check: ok: started"),
+                                          ("gui_solve_check.sh", None)])
+def test_gui_check_stops_a_blender_that_never_quits(tmp_path, script, said):
     bin_ = tmp_path / "bin"
     bin_.mkdir()
     # build_addon.py: an empty zip where the script looks for it; anything else: this Python
@@ -38,14 +40,15 @@ echo "userdata_check: ok: started"; exec sleep 600
 ''')
     _stub(bin_, "xvfb-run", 'shift 3; exec "$@"\n')            # -a -s "-screen ..." COMMAND...
     env = dict(os.environ, PATH=f"{bin_}{os.pathsep}{os.environ.get('PATH', '')}", GUI_CHECK_TIMEOUT_S="2")
-    proc = subprocess.Popen(["bash", os.path.join(ROOT, "tools", "gui_userdata_check.sh")], env=env,
+    proc = subprocess.Popen(["bash", os.path.join(ROOT, "tools", script)], env=env,
                             stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, start_new_session=True)
     try:
         out, _ = proc.communicate(timeout=120)
     except subprocess.TimeoutExpired:
         os.killpg(proc.pid, signal.SIGKILL)         # the stand-in Blender and its sleep too
         proc.communicate()
-        pytest.fail("tools/gui_userdata_check.sh still waits for a Blender that never quits")
+        pytest.fail(f"tools/{script} still waits for a Blender that never quits")
     assert proc.returncode != 0, out
     assert "did not finish in 2 s" in out, out
-    assert "userdata_check: ok: started" in out, out
+    if said:
+        assert said in out, out

@@ -11,6 +11,8 @@
 # (A) and confirms (Return) with xdotool; when it says so, it presses Esc.  Exits 0 when every
 # check passed; prints the checks either way.  With SHOT.png, also saves a screenshot of the
 # window while Solve Several Files solves its third take (the status bar: which file, how far).
+# Blender (and this script's watch of it) is stopped, and the check fails, after
+# GUI_CHECK_TIMEOUT_S seconds (default 1800), so CI does not wait forever on a hung window.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 source tools/blender_gui_env.sh
@@ -35,7 +37,9 @@ for name in ("b_long.csv", "c_long.csv"):
 PY
 SHOT="${1:+$(realpath -m "$1")}"
 export WORK SHOT
-xvfb-run -a -s "-screen 0 1600x1000x24" bash -c '
+limit="${GUI_CHECK_TIMEOUT_S:-1800}"
+rc=0
+timeout -k 30 "$limit" xvfb-run -a -s "-screen 0 1600x1000x24" bash -c '
   set -uo pipefail
   blender --window-geometry 0 0 1600 1000 --no-window-focus --python-exit-code 1 \
       --python tools/gui_solve_check.py -- --takes "$WORK/takes/" --state "$WORK/state.json" \
@@ -70,4 +74,9 @@ xvfb-run -a -s "-screen 0 1600x1000x24" bash -c '
   python3 -c "import json,sys; [print(\"  \" + c) for c in json.load(open(sys.argv[1]))[\"checks\"]]" \
       "$WORK/state.json" 2>/dev/null || true
   exit $rc
-'
+' || rc=$?
+if [ "$rc" = 124 ] || [ "$rc" = 137 ]; then
+  tail -40 "$WORK/blender.log" || true
+  echo "gui_solve_check: Blender did not finish in $limit s (GUI_CHECK_TIMEOUT_S): stopped" >&2
+fi
+exit "$rc"
