@@ -463,7 +463,7 @@ def inapplicable_options(args, inputs):
     model = str(getattr(args, "model", None) or "auto")
     if model.strip().lower() != "auto" and kp:
         notes.append(f"--model {model}: not used for the {kp} keypoint input(s) of {len(inputs)} "
-                     f"(HybrIK IK solves them, without a pose network; --model is for tracker recordings)")
+                     f"input(s) (HybrIK IK solves them, without a pose network; --model is for tracker recordings)")
     return notes
 
 

@@ -363,7 +363,7 @@ def export_fbx_takes(directory, armature, preset: str = DEFAULT, context=None, a
         raise ValueError(f"{armature.name!r} has an NLA strip in tweak mode (Tab in the NLA editor), so its "
                          f"action cannot be changed to each take: leave tweak mode to export its takes")
     output_guard.check_free(paths, overwrite,          # no file of the user's replaced
-                            remedy="tick Replace Files to replace them, or choose another folder")
+                            remedy="tick Replace Files to replace what is there, or choose another folder")
     os.makedirs(directory, exist_ok=True)
     output_guard.claim(paths)
     before = ad.action if ad is not None else None
