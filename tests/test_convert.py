@@ -532,3 +532,41 @@ def test_a_group_file_is_parsed_once_per_worker_not_once_per_person(tmp_path, mo
     assert ok["status"] == "ok" and len(parses) == 6
     convert.convert_task(EXAMPLE, str(tmp_path / "out_True"), "take", ["json"], st)
     assert io_keypoints._KEPT == {}                  # a one-person task drops the group file
+
+
+def test_a_schedulers_worker_keeps_no_group_file_after_the_run(tmp_path):
+    """A --scheduler's workers outlive the run: a worker whose last task was not the file's last
+    person (here person 2 was done before and skipped) dropped nothing, so the parse stayed in its
+    memory and a rerun after the file was rewritten with the same size and modification time (a
+    disk with 1-2 s times) solved the old numbers."""
+    from distributed import LocalCluster
+    from fixtures_keypoints import hinge_motion, to_y_up
+    from blender_manikin.core import io_keypoints, keypoint_layouts as kl
+    body, pos, world = hinge_motion(frames=90, seed=1)
+    clean = kl.keypoints_from_body22(pos, world, "coco17", body.stature)
+    path, out = str(tmp_path / "group.npy"), str(tmp_path / "out")
+
+    def write(shift):
+        np.save(path, np.stack([to_y_up(clean + [1.5 * k + shift, 0.0, 0.0]) for k in range(3)]))
+    write(0.0)
+    io_keypoints.forget_loads()
+    cluster = LocalCluster(n_workers=1, threads_per_worker=1, processes=False, dashboard_address=":0")
+    try:
+        args = ([path], out, ["json"], SolveSettings(fps=30.0))
+        kw = dict(scheduler=cluster.scheduler_address, progress=False, log=lambda m: None)
+        assert convert.run(*args, **kw)[0] == 0
+        for p in ("0", "1"):
+            os.remove(os.path.join(out, f"group_p{p}.json"))
+        assert [r["person"] for r in convert.run(*args, **kw)[1]] == ["0", "1"]
+        assert io_keypoints._KEPT == {}              # the worker (in this process) keeps nothing
+        before = json.loads(open(os.path.join(out, "group_p0.json")).read())["positions"]
+        mtime = os.stat(path).st_mtime_ns
+        write(0.5)                                   # person 0 moved 0.5 m: same size, same time
+        os.utime(path, ns=(mtime, mtime))
+        os.remove(os.path.join(out, "group_p0.json"))
+        assert convert.run(*args, **kw)[0] == 0
+        after = json.loads(open(os.path.join(out, "group_p0.json")).read())["positions"]
+        assert after != before                       # solved from the file as it is now
+    finally:
+        cluster.close()
+        io_keypoints.forget_loads()

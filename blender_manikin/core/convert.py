@@ -19,7 +19,7 @@ dask-kubernetes: any ``distributed`` scheduler address).
   is done, skipped or redone on its own as an input is.  The file is parsed once to list its
   people, then once per worker that solves any of them: a worker keeps the last group file it
   parsed (one file, :func:`.io_keypoints.reusing_loads`) for its next person of that file, and
-  drops it after the file's last person or before another file.
+  drops it after the file's last person or before another file; every worker drops it when the run ends.
 * ``DIR/manifest.jsonl`` gets one line per finished input: status (``ok``/``error``), frames,
   seconds, stature, quality notes, outputs, the error, and the input's size and modification
   time when it was read (``source``).  A rerun skips the inputs already converted (every output
@@ -361,6 +361,18 @@ def _client(scheduler, workers, timeout=None):
                                    "is it running, and is the address right (tcp://HOST:PORT)?") from None
 
 
+def _forget_on_workers(client):
+    """Drop the group file each worker of ``client`` keeps (:func:`.io_keypoints.forget_loads`):
+    kept past the run, its arrays would stay in a long-lived worker's memory, and a file rewritten
+    with the same size within the disk's time resolution would be solved from the old parse.  A
+    worker that does not answer is left as it is."""
+    from .io_keypoints import forget_loads
+    try:
+        client.run(forget_loads, on_error="ignore")
+    except Exception:                 # the scheduler gone: its workers with it, nothing kept to drop
+        pass
+
+
 def _error_record(path, message, person=None, people=None):
     rec = {"input": path, "status": "error", "outputs": [], "frames": 0, "seconds": 0.0, "stature": None,
            "notes": [], "error": message, "source": input_signature(path)}
@@ -603,6 +615,8 @@ def run(inputs, out_dir, fmts, settings: SolveSettings, scheduler=None, workers=
                                                len(tasks) - skipped - len(records)))
         raise
     finally:
+        if cluster is None:           # a --scheduler's workers outlive the run: a group file kept by one
+            _forget_on_workers(client)   # (its last person done elsewhere or skipped) is not kept on
         client.close()
         if cluster is not None:
             cluster.close()
