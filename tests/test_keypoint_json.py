@@ -290,3 +290,17 @@ def test_convert_and_solve_take_a_folder_of_frames_as_one_input(tmp_path, motion
     assert sorted(n for n in os.listdir(out) if n.endswith(".json") and not n.startswith(".")) == [
         "em.json", "results_clip.json"]
     assert len(json.loads((out / "em.json").read_text())["positions"]) == 90
+
+
+def test_a_tracker_json_with_a_meta_info_key_is_still_a_tracker_recording(tmp_path):
+    """A tracker JSON whose first key is ``meta_info`` (as MMPose's results file has) has a head
+    device and times: formats.reader_for gives it the tracker JSON reader, and the solve's choice
+    (is_keypoint_input) agrees; it took it for keypoints ('not a keypoint frame') though it read before."""
+    frames = [{"time": k / 90.0, "head": {"position": [0.1 * np.sin(k / 9.0), 1.6, 0.0], "rotation": [0, 0, 0, 1]},
+               "leftHand": {"position": [-0.3, 1.0, 0.2], "rotation": [0, 0, 0, 1]},
+               "rightHand": {"position": [0.3, 1.0, 0.2], "rotation": [0, 0, 0, 1]}} for k in range(300)]
+    path = tmp_path / "take.json"
+    path.write_text(json.dumps({"meta_info": {"app": "MyRecorder", "version": 2}, "frames": frames}))
+    assert formats.reader_for(path).name == "json"
+    assert not is_keypoint_input(path)
+    assert len(formats.reader_for(path).read(path).streams) == 3

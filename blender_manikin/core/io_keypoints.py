@@ -172,16 +172,26 @@ def freemocap_body_file(path):
 
 
 def is_keypoint_input(path) -> bool:
-    """True for what :func:`read_keypoints` reads: a FreeMoCap folder, a ``.npy`` / ``.npz`` / ``.trc`` / ``.c3d``,
-    or a CSV whose columns are ``<point>_x/_y/_z`` of a keypoint layout (no tracker devices)."""
+    """True for what :func:`read_keypoints` reads: a FreeMoCap folder, a folder of per-frame keypoint
+    JSON, a ``.npy`` / ``.npz`` / ``.trc`` / ``.c3d``, a ``.json`` with a keypoint JSON's keys
+    (:func:`keypoint_json_kind`) that the tracker JSON reader's sniff does not claim (as
+    :func:`.formats.reader_for` prefers it: a tracker JSON with a ``meta_info`` key stays one), or a CSV whose
+    columns are ``<point>_x/_y/_z`` of a keypoint layout (no tracker devices)."""
     p = os.fspath(path)
     if freemocap_body_file(p) or keypoint_json_files(p):
         return True
     ext = os.path.splitext(p)[1].lower()
     if ext in (".npy", ".npz", ".trc", ".c3d"):
         return os.path.isfile(p)
-    if ext == ".json":
-        return os.path.isfile(p) and _json_head_kind(p) is not None
+    if ext == ".json":          # a keypoint JSON's keys, and not a tracker JSON (its sniff first, as in reader_for)
+        if not os.path.isfile(p) or _json_head_kind(p) is None:
+            return False
+        from .formats import READERS, SNIFF_BYTES
+        try:
+            with open(p, "rb") as f:
+                return not READERS["json"].sniff(f.read(SNIFF_BYTES))
+        except OSError:
+            return False
     if ext == ".csv" and os.path.isfile(p):
         try:
             with open(p, "rb") as f:
