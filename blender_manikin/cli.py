@@ -412,19 +412,24 @@ def parse_formats(text):
 
 def expand_inputs(inputs, out=None):
     """Files of ``inputs`` with folders expanded to their recordings (sorted), except FreeMoCap
-    recording folders and folders of per-frame JSON keypoints, which are one input each.  Order
+    recording folders and folders of per-frame JSON keypoints, which are one input each (an
+    output folder holding a ``keypoints3d`` folder is one, and its own recordings are inputs too).  Order
     kept; a file given twice (again, in a folder also given, or through a symbolic link) is
     solved once, under its first name.  A folder's sub-folders are not searched: they are named
     on stderr (but not ``out``, the output folder), so a nested take is not passed over unseen;
     a symbolic link with a recording's extension whose target is gone (or that loops) is listed,
     and its solve says so."""
-    from .core.io_keypoints import freemocap_body_file, keypoint_json_files
+    from .core.io_keypoints import freemocap_body_file, json_frames_folder
     files = []
     for item in inputs:
-        if os.path.isdir(item) and (freemocap_body_file(item) or keypoint_json_files(item)):
+        frames = json_frames_folder(item)
+        if os.path.isdir(item) and (freemocap_body_file(item) or (
+                frames is not None and os.path.normpath(frames) == os.path.normpath(item))):
             # a FreeMoCap recording, a folder of per-frame JSON keypoints (EasyMocap, OpenPose): one input
             files.append(item.rstrip("/\\") or item)
         elif os.path.isdir(item):
+            if frames is not None:      # an output folder holding keypoints3d/: that input, and its own recordings
+                files.append(item.rstrip("/\\") or item)
             # a link with a recording's extension whose target is gone or that loops is kept, so
             # the solve says so (recording.missing_file) instead of leaving the take out unseen
             found = sorted(p for p in (os.path.join(item, n) for n in os.listdir(item))
@@ -432,12 +437,13 @@ def expand_inputs(inputs, out=None):
                            or (os.path.islink(p) and not os.path.exists(p)
                                and os.path.splitext(p)[1].lower() in _formats.input_extensions()))
             subs = sorted(n for n in os.listdir(item) if not n.startswith(".") and os.path.isdir(os.path.join(item, n))
-                          and not (out and os.path.realpath(os.path.join(item, n)) == os.path.realpath(out)))
+                          and not (out and os.path.realpath(os.path.join(item, n)) == os.path.realpath(out))
+                          and not (frames is not None and n.lower() == os.path.basename(frames).lower()))
             if subs:
                 named = ", ".join(subs[:5]) + (", ..." if len(subs) > 5 else "")
                 print(f"blender_manikin: {item}: {len(subs)} sub-folder(s) not searched ({named}): "
                       "give them as inputs too, or use convert, which searches sub-folders", file=sys.stderr)
-            if not found:               # said, so a folder given by mistake is not passed over unseen
+            if not found and frames is None:    # said, so a folder given by mistake is not passed over unseen
                 print(f"blender_manikin: {item}: no recordings in this folder", file=sys.stderr)
             files.extend(found)
         else:

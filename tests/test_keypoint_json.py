@@ -304,3 +304,20 @@ def test_a_tracker_json_with_a_meta_info_key_is_still_a_tracker_recording(tmp_pa
     assert formats.reader_for(path).name == "json"
     assert not is_keypoint_input(path)
     assert len(formats.reader_for(path).read(path).streams) == 3
+
+
+def test_a_tracker_take_beside_a_keypoints3d_folder_is_still_an_input(tmp_path, capsys):
+    """An EasyMocap output folder (holding keypoints3d/) is one input; a tracker take in that
+    folder is an input of its own, to convert's search and to solve's folder (both dropped it)."""
+    from blender_manikin.core import convert
+    (tmp_path / "keypoints3d").mkdir()
+    for k in range(3):
+        (tmp_path / "keypoints3d" / f"{k:06d}.json").write_text(
+            json.dumps([{"id": 0, "keypoints3d": [[0.1 * j, 0.0, 1.0, 1.0] for j in range(25)]}]))
+    take = tmp_path / "take.csv"
+    take.write_text("time,device,x,y,z,qw,qx,qy,qz\n0,head,0,1.6,0,1,0,0,0\n")
+    assert convert.collect_inputs([str(tmp_path)]) == [str(tmp_path), str(take)]
+    assert convert.collect_inputs([str(tmp_path / "keypoints3d")]) == [str(tmp_path / "keypoints3d")]
+    assert cli.expand_inputs([str(tmp_path)]) == [str(tmp_path), str(take)]
+    assert cli.expand_inputs([str(tmp_path / "keypoints3d")]) == [str(tmp_path / "keypoints3d")]
+    assert "not searched" not in capsys.readouterr().err      # keypoints3d/ is read, as the folder's input

@@ -92,17 +92,22 @@ def collect_inputs(items, exclude=()):
 def _walk_recordings(folder, kept=lambda p: True):
     """Recordings under ``folder``: files with a reader's extension, and FreeMoCap recording
     folders and folders of per-frame JSON keypoints (one input each; their own files are not
-    inputs); folders for which ``kept(path)``
+    inputs; an output folder holding a ``keypoints3d`` folder is one, and its other recordings
+    and sub-folders are searched as any folder's); folders for which ``kept(path)``
     is false are not searched."""
-    from .io_keypoints import freemocap_body_file, keypoint_json_files
+    from .io_keypoints import freemocap_body_file, json_frames_folder
     for d, dirs, fs in os.walk(folder):
         if not kept(d):
             dirs[:] = []
             continue
-        if freemocap_body_file(d) or keypoint_json_files(d):
+        frames = json_frames_folder(d)
+        if freemocap_body_file(d) or (frames is not None and os.path.normpath(frames) == os.path.normpath(d)):
             dirs[:] = []
             yield d
             continue
+        if frames is not None:        # d holds keypoints3d/: d is that input, not its files
+            dirs[:] = [s for s in dirs if s.lower() != os.path.basename(frames).lower()]
+            yield d
         dirs.sort()
         yield from (p for p in (os.path.join(d, f) for f in fs) if _is_recording(p))
 

@@ -1249,6 +1249,14 @@ def keypoint_json_files(path):
     return None
 
 
+def json_frames_folder(path):
+    """The folder holding the per-frame files of :func:`keypoint_json_files` ``(path)``: ``path``
+    itself, or its ``keypoints3d`` sub-folder when ``path`` is an output folder holding one (whose
+    other recordings, a tracker take beside it, are inputs of their own); None for anything else."""
+    found = keypoint_json_files(path)
+    return None if found is None else os.path.dirname(found[0][0])
+
+
 def _json_points(value, key_path, text, path, what):
     """``(K, 4)`` float64 (x, y, z, confidence; confidence NaN where not given) of a JSON value:
     ``[[x, y, z(, c)], ...]`` or a flat ``[x, y, z, c, ...]`` (OpenPose's, 4 a point); raises naming
