@@ -564,6 +564,42 @@ def test_modal_progress_cancel_and_finish(addon, recording, monkeypatch):
     assert op.reports[-1] == ({'ERROR'}, "MANIKIN: boom") and len(bpy.data.objects) == n
 
 
+def test_a_failed_modal_solve_redraws_the_panel(addon, recording, monkeypatch):
+    """A modal solve that fails ends CANCELLED, which redraws nothing: in a real window the
+    panel's "Solve failed: ..." box was not drawn (a single EasyMocap frame file picked, the
+    mouse then over the sidebar: only the status bar said it).  Its end tags the 3D Views (the
+    sidebar's areas) for a redraw, whatever way it ends."""
+    from blender_manikin.operators import solve as solve_op
+    log = []
+
+    class Area:
+        def __init__(self, kind):
+            self.type = kind
+
+        def tag_redraw(self):
+            log.append(self.type)
+
+    wm = _WM(log)
+    wm.progress_update = lambda value: None
+    wm.windows = [SimpleNamespace(screen=SimpleNamespace(areas=[Area('VIEW_3D'), Area('OUTLINER'),
+                                                                Area('VIEW_3D')]))]
+
+    class Context:                          # bpy.context with the window manager of a window
+        window_manager = wm
+
+        def __getattr__(self, name):
+            return getattr(bpy.context, name)
+
+    monkeypatch.setattr(solve_job, "run_solver", lambda *a, **k: (_ for _ in ()).throw(ValueError("boom")))
+    _settings(recording)
+    op = modal_operator(solve_op.MANIKIN_OT_solve_full_body)
+    queue = op.start_modal()
+    queue.job.join(5)
+    assert op.modal(Context(), SimpleNamespace(type='TIMER', value='NOTHING')) == {'CANCELLED'}
+    assert bpy.context.scene.manikin.last_report == "Solve failed: boom"
+    assert log == ["progress ended", "VIEW_3D", "VIEW_3D"]
+
+
 def test_a_modal_solve_is_written_in_the_scene_it_was_started_in(addon, recording):
     """The user shows another scene while the solve runs: the solve waits for its own scene (its
     settings, frame rate and armature are that scene's) instead of being written into the other."""

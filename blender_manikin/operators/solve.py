@@ -193,6 +193,13 @@ class _ModalSolves:
             wm.event_timer_remove(self._timer)
             self._timer = None
         wm.progress_end()
+        # The 3D Views (their sidebar holds the panel) drawn again: an operator that ends
+        # CANCELLED (a failed solve) redraws nothing, so the panel's "Solve failed: ..." box was
+        # not drawn until something else redrew the sidebar (the status bar alone said it).
+        for win in wm.windows:
+            for area in win.screen.areas:
+                if area.type == 'VIEW_3D':
+                    area.tag_redraw()
         ws = getattr(context, "workspace", None)
         if ws is not None:
             ws.status_text_set(None)
