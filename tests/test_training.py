@@ -476,7 +476,7 @@ def test_sources_file_fps_of_a_bvh_source(bvh_dir, tmp_path):
 
 @pytest.mark.parametrize("field, value, problem", [
     ("joint_map", "cmu-asf", "unknown joint_map 'cmu-asf' (expected one of 100style, bandai, cmu, cmu_asf, "
-     "lafan1, mixamo or a joint-map .json file)"),
+     "lafan1, mixamo, neuron, rokoko or a joint-map .json file)"),
     ("unit_scale", "centimetres", "unit_scale must be metres per unit"),
     ("unit_scale", -0.01, "unit_scale must be metres per unit"),
     ("up", "Y-up", "up must be an axis"),

@@ -96,6 +96,32 @@ zero pose a T-pose with world-aligned frames (so ``rest`` axes, as CMU).  spine1
 quarters of ``chain(Hips, Chest, ..., Chest4, Neck)``, the collar ``lerp(Collar, Shoulder;
 0.4)`` (the Collar joint sits 3 cm off the midline), the foot its ``Toe`` (ball of the foot).
 
+Xsens MVN's own BVH export has exactly 100STYLE's names and layout, so ``100style`` reads it
+(MVN's segment names ``Pelvis``, ``L5``, ``L3``, ``T12``, ``T8`` are those of MVNX files and its
+live stream, not of its BVH).
+
+Perception Neuron (Axis Neuron / Axis Studio BVH; ``neuron``): Hips, Left/RightUpLeg, Leg, Foot
+(no toe joint: the foot ends in an End Site, 8 cm below and 19.6 cm ahead of the ankle in the
+default skeleton, used as ``left_foot``), Spine, Spine1..Spine3, Neck on Spine3, Head,
+Left/RightShoulder, Arm, ForeArm, Hand and finger chains from ``LeftInHandIndex`` etc.;
+``CHANNELS 6`` on every joint, cm, +Y up, faces +Z, zero pose a T-pose with world-aligned frames
+(``rest`` axes).  On its default skeleton (hip joints 1.04 m up, so about 1.96 m tall) Spine3's
+top is at 0.805 of stature, Neck at 0.862 and Head at 0.908 (ear height), so the neck base is
+``lerp(Spine3, Neck; 0.4)`` and the head (top of the neck) ``lerp(Neck, Head; 0.2)``; spine1-3
+are the quarters of ``chain(Hips, Spine, Spine1, Spine2, Spine3)``.
+
+Rokoko Studio BVH (``rokoko``): Mixamo's names and hierarchy (Neck on Spine2, LeftToeBase) plus
+Perception Neuron style finger roots (``LeftInHandIndex`` on ``LeftHand``), which tell it from
+Mixamo (:attr:`JointMap.parents` joints must exist for detection).  Every OFFSET below the hips
+lies along the parent's local +X (not a T-pose), so orientations come from local axes, read off
+four frames of a real take and the finger OFFSETs: Hips and Head +X left, +Y up, +Z forward
+(head forward . pelvis forward 0.91); hands +X along the hand, +Y the back of the hand (the
+thumb root lies at +Z on the left hand, -Z on the right); feet +X towards LeftToeBase, -Z the
+performer's left (0.77-1.0).  Its Neck joint is at 0.851 of stature and Head at 0.913 (legs:
+about 1.77 m), so the neck base is ``lerp(Spine2, Neck; 0.8)`` and the head ``lerp(Neck,
+Head; 0.3)``; spine1-3 as Mixamo's.  The ankle->ball line dips about 50 degrees when standing
+(``foot_pitch`` measured per clip).
+
 Any other rig: a joint-map file (JSON, :func:`load_joint_map`, README "Joint-map files").  Its
 points may name a joint's End Site as ``"<joint>/End Site"`` (:data:`END_SITE`): the End Site
 OFFSET's end, posed with that joint (``p[j] + R_world[j] @ end_site[j]``), for a rig whose foot
@@ -200,7 +226,7 @@ import json
 import os
 import re
 import warnings
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Dict, Mapping, Optional, Sequence, Tuple, Union
 
 import numpy as np
@@ -213,7 +239,7 @@ from .rotations import normalize
 __all__ = [
     "Point", "joint", "lerp", "chain", "Axis", "local", "bone", "rest", "OrientationSpec",
     "JointMap", "BANDAI", "CMU", "MIXAMO", "LAFAN1", "STYLE100", "JOINT_MAPS", "load_joint_map",
-    "ORIENTED_JOINTS", "MotionClip", "END_SITE",
+    "ORIENTED_JOINTS", "MotionClip", "END_SITE", "point_names", "NEURON", "ROKOKO",
     "detect_joint_map", "get_joint_map", "axis_conversion", "detect_unit_scale",
     "estimate_floor", "clip_to_body_motion", "take_id_from_name", "rest_pose_report",
     "UNIT_CANDIDATES", "REST_FOOT_DIRECTION", "REST_FOOT_PITCH", "BANDAI_FOOT_PITCH",
@@ -225,6 +251,11 @@ NJ = skeleton.NUM_JOINTS
 _J = skeleton.J
 
 #: Joints whose orientation MotionClip carries (body-model names).
+#: Suffix that names a joint's End Site as a source point in a map: ``"LeftFoot/End Site"`` is
+#: the end of ``LeftFoot``'s End Site OFFSET, for a rig whose foot or head ends in an End Site
+#: with no toe or head-top joint (Perception Neuron's Axis Neuron BVH, older Biovision rigs).
+END_SITE = "/End Site"
+
 ORIENTED_JOINTS = ("pelvis", "head", "left_wrist", "right_wrist", "left_ankle", "right_ankle")
 
 _P = skeleton.PROPORTIONS
@@ -468,6 +499,46 @@ def _tpose_style(name, spine, limbs, unit_scale, parents, description) -> JointM
                     foot_pitch="auto", parents=parents, description=description)
 
 
+def _neuron() -> JointMap:
+    """Perception Neuron (Axis Neuron / Axis Studio BVH): the cgspeed limb names but no toe joint
+    (the foot ends in an End Site at the ball of the foot, :data:`END_SITE`), Spine..Spine3 with
+    ``Neck`` on ``Spine3`` (some versions add ``Neck1`` between Neck and Head), ``LeftInHandIndex``
+    etc. finger roots, ``CHANNELS 6`` on every joint; cm, Y-up, faces +Z, the zero pose a T-pose
+    with world-aligned frames (arms along +-X, legs along -Y)."""
+    limbs = dict(_CGSPEED_LIMBS, toe="Foot" + END_SITE)
+    jm = _tpose_style("neuron", ("Hips", "Spine", "Spine1", "Spine2", "Spine3"), limbs, "auto",
+                      (("Neck", "Spine3"),),
+                      "Perception Neuron / Axis Neuron BVH (cm, Y-up, faces +Z, T-pose rest, toes as End Sites)")
+    # its Head joint sits at ear height (0.91 of stature), its Neck joint near the top of the neck
+    pos = dict(jm.positions, neck=lerp("Spine3", "Neck", 0.4), head=lerp("Neck", "Head", 0.2))
+    return replace(jm, positions=pos)
+
+
+def _rokoko() -> JointMap:
+    """Rokoko Studio BVH: Mixamo's names and hierarchy (``Neck`` on ``Spine2``) plus Perception
+    Neuron style finger roots (``LeftInHandIndex`` on ``LeftHand``, which tells it from Mixamo);
+    cm, Y-up, faces +Z.  Every OFFSET below the hips lies along the parent's local +X, so the zero
+    pose is not a T-pose; the joints' axes (read off frames of a Rokoko take and the finger
+    OFFSETs): Hips and Head +X left, +Y up, +Z forward; LeftHand/RightHand +X along the hand, +Y
+    back of the hand (the thumb root lies towards +Z on the left hand, -Z on the right);
+    LeftFoot/RightFoot +X towards the toe, -Z to the performer's left."""
+    pos = _body_positions(("Hips", "Spine", "Spine1", "Spine2", "Neck"),
+                          lambda side, part: f"{side.capitalize()}{_CGSPEED_LIMBS[part]}")
+    # its Head joint sits at ear height (0.91 of stature), its Neck joint 0.85 of stature up
+    pos.update(neck=lerp("Spine2", "Neck", 0.8), head=lerp("Neck", "Head", 0.3))
+    ori = {
+        "pelvis": OrientationSpec("Hips", bone("Hips", "Spine"), bone("RightUpLeg", "LeftUpLeg")),
+        "head": OrientationSpec("Head", local(0, 1, 0), local(0, 0, 1)),
+        "left_wrist": OrientationSpec("LeftHand", local(1, 0, 0), local(0, 1, 0)),
+        "right_wrist": OrientationSpec("RightHand", local(1, 0, 0), local(0, 1, 0)),
+        "left_ankle": OrientationSpec("LeftFoot", bone("LeftFoot", "LeftToeBase"), local(0, 0, -1)),
+        "right_ankle": OrientationSpec("RightFoot", bone("RightFoot", "RightToeBase"), local(0, 0, -1)),
+    }
+    return JointMap("rokoko", pos, ori, unit_scale="auto", up="y", forward="z", rest_is_tpose=False,
+                    foot_pitch="auto", parents=(("Neck", "Spine2"), ("LeftInHandIndex", "LeftHand")),
+                    description="Rokoko Studio BVH (cm, Y-up, faces +Z, bones along local +X)")
+
+
 def _cgspeed_style(name, spine, neck_parent, description) -> JointMap:
     """A map for the rigs with the cgspeed BVH names (``LeftUpLeg``, ``LeftArm``, ...; T-pose rest
     with world-aligned frames): CMU's and Mixamo's, which differ in their spine (``spine``: the
@@ -530,8 +601,10 @@ CMU = _cmu()
 MIXAMO = _mixamo()
 LAFAN1 = _lafan1()
 STYLE100 = _style100()
+NEURON = _neuron()
+ROKOKO = _rokoko()
 JOINT_MAPS: Dict[str, JointMap] = {"bandai": BANDAI, "cmu": CMU, "mixamo": MIXAMO, "lafan1": LAFAN1,
-                                   "100style": STYLE100}
+                                   "100style": STYLE100, "neuron": NEURON, "rokoko": ROKOKO}
 
 
 # --------------------------------------------------------------------------
@@ -576,13 +649,9 @@ class _Resolver:
         return i
 
 
-#: Suffix that names a joint's End Site as a source point in a map: ``"LeftFoot/End Site"`` is
-#: the end of ``LeftFoot``'s End Site OFFSET, for a rig whose foot or head ends in an End Site
-#: with no toe or head-top joint (Perception Neuron's Axis Neuron BVH, older Biovision rigs).
-END_SITE = "/End Site"
 
 
-def _point_names(clip: BvhClip) -> Tuple[str, ...]:
+def point_names(clip: BvhClip) -> Tuple[str, ...]:
     """The clip's joint names, then ``<joint>/End Site`` for each joint with an End Site
     (:meth:`BvhClip.end_site_joints` order): the names a map's points may use."""
     return tuple(clip.joint_names) + tuple(clip.joint_names[j] + END_SITE for j in clip.end_site_joints())
@@ -592,18 +661,25 @@ def detect_joint_map(joint_names: Sequence[str], parents: Optional[Sequence[int]
     """The registered map whose source joints are all present (best coverage wins) and, when
     ``parents`` is given, whose :attr:`JointMap.parents` the hierarchy has (a Mixamo rig has the
     cgspeed names, but its ``Neck`` sits on ``Spine2``, two joints above the cgspeed neck base).
+    The joints :attr:`JointMap.parents` names must be there too (Rokoko's ``LeftInHandIndex``
+    tells it from Mixamo, whose names it has).
 
-    Raises ``ValueError`` listing what each map misses when none fits.
+    ``joint_names``: a clip's joints, optionally followed by ``<joint>/End Site`` names
+    (:func:`point_names`; ``parents`` then covers only the joints), which a rig whose foot ends in
+    an End Site needs (Perception Neuron).  Raises ``ValueError`` listing what each map misses
+    when none fits.
     """
-    best, report = None, []
+    best, best_need, report = None, 0, []
+    res = _Resolver(joint_names)
     for jm in JOINT_MAPS.values():
-        miss = jm.missing(joint_names)
+        need = jm.source_joints() + tuple(dict.fromkeys(n for pair in jm.parents for n in pair))
+        need = tuple(dict.fromkeys(need))
+        miss = tuple(n for n in need if res.find(n) is None)
         wrong = jm.wrong_parents(joint_names, parents) if parents is not None and not miss else ()
-        need = len(jm.source_joints())
         report.append(f"{jm.name}: " + (f"another rig with its joint names ({'; '.join(wrong)})" if wrong
                                         else f"missing {', '.join(miss) if miss else 'nothing'}"))
-        if not miss and not wrong and (best is None or need > len(best.source_joints())):
-            best = jm
+        if not miss and not wrong and (best is None or len(need) > best_need):
+            best, best_need = jm, len(need)
     if best is None:
         raise ValueError("no joint map fits this skeleton (" + "; ".join(report) + "); write a joint-map "
                          ".json for it (README 'Joint-map files'; a foot or head that ends in an End Site "
@@ -617,7 +693,7 @@ def get_joint_map(joint_map: Union[None, str, JointMap], clip: Optional[BvhClip]
     if joint_map is None or joint_map == "auto":
         if clip is None:
             raise ValueError("auto-detecting a joint map needs a clip")
-        return detect_joint_map(clip.joint_names, clip.parents)
+        return detect_joint_map(point_names(clip), clip.parents)
     if str(joint_map).lower().endswith(".json"):
         return load_joint_map(joint_map)
     try:
@@ -907,6 +983,10 @@ def _source_axis(ax: Axis, body_vec, M, res: _Resolver, rest_pos, clip_name) -> 
     raise ValueError(f"unknown axis kind {ax.kind!r}")  # pragma: no cover
 
 
+def _rounded(report: Mapping[str, float]) -> Dict[str, int]:
+    return {k: int(round(v)) for k, v in report.items()}
+
+
 def orientation_corrections(clip: BvhClip, jm: JointMap, M: np.ndarray,
                             foot_pitch: float = REST_FOOT_PITCH) -> Dict[str, Tuple[int, np.ndarray]]:
     """``{body name: (source joint index, C)}`` with ``R_body = M @ R_src @ C``.
@@ -914,7 +994,7 @@ def orientation_corrections(clip: BvhClip, jm: JointMap, M: np.ndarray,
     ``foot_pitch`` (degrees) sets the ankles' body-frame primary direction
     :func:`foot_direction`.
     """
-    res = _Resolver(_point_names(clip))
+    res = _Resolver(point_names(clip))
     rest_pos = np.concatenate([clip.rest_positions(), clip.rest_end_sites()])
     out = {}
     for name in ORIENTED_JOINTS:
@@ -924,7 +1004,15 @@ def orientation_corrections(clip: BvhClip, jm: JointMap, M: np.ndarray,
             A = tuple(foot_direction(foot_pitch))
         a = _source_axis(spec.primary, A, M, res, rest_pos, clip.name)
         b = _source_axis(spec.secondary, B, M, res, rest_pos, clip.name)
-        C = _frame(a, b) @ _frame(np.asarray(A, float), np.asarray(B, float)).T
+        try:
+            C = _frame(a, b) @ _frame(np.asarray(A, float), np.asarray(B, float)).T
+        except ValueError:
+            raise ValueError(
+                f"{clip.name}: joint map {jm.name!r}: orientations.{name}: its primary and secondary axes "
+                f"are parallel in this skeleton's rest pose, so the map does not fit this rig (a rig with "
+                f"the same joint names but another zero pose, e.g. a Rokoko BVH without finger joints read "
+                f"as 'mixamo': give the joint map 'rokoko'); rest pose: "
+                f"{_rounded(rest_pose_report(clip, jm))}") from None
         j = res(spec.source, clip.name)
         if j >= clip.num_joints:
             raise ValueError(f"{clip.name}: orientations.{name}: {spec.source!r} is an End Site, which has no "
@@ -962,7 +1050,7 @@ def rest_pose_report(clip: BvhClip, joint_map: Union[None, str, JointMap] = None
 
 def _rest_body_points(clip: BvhClip, jm: JointMap) -> np.ndarray:
     """``(22, 3)`` body joints on the clip's zero-channel pose (source axes and units)."""
-    res = _Resolver(_point_names(clip))
+    res = _Resolver(point_names(clip))
     rp = np.concatenate([clip.rest_positions(), clip.rest_end_sites()])
     W = _resolve_weights(jm, res, lambda a, b: float(np.linalg.norm(rp[b] - rp[a])), clip.name)
     return W @ rp
@@ -1127,7 +1215,7 @@ def _check_source_joints(jm: JointMap, clip: BvhClip) -> None:
     """``ValueError`` naming the clip, the map (its description: a joint-map file's name) and each
     entry (``positions.left_wrist``, ``orientations.left_ankle``) whose source joint the clip's
     skeleton does not have (a misspelt name in a joint-map file), with the skeleton's joints."""
-    names = _point_names(clip)
+    names = point_names(clip)
     miss = set(jm.missing(names))
     if not miss:
         return
@@ -1148,8 +1236,8 @@ def clip_to_body_motion(clip: BvhClip, joint_map: Union[None, str, JointMap] = N
     """Map a BVH clip onto the 22-joint body (metres, Blender axes, floor z = 0).
 
     ``joint_map``: a :class:`JointMap`, a registered name (``"bandai"``, ``"cmu"``,
-    ``"mixamo"``, ``"lafan1"``, ``"100style"``), the path of a joint-map ``.json`` file
-    (:func:`load_joint_map`) or ``None``/``"auto"`` to detect it from the joint names.
+    ``"mixamo"``, ``"lafan1"``, ``"100style"``, ``"neuron"``, ``"rokoko"``), the path of a joint-map
+    ``.json`` file (:func:`load_joint_map`) or ``None``/``"auto"`` to detect it from the joint names.
     ``unit_scale``: metres per source unit, ``"auto"``, or ``None`` for the
     map's default.  ``floor``: ``"auto"`` or the floor height in metres in
     converted axes.  ``up``/``forward`` override the map's source axes.
@@ -1162,7 +1250,7 @@ def clip_to_body_motion(clip: BvhClip, joint_map: Union[None, str, JointMap] = N
     jm = get_joint_map(joint_map, clip)
     _check_source_joints(jm, clip)
     M = axis_conversion(up or jm.up, forward or jm.forward)
-    res = _Resolver(_point_names(clip))
+    res = _Resolver(point_names(clip))
     T = clip.num_frames
     if T == 0:
         raise ValueError(f"{clip.name}: clip has no frames")

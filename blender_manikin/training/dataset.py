@@ -106,7 +106,8 @@ class MotionSource:
 
     path: a folder, a file or a tar archive of BVH or ASF/AMC takes.  name: what the model card
     calls it (default: the file name).  joint_map: ``"bandai"``, ``"cmu"`` (cgspeed BVH),
-    ``"mixamo"``, ``"lafan1"``, ``"100style"``, ``"cmu_asf"`` (CMU/HDM05 ASF), a joint-map
+    ``"mixamo"``, ``"lafan1"``, ``"100style"`` (also Xsens MVN BVH), ``"neuron"`` (Perception
+    Neuron), ``"rokoko"`` (Rokoko Studio), ``"cmu_asf"`` (CMU/HDM05 ASF), a joint-map
     ``.json`` file (:func:`core.joint_maps.load_joint_map`; relative to the sources file) or
     ``None`` (detected from the joint names).  unit_scale:
     metres per source unit, ``"auto"``, or ``None`` (the map's).  up / forward: the source's
