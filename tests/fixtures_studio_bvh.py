@@ -5,8 +5,10 @@ disk: tests write the text into ``tmp_path``.
 
 Sources (public repositories; see the jmaps2 report): Perception Neuron / Axis Neuron BVH
 header (a UDP-to-BVH bridge that prepends Axis Neuron's header; body joints, the thumb and index
-roots), Rokoko Studio BVH (AnimatedDrawings ``examples/bvh/rokoko/jesse_dance.bvh``: the whole
-header and four of its frames), Xsens MVN BVH (a BVH toolkit's ``xsens_hierarchy()``).
+roots), Rokoko Studio BVH (facebookresearch/AnimatedDrawings
+``examples/bvh/rokoko/jesse_dance.bvh``: the whole header and four of its frames; that repository
+is under the MIT licence, Copyright (c) Meta Platforms, Inc. and affiliates), Xsens MVN BVH (a
+BVH toolkit's ``xsens_hierarchy()``).
 """
 from __future__ import annotations
 
