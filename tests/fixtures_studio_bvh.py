@@ -3,7 +3,7 @@ OFFSETs and channel orders exactly as exported; fingers cut down where a test do
 and a writer that turns one into BVH text with T-pose or given frames.  Nothing here is read from
 disk: tests write the text into ``tmp_path``.
 
-Sources (public repositories; see the jmaps2 report): Perception Neuron / Axis Neuron BVH
+Sources (public repositories): Perception Neuron / Axis Neuron BVH
 header (a UDP-to-BVH bridge that prepends Axis Neuron's header; body joints, the thumb and index
 roots), Rokoko Studio BVH (facebookresearch/AnimatedDrawings
 ``examples/bvh/rokoko/jesse_dance.bvh``: the whole header and four of its frames; that repository
