@@ -243,3 +243,18 @@ def test_a_joint_map_file_may_name_an_end_site(motion, tmp_path):
     with pytest.raises(ValueError, match=r"orientations\.left_ankle: 'LeftFoot/End Site' is an End Site, which "
                                          r"has no rotation"):
         clip_to_body_motion(clip, str(f))
+
+
+def test_a_files_two_parallel_local_axes_are_refused_naming_the_file_and_line(tmp_path):
+    """An orientation whose primary and secondary are the same local axis (a typo in the file) is
+    the file's fault, whatever the rig: refused on loading, naming the file and the line (before: it
+    loaded, and solving blamed the rig and told to give the joint map 'rokoko')."""
+    d = _lafan1_file_dict()
+    d["orientations"]["head"]["secondary"] = [2, 0, 0]          # primary is "+x"
+    f = tmp_path / "typo.json"
+    f.write_text(json.dumps(d, indent=1))
+    line = f.read_text().splitlines().index('   "secondary": [') + 1
+    with pytest.raises(ValueError, match=rf"typo\.json, line {line}: orientations\.head\.secondary: \[2, 0, 0\] "
+                                         r"is parallel to primary '\+x'") as e:
+        jmod.load_joint_map(f)
+    assert "rokoko" not in str(e.value)

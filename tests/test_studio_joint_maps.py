@@ -2,6 +2,7 @@
 on hierarchies rebuilt from real files (``fixtures_studio_bvh``): detection by joint names and
 hierarchy, the rest-pose check, and where the 22 joints land."""
 import warnings
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -120,3 +121,19 @@ def test_rokoko_without_fingers_read_as_mixamo_names_the_file(tmp_path):
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         assert jmod.clip_to_body_motion(clip, "rokoko").joint_map == "rokoko"
+
+
+def test_parallel_axes_name_rokoko_only_for_the_mixamo_map(tmp_path):
+    """The advice to give 'rokoko' is for a Rokoko take read as 'mixamo'; another map whose axes
+    come out parallel on a rig (here a map whose ankle secondary is local +X, the Rokoko foot's
+    bone direction) is refused without it."""
+    clip = _clip(tmp_path, "rokoko_other_map", studio.ROKOKO, studio.ROKOKO_CHANNELS)
+    ori = dict(jmod.ROKOKO.orientations, left_ankle=jmod.OrientationSpec(
+        "LeftFoot", jmod.bone("LeftFoot", "LeftToeBase"), jmod.local(1, 0, 0)))    # +X is along that bone
+    jm = replace(jmod.ROKOKO, name="studio_file", orientations=ori)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        with pytest.raises(ValueError, match=r"rokoko_other_map: joint map 'studio_file': orientations\.left_ankle: "
+                                             r"its primary and secondary axes are parallel") as e:
+            jmod.clip_to_body_motion(clip, jm)
+    assert "rokoko'" not in str(e.value)

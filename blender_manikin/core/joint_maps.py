@@ -857,6 +857,11 @@ def load_joint_map(path) -> JointMap:
             raise ValueError(f'{w}: expected {{"joint": "Name", "primary": AXIS, "secondary": AXIS}}, '
                              f"got {shown(o)}")
         axes = [_file_axis(o[k], f"{at('orientations', n, k)}: orientations.{n}.{k}") for k in ("primary", "secondary")]
+        if axes[0].kind == axes[1].kind == "local" and np.linalg.norm(np.cross(axes[0].vector, axes[1].vector)) \
+                < 1e-6 * np.linalg.norm(axes[0].vector) * np.linalg.norm(axes[1].vector):
+            raise ValueError(f"{at('orientations', n, 'secondary')}: orientations.{n}.secondary: "
+                             f"{shown(o['secondary'])} is parallel to primary {shown(o['primary'])}: the two "
+                             "axes of a joint's frame must differ")
         ori[n] = OrientationSpec(o["joint"].strip(), *axes)
         if not tpose and "rest" in (ori[n].primary.kind, ori[n].secondary.kind):
             raise ValueError(f'{w}: "rest" axes need "rest_is_tpose": true')
@@ -1007,11 +1012,11 @@ def orientation_corrections(clip: BvhClip, jm: JointMap, M: np.ndarray,
         try:
             C = _frame(a, b) @ _frame(np.asarray(A, float), np.asarray(B, float)).T
         except ValueError:
+            hint = (" (a rig with the same joint names but another zero pose, e.g. a Rokoko BVH without "
+                    "finger joints read as 'mixamo': give the joint map 'rokoko')" if jm.name == "mixamo" else "")
             raise ValueError(
                 f"{clip.name}: joint map {jm.name!r}: orientations.{name}: its primary and secondary axes "
-                f"are parallel in this skeleton's rest pose, so the map does not fit this rig (a rig with "
-                f"the same joint names but another zero pose, e.g. a Rokoko BVH without finger joints read "
-                f"as 'mixamo': give the joint map 'rokoko'); rest pose: "
+                f"are parallel in this skeleton's rest pose, so the map does not fit this rig{hint}; rest pose: "
                 f"{_rounded(rest_pose_report(clip, jm))}") from None
         j = res(spec.source, clip.name)
         if j >= clip.num_joints:
