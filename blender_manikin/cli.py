@@ -410,6 +410,19 @@ def parse_formats(text):
     return tuple(dict.fromkeys(fmts))
 
 
+def _holds_recordings(folder):
+    """Whether ``folder`` (not its sub-folders) holds a recording or is a keypoint input itself
+    (a FreeMoCap recording, a folder of per-frame JSON keypoints)."""
+    from .core.io_keypoints import freemocap_body_file, json_frames_folder
+    try:
+        names = os.listdir(folder)
+    except OSError:
+        return True                     # named, so an unreadable folder is not passed over unseen
+    return bool(freemocap_body_file(folder) or json_frames_folder(folder)
+                or any(os.path.isfile(os.path.join(folder, n)) and _formats.is_recording_file(os.path.join(folder, n))
+                       for n in names))
+
+
 def expand_inputs(inputs, out=None):
     """Files of ``inputs`` with folders expanded to their recordings (sorted), except FreeMoCap
     recording folders and folders of per-frame JSON keypoints, which are one input each (an
@@ -439,6 +452,8 @@ def expand_inputs(inputs, out=None):
             subs = sorted(n for n in os.listdir(item) if not n.startswith(".") and os.path.isdir(os.path.join(item, n))
                           and not (out and os.path.realpath(os.path.join(item, n)) == os.path.realpath(out))
                           and not (frames is not None and n.lower() == os.path.basename(frames).lower()))
+            if frames is not None:      # an EasyMocap output folder: its keypoints2d/, smpl/, ... hold no takes
+                subs = [n for n in subs if _holds_recordings(os.path.join(item, n))]
             if subs:
                 named = ", ".join(subs[:5]) + (", ..." if len(subs) > 5 else "")
                 print(f"blender_manikin: {item}: {len(subs)} sub-folder(s) not searched ({named}): "

@@ -321,3 +321,22 @@ def test_a_tracker_take_beside_a_keypoints3d_folder_is_still_an_input(tmp_path, 
     assert cli.expand_inputs([str(tmp_path)]) == [str(tmp_path), str(take)]
     assert cli.expand_inputs([str(tmp_path / "keypoints3d")]) == [str(tmp_path / "keypoints3d")]
     assert "not searched" not in capsys.readouterr().err      # keypoints3d/ is read, as the folder's input
+
+
+def test_solve_of_an_easymocap_output_folder_names_only_sub_folders_with_takes(tmp_path, capsys):
+    """`solve` on an EasyMocap output folder does not list its keypoints2d/, smpl/, ... (per-frame
+    JSON that are no takes) as sub-folders not searched; a sub-folder with a take still is."""
+    (tmp_path / "keypoints3d").mkdir()
+    for sub in ("keypoints2d", "smpl"):
+        (tmp_path / sub).mkdir()
+        (tmp_path / sub / "000000.json").write_text(json.dumps([{"id": 0, "Rh": [[0.0, 0.0, 0.0]]}]))
+    for k in range(3):
+        (tmp_path / "keypoints3d" / f"{k:06d}.json").write_text(
+            json.dumps([{"id": 0, "keypoints3d": [[0.1 * j, 0.0, 1.0, 1.0] for j in range(25)]}]))
+    assert cli.expand_inputs([str(tmp_path)]) == [str(tmp_path)]
+    assert "not searched" not in capsys.readouterr().err
+    (tmp_path / "tracked").mkdir()
+    (tmp_path / "tracked" / "take.csv").write_text("time,device,x,y,z,qw,qx,qy,qz\n0,head,0,1.6,0,1,0,0,0\n")
+    assert cli.expand_inputs([str(tmp_path)]) == [str(tmp_path)]
+    err = capsys.readouterr().err
+    assert "1 sub-folder(s) not searched (tracked)" in err, err
