@@ -327,6 +327,51 @@ def test_render_one_frame_workbench(live, tmp_path):
     assert os.path.getsize(str(tmp_path / "frame.png")) > 0
 
 
+def test_key_swivel_keeps_other_sliders_unkeyed_edits(live):
+    """Key Swivel writes its key as Blender's own Insert Keyframe does (an animation update that
+    does not evaluate the rig's animation again): an unkeyed edit of another slider stays after
+    the scene is evaluated, and the same tag is what Ctrl+Z replays (tools/gui_userdata_check.py
+    shows the keyed slider's unkeyed value kept after Ctrl+Z in a real window)."""
+    from blender_manikin.operators import swivel_tools
+    res, obj, _, _, frames = live
+    swivel_tools.register()
+    try:
+        scene = bpy.context.scene
+        bpy.context.view_layer.objects.active = obj
+        k = 7
+        scene.frame_set(int(frames[k]))
+        fc = lr.swivel_fcurve(obj, "left_arm")
+        fc.keyframe_points[k + 1].interpolation = 'BEZIER'
+        fc.keyframe_points[k].interpolation = 'CONSTANT'
+        fc.keyframe_points[k].type = 'BREAKDOWN'
+        fc.update()
+        bpy.context.view_layer.update()
+        right = obj[writer.SWIVEL_PROPS["right_arm"]] + 0.7
+        obj[writer.SWIVEL_PROPS["right_arm"]] = right       # moved, not keyed
+        obj[writer.SWIVEL_PROPS["left_arm"]] = 2.5
+        assert bpy.ops.manikin.key_swivel(limb='left_arm') == {'FINISHED'}
+        bpy.context.view_layer.update()
+        assert abs(obj[writer.SWIVEL_PROPS["right_arm"]] - right) < 1e-6
+        # the key as before: value set, its own attributes kept, the evaluated rig shows it
+        kp = lr.swivel_fcurve(obj, "left_arm").keyframe_points
+        assert len(kp) == T and abs(kp[k].co[1] - 2.5) < 1e-6
+        assert (kp[k].interpolation, kp[k].type, kp[k + 1].interpolation) == ('CONSTANT', 'BREAKDOWN', 'BEZIER')
+        scene.frame_set(int(frames[k + 2]))
+        scene.frame_set(int(frames[k]))
+        assert abs(obj[writer.SWIVEL_PROPS["left_arm"]] - 2.5) < 1e-6
+        # a new key between frames: the interpolation of the key before it
+        scene.frame_set(int(frames[k]), subframe=0.5)
+        obj[writer.SWIVEL_PROPS["left_arm"]] = 1.25
+        assert bpy.ops.manikin.key_swivel(limb='left_arm') == {'FINISHED'}
+        kp = lr.swivel_fcurve(obj, "left_arm").keyframe_points
+        assert len(kp) == T + 1
+        assert abs(kp[k + 1].co[0] - (frames[k] + 0.5)) < 1e-4 and abs(kp[k + 1].co[1] - 1.25) < 1e-6
+        assert kp[k + 1].interpolation == 'CONSTANT'
+        assert abs(lr.swivel_fcurve(obj, "left_arm").evaluate(frames[k] + 0.5) - 1.25) < 1e-6
+    finally:
+        swivel_tools.unregister()
+
+
 def test_swivel_tools_operators(live):
     from blender_manikin.operators import swivel_tools
     from blender_manikin.panels import swivel_panel

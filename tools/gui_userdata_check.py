@@ -313,8 +313,8 @@ def undo_redo(label, before, after, known=None):
     if known:
         for line in [x for x in d if x.startswith(known)]:
             log(
-                f"known: {label}: after Ctrl+Z {line} (an unkeyed slider edit: keys written through Python "
-                f"re-evaluate the animation on undo, Blender's own Insert Keyframe does not)"
+                f"known: {label}: after Ctrl+Z {line} (an unkeyed slider edit shows the curve's value again, as "
+                f"after Blender's own Graph Editor Smooth Keys: rewriting a curve's keys re-evaluates its animation)"
             )
         d = [x for x in d if not x.startswith(known)]
     check(not d, f"{label}: Ctrl+Z gives the scene as before", "; ".join(d))
@@ -695,9 +695,18 @@ def steps():
         ("smooth_swivel", bpy.ops.manikin.smooth_swivel, {}),
         ("reset_swivel", bpy.ops.manikin.reset_swivel, {"scope": "ALL"}),
     ):
+        if label != "key_swivel":
+            # an unkeyed slider edit before each (Key Swivel keyed the first one)
+            bpy.data.objects[arm]["swivel_right_arm"] = bpy.data.objects[arm]["swivel_right_arm"] + 0.3
+            push(f"slider edit before {label}")
+        log(f"{label}: unkeyed slider values before: " + ", ".join(
+            f"{k} {v:.3f}" for k, v in bpy.data.objects[arm].items() if k.startswith("swivel_")))
         res, before, after = undo_round(label, op, **kw)
         check(diff(before, after) != [], f"{label}: changed something")
-        undo_redo(label, before, after, known=f"/objects/{arm}/props/swivel_" if label == "key_swivel" else None)
+        # Key Swivel: Ctrl+Z gives the slider's unkeyed value back (as Blender's own Insert
+        # Keyframe does above), not the curve's; Smooth / Reset rewrite whole curves and, like
+        # Blender's Graph Editor Smooth Keys, show the curve's value again
+        undo_redo(label, before, after, known=None if label == "key_swivel" else f"/objects/{arm}/props/swivel_")
         yield
 
     # -- Bake to FK (a new armature)

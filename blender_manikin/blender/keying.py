@@ -11,7 +11,9 @@ layered actions (``slots.new(for_id)``) take the legacy path.
 
 Keys are always written in bulk: ``fcurve.keyframe_points.add(n)``, then
 ``foreach_set('co', ...)`` and ``foreach_set('interpolation', ...)``, then
-``fcurve.update()``.  ``keyframe_insert`` is never used.
+``fcurve.update()``.  The one exception is a single key at the current frame
+(:func:`key_as_blender`, *Key Swivel*): it goes through ``keyframe_insert``, as
+Blender's own Insert Keyframe does, so that Ctrl+Z keeps the slider's unkeyed value.
 
 Frames are scene frames (float, ``co[0]``); values are in the RNA property's
 units (radians for rotations and the swivel angles, metres for locations).
@@ -309,6 +311,97 @@ def update_keys(fcurve, frames, values, drop=None, interpolation: str | None = N
     kp.foreach_set("handle_right", ohr[order].astype(np.float32).ravel())
     fcurve.update()
     return fcurve
+
+
+
+def key_as_blender(id_owner, fcurve, frame: float, value: float) -> bool:
+    """Key ``value`` at ``frame`` (action frames) of ``fcurve``, a curve of ``id_owner``'s
+    assigned action (and slot), through Blender's own keying (``id_owner.keyframe_insert``), so
+    that Ctrl+Z of the operator doing it gives back the animated properties' unkeyed edits (a
+    slider moved but not keyed before the key was made shows its moved value again, as after
+    Blender's Insert Keyframe), and another slider's unkeyed edit is not overwritten either.
+
+    Why: ``keyframe_points.add`` / ``insert`` / ``clear``, ``FCurve.update`` and
+    ``handles_recalc`` tag the action for a flushed animation update, which the undo system
+    replays after Ctrl+Z, so the object's animation is evaluated again and the curve's value
+    overwrites the unkeyed edit held in the undo step; Blender's keying tags it without the
+    flush.  The key ends as :func:`update_keys` would leave it: an existing key at ``frame``
+    (within 1e-4) takes the value and keeps its attributes (interpolation, handle types, key
+    type, easing, selection), its handles moved with it; a new key takes the interpolation of
+    the key before it (else of the first key), Blender's handles.  Other keys keep their
+    attributes.  ``value`` is written as given (an NLA remap is the caller's).  Returns False,
+    having changed nothing that :func:`update_keys` would not, where Blender's keying wrote no
+    key at ``frame`` (a locked curve, Only Insert Needed with the value already there, a time
+    mapping it does differently): the caller then writes the key with :func:`update_keys`."""
+    kp = fcurve.keyframe_points
+    n = len(kp)
+    old = {name: np.empty(n, dt) for name, dt in _KEY_ATTRS}
+    for name, buf in old.items():
+        kp.foreach_get(name, buf)
+    co0, hl0, hr0 = (np.empty(2 * n, np.float32) for _ in range(3))
+    kp.foreach_get("co", co0)
+    kp.foreach_get("handle_left", hl0)
+    kp.foreach_get("handle_right", hr0)
+    at = np.nonzero(np.abs(co0[0::2] - frame) < 1e-4)[0]
+    ad = id_owner.animation_data
+    scene_frame = frame
+    if ad is not None and ad.use_tweak_mode and hasattr(ad, "nla_tweak_strip_time_to_scene"):
+        scene_frame = float(ad.nla_tweak_strip_time_to_scene(float(frame)))
+    kw = {"group": fcurve.group.name} if fcurve.group is not None else {}
+    ok = False
+    # index -1 for a property that is not an array (Blender refuses 0 there)
+    for index in dict.fromkeys((fcurve.array_index, -1 if fcurve.array_index == 0 else fcurve.array_index)):
+        try:
+            ok = id_owner.keyframe_insert(fcurve.data_path, index=index, frame=scene_frame, **kw)
+            break
+        except TypeError:
+            continue
+        except RuntimeError:
+            break
+    m = len(kp)
+    co = np.empty(2 * m, np.float32)
+    kp.foreach_get("co", co)
+    co = co.reshape(m, 2)
+    hit = np.nonzero(np.abs(co[:, 0] - frame) < 1e-4)[0]
+    if not ok or len(hit) != 1 or m - n not in (0, 1) or (m == n and len(at) != 1):
+        if m != n or not np.array_equal(co.ravel(), co0):
+            # Blender keyed elsewhere (another frame, a key within its 0.01 frame snap): the curve
+            # as it was, for update_keys
+            kp.clear()
+            kp.add(n)
+            for name, buf in old.items():
+                kp.foreach_set(name, buf)
+            kp.foreach_set("co", co0)
+            kp.foreach_set("handle_left", hl0)
+            kp.foreach_set("handle_right", hr0)
+        return False
+    i = int(hit[0])
+    for name, buf in old.items():
+        if m == n:
+            out = buf
+        else:
+            cur = np.empty(m, buf.dtype)
+            kp.foreach_get(name, cur)
+            out = np.insert(buf, i, cur[i])
+            if name == "interpolation":
+                out[i] = buf[i - 1] if i > 0 else (buf[0] if n else _interp_value('LINEAR'))
+            elif name.startswith("handle_"):
+                out[i] = cur[i]
+        kp.foreach_set(name, out)
+    hl, hr = np.empty(2 * m, np.float32), np.empty(2 * m, np.float32)
+    kp.foreach_get("handle_left", hl)
+    kp.foreach_get("handle_right", hr)
+    dv = np.float32(value) - co[i, 1]
+    co[i, 1] = value
+    hl[2 * i + 1] += dv
+    hr[2 * i + 1] += dv
+    kp.foreach_set("co", co.ravel())
+    kp.foreach_set("handle_left", hl)
+    kp.foreach_set("handle_right", hr)
+    # the evaluated copy takes the values written after Blender's keying (a tag that does not
+    # evaluate the owner's animation again)
+    fcurve.id_data.update_tag()
+    return True
 
 
 #: the F-curve property of a pose bone's rotation in each rotation mode (every Euler order:

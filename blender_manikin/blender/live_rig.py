@@ -1062,7 +1062,9 @@ def key_swivel(obj, limbs, frame: float, values=None, context=None):
     others = {p: float(obj[p]) for limb, p in writer.SWIVEL_PROPS.items() if limb not in todo and p in obj.keys()}
     keyed = keying.nla_remap_values(obj, fcs, shown, context)
     for fc, value in zip(fcs, keyed):
-        keying.update_keys(fc, [frame], [value])
+        # Blender's keying: Ctrl+Z then gives back the slider's unkeyed value (key_as_blender)
+        if not keying.key_as_blender(obj, fc, frame, value):
+            keying.update_keys(fc, [frame], [value])
     if keying.nla_blends(obj):
         scene = (context or bpy.context).scene
         scene.frame_set(scene.frame_current, subframe=scene.frame_subframe)
