@@ -524,12 +524,7 @@ def steps():
     yield
     after = snap()
     check(diff(before, after) != [], "modal solve: wrote its take")
-    undo()
-    d = diff(before, snap())
-    check(not d, "modal solve: one Ctrl+Z gives the scene as before", "; ".join(d))
-    redo()
-    d = diff(after, snap())
-    check(not d, "modal solve: Ctrl+Shift+Z gives it as after", "; ".join(d))
+    undo_redo("modal solve", before, after)
     yield
 
     # -- the modal solve of a long take, the user working while it runs (undo steps on the way)
@@ -596,12 +591,7 @@ def steps():
         f"long modal solve, Ctrl+Z while it runs: the solve written, the move undone "
         f"({S().armature.name if S().armature else None})",
     )
-    undo()
-    d = diff(before, snap())
-    check(not d, "long modal solve, Ctrl+Z while it ran: one more Ctrl+Z gives the scene as before", "; ".join(d))
-    redo()
-    d = diff(after, snap())
-    check(not d, "... redo gives it as after", "; ".join(d))
+    undo_redo("long modal solve, Ctrl+Z while it ran, one more", before, after)
     S().filepath = example
     yield
 
