@@ -477,3 +477,33 @@ def test_a_group_file_that_cannot_be_read_fails_with_the_readers_error(addon, tm
         bpy.ops.manikin.solve_full_body('EXEC_DEFAULT')
     assert "cannot tell the units" in s.last_report and "choose one" not in s.last_report, s.last_report
     assert not _solved_takes()
+
+
+def test_panel_reads_the_folder_of_a_picked_per_frame_json_file(addon, tmp_path, motion):
+    """A file browser picks files: one EasyMocap frame file picked in the panel is read as its
+    folder, the take (it was refused, 'give its folder'); the command line still names the
+    folder rather than guess, so a glob of frame files is not solved once per file."""
+    import json
+    from blender_manikin.core import keypoint_layouts as kl
+    from blender_manikin.core.io_keypoints import frames_folder_of
+    from blender_manikin.core.recording import RecordingError
+    body, pos, world = motion
+    points = kl.keypoints_from_body22(pos, world, "body25", body.stature)
+    folder = tmp_path / "out" / "keypoints3d"
+    folder.mkdir(parents=True)
+    for f, k in enumerate(points):
+        (folder / f"{f:06d}.json").write_text(json.dumps([{"id": 0, "keypoints3d": [list(p) + [1.0] for p in k]}]))
+    picked = folder / "000012.json"
+    assert frames_folder_of(picked) == str(folder)
+    assert frames_folder_of(folder) is None and frames_folder_of(tmp_path / "missing.json") is None
+    with pytest.raises(RecordingError, match="give its folder"):
+        solve_recording(str(picked), SolveSettings(fps=30.0))
+    sc = bpy.context.scene
+    sc.render.fps, sc.render.fps_base = 30, 1.0
+    s = sc.manikin
+    s.source, s.keypoint_from, s.keypoint_path = 'KEYPOINTS', 'FILE', str(picked)
+    assert bpy.ops.manikin.solve_full_body() == {'FINISHED'}, s.last_report
+    assert "90 EasyMocap JSON files" in s.last_report, s.last_report
+    action = s.armature.animation_data.action
+    frames = [kp.co[0] for fc in keying.action_fcurves(action, s.armature) for kp in fc.keyframe_points]
+    assert max(frames) - min(frames) == pytest.approx(89)

@@ -424,6 +424,9 @@ def config_from_settings(context):
     cfg.filepath = bpy.path.abspath(s.filepath) if s.filepath else ""
     if s.source == 'KEYPOINTS':
         cfg.filepath = bpy.path.abspath(s.keypoint_path) if s.keypoint_path else ""
+        if s.keypoint_from == 'FILE' and cfg.filepath:
+            from ..core.io_keypoints import frames_folder_of
+            cfg.filepath = frames_folder_of(cfg.filepath) or cfg.filepath   # one frame's file: its folder
         if s.keypoint_from == 'OBJECTS':
             if s.keypoint_collection is None:
                 raise SolveError("choose the collection of the keypoint objects")

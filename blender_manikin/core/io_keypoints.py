@@ -1249,6 +1249,21 @@ def keypoint_json_files(path):
     return None
 
 
+def frames_folder_of(path):
+    """The folder whose per-frame JSON files (:func:`keypoint_json_files`) include ``path``, a
+    file of one frame (EasyMocap's ``keypoints3d/000000.json``, OpenPose's ``*_keypoints.json``);
+    None for anything else.  The panel reads that folder when one frame's file is picked in the
+    file browser (the command line refuses the file, naming its folder)."""
+    p = os.path.abspath(os.fspath(path))
+    if not (os.path.isfile(p) and p.lower().endswith(".json") and _json_head_kind(p) == "frame"):
+        return None
+    folder = os.path.dirname(p)
+    found = keypoint_json_files(folder)
+    if found is None or os.path.dirname(found[0][0]) != folder:
+        return None
+    return folder if any(os.path.samefile(f, p) for f in found[0]) else None
+
+
 def json_frames_folder(path):
     """The folder holding the per-frame files of :func:`keypoint_json_files` ``(path)``: ``path``
     itself, or its ``keypoints3d`` sub-folder when ``path`` is an output folder holding one (whose
