@@ -267,3 +267,34 @@ def test_foot_contacts_are_keyed_as_steps(scene):
         assert obj["foot_contact_right"] == pytest.approx(float(res.contacts[k, 1]))
     fc = next(f for f in keying.action_fcurves(out.action, obj) if f.data_path == '["foot_contact_left"]')
     assert fc.group.name == writer.CONTACT_GROUP and fc.keyframe_points[0].interpolation == 'CONSTANT'
+
+
+def test_key_as_blender_value_other_than_property_keeps_auto_handles_fitted(scene):
+    """key_as_blender given a value other than the property's (key_swivel's ``values``): the
+    curve ends as update_keys leaves it, auto-clamped handles of the key and its neighbours
+    fitted to the new value (Blender's keying fitted them to the property's value; the value was
+    written over them, the neighbours' handles stale: the curve at frame 8 was 3.6995, not 3.92)."""
+    def curve():
+        bpy.ops.wm.read_factory_settings(use_empty=True)
+        ob = bpy.data.objects.new("o", None)
+        bpy.context.scene.collection.objects.link(ob)
+        for f, v in ((1, 0.0), (11, 1.0), (21, 2.0), (31, 0.0)):
+            ob["p"] = v
+            ob.keyframe_insert('["p"]', frame=f)
+        ob["p"] = 1.0
+        fc = next(f for f in keying.action_fcurves(ob.animation_data.action, ob)
+                  if f.data_path == '["p"]')
+        return ob, fc
+
+    def keys(fc):
+        return np.array([[*k.handle_left, *k.co, *k.handle_right] for k in fc.keyframe_points])
+
+    for frame in (11.0, 16.0):                    # an existing key, a new one
+        ob, fc = curve()
+        keying.update_keys(fc, [frame], [5.0])
+        want, at = keys(fc), fc.evaluate(frame - 3)
+        ob, fc = curve()
+        if not keying.key_as_blender(ob, fc, frame, 5.0):
+            keying.update_keys(fc, [frame], [5.0])
+        np.testing.assert_allclose(keys(fc), want, atol=1e-5)
+        assert abs(fc.evaluate(frame - 3) - at) < 1e-5

@@ -314,6 +314,18 @@ def update_keys(fcurve, frames, values, drop=None, interpolation: str | None = N
 
 
 
+def _restore_keys(kp, n, old, co, hl, hr):
+    """Put back ``n`` keys of ``kp`` (keyframe_points): attributes ``old`` (:data:`_KEY_ATTRS`),
+    flat ``co`` / handles ``(2n,)`` float32, as read before Blender's keying."""
+    kp.clear()
+    kp.add(n)
+    for name, buf in old.items():
+        kp.foreach_set(name, buf)
+    kp.foreach_set("co", co)
+    kp.foreach_set("handle_left", hl)
+    kp.foreach_set("handle_right", hr)
+
+
 def key_as_blender(id_owner, fcurve, frame: float, value: float) -> bool:
     """Key ``value`` at ``frame`` (action frames) of ``fcurve``, a curve of ``id_owner``'s
     assigned action (and slot), through Blender's own keying (``id_owner.keyframe_insert``), so
@@ -332,7 +344,9 @@ def key_as_blender(id_owner, fcurve, frame: float, value: float) -> bool:
     attributes.  ``value`` is written as given (an NLA remap is the caller's).  Returns False,
     having changed nothing that :func:`update_keys` would not, where Blender's keying wrote no
     key at ``frame`` (a locked curve, Only Insert Needed with the value already there, a time
-    mapping it does differently): the caller then writes the key with :func:`update_keys`."""
+    mapping it does differently) or keyed there a value other than ``value`` (the property
+    holds another value; auto handles fitted to ``value`` need a recalculation, a flushed
+    update): the caller then writes the key with :func:`update_keys`."""
     kp = fcurve.keyframe_points
     n = len(kp)
     old = {name: np.empty(n, dt) for name, dt in _KEY_ATTRS}
@@ -367,15 +381,16 @@ def key_as_blender(id_owner, fcurve, frame: float, value: float) -> bool:
         if m != n or not np.array_equal(co.ravel(), co0):
             # Blender keyed elsewhere (another frame, a key within its 0.01 frame snap): the curve
             # as it was, for update_keys
-            kp.clear()
-            kp.add(n)
-            for name, buf in old.items():
-                kp.foreach_set(name, buf)
-            kp.foreach_set("co", co0)
-            kp.foreach_set("handle_left", hl0)
-            kp.foreach_set("handle_right", hr0)
+            _restore_keys(kp, n, old, co0, hl0, hr0)
         return False
     i = int(hit[0])
+    if abs(float(co[i, 1]) - value) > 1e-5 * max(1.0, abs(value)):
+        # Blender keyed another value (``value`` given, not the property's; a remap it does
+        # differently): its auto handles, of this key and its neighbours, fit that value and only a
+        # recalculation (a flushed update) fits them to ``value``: the curve as it was, for
+        # update_keys
+        _restore_keys(kp, n, old, co0, hl0, hr0)
+        return False
     for name, buf in old.items():
         if m == n:
             out = buf
