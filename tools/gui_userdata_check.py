@@ -305,6 +305,15 @@ def undo_round(label, op, mode="EXEC_DEFAULT", expect=("FINISHED",), **kw):
     return res, before, after
 
 
+def modal_solve_ended(solve_mod):
+    """Yield to Blender's event loop until the modal solve of ``solve_mod`` (the add-on's
+    operators.solve module) has ended, 300 s at most, then once more (its last redraw)."""
+    t0 = time.monotonic()
+    while solve_mod._ACTIVE["job"] is not None and time.monotonic() - t0 < 300:
+        yield
+    yield
+
+
 def undo_redo(label, before, after, known=None):
     """Ctrl+Z must give ``before``, Ctrl+Shift+Z ``after``.  known: a path prefix whose difference
     after Ctrl+Z is a known limitation, said as ``known:`` instead of failing."""
@@ -518,10 +527,7 @@ def steps():
     res = run_op(bpy.ops.manikin.solve_full_body, "INVOKE_DEFAULT")
     check(res == {"RUNNING_MODAL"}, f"modal solve: invoked ({sorted(res)})")
     solve_mod = next(m for n, m in sys.modules.items() if n.endswith("blender_manikin.operators.solve"))
-    t0 = time.monotonic()
-    while solve_mod._ACTIVE["job"] is not None and time.monotonic() - t0 < 300:
-        yield
-    yield
+    yield from modal_solve_ended(solve_mod)
     after = snap()
     check(diff(before, after) != [], "modal solve: wrote its take")
     undo_redo("modal solve", before, after)
@@ -540,9 +546,7 @@ def steps():
         bpy.ops.transform.translate("EXEC_DEFAULT", True, value=(1.0, 0.0, 0.0))
     mid = snap()
     t0 = time.monotonic()
-    while solve_mod._ACTIVE["job"] is not None and time.monotonic() - t0 < 300:
-        yield
-    yield
+    yield from modal_solve_ended(solve_mod)
     check(
         running_then,
         f"long modal solve: still running while the user moved an object " f"({time.monotonic() - t0:.1f} s more)",
@@ -579,10 +583,7 @@ def steps():
     undo()  # the move undone while solving
     running_then = solve_mod._ACTIVE["job"] is not None
     mid = snap()
-    t0 = time.monotonic()
-    while solve_mod._ACTIVE["job"] is not None and time.monotonic() - t0 < 300:
-        yield
-    yield
+    yield from modal_solve_ended(solve_mod)
     check(running_then, "long modal solve, Ctrl+Z while it runs: still running after the undo")
     after = snap()
     check(
@@ -608,10 +609,7 @@ def steps():
         bpy.ops.transform.translate("EXEC_DEFAULT", True, value=(0.0, 0.0, 1.0))
     running_then = solve_mod._ACTIVE["job"] is not None
     mid = snap()
-    t0 = time.monotonic()
-    while solve_mod._ACTIVE["job"] is not None and time.monotonic() - t0 < 300:
-        yield
-    yield
+    yield from modal_solve_ended(solve_mod)
     after = snap()
     check(
         running_then and after["mode"] == "EDIT" and after["cube"] == mid["cube"],

@@ -17,6 +17,13 @@ class _Base:
         return context.scene is not None and hasattr(context.scene, "manikin")
 
 
+def split_layout(layout):
+    """``layout`` (a panel's) with labels in a column of their own and no keyframe decorators."""
+    layout.use_property_split = True
+    layout.use_property_decorate = False
+    return layout
+
+
 def smoothing_rows(col, s):
     """The Smoothing setting (trackers and keypoints alike), its window when one is set."""
     col.prop(s, "smoothing_mode")
@@ -29,10 +36,8 @@ class MANIKIN_PT_solve(_Base, Panel):
     bl_idname = "MANIKIN_PT_solve"
 
     def draw(self, context):
-        layout = self.layout
+        layout = split_layout(self.layout)
         s = context.scene.manikin
-        layout.use_property_split = True
-        layout.use_property_decorate = False
         row = layout.row()
         row.use_property_split = False          # the whole width for the three sources
         row.prop(s, "source", expand=True)
@@ -186,10 +191,8 @@ class MANIKIN_PT_calibration(_Base, Panel):
         return _Base.poll(context) and context.scene.manikin.source != 'KEYPOINTS'
 
     def draw(self, context):
-        layout = self.layout
+        layout = split_layout(self.layout)
         s = context.scene.manikin
-        layout.use_property_split = True
-        layout.use_property_decorate = False
         layout.prop(s, "calibration")
         if s.calibration != 'MEASURE':
             layout.prop(s, "calibration_take", text="Take")     # under Calibration; "Calibration ..." cut
@@ -221,10 +224,8 @@ class MANIKIN_PT_output(_Base, Panel):
     bl_options = {'DEFAULT_CLOSED'}
 
     def draw(self, context):
-        layout = self.layout
+        layout = split_layout(self.layout)
         s = context.scene.manikin
-        layout.use_property_split = True
-        layout.use_property_decorate = False
         # scene objects (trackers or keypoints) are sampled from Start to End; files are read whole
         sampled = s.source == 'SCENE' or (s.source == 'KEYPOINTS' and s.keypoint_from in ('OBJECTS', 'ARMATURE'))
         # From Scene: the scene's own rate and range, greyed (the add-on's FPS / Start / End, unused
@@ -328,10 +329,8 @@ class MANIKIN_PT_retarget(_Base, Panel):
     bl_options = {'DEFAULT_CLOSED'}
 
     def draw(self, context):
-        layout = self.layout
+        layout = split_layout(self.layout)
         s = context.scene.manikin
-        layout.use_property_split = True
-        layout.use_property_decorate = False
         layout.prop(s, "retarget_target")
         row = layout.row(align=True)
         row.prop(s, "retarget_map")
@@ -373,10 +372,8 @@ class MANIKIN_PT_export(_Base, Panel):
     bl_options = {'DEFAULT_CLOSED'}
 
     def draw(self, context):
-        layout = self.layout
+        layout = split_layout(self.layout)
         s = context.scene.manikin
-        layout.use_property_split = True
-        layout.use_property_decorate = False
         layout.prop(s, "export_format")
         if s.export_format == 'GLB':
             layout.operator("manikin.export_gltf", icon='EXPORT')
